@@ -1,0 +1,26 @@
+# fempm: `make demo` runs the main demo, `make test` runs the tests (serial, then MPI on 2 ranks).
+# Both create the virtual environment .venv when it is missing.
+VENV    ?= .venv
+PY      := $(VENV)/bin/python
+MPIEXEC := $(VENV)/bin/mpiexec
+NPROCS  ?= 2
+
+.PHONY: venv demo test test-serial test-mpi study bench clean
+
+venv:
+	@bash scripts/bootstrap
+
+demo: venv
+	$(PY) demos/projection_unstructured.py
+
+test: venv
+	bash scripts/run-tests
+
+study: venv
+	$(PY) -m fempm study mapping
+
+bench: venv
+	$(PY) benchmarks/bench_mapping.py
+
+clean:
+	rm -rf $(VENV) output .pytest_cache

@@ -1,0 +1,145 @@
+r"""Reference-to-physical maps of the mesh cells, vectorized over points.
+
+For a cell with geometry nodes :math:`x_k` and coordinate basis :math:`\phi_k`,
+
+.. math::
+    x(X) = \sum_k \phi_k(X)\, x_k, \qquad J(X) = \sum_k x_k \otimes \nabla_X \phi_k(X),
+    \qquad K = J^{-1}.
+
+Affine simplices store :math:`x_0` and :math:`K` per cell, so the pull-back is closed form,
+:math:`X = K (x - x_0)`. Other cells (quadrilaterals, hexahedra, curved cells) are pulled back
+by a Newton iteration vectorized over all points at once.
+"""
+
+from __future__ import annotations
+
+import basix
+import dolfinx
+import numpy as np
+import numpy.typing as npt
+
+_SIMPLICES = {"interval", "triangle", "tetrahedron"}
+
+
+def coordinate_map(mesh: dolfinx.mesh.Mesh):
+    """The mesh's coordinate element and geometry dofmap (DOLFINx 0.10 and 0.11)."""
+    geom = mesh.geometry
+    cmap = geom.cmaps[0] if hasattr(geom, "cmaps") else geom.cmap
+    dofmap = geom.dofmaps[0] if hasattr(geom, "dofmaps") else geom.dofmap
+    return cmap, dofmap
+
+
+class CellGeometry:
+    """Vectorized geometry of the cells of a DOLFINx mesh (push-forward, Jacobian, pull-back).
+
+    Only manifolds with ``gdim == tdim`` are supported (a point must have a unique reference
+    coordinate in a cell).
+    """
+
+    def __init__(self, mesh: dolfinx.mesh.Mesh):
+        self.mesh = mesh
+        self.tdim = mesh.topology.dim
+        self.gdim = mesh.geometry.dim
+        if self.gdim != self.tdim:
+            raise NotImplementedError(
+                f"fempm needs gdim == tdim (got gdim={self.gdim}, tdim={self.tdim}); create the "
+                "mesh with the geometric dimension of its cells (e.g. gdim=2 for triangles)"
+            )
+        self.cell_name = mesh.topology.cell_type.name
+        cmap, dofmap = coordinate_map(mesh)
+        self.basix_cell = getattr(basix.CellType, self.cell_name)
+        self.element = basix.create_element(
+            basix.ElementFamily.P, self.basix_cell, cmap.degree, basix.LagrangeVariant(cmap.variant)
+        )
+        self.dofmap = np.asarray(dofmap)
+        self.x = mesh.geometry.x[:, : self.gdim]
+        self.affine = self.cell_name in _SIMPLICES and cmap.degree == 1
+        self.num_owned = mesh.topology.index_map(self.tdim).size_local
+        if self.affine:
+            nodes = self.x[self.dofmap]  # (ncells, tdim+1, gdim)
+            self._x0 = nodes[:, 0, :]
+            J = np.swapaxes(nodes[:, 1:, :] - nodes[:, :1, :], 1, 2)  # J[c, g, t] = x_{t+1} - x_0
+            self._J = J
+            self._detJ = np.linalg.det(J)
+            self._K = np.linalg.inv(J)
+
+    # -- push forward -------------------------------------------------------------------------
+    def _tabulate(self, nderiv: int, X: npt.NDArray) -> npt.NDArray:
+        return self.element.tabulate(nderiv, np.ascontiguousarray(X, dtype=np.float64))[..., 0]
+
+    def push_forward(self, cells: npt.NDArray[np.int32], X: npt.NDArray) -> npt.NDArray:
+        """Physical coordinates ``x(X)`` of reference points ``X`` (n, tdim) in ``cells``."""
+        if self.affine:
+            return self._x0[cells] + np.einsum("ngt,nt->ng", self.jacobian(cells, X), X)
+        phi = self._tabulate(0, X)[0]  # (n, ndofs)
+        return np.einsum("nk,nkg->ng", phi, self.x[self.dofmap[cells]])
+
+    def jacobian(self, cells: npt.NDArray[np.int32], X: npt.NDArray) -> npt.NDArray:
+        """``J[n, g, t] = dx_g / dX_t`` at the points, shape (n, gdim, tdim)."""
+        if self.affine:
+            return self._J[cells]
+        dphi = self._tabulate(1, X)[1:]  # (tdim, n, ndofs)
+        return np.einsum("tnk,nkg->ngt", dphi, self.x[self.dofmap[cells]])
+
+    def inverse_jacobian(self, cells: npt.NDArray[np.int32], X: npt.NDArray) -> npt.NDArray:
+        """``K = J^{-1}``, shape (n, tdim, gdim), so that ``grad N = dN/dX @ K``."""
+        if self.affine:
+            return self._K[cells]
+        return np.linalg.inv(self.jacobian(cells, X))
+
+    def detJ(self, cells: npt.NDArray[np.int32], X: npt.NDArray) -> npt.NDArray:
+        if self.affine:
+            return self._detJ[cells]
+        return np.linalg.det(self.jacobian(cells, X))
+
+    # -- pull back ----------------------------------------------------------------------------
+    def pull_back(
+        self, cells: npt.NDArray[np.int32], x: npt.NDArray, *, tol: float = 1e-12, max_it: int = 30
+    ) -> npt.NDArray:
+        """Reference coordinates of physical points ``x`` (n, gdim) with respect to ``cells``.
+
+        Points outside a non-affine cell may not converge: their entries are NaN.
+        """
+        x = np.asarray(x, dtype=np.float64)[:, : self.gdim]
+        if self.affine:
+            return np.einsum("ntg,ng->nt", self._K[cells], x - self._x0[cells])
+        nodes = self.x[self.dofmap[cells]]  # (n, ndofs, gdim)
+        X = np.tile(basix.geometry(self.basix_cell).mean(axis=0), (len(cells), 1))
+        active = np.arange(len(cells))
+        for _ in range(max_it):
+            if active.size == 0:
+                break
+            tab = self._tabulate(1, X[active])
+            xa = np.einsum("nk,nkg->ng", tab[0], nodes[active])
+            J = np.einsum("tnk,nkg->ngt", tab[1:], nodes[active])
+            with np.errstate(all="ignore"):
+                dX = np.linalg.solve(J, (x[active] - xa)[..., None])[..., 0]
+            X[active] += dX
+            step = np.linalg.norm(dX, axis=1)
+            bad = ~np.isfinite(step) | (np.abs(X[active]).max(axis=1) > 1e3)
+            X[active[bad]] = np.nan
+            done = bad | (step < tol)
+            active = active[~done]
+        X[active] = np.nan  # not converged
+        return X
+
+    def contains(self, X: npt.NDArray, tol: float = 1e-10) -> npt.NDArray[np.bool_]:
+        """Whether reference points lie in the reference cell (within ``tol``)."""
+        with np.errstate(invalid="ignore"):
+            inside = np.all(X >= -tol, axis=1)
+            if self.cell_name in _SIMPLICES:
+                inside &= X.sum(axis=1) <= 1.0 + tol
+            else:
+                inside &= np.all(X <= 1.0 + tol, axis=1)
+        return inside & np.all(np.isfinite(X), axis=1)
+
+    def cell_volumes(self) -> npt.NDArray:
+        """Volumes of all local cells (owned and ghost), by Gauss quadrature of ``|det J|``."""
+        ncells = self.dofmap.shape[0]
+        if self.affine:
+            return np.abs(self._detJ) / {1: 1.0, 2: 2.0, 3: 6.0}[self.tdim]
+        deg = 2 * self.element.degree * self.tdim
+        Xq, wq = basix.make_quadrature(self.basix_cell, deg)
+        dphi = self._tabulate(1, Xq)[1:]  # (tdim, q, ndofs)
+        J = np.einsum("tqk,ckg->cqgt", dphi, self.x[self.dofmap[:ncells]])
+        return np.abs(np.linalg.det(J)) @ wq

@@ -1,0 +1,111 @@
+"""Locate points in the owned cells of a DOLFINx mesh and pull them back to the reference cell.
+
+Candidates come from a bounding-box tree over the *owned* cells only (a ghost cell would count a
+particle twice in P2G); each candidate is tested with the vectorized pull-back of
+:class:`fempm.geometry.CellGeometry`, which also gives the reference coordinates. Relocation
+tests each point's previous cell first and searches the tree only for the points that left it.
+"""
+
+from __future__ import annotations
+
+import dolfinx
+import dolfinx.geometry
+import numpy as np
+import numpy.typing as npt
+
+from fempm.geometry import CellGeometry
+
+
+class OutsideMeshError(ValueError):
+    """Particles lie outside the mesh (no owned cell of any rank contains them)."""
+
+
+def outside_message(count: int, examples: npt.NDArray) -> str:
+    pts = "; ".join(np.array2string(p, precision=6, separator=", ") for p in examples[:5])
+    return (
+        f"{count} particle(s) lie outside the mesh, e.g. at {pts}. "
+        "Pass outside='remove' to drop them (the number removed is reported)."
+    )
+
+
+def as_points3(x: npt.NDArray) -> npt.NDArray[np.float64]:
+    """Points padded to the 3 columns DOLFINx geometry routines expect."""
+    x = np.asarray(x, dtype=np.float64)
+    x = x.reshape(len(x), -1)
+    out = np.zeros((len(x), 3))
+    out[:, : x.shape[1]] = x
+    return out
+
+
+class CellLocator:
+    """Point location in owned cells with reference coordinates.
+
+    Parameters
+    ----------
+    mesh:
+        The background mesh.
+    tol:
+        Tolerance on the reference coordinates for a point to count as inside a cell.
+    """
+
+    def __init__(self, mesh: dolfinx.mesh.Mesh, *, tol: float = 1e-10):
+        self.mesh = mesh
+        self.tol = tol
+        self.geometry = CellGeometry(mesh)
+        tdim = mesh.topology.dim
+        owned = np.arange(self.geometry.num_owned, dtype=np.int32)
+        extent = np.ptp(self.geometry.x, axis=0).max() if len(self.geometry.x) else 1.0
+        self.tree = dolfinx.geometry.bb_tree(mesh, tdim, entities=owned, padding=1e-8 * extent)
+        self._global_tree = None
+
+    @property
+    def global_tree(self):
+        """Tree of the ranks' bounding boxes (collective on first use)."""
+        if self._global_tree is None:
+            self._global_tree = self.tree.create_global_tree(self.mesh.comm)
+        return self._global_tree
+
+    def candidate_ranks(self, x: npt.NDArray) -> tuple[npt.NDArray, npt.NDArray]:
+        """Pairs (point index, rank) whose rank's bounding box holds the point."""
+        adj = dolfinx.geometry.compute_collisions_points(self.global_tree, as_points3(x))
+        counts = np.diff(adj.offsets)
+        return np.repeat(np.arange(len(x)), counts), np.asarray(adj.array)
+
+    def locate(self, x: npt.NDArray) -> tuple[npt.NDArray[np.int32], npt.NDArray]:
+        """Owned cell (``-1`` if none) and reference coordinates of each point of ``x``."""
+        n = len(x)
+        tdim = self.geometry.tdim
+        cells = np.full(n, -1, dtype=np.int32)
+        X = np.full((n, tdim), np.nan)
+        if n == 0:
+            return cells, X
+        adj = dolfinx.geometry.compute_collisions_points(self.tree, as_points3(x))
+        cand = np.asarray(adj.array, dtype=np.int32)
+        pidx = np.repeat(np.arange(n), np.diff(adj.offsets))
+        if cand.size == 0:
+            return cells, X
+        Xc = self.geometry.pull_back(cand, np.asarray(x)[pidx])
+        inside = self.geometry.contains(Xc, self.tol)
+        hit_p, first = np.unique(pidx[inside], return_index=True)
+        hits = np.flatnonzero(inside)[first]
+        cells[hit_p] = cand[hits]
+        X[hit_p] = Xc[hits]
+        return cells, X
+
+    def relocate(
+        self, x: npt.NDArray, cells: npt.NDArray[np.int32]
+    ) -> tuple[npt.NDArray[np.int32], npt.NDArray]:
+        """Like :meth:`locate`, testing each point's previous owned cell first."""
+        cells = np.asarray(cells, dtype=np.int32)
+        X = np.full((len(x), self.geometry.tdim), np.nan)
+        new_cells = np.full(len(x), -1, dtype=np.int32)
+        valid = np.flatnonzero(cells >= 0)
+        if valid.size:
+            Xv = self.geometry.pull_back(cells[valid], np.asarray(x)[valid])
+            stay = self.geometry.contains(Xv, self.tol)
+            new_cells[valid[stay]] = cells[valid[stay]]
+            X[valid[stay]] = Xv[stay]
+        moved = np.flatnonzero(new_cells < 0)
+        if moved.size:
+            new_cells[moved], X[moved] = self.locate(np.asarray(x)[moved])
+        return new_cells, X

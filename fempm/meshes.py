@@ -1,0 +1,95 @@
+"""Unstructured meshes from gmsh (optional dependency ``gmsh``, imported lazily).
+
+``read_msh`` reads a ``.msh`` file on rank 0 and distributes it; ``unstructured_rectangle`` and
+``unstructured_box`` generate meshes of a given size for studies. Works with DOLFINx 0.10+
+(``dolfinx.io.gmsh``) and earlier (``dolfinx.io.gmshio``).
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import dolfinx
+from mpi4py import MPI
+
+
+def _gmshio():
+    try:
+        from dolfinx.io import gmsh as gmshio
+    except ImportError:  # DOLFINx < 0.10
+        from dolfinx.io import gmshio
+    return gmshio
+
+
+def _gmsh():
+    try:
+        import gmsh
+    except ImportError as e:  # pragma: no cover - depends on the installation
+        raise ImportError("unstructured meshes need gmsh: pip install 'fempm[mesh]' (or gmsh)") from e
+    return gmsh
+
+
+def read_msh(path: str | Path, comm: MPI.Comm = MPI.COMM_WORLD, gdim: int | None = None):
+    """Read a gmsh ``.msh`` file; returns DOLFINx ``MeshData`` (mesh, cell_tags, facet_tags, ...).
+
+    ``gdim`` defaults to the dimension of the highest-dimensional cells.
+    """
+    path = Path(path)
+    if not path.exists():
+        raise FileNotFoundError(f"mesh file {path} does not exist")
+    gmsh = _gmsh()
+    dim = 0
+    if comm.rank == 0:
+        _start(gmsh)
+        gmsh.open(str(path))
+        dim = gmsh.model.getDimension()
+    gdim = comm.bcast(dim, root=0) if gdim is None else gdim
+    data = _gmshio().model_to_mesh(gmsh.model, comm, 0, gdim=gdim)
+    gmsh.finalize() if comm.rank == 0 else None
+    return data
+
+
+def _start(gmsh) -> None:
+    gmsh.initialize()
+    gmsh.option.setNumber("General.Terminal", 0)
+
+
+def _model_to_mesh(gmsh, comm: MPI.Comm, gdim: int) -> dolfinx.mesh.Mesh:
+    data = _gmshio().model_to_mesh(gmsh.model, comm, 0, gdim=gdim)
+    gmsh.finalize() if comm.rank == 0 else None
+    return data[0]
+
+
+def unstructured_rectangle(
+    comm: MPI.Comm, h: float, *, size: tuple[float, float] = (1.0, 1.0), quadrilateral: bool = False, seed: int = 0
+) -> dolfinx.mesh.Mesh:
+    """Frontal-Delaunay triangles (or recombined quadrilaterals) of size ``h`` on a rectangle."""
+    gmsh = _gmsh()
+    if comm.rank == 0:
+        _start(gmsh)
+        gmsh.model.add("rectangle")
+        gmsh.option.setNumber("Mesh.RandomSeed", seed)
+        s = gmsh.model.occ.addRectangle(0, 0, 0, *size)
+        gmsh.model.occ.synchronize()
+        gmsh.model.addPhysicalGroup(2, [s], 1)
+        gmsh.option.setNumber("Mesh.CharacteristicLengthMax", h)
+        gmsh.option.setNumber("Mesh.Algorithm", 8 if quadrilateral else 6)
+        if quadrilateral:
+            gmsh.option.setNumber("Mesh.RecombineAll", 1)
+            gmsh.option.setNumber("Mesh.RecombinationAlgorithm", 2)
+        gmsh.model.mesh.generate(2)
+    return _model_to_mesh(gmsh, comm, 2)
+
+
+def unstructured_box(comm: MPI.Comm, h: float, *, size=(1.0, 1.0, 1.0)) -> dolfinx.mesh.Mesh:
+    """Delaunay tetrahedra of size ``h`` on a box."""
+    gmsh = _gmsh()
+    if comm.rank == 0:
+        _start(gmsh)
+        gmsh.model.add("box")
+        v = gmsh.model.occ.addBox(0, 0, 0, *size)
+        gmsh.model.occ.synchronize()
+        gmsh.model.addPhysicalGroup(3, [v], 1)
+        gmsh.option.setNumber("Mesh.CharacteristicLengthMax", h)
+        gmsh.model.mesh.generate(3)
+    return _model_to_mesh(gmsh, comm, 3)

@@ -1,0 +1,173 @@
+"""Particles: a struct of arrays on a DOLFINx mesh.
+
+Each rank holds the particles inside its owned cells: position ``x`` (n, gdim), ``mass`` and
+``volume`` (n,), a global ``ids`` array, the owning local cell ``cells`` and the reference
+coordinates ``X`` (n, tdim) in that cell, plus named per-particle ``fields`` (velocity,
+deformation gradient, stress, history, user data) that move with the particles between ranks.
+"""
+
+from __future__ import annotations
+
+import logging
+from typing import Literal
+
+import dolfinx
+import numpy as np
+import numpy.typing as npt
+from mpi4py import MPI
+
+from fempm.location import CellLocator, OutsideMeshError, outside_message
+from fempm.migration import distribute
+
+log = logging.getLogger("fempm")
+
+OutsidePolicy = Literal["raise", "remove"]
+_OUTSIDE = ("raise", "remove")
+
+
+def _check_positive(name: str, a: npt.NDArray, comm: MPI.Comm) -> None:
+    bad = np.flatnonzero(~(a > 0))  # catches NaN too
+    nbad = comm.allreduce(len(bad))
+    if nbad:
+        raise ValueError(
+            f"{nbad} particle(s) have non-positive or non-finite {name} "
+            f"(e.g. {name}[{bad[0] if len(bad) else '...'}] = {a[bad[0]] if len(bad) else '...'})"
+        )
+
+
+class Particles:
+    """Particles distributed over the ranks that own the cells containing them.
+
+    ``Particles(mesh, x, mass, volume)`` is collective: each rank may pass any subset of the
+    points (or none); every particle ends on the rank owning its cell.
+
+    Parameters
+    ----------
+    mesh:
+        Background mesh.
+    x, mass, volume:
+        Positions (n, gdim) (3 columns accepted), masses and volumes (n,), all positive.
+    fields:
+        Extra per-particle arrays (first dimension n), carried along.
+    ids:
+        Global integer ids; default: consecutive over the ranks in rank order.
+    outside:
+        ``"raise"`` (default): an :class:`OutsideMeshError` names the particles outside the mesh.
+        ``"remove"``: drop them; the global count is in :attr:`removed` and in the log.
+    """
+
+    def __init__(
+        self,
+        mesh: dolfinx.mesh.Mesh,
+        x: npt.ArrayLike,
+        mass: npt.ArrayLike,
+        volume: npt.ArrayLike,
+        *,
+        fields: dict[str, npt.ArrayLike] | None = None,
+        ids: npt.ArrayLike | None = None,
+        outside: OutsidePolicy = "raise",
+        locator: CellLocator | None = None,
+    ):
+        self.mesh = mesh
+        self.locator = locator if locator is not None else CellLocator(mesh)
+        gdim = mesh.geometry.dim
+        x = np.asarray(x, dtype=np.float64).reshape(-1, np.shape(x)[-1] if np.ndim(x) > 1 else 1)
+        if x.shape[1] < gdim or np.any(x[:, gdim:] != 0):
+            raise ValueError(f"positions must have {gdim} coordinates (extra columns must be 0)")
+        x = np.ascontiguousarray(x[:, :gdim])
+        n = len(x)
+        mass = np.broadcast_to(np.asarray(mass, dtype=np.float64), (n,)).copy()
+        volume = np.broadcast_to(np.asarray(volume, dtype=np.float64), (n,)).copy()
+        comm = mesh.comm
+        nonfinite = comm.allreduce(int(np.count_nonzero(~np.isfinite(x).all(axis=1))))
+        if nonfinite:
+            raise ValueError(f"{nonfinite} particle position(s) are not finite")
+        _check_positive("mass", mass, comm)
+        _check_positive("volume", volume, comm)
+        if ids is None:
+            ids = comm.exscan(n) or 0
+            ids = np.arange(ids, ids + n, dtype=np.int64)
+        data = {"mass": mass, "volume": volume, "ids": np.asarray(ids, dtype=np.int64)}
+        for k, v in (fields or {}).items():
+            v = np.asarray(v)
+            if len(v) != n:
+                raise ValueError(f"field {k!r} has {len(v)} rows for {n} particles")
+            data["field:" + k] = v
+        self._assign(distribute(self.locator, x, data), outside)
+
+    # -- construction helpers -----------------------------------------------------------------
+    @classmethod
+    def from_located(
+        cls,
+        locator: CellLocator,
+        x: npt.NDArray,
+        cells: npt.NDArray[np.int32],
+        X: npt.NDArray,
+        mass: npt.NDArray,
+        volume: npt.NDArray,
+        ids: npt.NDArray[np.int64],
+        fields: dict[str, npt.NDArray] | None = None,
+    ) -> Particles:
+        """Particles already in owned cells with known reference coordinates (no search)."""
+        self = cls.__new__(cls)
+        self.mesh, self.locator = locator.mesh, locator
+        self.x, self.cells, self.X = x, np.asarray(cells, dtype=np.int32), X
+        self.mass, self.volume, self.ids = mass, volume, ids
+        self.fields = dict(fields or {})
+        self.removed = 0
+        _check_positive("mass", mass, locator.mesh.comm)
+        _check_positive("volume", volume, locator.mesh.comm)
+        return self
+
+    def _assign(self, d, outside: OutsidePolicy) -> None:
+        if outside not in _OUTSIDE:
+            raise ValueError(f"unknown option outside={outside!r}; expected one of {_OUTSIDE}")
+        comm = self.mesh.comm
+        nout = comm.allreduce(len(d.outside))
+        if nout and outside == "raise":
+            examples = np.concatenate(comm.allgather(d.outside[:5]))
+            raise OutsideMeshError(outside_message(nout, examples))
+        if nout:
+            log.warning("fempm: removed %d particle(s) outside the mesh", nout)
+        self.removed = nout
+        self.x, self.cells, self.X = d.x, d.cells, d.X
+        self.mass, self.volume, self.ids = d.data["mass"], d.data["volume"], d.data["ids"]
+        self.fields = {k[6:]: v for k, v in d.data.items() if k.startswith("field:")}
+
+    def _arrays(self) -> dict[str, npt.NDArray]:
+        data = {"mass": self.mass, "volume": self.volume, "ids": self.ids}
+        data.update({"field:" + k: v for k, v in self.fields.items()})
+        return data
+
+    # -- queries ------------------------------------------------------------------------------
+    @property
+    def comm(self) -> MPI.Comm:
+        return self.mesh.comm
+
+    @property
+    def gdim(self) -> int:
+        return self.mesh.geometry.dim
+
+    def __len__(self) -> int:
+        return len(self.x)
+
+    @property
+    def num_global(self) -> int:
+        """Total number of particles over all ranks (collective)."""
+        return self.comm.allreduce(len(self.x))
+
+    def density(self) -> npt.NDArray:
+        return self.mass / self.volume
+
+    # -- motion -------------------------------------------------------------------------------
+    def relocate(self, outside: OutsidePolicy = "raise") -> None:
+        """Update cells and reference coordinates after ``x`` changed (collective).
+
+        Each particle's previous cell is tested first; particles that left the rank's owned
+        cells move to the rank that owns their new cell.
+        """
+        cells, X = self.locator.relocate(self.x, self.cells)
+        if self.comm.size == 1 and np.all(cells >= 0):
+            self.cells, self.X = cells, X
+            return
+        self._assign(distribute(self.locator, self.x, self._arrays(), cells=cells, X=X), outside)

@@ -1,0 +1,80 @@
+"""PETSc helpers, isolated here: matrices from COO data on a DOLFINx index map, active-dof
+index sets and KSP set-up with an options prefix."""
+
+from __future__ import annotations
+
+from typing import Any
+
+import dolfinx
+import numpy as np
+import numpy.typing as npt
+from petsc4py import PETSc
+
+
+def local_to_global_map(index_map: dolfinx.common.IndexMap) -> PETSc.LGMap:
+    n = index_map.size_local + index_map.num_ghosts
+    g = index_map.local_to_global(np.arange(n, dtype=np.int32)).astype(PETSc.IntType)
+    return PETSc.LGMap().create(g, comm=index_map.comm)
+
+
+def coo_matrix(
+    index_map: dolfinx.common.IndexMap,
+    rows: npt.NDArray,
+    cols: npt.NDArray,
+    values: npt.NDArray,
+    lgmap: PETSc.LGMap | None = None,
+) -> PETSc.Mat:
+    """Square AIJ matrix on ``index_map`` from COO entries in *local* indices (owned + ghost).
+
+    Repeated entries are summed; entries in rows owned by another rank are sent there.
+    """
+    n, N = index_map.size_local, index_map.size_global
+    A = PETSc.Mat().create(comm=index_map.comm)
+    A.setSizes(((n, N), (n, N)))
+    A.setType(PETSc.Mat.Type.AIJ)
+    A.setLGMap(lgmap or local_to_global_map(index_map))
+    A.setPreallocationCOOLocal(
+        np.asarray(rows, dtype=PETSc.IntType).ravel().copy(),
+        np.asarray(cols, dtype=PETSc.IntType).ravel().copy(),
+    )
+    A.setValuesCOO(np.asarray(values, dtype=PETSc.ScalarType).ravel(), addv=PETSc.InsertMode.ADD_VALUES)
+    A.assemble()
+    return A
+
+
+def owned_index_set(index_map: dolfinx.common.IndexMap, owned_mask: npt.NDArray[np.bool_]) -> PETSc.IS:
+    """Global indices of the owned dofs where ``owned_mask`` holds."""
+    local = np.flatnonzero(owned_mask).astype(np.int32)
+    g = index_map.local_to_global(local).astype(PETSc.IntType)
+    return PETSc.IS().createGeneral(g, comm=index_map.comm)
+
+
+DEFAULT_KSP_OPTIONS: dict[str, Any] = {
+    "ksp_type": "cg",
+    "pc_type": "jacobi",
+    "ksp_rtol": 1e-13,
+    "ksp_atol": 1e-300,
+    "ksp_max_it": 20000,
+}
+
+
+def create_ksp(comm, prefix: str, options: dict[str, Any] | None = None) -> PETSc.KSP:
+    """KSP with options prefix ``prefix``: fempm defaults (CG + Jacobi), then ``options``, then
+    whatever the PETSc options database holds under the prefix (command line wins)."""
+    ksp = PETSc.KSP().create(comm)
+    ksp.setOptionsPrefix(prefix)
+    opts = PETSc.Options()
+    merged = {**DEFAULT_KSP_OPTIONS, **(options or {})}
+    added = [k for k in merged if not opts.hasName(prefix + k)]
+    for k in added:
+        opts[prefix + k] = merged[k]
+    ksp.setFromOptions()
+    ksp.getPC().setFromOptions()
+    for k in added:
+        opts.delValue(prefix + k)
+    return ksp
+
+
+def converged_reason_name(reason: int) -> str:
+    names = {v: k for k, v in vars(PETSc.KSP.ConvergedReason).items() if isinstance(v, int)}
+    return names.get(reason, str(reason))

@@ -1,0 +1,96 @@
+"""Figures with pyvista (fields and particles) and matplotlib (studies). Imported lazily."""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from pathlib import Path
+
+import dolfinx.fem
+import numpy as np
+import numpy.typing as npt
+
+from fempm.particles import Particles
+
+
+def _gather(comm, a: npt.NDArray) -> npt.NDArray:
+    parts = comm.gather(a, root=0)
+    return np.concatenate(parts) if comm.rank == 0 else a
+
+
+def plot_projection(F: dolfinx.fem.Function, particles: Particles, values: npt.NDArray, path: Path) -> None:
+    """Side by side: particles coloured by their values, and the projected field ``F``.
+
+    Under MPI the particles are gathered to rank 0 and each rank's part of the mesh is drawn
+    by rank 0 from gathered pieces.
+    """
+    import dolfinx.plot
+    import pyvista
+
+    pyvista.OFF_SCREEN = True
+    comm = F.function_space.mesh.comm
+    cells, types, x = dolfinx.plot.vtk_mesh(F.function_space)
+    pieces = comm.gather((cells, types, x, F.x.array.real.copy()), root=0)
+    xp = _gather(comm, np.pad(particles.x, ((0, 0), (0, 3 - particles.gdim))))
+    vp = _gather(comm, np.asarray(values))
+    if comm.rank != 0:
+        return
+    grids = []
+    for c, t, xx, v in pieces:
+        g = pyvista.UnstructuredGrid(c, t, xx)
+        g.point_data[F.name] = v
+        grids.append(g)
+    grid = grids[0] if len(grids) == 1 else pyvista.merge(grids)
+    cloud = pyvista.PolyData(xp)
+    cloud.point_data["particle value"] = vp
+    clim = [float(np.min(vp)), float(np.max(vp))]
+    plotter = pyvista.Plotter(shape=(1, 2), window_size=(1400, 650), off_screen=True)
+    plotter.subplot(0, 0)
+    plotter.add_text("particles", font_size=12)
+    plotter.add_mesh(grid, style="wireframe", color="gray", opacity=0.4)
+    plotter.add_mesh(cloud, scalars="particle value", point_size=6, render_points_as_spheres=True, clim=clim)
+    plotter.view_xy()
+    plotter.subplot(0, 1)
+    plotter.add_text(F.name, font_size=12)
+    plotter.add_mesh(grid, scalars=F.name, show_edges=True, clim=clim)
+    plotter.view_xy()
+    Path(path).parent.mkdir(parents=True, exist_ok=True)
+    plotter.screenshot(str(path))
+    plotter.close()
+
+
+def plot_error_vs_time(rows: Sequence[dict], path: Path, *, title: str = "") -> None:
+    """Log-log L2 error against wall time, one line per (mesh, field, space, mass) series."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    series: dict[tuple, list[dict]] = {}
+    for r in rows:
+        series.setdefault((r["mesh"], r["field"], r["space"], r["mass"], r["ppc"]), []).append(r)
+    fig, axes = plt.subplots(1, 2, figsize=(13, 5.5), sharey=False)
+    for ax, fld in zip(axes, sorted({r["field"] for r in rows})):
+        for key, rs in sorted(series.items()):
+            if key[1] != fld:
+                continue
+            rs = sorted(rs, key=lambda r: r["time_s"])
+            ls = "-" if key[3] == "consistent" else "--"
+            marker = {"structured-tri": "o", "structured-quad": "s", "unstructured-tri": "^"}.get(key[0], "x")
+            ax.loglog(
+                [r["time_s"] for r in rs],
+                [max(r["l2_error"], 1e-17) for r in rs],
+                ls,
+                marker=marker,
+                label=f"{key[0]} {key[2]} {key[3]} ppc={key[4]}",
+            )
+        ax.set_xlabel("wall time of the projection [s]")
+        ax.set_ylabel("L2 error")
+        ax.set_title(f"field: {fld}")
+        ax.grid(True, which="both", alpha=0.3)
+    axes[-1].legend(fontsize=6, ncol=1, loc="center left", bbox_to_anchor=(1.0, 0.5))
+    if title:
+        fig.suptitle(title)
+    fig.tight_layout()
+    Path(path).parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(path, dpi=130)
+    plt.close(fig)

@@ -1,0 +1,224 @@
+r"""Particle-to-grid (P2G) and grid-to-particle (G2P) transfers; the Galerkin projection.
+
+The mass-weighted least-squares fit :math:`F = \sum_j F_j N_j` of particle data :math:`f_p`
+minimises :math:`\int (F - f)^2 \rho\, dV`, which with particle quadrature gives
+
+.. math::
+    \sum_j m_{ij} F_j = b_i, \qquad m_{ij} = \sum_p M_p N_i(x_p) N_j(x_p), \qquad
+    b_i = \sum_p M_p f_p N_i(x_p)
+
+(seed 000, eqs. 16.6-16.17). *Consistent* mode assembles :math:`m_{ij}` as a PETSc matrix and
+solves with KSP (CG + Jacobi by default) on the dofs that particles support. *Lumped* mode
+replaces :math:`m_{ij}` by its row sum :math:`m_i = \sum_p M_p N_i(x_p)` (eqs. 16.21-16.23):
+:math:`F_i = b_i / m_i`, which needs a non-negative basis (P1/Q1 or Bernstein).
+"""
+
+from __future__ import annotations
+
+import logging
+from collections.abc import Callable
+from typing import Any, Literal
+
+import dolfinx
+import dolfinx.fem
+import dolfinx.la
+import numpy as np
+import numpy.typing as npt
+from mpi4py import MPI
+from petsc4py import PETSc
+
+from fempm import petsc as fpetsc
+from fempm.basis import ParticleBasis
+from fempm.particles import Particles
+
+log = logging.getLogger("fempm")
+
+MassMode = Literal["consistent", "lumped"]
+_MASS_MODES = ("consistent", "lumped")
+
+#: a dof is supported when its diagonal (consistent) or lumped mass exceeds this fraction
+#: of the largest one
+SUPPORT_TOL = 1e-14
+
+
+def p2g(basis: ParticleBasis, weights: npt.NDArray, *, values: npt.NDArray | None = None) -> npt.NDArray:
+    r""":math:`\sum_p w_p S[p, i]` summed over all ranks; (owned + ghost dofs, k), ghosts updated."""
+    local = basis.scatter(weights, values=values)
+    vec = dolfinx.la.vector(basis.index_map, bs=local.shape[1])
+    vec.array[:] = local.ravel()
+    vec.scatter_reverse(dolfinx.la.InsertMode.add)
+    vec.scatter_forward()
+    return vec.array.reshape(local.shape)
+
+
+def lumped_mass(basis: ParticleBasis, particles: Particles) -> npt.NDArray:
+    r"""Lumped nodal mass :math:`m_i = \sum_p M_p N_i(x_p)` on owned + ghost dofs."""
+    return p2g(basis, particles.mass)[:, 0]
+
+
+def consistent_mass_matrix(basis: ParticleBasis, particles: Particles) -> PETSc.Mat:
+    r"""PETSc matrix :math:`m_{ij} = \sum_p M_p N_i(x_p) N_j(x_p)` (one row per scalar dof).
+
+    Particle contributions are summed per cell first (``np.bincount``), then inserted once as
+    COO data.
+    """
+    S, M = basis.values, particles.mass
+    n, k = S.shape
+    cells, inv = np.unique(particles.cells, return_inverse=True)
+    contrib = (M[:, None, None] * S[:, :, None] * S[:, None, :]).reshape(n, k * k)
+    key = (inv[:, None] * (k * k) + np.arange(k * k)[None, :]).ravel()
+    Ae = np.bincount(key, weights=contrib.ravel(), minlength=len(cells) * k * k)
+    dofs = np.asarray(basis.V.dofmap.list)[cells]
+    rows = np.broadcast_to(dofs[:, :, None], (len(cells), k, k))
+    cols = np.broadcast_to(dofs[:, None, :], (len(cells), k, k))
+    return fpetsc.coo_matrix(basis.index_map, rows, cols, Ae)
+
+
+def _particle_values(values: npt.ArrayLike | Callable, particles: Particles, bs: int) -> npt.NDArray:
+    if callable(values):  # DOLFINx convention: f(x) with x of shape (3, n)
+        x3 = np.zeros((3, len(particles)))
+        x3[: particles.gdim] = particles.x.T
+        values = np.asarray(values(x3), dtype=np.float64)
+        values = values.reshape(-1, len(particles)).T  # (n, bs)
+    f = np.asarray(values, dtype=np.float64).reshape(len(particles), -1)
+    if f.shape[1] != bs:
+        raise ValueError(f"values have {f.shape[1]} component(s) per particle; the space has {bs}")
+    if not np.all(np.isfinite(f)):
+        raise ValueError(f"{np.count_nonzero(~np.isfinite(f))} particle value(s) are not finite")
+    return f
+
+
+class Projector:
+    """Projection of particle data onto ``V`` with a fixed set of particles.
+
+    Assembles the mass (consistent matrix + KSP, or lumped vector) once; :meth:`project` then
+    costs one P2G and one solve per value component.
+
+    Attributes
+    ----------
+    active:
+        Mask over owned + ghost dofs that particles support; other dofs are excluded from the
+        solve and set to 0.
+    num_inactive:
+        Global number of unsupported dofs (also logged).
+    iterations:
+        KSP iterations of the last :meth:`project`, per component.
+    """
+
+    def __init__(
+        self,
+        V: dolfinx.fem.FunctionSpace,
+        particles: Particles,
+        *,
+        mass: MassMode = "consistent",
+        petsc_options_prefix: str = "fempm_projection_",
+        petsc_options: dict[str, Any] | None = None,
+        basis: ParticleBasis | None = None,
+    ):
+        if mass not in _MASS_MODES:
+            raise ValueError(f"unknown option mass={mass!r}; expected one of {_MASS_MODES}")
+        self.V, self.particles, self.mass = V, particles, mass
+        self.basis = basis if basis is not None else ParticleBasis(V, particles)
+        imap = self.basis.index_map
+        self.num_owned = imap.size_local
+        comm = particles.comm
+        self.iterations: list[int] = []
+        if mass == "lumped":
+            if not self.basis.nonnegative:
+                raise ValueError(
+                    f"lumped mass needs a non-negative basis (degree 1 or Bernstein); this "
+                    f"Lagrange space of degree {self.basis.element.degree} has lumped vertex masses "
+                    "that can be zero or negative: use mass='consistent' or a Bernstein variant"
+                )
+            self.lumped = lumped_mass(self.basis, particles)
+            measure = self.lumped
+        else:
+            measure = p2g(self.basis, particles.mass, values=self.basis.values**2)[:, 0]
+        top = comm.allreduce(float(measure[: self.num_owned].max(initial=0.0)), op=MPI.MAX)
+        self.active = measure > SUPPORT_TOL * top
+        self.num_inactive = comm.allreduce(int(np.count_nonzero(~self.active[: self.num_owned])))
+        if self.num_inactive:
+            log.info("fempm: %d dof(s) without particle support excluded and set to 0", self.num_inactive)
+        if mass == "consistent":
+            A = consistent_mass_matrix(self.basis, particles)
+            iset = fpetsc.owned_index_set(imap, self.active[: self.num_owned])
+            self.matrix = A.createSubMatrix(iset, iset)
+            A.destroy()
+            self.ksp = fpetsc.create_ksp(comm, petsc_options_prefix, petsc_options)
+            self.ksp.setOperators(self.matrix)
+            self._x, self._b = self.matrix.createVecs()
+            ones, rows = self.matrix.createVecs()
+            ones.set(1.0)
+            self.matrix.mult(ones, rows)
+            self.row_mass = np.zeros(self.num_owned)
+            self.row_mass[self.active[: self.num_owned]] = rows.array
+        else:
+            self.row_mass = np.where(self.active, self.lumped, 0.0)[: self.num_owned]
+
+    def grid_total(self, u: dolfinx.fem.Function) -> npt.NDArray:
+        r"""Grid total :math:`\sum_{ij} m_{ij} F_j` (lumped: :math:`\sum_i m_i F_i`) per component,
+        summed over ranks. For ``u`` the projection of :math:`f_p` it equals
+        :math:`\sum_p M_p f_p` (conservation); for ``u = 1`` the total mass."""
+        F = u.x.array.reshape(-1, self.basis.bs)[: self.num_owned]
+        return self.particles.comm.allreduce(self.row_mass @ F)
+
+    def rhs(self, f: npt.NDArray) -> npt.NDArray:
+        r""":math:`b_i = \sum_p M_p f_p N_i(x_p)` on owned + ghost dofs, (ndofs, bs)."""
+        return p2g(self.basis, self.particles.mass[:, None] * f)
+
+    def project(
+        self, values: npt.ArrayLike | Callable, out: dolfinx.fem.Function | None = None
+    ) -> dolfinx.fem.Function:
+        """Project particle values (n,) / (n, bs), or a function of x, onto ``V``."""
+        bs = self.basis.bs
+        f = _particle_values(values, self.particles, bs)
+        b = self.rhs(f)
+        u = out if out is not None else dolfinx.fem.Function(self.V)
+        F = np.zeros((self.num_owned, bs))
+        act = self.active[: self.num_owned]
+        if self.mass == "lumped":
+            F[act] = b[: self.num_owned][act] / self.lumped[: self.num_owned][act, None]
+        else:
+            self.iterations = []
+            for c in range(bs):
+                self._b.array[:] = b[: self.num_owned][act, c]
+                self._x.set(0.0)
+                self.ksp.solve(self._b, self._x)
+                reason = self.ksp.getConvergedReason()
+                if reason < 0:
+                    raise RuntimeError(
+                        f"consistent projection: KSP did not converge ({fpetsc.converged_reason_name(reason)}, "
+                        f"{self.ksp.getIterationNumber()} iterations); the particle mass matrix may be "
+                        "singular: too few particles per cell for this space?"
+                    )
+                self.iterations.append(self.ksp.getIterationNumber())
+                F[act, c] = self._x.array
+        u.x.array[: self.num_owned * bs] = F.ravel()
+        u.x.scatter_forward()
+        return u
+
+
+def project(
+    V: dolfinx.fem.FunctionSpace,
+    particles: Particles,
+    values: npt.ArrayLike | Callable,
+    *,
+    mass: MassMode = "consistent",
+    petsc_options_prefix: str = "fempm_projection_",
+    petsc_options: dict[str, Any] | None = None,
+) -> dolfinx.fem.Function:
+    """Galerkin projection of particle ``values`` onto ``V`` (see :class:`Projector`)."""
+    projector = Projector(
+        V, particles, mass=mass, petsc_options_prefix=petsc_options_prefix, petsc_options=petsc_options
+    )
+    return projector.project(values)
+
+
+def interpolate(u: dolfinx.fem.Function, particles: Particles, basis: ParticleBasis | None = None) -> npt.NDArray:
+    r"""G2P: values :math:`u(x_p) = \sum_i u_i N_i(x_p)` at the particles, (n,) or (n, bs).
+
+    Ghost values of ``u`` must be up to date (as after any DOLFINx interpolation or solve).
+    """
+    basis = basis if basis is not None else ParticleBasis(u.function_space, particles)
+    vals = basis.gather(u.x.array.reshape(-1, basis.bs))
+    return vals[:, 0] if basis.bs == 1 else vals
