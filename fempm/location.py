@@ -31,7 +31,8 @@ def outside_message(count: int, examples: npt.NDArray) -> str:
 def as_points3(x: npt.NDArray) -> npt.NDArray[np.float64]:
     """Points padded to the 3 columns DOLFINx geometry routines expect."""
     x = np.asarray(x, dtype=np.float64)
-    x = x.reshape(len(x), -1)
+    if x.ndim == 1:
+        x = x[:, None]
     out = np.zeros((len(x), 3))
     out[:, : x.shape[1]] = x
     return out

@@ -1,0 +1,62 @@
+"""Shared mesh factories for the tests (each takes a communicator)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import fempm  # noqa: F401  (imports dolfinx_solver first)
+import dolfinx.mesh as dm
+import numpy as np
+import pytest
+from mpi4py import MPI
+
+MESHES = Path(__file__).resolve().parents[1] / "meshes"
+
+
+def _perturb(mesh: dm.Mesh, amp: float = 0.06) -> dm.Mesh:
+    """Move interior nodes of a unit square/cube mesh smoothly: quads/hexes become non-affine."""
+    x = mesh.geometry.x
+    gdim = mesh.geometry.dim
+    bump = np.prod(np.sin(np.pi * x[:, :gdim]), axis=1)
+    for d in range(gdim):
+        x[:, d] += amp * bump * np.sin(2 * np.pi * x[:, (d + 1) % gdim] + d)
+    return mesh
+
+
+def _read(name: str):
+    def make(comm):
+        from fempm.meshes import read_msh
+
+        return read_msh(MESHES / name, comm).mesh
+
+    return make
+
+
+MESH_FACTORIES = {
+    "interval": lambda comm: dm.create_unit_interval(comm, 9),
+    "triangle": lambda comm: dm.create_unit_square(comm, 6, 5),
+    "quadrilateral": lambda comm: dm.create_unit_square(comm, 6, 5, dm.CellType.quadrilateral),
+    "tetrahedron": lambda comm: dm.create_unit_cube(comm, 3, 3, 2),
+    "hexahedron": lambda comm: dm.create_unit_cube(comm, 3, 3, 2, dm.CellType.hexahedron),
+    "distorted-quadrilateral": lambda comm: _perturb(dm.create_unit_square(comm, 6, 5, dm.CellType.quadrilateral)),
+    "distorted-hexahedron": lambda comm: _perturb(dm.create_unit_cube(comm, 3, 3, 3, dm.CellType.hexahedron)),
+    "unstructured-triangle": _read("plate_with_hole.msh"),
+    "unstructured-quadrilateral": _read("square_quads.msh"),
+    "unstructured-tetrahedron": _read("cube_tets.msh"),
+}
+
+
+@pytest.fixture(params=sorted(MESH_FACTORIES))
+def mesh_name(request):
+    return request.param
+
+
+def make_mesh(name: str, comm=MPI.COMM_WORLD) -> dm.Mesh:
+    return MESH_FACTORIES[name](comm)
+
+
+def ppc_for(mesh: dm.Mesh, degree: int) -> int:
+    """Particles per cell: at least the dofs per cell of a Lagrange space of this degree."""
+    tdim = mesh.topology.dim
+    n = degree + 1
+    return n**tdim

@@ -1,0 +1,32 @@
+"""Every demo runs at a small size and checks a number."""
+
+import importlib.util
+from pathlib import Path
+
+import pytest
+from mpi4py import MPI
+
+DEMOS = Path(__file__).resolve().parents[2] / "demos"
+
+
+def load(name):
+    spec = importlib.util.spec_from_file_location(name, DEMOS / f"{name}.py")
+    mod = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(mod)
+    return mod
+
+
+def test_projection_demo(tmp_path):
+    demo = load("projection_unstructured")
+    out = tmp_path / "projection"
+    res = demo.main(["--ppc", "4", "--out", str(out)])
+    cases = {(c["space"], c["mass"]): c for c in res["cases"]}
+    assert res["area"] == pytest.approx(1 - 0.04 * 3.14159, rel=3e-3)
+    for c in cases.values():
+        assert c["mass defect"] < 1e-13 and c["momentum defect"] < 1e-12
+    # consistent beats lumped on P1, and P2 beats P1 on this smooth field
+    assert cases["P1", "consistent"]["L2 error"] < 0.5 * cases["P1", "lumped"]["L2 error"]
+    assert cases["P2", "consistent"]["L2 error"] < 0.2 * cases["P1", "consistent"]["L2 error"]
+    if MPI.COMM_WORLD.rank == 0:
+        assert (out / "projection.png").stat().st_size > 10_000
+        assert (out / "f_P2_consistent.bp").is_dir()

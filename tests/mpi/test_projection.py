@@ -1,0 +1,128 @@
+"""Galerkin projection: exact reproduction of FE fields (consistent), constants (lumped),
+conservation, errors, and the parallel result against the serial one."""
+
+import basix
+import basix.ufl
+import dolfinx.fem as fem
+import fempm
+import numpy as np
+import pytest
+from conftest import make_mesh, ppc_for
+from mpi4py import MPI
+
+comm = MPI.COMM_WORLD
+
+
+def random_function(V, seed=0):
+    u = fem.Function(V)
+    imap = V.dofmap.index_map
+    bs = V.dofmap.index_map_bs
+    g = imap.local_to_global(np.arange(imap.size_local + imap.num_ghosts, dtype=np.int32))
+    # a value per global dof, independent of the partition
+    vals = np.sin(1.0 + 12.9898 * (g[:, None] * bs + np.arange(bs)) + seed) * 43758.5453
+    u.x.array[:] = (vals - np.floor(vals)).ravel()
+    return u
+
+
+@pytest.mark.parametrize("degree", [1, 2])
+def test_consistent_reproduces_fe_fields(mesh_name, degree):
+    mesh = make_mesh(mesh_name)
+    p = fempm.create_particles(mesh, ppc_for(mesh, degree), density=2.5, jitter=0.6, seed=9)
+    for shape in [(), (mesh.geometry.dim,)]:
+        V = fem.functionspace(mesh, ("Lagrange", degree, shape))
+        u = random_function(V)
+        F = fempm.project(V, p, fempm.interpolate(u, p), mass="consistent")
+        err = comm.allreduce(np.abs(F.x.array - u.x.array).max(initial=0.0), op=MPI.MAX)
+        assert err < 1e-10, f"{mesh_name} P{degree} {shape}: max dof error {err:.2e}"
+
+
+@pytest.mark.parametrize("name", ["triangle", "unstructured-quadrilateral", "tetrahedron", "distorted-hexahedron"])
+def test_lumped_reproduces_constants_not_linears(name):
+    mesh = make_mesh(name)
+    p = fempm.create_particles(mesh, 2 ** mesh.topology.dim, jitter=0.8, seed=2)
+    V = fem.functionspace(mesh, ("Lagrange", 1))
+    F = fempm.project(V, p, np.full(len(p), 3.7), mass="lumped")
+    assert comm.allreduce(np.abs(F.x.array - 3.7).max(), op=MPI.MAX) < 1e-12
+    lin = fem.Function(V)
+    lin.interpolate(lambda x: 1.0 + 2.0 * x[0] - x[1])
+    FL = fempm.project(V, p, fempm.interpolate(lin, p), mass="lumped")
+    err_lumped = comm.allreduce(np.abs(FL.x.array - lin.x.array).max(), op=MPI.MAX)
+    FC = fempm.project(V, p, fempm.interpolate(lin, p), mass="consistent")
+    err_consistent = comm.allreduce(np.abs(FC.x.array - lin.x.array).max(), op=MPI.MAX)
+    assert err_lumped > 1e-2 and err_consistent < 1e-10
+
+
+def test_lumped_bernstein_reproduces_constants():
+    mesh = make_mesh("unstructured-triangle")
+    p = fempm.create_particles(mesh, 9, jitter=0.5, seed=1)
+    el = basix.ufl.element("P", "triangle", 2, lagrange_variant=basix.LagrangeVariant.bernstein)
+    F = fempm.project(fem.functionspace(mesh, el), p, np.full(len(p), -2.0), mass="lumped")
+    assert comm.allreduce(np.abs(F.x.array + 2.0).max(), op=MPI.MAX) < 1e-12
+
+
+def test_lumped_p2_lagrange_is_refused():
+    mesh = make_mesh("triangle")
+    p = fempm.create_particles(mesh, 9)
+    with pytest.raises(ValueError, match="non-negative basis"):
+        fempm.project(fem.functionspace(mesh, ("Lagrange", 2)), p, np.ones(len(p)), mass="lumped")
+    with pytest.raises(ValueError, match="unknown option mass='diagonal'"):
+        fempm.project(fem.functionspace(mesh, ("Lagrange", 1)), p, np.ones(len(p)), mass="diagonal")
+
+
+@pytest.mark.parametrize("mass,degree", [("lumped", 1), ("consistent", 1), ("consistent", 2)])
+def test_mass_and_momentum_conserved(mass, degree):
+    mesh = make_mesh("unstructured-triangle")
+    p = fempm.create_particles(mesh, 9, density=1000.0, jitter=0.9, seed=5)
+    V = fem.functionspace(mesh, ("Lagrange", degree, (2,)))
+    v = np.column_stack([np.sin(7 * p.x[:, 0]) + p.x[:, 1] ** 3, np.cos(5 * p.x[:, 1])])
+    proj = fempm.Projector(V, p, mass=mass)
+    F = proj.project(v)
+    momentum = comm.allreduce(p.mass @ v)
+    np.testing.assert_allclose(proj.grid_total(F), momentum, rtol=1e-13)
+    one = fem.Function(V)
+    one.x.array[:] = 1.0
+    np.testing.assert_allclose(proj.grid_total(one), comm.allreduce(p.mass.sum()), rtol=1e-13)
+
+
+def test_unsupported_dofs_are_excluded_and_reported():
+    """Particles only in the left half: the right half's dofs are inactive and set to 0."""
+    mesh = make_mesh("triangle")
+    rng = np.random.default_rng(0)
+    x = rng.random((600, 2)) * [0.45, 1.0]
+    p = fempm.Particles(mesh, x if comm.rank == 0 else np.zeros((0, 2)), 1.0, 1.0)
+    V = fem.functionspace(mesh, ("Lagrange", 1))
+    proj = fempm.Projector(V, p)
+    lin = fem.Function(V)
+    lin.interpolate(lambda x: 2.0 - x[1])
+    F = proj.project(fempm.interpolate(lin, p))
+    xd = V.tabulate_dof_coordinates()[:, 0]
+    assert proj.num_inactive == 3 * 6  # vertex columns x = 4/6, 5/6, 1 of the 6x5 mesh
+    assert np.all(F.x.array[xd > 0.6] == 0.0)
+    err = np.abs(F.x.array - lin.x.array)[proj.active].max(initial=0.0)
+    assert comm.allreduce(err, op=MPI.MAX) < 1e-10
+
+
+@pytest.mark.parametrize("name,degree,mass", [
+    ("unstructured-triangle", 2, "consistent"),
+    ("unstructured-triangle", 1, "lumped"),
+    ("distorted-hexahedron", 1, "consistent"),
+    ("unstructured-tetrahedron", 1, "lumped"),
+])
+def test_parallel_equals_serial(name, degree, mass):
+    """Same particles on a distributed mesh and on a serial copy: same projected field."""
+    serial_mesh = make_mesh(name, MPI.COMM_SELF)
+    ps = fempm.create_particles(serial_mesh, ppc_for(serial_mesh, degree), jitter=0.7, seed=8)
+    f = np.sin(4 * ps.x[:, 0]) * np.cos(3 * ps.x[:, 1]) + ps.x[:, -1] ** 2
+    Fs = fempm.project(fem.functionspace(serial_mesh, ("Lagrange", degree)), ps, f, mass=mass)
+    mesh = make_mesh(name, comm)
+    mine = slice(None) if comm.rank == 0 else slice(0, 0)
+    pw = fempm.Particles(mesh, ps.x[mine], ps.mass[mine], ps.volume[mine], ids=ps.ids[mine], fields={"f": f[mine]})
+    Fw = fempm.project(fem.functionspace(mesh, ("Lagrange", degree)), pw, pw.fields["f"], mass=mass)
+    # compare the two fields at the particles (matched by id)
+    vs = fempm.interpolate(Fs, ps)
+    vw = fempm.interpolate(Fw, pw)
+    order = np.argsort(ps.ids)
+    ref = vs[order][np.searchsorted(ps.ids[order], pw.ids)]
+    diff = comm.allreduce(np.abs(vw - ref).max(initial=0.0), op=MPI.MAX)
+    assert pw.num_global == len(ps)
+    assert diff < 1e-10
