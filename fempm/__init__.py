@@ -14,7 +14,7 @@ from fempm.basis import ParticleBasis
 from fempm.location import CellLocator, OutsideMeshError
 from fempm.particles import Particles
 from fempm.seeding import create_particles
-from fempm.transfer import Projector, interpolate, lumped_mass, project
+from fempm.transfer import Projector, SingularMassError, interpolate, lumped_mass, project
 
 __all__ = [
     "CellLocator",
@@ -22,6 +22,7 @@ __all__ = [
     "ParticleBasis",
     "Particles",
     "Projector",
+    "SingularMassError",
     "create_particles",
     "interpolate",
     "lumped_mass",

@@ -41,6 +41,10 @@ _MASS_MODES = ("consistent", "lumped")
 SUPPORT_TOL = 1e-14
 
 
+class SingularMassError(ValueError):
+    """The particles cannot determine a unique consistent projection."""
+
+
 def p2g(basis: ParticleBasis, weights: npt.NDArray, *, values: npt.NDArray | None = None) -> npt.NDArray:
     r""":math:`\sum_p w_p S[p, i]` summed over all ranks; (owned + ghost dofs, k), ghosts updated."""
     local = basis.scatter(weights, values=values)
@@ -140,6 +144,13 @@ class Projector:
         if self.num_inactive:
             log.info("fempm: %d dof(s) without particle support excluded and set to 0", self.num_inactive)
         if mass == "consistent":
+            nactive = comm.allreduce(int(np.count_nonzero(self.active[: self.num_owned])))
+            if particles.num_global < nactive:  # rank(m) = rank(S) <= number of particles
+                raise SingularMassError(
+                    f"the consistent mass matrix is singular: {particles.num_global} particles "
+                    f"support {nactive} dofs (its rank is at most the number of particles); "
+                    "seed more particles per cell or use a lower degree"
+                )
             A = consistent_mass_matrix(self.basis, particles)
             iset = fpetsc.owned_index_set(imap, self.active[: self.num_owned])
             self.matrix = A.createSubMatrix(iset, iset)

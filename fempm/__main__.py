@@ -1,0 +1,5 @@
+import sys
+
+from fempm.cli import main
+
+sys.exit(main())

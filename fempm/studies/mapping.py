@@ -1,0 +1,162 @@
+r"""Mapping study: error of the particle-to-grid projection against its run time.
+
+Known fields are sampled at jittered particles and projected onto P1 (lumped and consistent)
+and P2 (consistent) spaces, on structured triangles, structured quadrilaterals and unstructured
+gmsh triangles, for several mesh sizes and particle densities:
+
+* ``smooth``: :math:`f = \sin(2\pi x)\sin(2\pi y) + x^2 y`,
+* ``fe``: a random function of the target space itself (consistent projection must return it
+  to solver tolerance; lumped projection does not).
+
+For each case the table holds :math:`\|F - f\|_{L^2}`, the wall time of the projection (basis
+tabulation, mass assembly, right-hand side and solve; maximum over ranks) and the KSP
+iterations. Fitted convergence rates :math:`\|F - f\| \sim h^r` (``numpy.polyfit``) of the
+smooth field are in the Markdown summary.
+"""
+
+from __future__ import annotations
+
+import csv
+import itertools
+import time
+from pathlib import Path
+
+import dolfinx.fem
+import dolfinx.mesh as dm
+import numpy as np
+import ufl
+from mpi4py import MPI
+
+from fempm.errors import l2_error
+from fempm.seeding import create_particles
+from fempm.transfer import Projector, SingularMassError, interpolate
+
+MESH_KINDS = ("structured-tri", "structured-quad", "unstructured-tri")
+SPACES = ((1, "lumped"), (1, "consistent"), (2, "consistent"))
+
+
+def make_mesh(kind: str, n: int, comm: MPI.Comm) -> dm.Mesh:
+    if kind == "structured-tri":
+        return dm.create_unit_square(comm, n, n)
+    if kind == "structured-quad":
+        return dm.create_unit_square(comm, n, n, dm.CellType.quadrilateral)
+    if kind == "unstructured-tri":
+        from fempm.meshes import unstructured_rectangle
+
+        return unstructured_rectangle(comm, 1.0 / n)
+    raise ValueError(f"unknown mesh kind {kind!r}; expected one of {MESH_KINDS}")
+
+
+def smooth(x):
+    return np.sin(2 * np.pi * x[0]) * np.sin(2 * np.pi * x[1]) + x[0] ** 2 * x[1]
+
+
+def smooth_ufl(mesh):
+    x = ufl.SpatialCoordinate(mesh)
+    return ufl.sin(2 * ufl.pi * x[0]) * ufl.sin(2 * ufl.pi * x[1]) + x[0] ** 2 * x[1]
+
+
+def random_fe_function(V: dolfinx.fem.FunctionSpace, seed: int = 0) -> dolfinx.fem.Function:
+    """A function of V with partition-independent pseudo-random dof values in [-1, 1)."""
+    u = dolfinx.fem.Function(V)
+    imap = V.dofmap.index_map
+    g = imap.local_to_global(np.arange(imap.size_local + imap.num_ghosts, dtype=np.int32))
+    v = np.sin(12.9898 * g + 78.233 * seed) * 43758.5453
+    u.x.array[:] = 2.0 * (v - np.floor(v)) - 1.0
+    return u
+
+
+def run_case(mesh, particles, degree: int, mass: str, field: str) -> dict:
+    comm = mesh.comm
+    V = dolfinx.fem.functionspace(mesh, ("Lagrange", degree))
+    if field == "smooth":
+        values, exact = smooth, smooth_ufl(mesh)
+    else:
+        exact = random_fe_function(V)
+        values = interpolate(exact, particles)
+    comm.Barrier()
+    t0 = time.perf_counter()
+    projector = Projector(V, particles, mass=mass)
+    F = projector.project(values)
+    wall = comm.allreduce(time.perf_counter() - t0, op=MPI.MAX)
+    return {
+        "l2_error": l2_error(F, exact),
+        "time_s": wall,
+        "ksp_its": projector.iterations[0] if projector.iterations else 0,
+        "dofs": V.dofmap.index_map.size_global,
+        "inactive": projector.num_inactive,
+    }
+
+
+def run(
+    sizes=(8, 16, 32),
+    ppcs=(4,),
+    kinds=MESH_KINDS,
+    fields=("smooth", "fe"),
+    out: Path = Path("output/study-mapping"),
+    comm: MPI.Comm = MPI.COMM_WORLD,
+    jitter: float = 0.5,
+    log=print,
+) -> list[dict]:
+    """Run every case, write ``mapping.csv``, ``mapping.md`` and ``mapping.png`` into ``out``."""
+    rows = []
+    for kind, n in itertools.product(kinds, sizes):
+        mesh = make_mesh(kind, n, comm)
+        ncells = mesh.topology.index_map(2).size_global
+        h = 1.0 / np.sqrt(ncells / (2 if "tri" in kind else 1))  # equivalent structured size
+        for ppc in ppcs:
+            particles = create_particles(mesh, ppc, jitter=jitter, seed=1)
+            for (degree, mass), field in itertools.product(SPACES, fields):
+                try:
+                    r = run_case(mesh, particles, degree, mass, field)
+                except SingularMassError:  # too few particles for the space: no row
+                    if comm.rank == 0:
+                        log(f"{kind:17s} n={n:4d} ppc={ppc:2d} P{degree} {mass}: singular mass matrix, skipped")
+                    continue
+                row = {"mesh": kind, "n": n, "h": h, "cells": ncells, "ppc": ppc, "particles": particles.num_global,
+                       "field": field, "space": f"P{degree}", "mass": mass, **r}
+                rows.append(row)
+                if comm.rank == 0:
+                    log(f"{kind:17s} n={n:4d} ppc={ppc:2d} {field:6s} P{degree} {mass:10s} "
+                        f"L2={r['l2_error']:.3e}  t={r['time_s']:.4f}s  its={r['ksp_its']}")
+    if comm.rank == 0:
+        write(rows, out)
+    return rows
+
+
+def convergence_rates(rows: list[dict]) -> list[dict]:
+    """Fitted slope of log(error) against log(h) per series of the smooth field."""
+    out = []
+    keys = sorted({(r["mesh"], r["space"], r["mass"], r["ppc"]) for r in rows if r["field"] == "smooth"})
+    for key in keys:
+        rs = [r for r in rows if r["field"] == "smooth" and (r["mesh"], r["space"], r["mass"], r["ppc"]) == key]
+        if len(rs) >= 2:
+            slope = np.polyfit(np.log([r["h"] for r in rs]), np.log([r["l2_error"] for r in rs]), 1)[0]
+            out.append({"mesh": key[0], "space": key[1], "mass": key[2], "ppc": key[3], "rate": slope})
+    return out
+
+
+COLUMNS = ["mesh", "n", "cells", "ppc", "particles", "field", "space", "mass", "l2_error", "time_s", "ksp_its", "dofs", "inactive"]
+
+
+def write(rows: list[dict], out: Path) -> None:
+    from fempm.plot import plot_error_vs_time
+
+    out = Path(out)
+    out.mkdir(parents=True, exist_ok=True)
+    with open(out / "mapping.csv", "w", newline="") as f:
+        w = csv.DictWriter(f, fieldnames=COLUMNS + ["h"])
+        w.writeheader()
+        w.writerows(rows)
+    fmt = {"l2_error": "{:.3e}", "time_s": "{:.4f}", "h": "{:.4f}"}
+    lines = ["# Mapping study: L2 error and wall time of the particle-to-grid projection", "",
+             "| " + " | ".join(COLUMNS) + " |", "|" + "---|" * len(COLUMNS)]
+    for r in rows:
+        lines.append("| " + " | ".join(fmt.get(c, "{}").format(r[c]) for c in COLUMNS) + " |")
+    rates = convergence_rates(rows)
+    if rates:
+        lines += ["", "## Fitted convergence rates (smooth field, error ~ h^rate)", "",
+                  "| mesh | space | mass | ppc | rate |", "|---|---|---|---|---|"]
+        lines += [f"| {r['mesh']} | {r['space']} | {r['mass']} | {r['ppc']} | {r['rate']:.2f} |" for r in rates]
+    (out / "mapping.md").write_text("\n".join(lines) + "\n")
+    plot_error_vs_time(rows, out / "mapping.png", title="fempm mapping study: error vs projection time")
