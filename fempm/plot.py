@@ -73,7 +73,7 @@ def plot_error_vs_time(rows: Sequence[dict], path: Path, *, title: str = "") -> 
         for key, rs in sorted(series.items()):
             if key[1] != fld:
                 continue
-            rs = sorted(rs, key=lambda r: r["time_s"])
+            rs = sorted(rs, key=lambda r: r["n"])  # connect refinements
             ls = "-" if key[3] == "consistent" else "--"
             marker = {"structured-tri": "o", "structured-quad": "s", "unstructured-tri": "^"}.get(key[0], "x")
             ax.loglog(
