@@ -45,14 +45,31 @@ class SingularMassError(ValueError):
     """The particles cannot determine a unique consistent projection."""
 
 
-def p2g(basis: ParticleBasis, weights: npt.NDArray, *, values: npt.NDArray | None = None) -> npt.NDArray:
-    r""":math:`\sum_p w_p S[p, i]` summed over all ranks; (owned + ghost dofs, k), ghosts updated."""
-    local = basis.scatter(weights, values=values)
-    vec = dolfinx.la.vector(basis.index_map, bs=local.shape[1])
+def sum_over_ranks(index_map, local: npt.NDArray) -> npt.NDArray:
+    """Add the ghost contributions (ndofs, k) to their owners and update the ghosts."""
+    vec = dolfinx.la.vector(index_map, bs=local.shape[1])
     vec.array[:] = local.ravel()
     vec.scatter_reverse(dolfinx.la.InsertMode.add)
     vec.scatter_forward()
     return vec.array.reshape(local.shape)
+
+
+def p2g(basis: ParticleBasis, weights: npt.NDArray, *, values: npt.NDArray | None = None) -> npt.NDArray:
+    r""":math:`\sum_p w_p S[p, i]` summed over all ranks; (owned + ghost dofs, k), ghosts updated."""
+    return sum_over_ranks(basis.index_map, basis.scatter(weights, values=values))
+
+
+def p2g_gradients(basis: ParticleBasis, vectors: npt.NDArray) -> npt.NDArray:
+    r""":math:`\sum_p w_p \cdot \nabla N_i(x_p)` for per-particle tensors ``vectors`` (n, k, d):
+    row ``a`` of the result is :math:`\sum_p \sum_b w_{p,a b}\, G[p, i, b]` (e.g. the internal
+    force with :math:`w_p = -V_p \sigma_p`); returns (owned + ghost dofs, k)."""
+    contrib = np.einsum("pab,pib->pia", vectors, basis.gradients)  # (n, ndofs_cell, k)
+    nd = basis.num_dofs_local
+    idx = basis.dofs.ravel()
+    local = np.column_stack(
+        [np.bincount(idx, weights=contrib[:, :, a].ravel(), minlength=nd) for a in range(contrib.shape[2])]
+    )
+    return sum_over_ranks(basis.index_map, local)
 
 
 def lumped_mass(basis: ParticleBasis, particles: Particles) -> npt.NDArray:
@@ -185,15 +202,27 @@ class Projector:
         f = _particle_values(values, self.particles, bs)
         b = self.rhs(f)
         u = out if out is not None else dolfinx.fem.Function(self.V)
-        F = np.zeros((self.num_owned, bs))
+        u.x.array[:] = self.solve(b).ravel()
+        return u
+
+    def solve(self, b: npt.NDArray, guess: npt.NDArray | None = None) -> npt.NDArray:
+        """Solve ``m F = b`` on the active dofs for (owned + ghost dofs, k) right-hand sides;
+        returns (owned + ghost dofs, k) with ghosts updated and 0 on inactive dofs.
+        ``guess`` (same shape) warm-starts the KSP."""
         act = self.active[: self.num_owned]
+        n, k = self.num_owned, b.shape[1]
+        F = np.zeros((n, k))
         if self.mass == "lumped":
-            F[act] = b[: self.num_owned][act] / self.lumped[: self.num_owned][act, None]
+            F[act] = b[:n][act] / self.lumped[:n][act, None]
         else:
             self.iterations = []
-            for c in range(bs):
-                self._b.array[:] = b[: self.num_owned][act, c]
-                self._x.set(0.0)
+            self.ksp.setInitialGuessNonzero(guess is not None)
+            for c in range(k):
+                self._b.array[:] = b[:n][act, c]
+                if guess is None:
+                    self._x.set(0.0)
+                else:
+                    self._x.array[:] = guess[:n][act, c]
                 self.ksp.solve(self._b, self._x)
                 reason = self.ksp.getConvergedReason()
                 if reason < 0:
@@ -204,9 +233,12 @@ class Projector:
                     )
                 self.iterations.append(self.ksp.getIterationNumber())
                 F[act, c] = self._x.array
-        u.x.array[: self.num_owned * bs] = F.ravel()
-        u.x.scatter_forward()
-        return u
+        full = np.zeros((len(self.active), k))
+        full[:n] = F
+        vec = dolfinx.la.vector(self.basis.index_map, bs=k)
+        vec.array[:] = full.ravel()
+        vec.scatter_forward()
+        return vec.array.reshape(full.shape)
 
 
 def project(

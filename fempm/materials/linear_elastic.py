@@ -1,0 +1,47 @@
+r"""Linear elasticity, small strain: :math:`\sigma = \lambda\, \mathrm{tr}\,\varepsilon\, I + 2\mu
+\varepsilon` with :math:`\varepsilon = \mathrm{sym}(F) - I`.
+
+In 1D with :math:`\nu = 0` this is :math:`\sigma = E (F - 1)`, for which the Lagrangian bar
+equation is exactly linear (the vibrating-bar reference).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import numpy.typing as npt
+
+from fempm.materials.base import identity, lame, sym, trace
+
+
+@dataclass(frozen=True)
+class LinearElastic:
+    E: float
+    nu: float = 0.0
+    history: tuple[str, ...] = ()
+
+    def __post_init__(self):
+        if self.E <= 0 or not -1.0 < self.nu < 0.5:
+            raise ValueError(f"LinearElastic needs E > 0 and -1 < nu < 0.5 (got E={self.E}, nu={self.nu})")
+
+    @property
+    def lame(self) -> tuple[float, float]:
+        return lame(self.E, self.nu)
+
+    def strain(self, F: npt.NDArray) -> npt.NDArray:
+        return sym(F) - identity(len(F), F.shape[1])
+
+    def stress(self, F, L, sigma, dt, rho) -> npt.NDArray:
+        lam, mu = self.lame
+        eps = self.strain(F)
+        return lam * trace(eps)[:, None, None] * identity(len(F), F.shape[1]) + 2 * mu * eps
+
+    def wave_speed(self, F, rho) -> npt.NDArray:
+        lam, mu = self.lame
+        return np.sqrt((lam + 2 * mu) / rho)
+
+    def energy_density(self, F) -> npt.NDArray:
+        lam, mu = self.lame
+        eps = self.strain(F)
+        return 0.5 * lam * trace(eps) ** 2 + mu * np.einsum("nij,nij->n", eps, eps)

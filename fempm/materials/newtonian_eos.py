@@ -1,0 +1,40 @@
+r"""Weakly compressible Newtonian fluid with the Tait equation of state:
+:math:`p = \kappa\left((\rho/\rho_0)^\gamma - 1\right)`,
+:math:`\sigma = -p I + 2\eta\, \mathrm{dev}\, D`, :math:`D = \mathrm{sym}\, L`,
+sound speed :math:`c = \sqrt{\kappa\gamma/\rho_0\, (\rho/\rho_0)^{\gamma - 1}}`.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import numpy.typing as npt
+
+from fempm.materials.base import identity, sym, trace
+
+
+@dataclass(frozen=True)
+class NewtonianTait:
+    rho0: float
+    kappa: float = 2.0e4
+    gamma: float = 7.0
+    viscosity: float = 1.0e-3
+    history: tuple[str, ...] = ()
+
+    def pressure(self, rho: npt.NDArray) -> npt.NDArray:
+        return self.kappa * ((rho / self.rho0) ** self.gamma - 1.0)
+
+    def stress(self, F, L, sigma, dt, rho) -> npt.NDArray:
+        d = L.shape[1]
+        D = sym(L)
+        dev = D - (trace(D) / d)[:, None, None] * identity(len(L), d)
+        return -self.pressure(rho)[:, None, None] * identity(len(L), d) + 2 * self.viscosity * dev
+
+    def wave_speed(self, F, rho) -> npt.NDArray:
+        return np.sqrt(self.kappa * self.gamma / self.rho0 * (rho / self.rho0) ** (self.gamma - 1))
+
+    def energy_density(self, F) -> npt.NDArray:
+        J = np.linalg.det(F)
+        g = self.gamma  # W(J) with dW/dJ = -p(J): kappa (J^(1-g)/(g-1) + J) - kappa g/(g-1)
+        return self.kappa * (J ** (1 - g) / (g - 1) + J - g / (g - 1))
