@@ -11,7 +11,7 @@ venv:
 	@bash scripts/bootstrap
 
 demo: venv
-	$(PY) demos/projection_unstructured.py
+	$(PY) demos/two_disks.py
 
 test: venv
 	bash scripts/run-tests

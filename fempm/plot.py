@@ -94,3 +94,28 @@ def plot_error_vs_time(rows: Sequence[dict], path: Path, *, title: str = "") -> 
     Path(path).parent.mkdir(parents=True, exist_ok=True)
     fig.savefig(path, dpi=130)
     plt.close(fig)
+
+
+def plot_energies(history: Sequence[dict], path: Path, *, title: str = "", extra: dict | None = None) -> None:
+    """Kinetic, strain and total energy against time (plus optional extra curves t -> y)."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    t = [r["t"] for r in history]
+    fig, ax = plt.subplots(figsize=(7, 4.2))
+    for key in ("kinetic", "strain", "total"):
+        ax.plot(t, [r[key] for r in history], label=key)
+    for label, (tt, yy) in (extra or {}).items():
+        ax.plot(tt, yy, "--", label=label)
+    ax.set_xlabel("t")
+    ax.set_ylabel("energy")
+    ax.grid(alpha=0.3)
+    ax.legend()
+    if title:
+        ax.set_title(title)
+    fig.tight_layout()
+    Path(path).parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(path, dpi=130)
+    plt.close(fig)

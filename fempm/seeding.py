@@ -86,11 +86,16 @@ def create_particles(
     density: float | Callable[[npt.NDArray], npt.NDArray] = 1.0,
     jitter: float = 0.0,
     seed: int | None = None,
+    cells: npt.NDArray[np.int32] | Callable[[npt.NDArray], npt.NDArray] | None = None,
+    where: Callable[[npt.NDArray], npt.NDArray] | None = None,
     locator: CellLocator | None = None,
 ) -> Particles:
     """Seed ``ppc`` particles in every owned cell of ``mesh`` (collective).
 
-    ``density`` is a number or a function of the positions (n, gdim) -> (n,).
+    ``density`` is a number or a function of the positions (n, gdim) -> (n,). ``cells``
+    restricts the seeding to some owned cells: local cell indices, or a predicate on the cell
+    midpoints (x of shape (3, n), as ``dolfinx.mesh.locate_entities``). ``where`` keeps only
+    the particles whose positions (3, n) satisfy it (a body's shape, e.g. a disk).
     """
     if not 0.0 <= jitter <= 1.0:
         raise ValueError(f"jitter={jitter} must lie in [0, 1]")
@@ -99,8 +104,16 @@ def create_particles(
     comm = mesh.comm
     subs = reference_pattern(geom.cell_name, ppc)  # (ppc, nv, tdim)
     ncell = geom.num_owned
-    cells = np.repeat(np.arange(ncell, dtype=np.int32), ppc)
-    local = np.tile(np.arange(ppc), ncell)
+    chosen = np.arange(ncell, dtype=np.int32)
+    if callable(cells):
+        mid = dolfinx.mesh.compute_midpoints(mesh, geom.tdim, chosen)
+        chosen = chosen[np.asarray(cells(mid.T), dtype=bool)]
+    elif cells is not None:
+        chosen = np.asarray(cells, dtype=np.int32)
+        if np.any((chosen < 0) | (chosen >= ncell)):
+            raise ValueError("cells must be owned local cell indices")
+    cells = np.repeat(chosen, ppc)
+    local = np.tile(np.arange(ppc), len(chosen))
     ids = np.asarray(mesh.topology.original_cell_index[:ncell], dtype=np.int64)[cells] * ppc + local
     if subs.shape[1] == 2:  # boxes
         centre = subs.mean(axis=1)
@@ -124,5 +137,10 @@ def create_particles(
     w = np.abs(geom.detJ(cells, X))
     wsum = np.bincount(cells, weights=w, minlength=ncell)
     volume = geom.cell_volumes()[cells] * w / wsum[cells]
+    if where is not None:
+        x3 = np.zeros((3, len(x)))
+        x3[: geom.gdim] = x.T
+        keep = np.asarray(where(x3), dtype=bool)
+        x, cells, X, volume, ids = x[keep], cells[keep], X[keep], volume[keep], ids[keep]
     rho = density(x) if callable(density) else np.full(len(x), float(density))
     return Particles.from_located(locator, x, cells, X, rho * volume, volume, ids)

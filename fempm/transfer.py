@@ -113,7 +113,9 @@ class Projector:
     """Projection of particle data onto ``V`` with a fixed set of particles.
 
     Assembles the mass (consistent matrix + KSP, or lumped vector) once; :meth:`project` then
-    costs one P2G and one solve per value component.
+    costs one P2G and one solve per value component. ``exclude`` lists (block) dofs held at 0
+    (Dirichlet); ``mass_cutoff`` drops dofs whose lumped mass is below that fraction of the
+    largest.
 
     Attributes
     ----------
@@ -135,6 +137,8 @@ class Projector:
         petsc_options_prefix: str = "fempm_projection_",
         petsc_options: dict[str, Any] | None = None,
         basis: ParticleBasis | None = None,
+        exclude: npt.NDArray[np.int32] | None = None,
+        mass_cutoff: float = 0.0,
     ):
         if mass not in _MASS_MODES:
             raise ValueError(f"unknown option mass={mass!r}; expected one of {_MASS_MODES}")
@@ -157,6 +161,11 @@ class Projector:
             measure = p2g(self.basis, particles.mass, values=self.basis.values**2)[:, 0]
         top = comm.allreduce(float(measure[: self.num_owned].max(initial=0.0)), op=MPI.MAX)
         self.active = measure > SUPPORT_TOL * top
+        if mass_cutoff > 0.0:  # nodes with a tiny share of mass (edge of a body)
+            m = self.lumped if mass == "lumped" else lumped_mass(self.basis, particles)
+            self.active &= m > mass_cutoff * comm.allreduce(float(m.max(initial=0.0)), op=MPI.MAX)
+        if exclude is not None:  # constrained dofs (e.g. fixed velocity): value 0, not solved for
+            self.active[exclude] = False
         self.num_inactive = comm.allreduce(int(np.count_nonzero(~self.active[: self.num_owned])))
         if self.num_inactive:
             log.info("fempm: %d dof(s) without particle support excluded and set to 0", self.num_inactive)

@@ -5,6 +5,7 @@
 - plate_with_hole.msh: unit square with a hole of radius 0.2 at (0.5, 0.5), triangles, h = 0.06
   (physical groups: 1 = plate; facets 1 = outer boundary, 2 = hole)
 - square_quads.msh: unit square, unstructured (recombined) quadrilaterals, h = 0.1
+- unit_square_tri.msh: unit square, unstructured triangles, h = 0.05 (two-disk demo)
 - cube_tets.msh: unit cube, unstructured tetrahedra, h = 0.25
 """
 
@@ -45,6 +46,15 @@ def square_quads(h=0.1):
     gmsh.model.mesh.generate(2)
 
 
+def unit_square_tri(h=0.05):
+    gmsh.model.add("unit_square_tri")
+    s = gmsh.model.occ.addRectangle(0, 0, 0, 1, 1)
+    gmsh.model.occ.synchronize()
+    gmsh.model.addPhysicalGroup(2, [s], 1, "square")
+    gmsh.option.setNumber("Mesh.CharacteristicLengthMax", h)
+    gmsh.model.mesh.generate(2)
+
+
 def cube_tets(h=0.25):
     gmsh.model.add("cube_tets")
     v = gmsh.model.occ.addBox(0, 0, 0, 1, 1, 1)
@@ -55,7 +65,7 @@ def cube_tets(h=0.25):
 
 
 if __name__ == "__main__":
-    for make in (plate_with_hole, square_quads, cube_tets):
+    for make in (plate_with_hole, square_quads, unit_square_tri, cube_tets):
         gmsh.initialize()
         gmsh.option.setNumber("General.Terminal", 0)
         gmsh.option.setNumber("Mesh.RandomSeed", 0)

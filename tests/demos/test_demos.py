@@ -10,6 +10,7 @@ DEMOS = Path(__file__).resolve().parents[2] / "demos"
 
 
 def load(name):
+    """Import a demo script as a module."""
     spec = importlib.util.spec_from_file_location(name, DEMOS / f"{name}.py")
     mod = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(mod)

@@ -1,0 +1,58 @@
+r"""Grid boundary conditions on the velocity dofs of a blocked (vector) space.
+
+* :class:`Fixed`: :math:`v_i = 0` on the dofs.
+* :class:`Slip`: no flow through a wall of unit normal :math:`n` (any direction):
+  :math:`v_i \leftarrow v_i - (v_i \cdot n)\, n`.
+
+Dofs are located with DOLFINx (``locate_dofs_geometrical`` or, from gmsh facet tags,
+``locate_dofs_topological``); they are block indices of the vector space.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass
+
+import dolfinx.fem
+import dolfinx.mesh
+import numpy as np
+import numpy.typing as npt
+
+
+@dataclass(frozen=True)
+class Fixed:
+    dofs: npt.NDArray[np.int32]
+
+    def apply(self, v: npt.NDArray) -> None:
+        v[self.dofs] = 0.0
+
+
+@dataclass(frozen=True)
+class Slip:
+    dofs: npt.NDArray[np.int32]
+    normal: npt.NDArray  # (d,) or (len(dofs), d), unit
+
+    def apply(self, v: npt.NDArray) -> None:
+        n = np.broadcast_to(self.normal, (len(self.dofs), v.shape[1]))
+        vn = np.einsum("nd,nd->n", v[self.dofs], n)
+        v[self.dofs] -= vn[:, None] * n
+
+
+def fixed(V: dolfinx.fem.FunctionSpace, where: Callable[[npt.NDArray], npt.NDArray]) -> Fixed:
+    """All velocity components zero at the dofs where ``where(x)`` holds (x of shape (3, n))."""
+    return Fixed(np.asarray(dolfinx.fem.locate_dofs_geometrical(V, where), dtype=np.int32))
+
+
+def slip(V: dolfinx.fem.FunctionSpace, where: Callable[[npt.NDArray], npt.NDArray], normal) -> Slip:
+    """Zero normal velocity at the dofs where ``where(x)`` holds; ``normal`` any direction."""
+    n = np.asarray(normal, dtype=np.float64)
+    n = n / np.linalg.norm(n)
+    return Slip(np.asarray(dolfinx.fem.locate_dofs_geometrical(V, where), dtype=np.int32), n)
+
+
+def fixed_on_facets(V: dolfinx.fem.FunctionSpace, facet_tags: dolfinx.mesh.MeshTags, tag: int) -> Fixed:
+    """Fixed dofs on the facets of a gmsh physical group."""
+    mesh = V.mesh
+    mesh.topology.create_connectivity(mesh.topology.dim - 1, mesh.topology.dim)
+    dofs = dolfinx.fem.locate_dofs_topological(V, mesh.topology.dim - 1, facet_tags.find(tag))
+    return Fixed(np.asarray(dofs, dtype=np.int32))

@@ -1,0 +1,105 @@
+"""Output as a run goes: energies CSV (flushed every row), particle frames as VTK PolyData
+(legacy binary, one file per frame, gathered on rank 0), grid velocity with VTXWriter, and a
+JSON summary."""
+
+from __future__ import annotations
+
+import csv
+import json
+from pathlib import Path
+
+import dolfinx.fem
+import dolfinx.io
+import numpy as np
+import numpy.typing as npt
+
+from fempm.particles import Particles
+
+
+def write_vtk_points(path: Path, x: npt.NDArray, data: dict[str, npt.NDArray]) -> None:
+    """Legacy binary VTK PolyData: points (n, 3) with point data (scalars, vectors, tensors)."""
+    n = len(x)
+    with open(path, "wb") as f:
+        f.write(b"# vtk DataFile Version 3.0\nfempm particles\nBINARY\nDATASET POLYDATA\n")
+        f.write(f"POINTS {n} double\n".encode())
+        f.write(np.ascontiguousarray(x, dtype=">f8").tobytes())
+        f.write(f"\nVERTICES {n} {2 * n}\n".encode())
+        f.write(np.column_stack([np.ones(n), np.arange(n)]).astype(">i4").tobytes())
+        f.write(f"\nPOINT_DATA {n}\n".encode())
+        for name, a in data.items():
+            a = np.asarray(a, dtype=">f8").reshape(n, -1)
+            kind = {1: "SCALARS {} double 1\nLOOKUP_TABLE default", 3: "VECTORS {} double", 9: "TENSORS {} double"}[a.shape[1]]
+            f.write((kind.format(name) + "\n").encode())
+            f.write(a.tobytes())
+            f.write(b"\n")
+
+
+def _pad3(a: npt.NDArray) -> npt.NDArray:
+    """Vectors (n, d) -> (n, 3); tensors (n, d, d) -> (n, 3, 3)."""
+    if a.ndim == 2:
+        return np.pad(a, ((0, 0), (0, 3 - a.shape[1])))
+    return np.pad(a, ((0, 0), (0, 3 - a.shape[1]), (0, 3 - a.shape[2])))
+
+
+class RunWriter:
+    """Writes a run's outputs into ``folder`` as the run goes (nothing kept only in memory)."""
+
+    def __init__(self, folder: Path, particles: Particles, V: dolfinx.fem.FunctionSpace | None = None):
+        self.folder = Path(folder)
+        self.comm = particles.comm
+        self.frame = 0
+        self._csv = None
+        if self.comm.rank == 0:
+            (self.folder / "particles").mkdir(parents=True, exist_ok=True)
+        self.comm.Barrier()
+        self.grid_v = dolfinx.fem.Function(V, name="grid_velocity") if V is not None else None
+        self._vtx = (
+            dolfinx.io.VTXWriter(self.comm, self.folder / "grid_velocity.bp", [self.grid_v], engine="BP4")
+            if V is not None
+            else None
+        )
+
+    def energies(self, row: dict) -> None:
+        if self.comm.rank != 0:
+            return
+        if self._csv is None:
+            self._file = open(self.folder / "energies.csv", "w", newline="")
+            self._csv = csv.DictWriter(self._file, fieldnames=list(row))
+            self._csv.writeheader()
+        self._csv.writerow(row)
+        self._file.flush()
+
+    def particles(self, particles: Particles, t: float) -> None:
+        f = particles.fields
+        local = {
+            "x": _pad3(particles.x),
+            "velocity": _pad3(f["v"]),
+            "stress": _pad3(f["sigma"]).reshape(len(particles), 9),
+            "J": np.linalg.det(f["F"]),
+            "id": particles.ids.astype(float),
+            "body": f["body"].astype(float),
+        }
+        parts = self.comm.gather(local, root=0)
+        if self.comm.rank == 0:
+            allp = {k: np.concatenate([p[k] for p in parts]) for k in local}
+            x = allp.pop("x")
+            write_vtk_points(self.folder / "particles" / f"particles_{self.frame:05d}.vtk", x, allp)
+            with open(self.folder / "particles" / "times.csv", "a") as fh:
+                fh.write(f"{self.frame},{t!r}\n")
+        self.frame += 1
+
+    def grid(self, v: npt.NDArray, t: float) -> None:
+        if self._vtx is None:
+            return
+        self.grid_v.x.array[:] = v.ravel()
+        self._vtx.write(t)
+
+    def summary(self, data: dict) -> None:
+        if self.comm.rank == 0:
+            (self.folder / "summary.json").write_text(json.dumps(data, indent=2, default=float))
+
+    def close(self) -> None:
+        if self._vtx is not None:
+            self._vtx.close()
+        if self.comm.rank == 0 and self._csv is not None:
+            self._file.close()

@@ -1,0 +1,81 @@
+"""Built-in scenes (the verification problems), usable from Python and from
+``python -m fempm run NAME --option value``."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import dolfinx.mesh as dm
+import numpy as np
+from mpi4py import MPI
+
+from fempm.boundary import fixed
+from fempm.materials import LinearElastic
+from fempm.scene import Scene
+from fempm.seeding import create_particles
+from fempm.stepping import StepOptions
+
+MESHES = Path(__file__).resolve().parents[1] / "meshes"
+
+
+def vibrating_bar(
+    cells: int = 16, ppc: int = 2, scheme: str = "USL", flip: float = 1.0, mass: str = "lumped",
+    cfl: float = 0.5, t_end: float = 40.0, L: float = 25.0, E: float = 100.0, rho: float = 1.0,
+    v0: float = 0.1, mode: int = 1, comm: MPI.Comm = MPI.COMM_WORLD,
+) -> Scene:
+    """1D bar fixed at x = 0, free at x = L, first mode: v(x, 0) = v0 sin(beta x).
+
+    Exact: v_cm(t) = v0 / (beta L) cos(omega t), beta = (2 mode - 1) pi / (2 L), omega = beta c.
+    The mesh extends 4 cells past the free end so the bar can stretch.
+    """
+    h = L / cells
+    mesh = dm.create_interval(comm, cells + 4, [0.0, L + 4 * h])
+    p = create_particles(mesh, ppc, density=rho, cells=lambda x: x[0] < L)
+    beta = (2 * mode - 1) * np.pi / (2 * L)
+    p.fields["v"] = v0 * np.sin(beta * p.x)
+    params = dict(cells=cells, ppc=ppc, scheme=scheme, flip=flip, mass=mass, cfl=cfl, L=L, E=E, rho=rho, v0=v0,
+                  beta=beta, omega=beta * np.sqrt(E / rho))
+    return Scene(
+        name="vibrating_bar", mesh=mesh, particles=p, materials=[LinearElastic(E, 0.0)], t_end=t_end,
+        bcs=lambda V: [fixed(V, lambda x: np.isclose(x[0], 0.0))],
+        options=StepOptions(scheme=scheme, flip=flip, mass=mass, cfl=cfl), params=params,
+    )
+
+
+def two_disks(
+    mesh: str = "structured", cells: int = 20, ppc: int = 4, scheme: str = "MUSL", flip: float = 1.0,
+    mass: str = "lumped", cfl: float = 0.4, t_end: float = 3.0, E: float = 1000.0, nu: float = 0.3,
+    rho: float = 1000.0, speed: float = 0.1, radius: float = 0.2, frames: int = 30,
+    comm: MPI.Comm = MPI.COMM_WORLD,
+) -> Scene:
+    """Two elastic disks (Sulsky, Chen and Schreyer 1994) on the unit square, plane strain.
+
+    Disks of radius 0.2 at (0.2, 0.2) and (0.8, 0.8) moving at +-(0.1, 0.1); contact through
+    the single-valued grid velocity; no boundary conditions (the disks never reach the walls).
+    ``mesh``: "structured" (quadrilaterals, ``cells`` per side) or "unstructured"
+    (triangles from ``meshes/unit_square_tri.msh``).
+    """
+    if mesh == "structured":
+        m = dm.create_unit_square(comm, cells, cells, dm.CellType.quadrilateral)
+    elif mesh == "unstructured":
+        from fempm.meshes import read_msh
+
+        m = read_msh(MESHES / "unit_square_tri.msh", comm, gdim=2).mesh
+    else:
+        raise ValueError(f"unknown option mesh={mesh!r}; expected structured or unstructured")
+    centres = np.array([[0.2, 0.2], [0.8, 0.8]])
+
+    def in_disks(x):
+        return (np.hypot(x[0] - 0.2, x[1] - 0.2) < radius) | (np.hypot(x[0] - 0.8, x[1] - 0.8) < radius)
+
+    p = create_particles(m, ppc, density=rho, where=in_disks)
+    lower = np.hypot(*(p.x - centres[0]).T) < radius
+    p.fields["v"] = np.where(lower[:, None], speed, -speed) * np.ones((len(p), 2))
+    params = dict(mesh=mesh, cells=cells, ppc=ppc, scheme=scheme, flip=flip, mass=mass, cfl=cfl, E=E, nu=nu, rho=rho)
+    return Scene(
+        name="two_disks", mesh=m, particles=p, materials=[LinearElastic(E, nu)], t_end=t_end, frames=frames,
+        options=StepOptions(scheme=scheme, flip=flip, mass=mass, cfl=cfl), params=params,
+    )
+
+
+SCENES = {"bar": vibrating_bar, "disks": two_disks}

@@ -1,0 +1,259 @@
+r"""The explicit MPM step (seed 002): P2G, grid update, G2P with PIC/FLIP blend, kinematics,
+constitutive update, position update.
+
+Grid equations (lumped mass :math:`m_i = \sum_p M_p N_{ip}`, or the consistent matrix):
+
+.. math::
+    m_i v_i = \sum_p M_p v_p N_{ip}, \qquad
+    f_i = -\sum_p V_p \sigma_p \nabla N_{ip} + \sum_p M_p b_p N_{ip}
+          + \sum_p N_{ip} \bar t_p h^{-1} V_p, \qquad
+    v_i^{+} = v_i + \Delta t\, f_i / m_i .
+
+G2P: :math:`v_p^{+} = \alpha (v_p + \sum_i N_{ip}(v_i^{+} - v_i)) + (1-\alpha) \sum_i N_{ip} v_i^{+}`,
+:math:`L_p = \sum_i v_i^{+} \otimes \nabla N_{ip}`, :math:`F_p^{+} = (I + \Delta t L_p) F_p`,
+:math:`V_p = J_p V_p^0`, :math:`x_p^{+} = x_p + \Delta t \sum_i N_{ip} v_i^{+}`.
+
+Schemes: USL (stress after G2P), USF (stress from the momentum velocity before the force),
+MUSL (USL, with the grid velocity re-mapped from the updated particle momenta before the
+strain and position update).
+"""
+
+from __future__ import annotations
+
+from collections import Counter
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
+from typing import Literal
+
+import dolfinx.fem
+import dolfinx.mesh
+import numpy as np
+import numpy.typing as npt
+from mpi4py import MPI
+
+from fempm.basis import ParticleBasis
+from fempm.boundary import Fixed
+from fempm.materials.base import identity
+from fempm.particles import Particles
+from fempm.transfer import Projector, p2g, p2g_gradients
+
+Scheme = Literal["USL", "USF", "MUSL"]
+
+
+class SimulationError(RuntimeError):
+    """The state became invalid (non-finite values, J <= 0, unstable time step)."""
+
+
+@dataclass
+class StepOptions:
+    r"""Transfer and time-stepping options.
+
+    scheme: USL, USF or MUSL. flip: PIC/FLIP blend alpha (1 = FLIP, 0 = PIC).
+    mass: lumped or consistent. cfl: Courant number in (0, 1]. mass_cutoff: nodes whose
+    lumped mass is below this fraction of the largest are inactive (velocity 0). position:
+    move particles with the grid velocity (default) or their own updated velocity (the seed's
+    :math:`x_p^+ = x_p + \Delta t\, v_p^+`).
+    """
+
+    scheme: Scheme = "USL"
+    flip: float = 1.0
+    mass: Literal["lumped", "consistent"] = "lumped"
+    cfl: float = 0.4
+    mass_cutoff: float = 1e-9
+    position: Literal["grid", "particle"] = "grid"
+    petsc_options_prefix: str = "fempm_step_"
+
+    def __post_init__(self):
+        if self.scheme not in ("USL", "USF", "MUSL"):
+            raise ValueError(f"unknown option scheme={self.scheme!r}; expected USL, USF or MUSL")
+        if self.mass not in ("lumped", "consistent"):
+            raise ValueError(f"unknown option mass={self.mass!r}; expected lumped or consistent")
+        if self.position not in ("grid", "particle"):
+            raise ValueError(f"unknown option position={self.position!r}; expected grid or particle")
+        if not 0.0 <= self.flip <= 1.0:
+            raise ValueError(f"flip={self.flip} must lie in [0, 1]")
+        if not 0.0 < self.cfl <= 1.0:
+            raise ValueError(f"cfl={self.cfl} must lie in (0, 1]: a CFL number above 1 is unstable")
+
+
+@dataclass
+class Loads:
+    """External loads; a term left None is never assembled.
+
+    body_force: acceleration (d,) or a function (x (n, d), t) -> (n, d), per unit mass.
+    traction: per-particle traction (n, d) on surface particles (zero rows elsewhere) and the
+    particle's cell size ``h`` in :math:`\\bar t_p h^{-1} V_p`, given as a function t -> (n, d).
+    """
+
+    body_force: npt.ArrayLike | Callable | None = None
+    traction: Callable[[float], npt.NDArray] | None = None
+
+
+def cell_sizes(mesh) -> npt.NDArray:
+    """Smallest vertex-to-vertex distance of each local cell (the CFL length)."""
+    from fempm.geometry import coordinate_map
+
+    _, dofmap = coordinate_map(mesh)
+    nv = {"interval": 2, "triangle": 3, "quadrilateral": 4, "tetrahedron": 4, "hexahedron": 8}[
+        mesh.topology.cell_type.name
+    ]
+    xc = mesh.geometry.x[np.asarray(dofmap)[:, :nv]]
+    i, j = np.triu_indices(nv, 1)
+    return np.linalg.norm(xc[:, i] - xc[:, j], axis=2).min(axis=1)
+
+
+@dataclass
+class ExplicitSolver:
+    """Explicit MPM on the vector P1 (or P2/Bernstein) space ``V`` of the particles' mesh.
+
+    Particle state lives in ``particles.fields``: ``v`` (n, d), ``F`` (n, d, d), ``sigma``
+    (n, d, d), ``volume0`` (n,), ``body`` (n,) index into ``materials``.
+    """
+
+    V: dolfinx.fem.FunctionSpace
+    particles: Particles
+    materials: Sequence
+    bcs: Sequence = ()
+    loads: Loads = field(default_factory=Loads)
+    options: StepOptions = field(default_factory=StepOptions)
+    t: float = 0.0
+    step_count: int = 0
+
+    def __post_init__(self):
+        p = self.particles
+        d = p.gdim
+        n = len(p)
+        f = p.fields
+        f.setdefault("v", np.zeros((n, d)))
+        f.setdefault("F", identity(n, d))
+        f.setdefault("sigma", np.zeros((n, d, d)))
+        f.setdefault("volume0", p.volume.copy())
+        f.setdefault("body", np.zeros(n, dtype=np.int32))
+        self.h_cell = cell_sizes(p.mesh)
+        self.terms: Counter = Counter()  # how often each force term was assembled
+        fixed = [bc.dofs for bc in self.bcs if isinstance(bc, Fixed)]
+        self._fixed_dofs = np.unique(np.concatenate(fixed)) if fixed else None
+
+    # -- helpers ------------------------------------------------------------------------------
+    def _material_loop(self):
+        body = self.particles.fields["body"]
+        for b, mat in enumerate(self.materials):
+            yield mat, np.flatnonzero(body == b)
+
+    def stable_dt(self) -> float:
+        r""":math:`\Delta t = \mathrm{CFL}\, \min_p h_{c(p)} / (c_p + |v_p|)` over all ranks."""
+        p = self.particles
+        f = p.fields
+        rho = p.mass / p.volume
+        c = np.zeros(len(p))
+        for mat, idx in self._material_loop():
+            c[idx] = mat.wave_speed(f["F"][idx], rho[idx])
+        speed = c + np.linalg.norm(f["v"], axis=1)
+        local = np.min(self.h_cell[p.cells] / np.maximum(speed, 1e-300), initial=np.inf)
+        return self.options.cfl * p.comm.allreduce(local, op=MPI.MIN)
+
+    def _apply_bcs(self, v: npt.NDArray) -> None:
+        for bc in self.bcs:
+            bc.apply(v)
+
+    def _update_stress(self, L: npt.NDArray, dt: float) -> None:
+        p = self.particles
+        f = p.fields
+        F = np.einsum("nij,njk->nik", identity(len(p), p.gdim) + dt * L, f["F"])
+        J = np.linalg.det(F)
+        bad = ~(J > 0)
+        if p.comm.allreduce(int(bad.sum())):
+            self._fail(f"inverted deformation J <= 0 at particle(s) {self._ids(bad)}")
+        f["F"] = F
+        p.volume = J * f["volume0"]
+        rho = p.mass / p.volume
+        for mat, idx in self._material_loop():
+            f["sigma"][idx] = mat.stress(F[idx], L[idx], f["sigma"][idx], dt, rho[idx])
+
+    def _ids(self, mask):
+        ids = np.concatenate(self.particles.comm.allgather(self.particles.ids[mask][:5]))
+        return ids[:5].tolist()
+
+    def _fail(self, what: str):
+        raise SimulationError(f"step {self.step_count}, t = {self.t:.6g}: {what}")
+
+    def _forces(self, basis: ParticleBasis, t: float) -> npt.NDArray:
+        p = self.particles
+        f = p2g_gradients(basis, -p.volume[:, None, None] * p.fields["sigma"])
+        self.terms["internal"] += 1
+        if self.loads.body_force is not None:
+            b = self.loads.body_force
+            acc = b(p.x, t) if callable(b) else np.broadcast_to(np.asarray(b, float), p.x.shape)
+            f += p2g(basis, p.mass[:, None] * acc)
+            self.terms["body_force"] += 1
+        if self.loads.traction is not None:
+            tbar = self.loads.traction(t)
+            f += p2g(basis, tbar * (p.volume / self.h_cell[p.cells])[:, None])
+            self.terms["traction"] += 1
+        return f
+
+    # -- the step -----------------------------------------------------------------------------
+    def step(self, dt: float | None = None) -> float:
+        """Advance one step (``dt`` defaults to the stable one); returns the ``dt`` used."""
+        opts = self.options
+        p = self.particles
+        fld = p.fields
+        if dt is None:
+            dt = self.stable_dt()
+        elif dt > self.stable_dt() / opts.cfl:
+            self._fail(f"time step {dt:.3g} exceeds the stability limit {self.stable_dt() / opts.cfl:.3g} (CFL > 1)")
+        basis = ParticleBasis(self.V, p, gradients=True)
+        mass_op = Projector(
+            self.V, p, mass=opts.mass, basis=basis, petsc_options_prefix=opts.petsc_options_prefix,
+            exclude=self._fixed_dofs, mass_cutoff=opts.mass_cutoff,
+        )
+        v_old = mass_op.solve(p2g(basis, p.mass[:, None] * fld["v"]))
+        self._apply_bcs(v_old)
+        if opts.scheme == "USF":
+            self._update_stress(self._velocity_gradient(basis, v_old), dt)
+        a = mass_op.solve(self._forces(basis, self.t))
+        v_new = v_old + dt * a
+        self._apply_bcs(v_new)
+        # G2P
+        vp_grid = basis.gather(v_new)
+        fld["v"] = opts.flip * (fld["v"] + basis.gather(v_new - v_old)) + (1.0 - opts.flip) * vp_grid
+        if opts.scheme == "MUSL":
+            v_new = mass_op.solve(p2g(basis, p.mass[:, None] * fld["v"]))
+            self._apply_bcs(v_new)
+            vp_grid = basis.gather(v_new)
+        if opts.scheme != "USF":
+            self._update_stress(self._velocity_gradient(basis, v_new), dt)
+        p.x = p.x + dt * (fld["v"] if self.options.position == "particle" else vp_grid)
+        self._check_finite()
+        self.t += dt
+        self.step_count += 1
+        p.relocate()
+        self.grid_velocity = v_new
+        return dt
+
+    @staticmethod
+    def _velocity_gradient(basis: ParticleBasis, v: npt.NDArray) -> npt.NDArray:
+        return np.einsum("pad,pag->pdg", v[basis.dofs], basis.gradients)
+
+    def _check_finite(self) -> None:
+        p = self.particles
+        f = p.fields
+        bad = ~(np.isfinite(p.x).all(1) & np.isfinite(f["v"]).all(1) & np.isfinite(f["sigma"]).all((1, 2)))
+        if p.comm.allreduce(int(bad.sum())):
+            self._fail(f"non-finite state at particle(s) {self._ids(bad)}")
+
+    # -- diagnostics --------------------------------------------------------------------------
+    def energies(self) -> dict[str, float]:
+        """Kinetic, strain and total energy and linear momentum, summed over ranks."""
+        p = self.particles
+        f = p.fields
+        kin = 0.5 * np.sum(p.mass * np.einsum("nd,nd->n", f["v"], f["v"]))
+        strain = 0.0
+        for mat, idx in self._material_loop():
+            strain += np.sum(f["volume0"][idx] * mat.energy_density(f["F"][idx]))
+        mom = p.mass @ f["v"]
+        kin, strain = p.comm.allreduce(kin), p.comm.allreduce(strain)
+        mom = p.comm.allreduce(mom)
+        out = {"t": self.t, "kinetic": kin, "strain": strain, "total": kin + strain}
+        out.update({f"momentum_{'xyz'[i]}": float(m) for i, m in enumerate(mom)})
+        return out
