@@ -77,7 +77,7 @@ class ParticleBasis:
         """
         S = self.values if values is None else values
         w = np.asarray(weights, dtype=np.float64)
-        w2 = w.reshape(len(w), -1)
+        w2 = w[:, None] if w.ndim == 1 else w.reshape(w.shape[0], int(np.prod(w.shape[1:])))
         nd = self.num_dofs_local
         idx = self.dofs.ravel()
         out = np.empty((nd, w2.shape[1]))

@@ -1,4 +1,11 @@
-"""Command line: ``python -m fempm study mapping [--full] [--out DIR]``."""
+"""Command line.
+
+    python -m fempm study mapping [--full] [--out DIR]
+    python -m fempm run SCENE [--out DIR] [--option value ...]   (SCENE: bar, disks)
+
+Scene options are the keyword arguments of the scene builders in :mod:`fempm.scenes`
+(``python -m fempm run disks --help`` lists them); an unknown option is an error.
+"""
 
 from __future__ import annotations
 
@@ -15,9 +22,18 @@ def main(argv: list[str] | None = None) -> int:
     study.add_argument("--sizes", type=int, nargs="+", help="cells per side (default 8 16 32; --full: 8 ... 128)")
     study.add_argument("--ppc", type=int, nargs="+", help="particles per cell (default 4 9; --full: 1 4 9 16)")
     study.add_argument("--out", type=Path, default=None, help="output folder (default output/study-NAME)")
-    args = parser.parse_args(argv)
+    runp = sub.add_parser("run", help="run a scene, writing outputs and a JSON summary", add_help=False)
+    runp.add_argument("scene")
+    runp.add_argument("--out", type=Path, default=None, help="output folder (default output/SCENE)")
+    runp.add_argument("-h", "--help", action="store_true")
+    args, rest = parser.parse_known_args(argv)
+    if args.command != "run" and rest:
+        parser.error(f"unrecognized arguments: {' '.join(rest)}")
 
     import fempm  # noqa: F401  (dolfinx_solver before dolfinx)
+
+    if args.command == "run":
+        return _run(args, rest)
 
     if args.command == "study" and args.name == "mapping":
         from fempm.studies import mapping
@@ -30,4 +46,50 @@ def main(argv: list[str] | None = None) -> int:
 
         if MPI.COMM_WORLD.rank == 0:
             print(f"wrote {out}/mapping.csv, mapping.md, mapping.png")
+    return 0
+
+
+def _scene_options(builder, rest: list[str]) -> dict:
+    """``--name value`` pairs typed after the builder's defaults; unknown names are errors."""
+    import inspect
+
+    params = {k: v.default for k, v in inspect.signature(builder).parameters.items() if k != "comm"}
+    opts = {}
+    it = iter(rest)
+    for flag in it:
+        if not flag.startswith("--"):
+            raise SystemExit(f"fempm run: expected --option value, got {flag!r}")
+        name = flag[2:].replace("-", "_")
+        if name not in params:
+            raise SystemExit(f"fempm run: unknown option --{flag[2:]}; options: {', '.join(sorted(params))}")
+        value = next(it, None)
+        if value is None:
+            raise SystemExit(f"fempm run: option {flag} needs a value")
+        default = params[name]
+        opts[name] = type(default)(value) if isinstance(default, (int, float)) and not isinstance(default, bool) else value
+    return opts
+
+
+def _run(args, rest: list[str]) -> int:
+    import inspect
+
+    from mpi4py import MPI
+
+    from fempm.scene import run
+    from fempm.scenes import SCENES
+
+    if args.scene not in SCENES:
+        raise SystemExit(f"fempm run: unknown scene {args.scene!r}; scenes: {', '.join(SCENES)}")
+    builder = SCENES[args.scene]
+    if args.help:
+        print(f"python -m fempm run {args.scene} [--out DIR] options (defaults):")
+        for k, v in inspect.signature(builder).parameters.items():
+            if k != "comm":
+                print(f"  --{k.replace('_', '-')} {v.default}")
+        return 0
+    scene = builder(**_scene_options(builder, rest))
+    out = args.out or Path("output") / args.scene
+    run(scene, out)
+    if MPI.COMM_WORLD.rank == 0:
+        print(f"wrote {out}/summary.json, energies.csv, particles/, grid_velocity.bp")
     return 0

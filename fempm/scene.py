@@ -68,7 +68,7 @@ def run(
                 if hasattr(solver, "grid_velocity"):
                     writer.grid(solver.grid_velocity, solver.t)
                 next_frame += scene.t_end / max(scene.frames, 1)
-            dt = solver.step()
+            dt = solver.step(min(solver.stable_dt(), scene.t_end - solver.t))
             row = {"step": solver.step_count, "dt": dt, **solver.energies()}
             history.append(row)
             if writer is not None:

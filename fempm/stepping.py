@@ -160,8 +160,12 @@ class ExplicitSolver:
         p = self.particles
         f = p.fields
         F = np.einsum("nij,njk->nik", identity(len(p), p.gdim) + dt * L, f["F"])
-        J = np.linalg.det(F)
-        bad = ~(J > 0)
+        with np.errstate(invalid="ignore"):
+            J = np.linalg.det(F)
+        nonfinite = ~np.isfinite(J)
+        if p.comm.allreduce(int(nonfinite.sum())):
+            self._fail(f"non-finite state (deformation gradient) at particle(s) {self._ids(nonfinite)}")
+        bad = J <= 0
         if p.comm.allreduce(int(bad.sum())):
             self._fail(f"inverted deformation J <= 0 at particle(s) {self._ids(bad)}")
         f["F"] = F
@@ -202,6 +206,7 @@ class ExplicitSolver:
             dt = self.stable_dt()
         elif dt > self.stable_dt() / opts.cfl:
             self._fail(f"time step {dt:.3g} exceeds the stability limit {self.stable_dt() / opts.cfl:.3g} (CFL > 1)")
+        self._check_finite()
         basis = ParticleBasis(self.V, p, gradients=True)
         mass_op = Projector(
             self.V, p, mass=opts.mass, basis=basis, petsc_options_prefix=opts.petsc_options_prefix,

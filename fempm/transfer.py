@@ -100,8 +100,11 @@ def _particle_values(values: npt.ArrayLike | Callable, particles: Particles, bs:
         x3 = np.zeros((3, len(particles)))
         x3[: particles.gdim] = particles.x.T
         values = np.asarray(values(x3), dtype=np.float64)
-        values = values.reshape(-1, len(particles)).T  # (n, bs)
-    f = np.asarray(values, dtype=np.float64).reshape(len(particles), -1)
+        values = values.reshape(bs, len(particles)).T  # (n, bs)
+    f = np.asarray(values, dtype=np.float64)
+    f = f[:, None] if f.ndim == 1 else f.reshape(f.shape[0], int(np.prod(f.shape[1:])))
+    if f.shape[0] != len(particles):
+        raise ValueError(f"values have {f.shape[0]} rows for {len(particles)} particles")
     if f.shape[1] != bs:
         raise ValueError(f"values have {f.shape[1]} component(s) per particle; the space has {bs}")
     if not np.all(np.isfinite(f)):

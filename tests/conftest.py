@@ -60,3 +60,17 @@ def ppc_for(mesh: dm.Mesh, degree: int) -> int:
     tdim = mesh.topology.dim
     n = degree + 1
     return n**tdim
+
+
+@pytest.hookimpl(hookwrapper=True)
+def pytest_runtest_makereport(item, call):
+    """Under MPI a test failing on one rank leaves the others waiting in a collective:
+    print the failure and abort the whole run at once instead of hanging."""
+    outcome = yield
+    report = outcome.get_result()
+    if report.failed and MPI.COMM_WORLD.size > 1:
+        import sys
+
+        sys.stderr.write(f"\n[rank {MPI.COMM_WORLD.rank}] FAILED {item.nodeid}\n{report.longreprtext}\n")
+        sys.stderr.flush()
+        MPI.COMM_WORLD.Abort(1)

@@ -10,7 +10,7 @@ bar = load("vibrating_bar")
 def test_usl_flip_16_cells_consistent_within_2_5_percent(tmp_path):
     r = bar.main(["--cells", "16", "--mass", "consistent", "--out", str(tmp_path), "--no-plot"])
     assert r["vcm_error"] < 0.025
-    assert r["energy_error"] < 1e-3
+    assert r["energy_error"] < 5e-3
 
 
 @pytest.mark.parametrize("mass", ["lumped", "consistent"])
