@@ -52,7 +52,10 @@ class StepOptions:
     mass: lumped or consistent. cfl: Courant number in (0, 1]. mass_cutoff: nodes whose
     lumped mass is below this fraction of the largest are inactive (velocity 0). position:
     move particles with the grid velocity (default) or their own updated velocity (the seed's
-    :math:`x_p^+ = x_p + \Delta t\, v_p^+`).
+    :math:`x_p^+ = x_p + \Delta t\, v_p^+`). lumped_forces: with consistent mass, map the
+    velocity with the consistent matrix but divide the forces by the lumped mass (stable with
+    the CFL step when weakly supported boundary nodes make the consistent matrix nearly
+    singular).
     """
 
     scheme: Scheme = "USL"
@@ -61,6 +64,7 @@ class StepOptions:
     cfl: float = 0.4
     mass_cutoff: float = 1e-9
     position: Literal["grid", "particle"] = "grid"
+    lumped_forces: bool = False
     petsc_options_prefix: str = "fempm_step_"
 
     def __post_init__(self):
@@ -216,7 +220,12 @@ class ExplicitSolver:
         self._apply_bcs(v_old)
         if opts.scheme == "USF":
             self._update_stress(self._velocity_gradient(basis, v_old), dt)
-        a = mass_op.solve(self._forces(basis, self.t))
+        f_grid = self._forces(basis, self.t)
+        if opts.mass == "consistent" and opts.lumped_forces:
+            m = mass_op.lumped_masses()
+            a = np.where(mass_op.active[:, None], f_grid / np.where(m > 0, m, 1.0)[:, None], 0.0)
+        else:
+            a = mass_op.solve(f_grid)
         v_new = v_old + dt * a
         self._apply_bcs(v_new)
         # G2P

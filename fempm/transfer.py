@@ -195,6 +195,12 @@ class Projector:
         else:
             self.row_mass = np.where(self.active, self.lumped, 0.0)[: self.num_owned]
 
+    def lumped_masses(self) -> npt.NDArray:
+        """Lumped nodal masses on owned + ghost dofs (computed once)."""
+        if not hasattr(self, "lumped"):
+            self.lumped = lumped_mass(self.basis, self.particles)
+        return self.lumped
+
     def grid_total(self, u: dolfinx.fem.Function) -> npt.NDArray:
         r"""Grid total :math:`\sum_{ij} m_{ij} F_j` (lumped: :math:`\sum_i m_i F_i`) per component,
         summed over ranks. For ``u`` the projection of :math:`f_p` it equals
