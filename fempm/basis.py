@@ -62,7 +62,7 @@ class ParticleBasis:
         self.gradients: npt.NDArray | None = None
         if gradients:
             K = particles.locator.geometry.inverse_jacobian(cells, X)  # (n, tdim, gdim)
-            self.gradients = np.einsum("tnk,ntg->nkg", tab[1:], K)
+            self.gradients = np.transpose(tab[1:], (1, 2, 0)) @ K  # (n, k, tdim) @ (n, tdim, gdim)
 
     @property
     def num_dofs_local(self) -> int:

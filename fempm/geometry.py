@@ -17,6 +17,7 @@ import basix
 import dolfinx
 import numpy as np
 import numpy.typing as npt
+from mpi4py import MPI
 
 _SIMPLICES = {"interval", "triangle", "tetrahedron"}
 
@@ -53,12 +54,21 @@ class CellGeometry:
         )
         self.dofmap = np.asarray(dofmap)
         self.x = mesh.geometry.x[:, : self.gdim]
-        self.affine = self.cell_name in _SIMPLICES and cmap.degree == 1
         self.num_owned = mesh.topology.index_map(self.tdim).size_local
+        self.affine = False
+        if cmap.degree == 1:
+            # the map is affine when every geometry node is x0 + J X_node with J from the nodes at
+            # the reference unit points (simplices always; parallelogram quads, parallelepiped hexes)
+            ref = basix.geometry(self.basix_cell)
+            unit = [int(np.flatnonzero(np.all(np.isclose(ref, e), axis=1))[0]) for e in np.eye(self.tdim)]
+            nodes = self.x[self.dofmap]  # (ncells, nnodes, gdim)
+            x0 = nodes[:, 0, :]
+            J = np.swapaxes(nodes[:, unit, :] - x0[:, None, :], 1, 2)  # J[c, g, t]
+            pred = x0[:, None, :] + np.einsum("cgt,kt->ckg", J, ref)
+            scale = np.abs(nodes).max(initial=1.0)
+            self.affine = bool(mesh.comm.allreduce(np.abs(pred - nodes).max(initial=0.0) <= 1e-13 * scale, op=MPI.LAND))
         if self.affine:
-            nodes = self.x[self.dofmap]  # (ncells, tdim+1, gdim)
-            self._x0 = nodes[:, 0, :]
-            J = np.swapaxes(nodes[:, 1:, :] - nodes[:, :1, :], 1, 2)  # J[c, g, t] = x_{t+1} - x_0
+            self._x0 = x0
             self._J = J
             self._detJ = np.linalg.det(J)
             self._K = np.linalg.inv(J)
@@ -137,7 +147,8 @@ class CellGeometry:
         """Volumes of all local cells (owned and ghost), by Gauss quadrature of ``|det J|``."""
         ncells = self.dofmap.shape[0]
         if self.affine:
-            return np.abs(self._detJ) / {1: 1.0, 2: 2.0, 3: 6.0}[self.tdim]
+            ref_volume = {1: 1.0, 2: 0.5, 3: 1.0 / 6.0}[self.tdim] if self.cell_name in _SIMPLICES else 1.0
+            return np.abs(self._detJ) * ref_volume
         deg = 2 * self.element.degree * self.tdim
         Xq, wq = basix.make_quadrature(self.basix_cell, deg)
         dphi = self._tabulate(1, Xq)[1:]  # (tdim, q, ndofs)

@@ -163,7 +163,7 @@ class ExplicitSolver:
     def _update_stress(self, L: npt.NDArray, dt: float) -> None:
         p = self.particles
         f = p.fields
-        F = np.einsum("nij,njk->nik", identity(len(p), p.gdim) + dt * L, f["F"])
+        F = (identity(len(p), p.gdim) + dt * L) @ f["F"]
         with np.errstate(invalid="ignore"):
             J = np.linalg.det(F)
         nonfinite = ~np.isfinite(J)
@@ -247,7 +247,8 @@ class ExplicitSolver:
 
     @staticmethod
     def _velocity_gradient(basis: ParticleBasis, v: npt.NDArray) -> npt.NDArray:
-        return np.einsum("pad,pag->pdg", v[basis.dofs], basis.gradients)
+        vd, G = v[basis.dofs], basis.gradients  # sum over the cell's dofs a (not over particles)
+        return sum(vd[:, a, :, None] * G[:, a, None, :] for a in range(G.shape[1]))
 
     def _check_finite(self) -> None:
         p = self.particles

@@ -63,7 +63,7 @@ def p2g_gradients(basis: ParticleBasis, vectors: npt.NDArray) -> npt.NDArray:
     r""":math:`\sum_p w_p \cdot \nabla N_i(x_p)` for per-particle tensors ``vectors`` (n, k, d):
     row ``a`` of the result is :math:`\sum_p \sum_b w_{p,a b}\, G[p, i, b]` (e.g. the internal
     force with :math:`w_p = -V_p \sigma_p`); returns (owned + ghost dofs, k)."""
-    contrib = np.einsum("pab,pib->pia", vectors, basis.gradients)  # (n, ndofs_cell, k)
+    contrib = basis.gradients @ np.swapaxes(vectors, 1, 2)  # (n, ndofs_cell, k)
     nd = basis.num_dofs_local
     idx = basis.dofs.ravel()
     local = np.column_stack(
