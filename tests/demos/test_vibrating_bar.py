@@ -23,3 +23,13 @@ def test_bar_converges_under_refinement(tmp_path, mass):
     if mass == "lumped":
         energy = [r["energy_error"] for r in rs]
         assert energy[0] > energy[1] > energy[2], energy
+
+
+def test_2d_strip_reproduces_the_1d_bar(tmp_path):
+    """nu = 0, one cell high: the strip's centre-of-mass velocity is the 1D one to round-off."""
+    args = ["--cells", "16", "--mass", "lumped", "--t-end", "10", "--no-plot"]
+    r1 = bar.main(args + ["--out", str(tmp_path / "1d")])
+    r2 = bar.main(args + ["--out", str(tmp_path / "2d"), "--dim", "2"])
+    np.testing.assert_allclose(r2["t"], r1["t"], rtol=1e-12)
+    np.testing.assert_allclose(r2["vcm"], r1["vcm"], atol=1e-12)
+    assert r2["energy_error"] == pytest.approx(r1["energy_error"], rel=1e-8)
