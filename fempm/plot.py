@@ -58,13 +58,26 @@ def plot_projection(F: dolfinx.fem.Function, particles: Particles, values: npt.N
     plotter.close()
 
 
-def plot_error_vs_time(rows: Sequence[dict], path: Path, *, title: str = "") -> None:
-    """Log-log L2 error against wall time, one line per (mesh, field, space, mass) series."""
+def _pyplot():
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
+    return plt
+
+
+def _save(fig, path: Path) -> None:
+    Path(path).parent.mkdir(parents=True, exist_ok=True)
+    fig.tight_layout()
+    fig.savefig(path, dpi=130)
+    fig.clf()
+    _pyplot().close(fig)
+
+
+def plot_error_vs_time(rows: Sequence[dict], path: Path, *, title: str = "") -> None:
+    """Log-log L2 error against wall time, one line per (mesh, field, space, mass) series."""
+    plt = _pyplot()
     series: dict[tuple, list[dict]] = {}
     for r in rows:
         series.setdefault((r["mesh"], r["field"], r["space"], r["mass"], r["ppc"]), []).append(r)
@@ -90,19 +103,12 @@ def plot_error_vs_time(rows: Sequence[dict], path: Path, *, title: str = "") -> 
     axes[-1].legend(fontsize=6, ncol=1, loc="center left", bbox_to_anchor=(1.0, 0.5))
     if title:
         fig.suptitle(title)
-    fig.tight_layout()
-    Path(path).parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(path, dpi=130)
-    plt.close(fig)
+    _save(fig, path)
 
 
 def plot_energies(history: Sequence[dict], path: Path, *, title: str = "", extra: dict | None = None) -> None:
     """Kinetic, strain and total energy against time (plus optional extra curves t -> y)."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
+    plt = _pyplot()
     t = [r["t"] for r in history]
     fig, ax = plt.subplots(figsize=(7, 4.2))
     for key in ("kinetic", "strain", "total"):
@@ -115,7 +121,4 @@ def plot_energies(history: Sequence[dict], path: Path, *, title: str = "", extra
     ax.legend()
     if title:
         ax.set_title(title)
-    fig.tight_layout()
-    Path(path).parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(path, dpi=130)
-    plt.close(fig)
+    _save(fig, path)

@@ -65,10 +65,10 @@ def run(
         while solver.t < scene.t_end * (1 - 1e-12):
             if writer is not None and solver.t >= next_frame:
                 writer.particles(scene.particles, solver.t)
-                if hasattr(solver, "grid_velocity"):
+                if solver.grid_velocity is not None:
                     writer.grid(solver.grid_velocity, solver.t)
                 next_frame += scene.t_end / max(scene.frames, 1)
-            dt = solver.step(min(solver.stable_dt(), scene.t_end - solver.t))
+            dt = solver.step(dt_max=scene.t_end - solver.t)
             row = {"step": solver.step_count, "dt": dt, **solver.energies()}
             history.append(row)
             if writer is not None:

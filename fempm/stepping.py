@@ -135,6 +135,7 @@ class ExplicitSolver:
         f.setdefault("body", np.zeros(n, dtype=np.int32))
         self.h_cell = cell_sizes(p.mesh)
         self.terms: Counter = Counter()  # how often each force term was assembled
+        self.grid_velocity: npt.NDArray | None = None  # last step's, also the CG warm start
         fixed = [bc.dofs for bc in self.bcs if isinstance(bc, Fixed)]
         self._fixed_dofs = np.unique(np.concatenate(fixed)) if fixed else None
 
@@ -201,22 +202,24 @@ class ExplicitSolver:
         return f
 
     # -- the step -----------------------------------------------------------------------------
-    def step(self, dt: float | None = None) -> float:
-        """Advance one step (``dt`` defaults to the stable one); returns the ``dt`` used."""
+    def step(self, dt: float | None = None, *, dt_max: float = np.inf) -> float:
+        """Advance one step; returns the ``dt`` used. ``dt`` defaults to the stable step
+        (at most ``dt_max``); a given ``dt`` above the stability limit (CFL > 1) is an error."""
         opts = self.options
         p = self.particles
         fld = p.fields
+        stable = self.stable_dt()
         if dt is None:
-            dt = self.stable_dt()
-        elif dt > self.stable_dt() / opts.cfl:
-            self._fail(f"time step {dt:.3g} exceeds the stability limit {self.stable_dt() / opts.cfl:.3g} (CFL > 1)")
+            dt = min(stable, dt_max)
+        elif dt > stable / opts.cfl:
+            self._fail(f"time step {dt:.3g} exceeds the stability limit {stable / opts.cfl:.3g} (CFL > 1)")
         self._check_finite()
         basis = ParticleBasis(self.V, p, gradients=True)
         mass_op = Projector(
             self.V, p, mass=opts.mass, basis=basis, petsc_options_prefix=opts.petsc_options_prefix,
             exclude=self._fixed_dofs, mass_cutoff=opts.mass_cutoff,
         )
-        v_old = mass_op.solve(p2g(basis, p.mass[:, None] * fld["v"]))
+        v_old = mass_op.solve(p2g(basis, p.mass[:, None] * fld["v"]), guess=self.grid_velocity)
         self._apply_bcs(v_old)
         if opts.scheme == "USF":
             self._update_stress(self._velocity_gradient(basis, v_old), dt)

@@ -151,6 +151,7 @@ class Projector:
         self.num_owned = imap.size_local
         comm = particles.comm
         self.iterations: list[int] = []
+        self.lumped: npt.NDArray | None = None
         if mass == "lumped":
             if not self.basis.nonnegative:
                 raise ValueError(
@@ -158,14 +159,13 @@ class Projector:
                     f"Lagrange space of degree {self.basis.element.degree} has lumped vertex masses "
                     "that can be zero or negative: use mass='consistent' or a Bernstein variant"
                 )
-            self.lumped = lumped_mass(self.basis, particles)
-            measure = self.lumped
+            measure = self.lumped_masses()
         else:
             measure = p2g(self.basis, particles.mass, values=self.basis.values**2)[:, 0]
         top = comm.allreduce(float(measure[: self.num_owned].max(initial=0.0)), op=MPI.MAX)
         self.active = measure > SUPPORT_TOL * top
         if mass_cutoff > 0.0:  # nodes with a tiny share of mass (edge of a body)
-            m = self.lumped if mass == "lumped" else lumped_mass(self.basis, particles)
+            m = self.lumped_masses()
             self.active &= m > mass_cutoff * comm.allreduce(float(m.max(initial=0.0)), op=MPI.MAX)
         if exclude is not None:  # constrained dofs (e.g. fixed velocity): value 0, not solved for
             self.active[exclude] = False
@@ -197,7 +197,7 @@ class Projector:
 
     def lumped_masses(self) -> npt.NDArray:
         """Lumped nodal masses on owned + ghost dofs (computed once)."""
-        if not hasattr(self, "lumped"):
+        if self.lumped is None:
             self.lumped = lumped_mass(self.basis, self.particles)
         return self.lumped
 
