@@ -7,7 +7,7 @@ conserved to round-off; we plot kinetic, strain and total energy against time.
 
 The default runs on the unstructured triangle mesh `meshes/unit_square_tri.msh` (h = 0.05);
 `--mesh structured` uses 20 x 20 quadrilaterals. Outputs: `energies.csv`, particle frames
-(`particles/*.vtk` for ParaView), the grid velocity (`grid_velocity.bp`), `energies.png`,
+(`particles/*.vtk` for ParaView, `frames/*.png`), the grid velocity (`grid_velocity.bp`), `energies.png`,
 `disks.png` and `summary.json`.
 
 Run: `python demos/two_disks.py [--mesh structured] [--mass consistent] [--out output/disks]`
@@ -38,7 +38,7 @@ def main(argv: list[str] | None = None) -> dict:
     a = ap.parse_args(argv)
     comm = MPI.COMM_WORLD
     scene = two_disks(mesh=a.mesh, cells=a.cells, mass=a.mass, scheme=a.scheme, t_end=a.t_end)
-    res = run(scene, a.out, progress=comm.rank == 0)
+    res = run(scene, a.out, progress=comm.rank == 0, png=not a.no_plot)
     h = res["history"]
     p0 = np.array([h[0]["momentum_x"], h[0]["momentum_y"]])
     drift = max(np.abs(np.array([r["momentum_x"], r["momentum_y"]]) - p0).max() for r in h)

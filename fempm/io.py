@@ -12,6 +12,7 @@ import dolfinx.fem
 import dolfinx.io
 import numpy as np
 import numpy.typing as npt
+from mpi4py import MPI
 
 from fempm.particles import Particles
 
@@ -44,8 +45,13 @@ def _pad3(a: npt.NDArray) -> npt.NDArray:
 class RunWriter:
     """Writes a run's outputs into ``folder`` as the run goes (nothing kept only in memory)."""
 
-    def __init__(self, folder: Path, particles: Particles, V: dolfinx.fem.FunctionSpace | None = None):
+    def __init__(self, folder: Path, particles: Particles, V: dolfinx.fem.FunctionSpace | None = None,
+                 *, png: bool = False):
         self.folder = Path(folder)
+        self.png = png
+        x = particles.mesh.geometry.x
+        self.bounds = np.array([particles.comm.allreduce(x.min(axis=0), op=MPI.MIN),
+                                particles.comm.allreduce(x.max(axis=0), op=MPI.MAX)])
         self.comm = particles.comm
         self.frame = 0
         self._csv = None
@@ -86,6 +92,12 @@ class RunWriter:
             write_vtk_points(self.folder / "particles" / f"particles_{self.frame:05d}.vtk", x, allp)
             with open(self.folder / "particles" / "times.csv", "a") as fh:
                 fh.write(f"{self.frame},{t!r}\n")
+            if self.png:
+                from fempm.plot import plot_particle_frame
+
+                speed = np.linalg.norm(allp["velocity"], axis=1)
+                plot_particle_frame(x, speed, self.folder / "frames" / f"frame_{self.frame:05d}.png",
+                                    title=f"t = {t:.4g}", label="|velocity|", bounds=self.bounds)
         self.frame += 1
 
     def grid(self, v: npt.NDArray, t: float) -> None:

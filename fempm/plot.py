@@ -122,3 +122,23 @@ def plot_energies(history: Sequence[dict], path: Path, *, title: str = "", extra
     if title:
         ax.set_title(title)
     _save(fig, path)
+
+
+def plot_particle_frame(x: npt.NDArray, values: npt.NDArray, path: Path, *, title: str = "", label: str = "",
+                        bounds: npt.NDArray | None = None) -> None:
+    """One PNG frame: particles (n, 3) coloured by ``values`` (2D/3D: x-y view; 1D: x vs value)."""
+    plt = _pyplot()
+    fig, ax = plt.subplots(figsize=(5.5, 4.6))
+    if np.allclose(x[:, 1:], 0.0):
+        ax.plot(x[:, 0], values, ".", ms=3)
+        ax.set_xlabel("x")
+        ax.set_ylabel(label)
+    else:
+        sc = ax.scatter(x[:, 0], x[:, 1], c=values, s=4, cmap="viridis")
+        fig.colorbar(sc, ax=ax, label=label)
+        ax.set_aspect("equal")
+        if bounds is not None:
+            ax.set_xlim(bounds[0, 0], bounds[1, 0])
+            ax.set_ylim(bounds[0, 1], bounds[1, 1])
+    ax.set_title(title)
+    _save(fig, path)

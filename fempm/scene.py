@@ -49,14 +49,16 @@ def run(
     out: Path | None = None,
     *,
     progress: bool = True,
+    png: bool = False,
     callback: Callable[[ExplicitSolver], None] | None = None,
 ) -> dict:
     """Run ``scene`` to ``t_end``. Energies and momentum are recorded every step (returned in
     ``history`` and, with ``out``, written to ``energies.csv`` as the run goes, together with
-    particle VTK frames, the grid velocity (VTX) and ``summary.json``)."""
+    particle VTK frames, the grid velocity (VTX), ``summary.json`` and, with ``png``, a PNG of
+    the particles per frame in ``frames/``)."""
     solver = scene.solver()
     comm = scene.mesh.comm
-    writer = RunWriter(Path(out), scene.particles, solver.V) if out is not None else None
+    writer = RunWriter(Path(out), scene.particles, solver.V, png=png) if out is not None else None
     history = [solver.energies()]
     next_frame = 0.0
     t0 = time.perf_counter()

@@ -31,3 +31,15 @@ def test_projection_demo(tmp_path):
     if MPI.COMM_WORLD.rank == 0:
         assert (out / "projection.png").stat().st_size > 10_000
         assert (out / "f_P2_consistent.bp").is_dir()
+
+
+def test_two_disks_demo_writes_outputs(tmp_path):
+    demo = load("two_disks")
+    out = tmp_path / "disks"
+    res = demo.main(["--mesh", "structured", "--t-end", "0.5", "--out", str(out)])
+    assert res["momentum_drift"] < 1e-13
+    frames = sorted((out / "frames").glob("frame_*.png"))
+    assert len(frames) == len(list((out / "particles").glob("particles_*.vtk"))) > 3
+    rows = (out / "energies.csv").read_text().splitlines()
+    assert len(rows) == res["steps"] + 1 and rows[0].startswith("step,dt,t,kinetic,strain,total")
+    assert (out / "energies.png").stat().st_size > 10_000 and (out / "summary.json").exists()
