@@ -50,8 +50,10 @@ class RunWriter:
         self.folder = Path(folder)
         self.png = png
         x = particles.mesh.geometry.x
-        self.bounds = np.array([particles.comm.allreduce(x.min(axis=0), op=MPI.MIN),
-                                particles.comm.allreduce(x.max(axis=0), op=MPI.MAX)])
+        lo, hi = x.min(axis=0, initial=np.inf), x.max(axis=0, initial=-np.inf)
+        particles.comm.Allreduce(MPI.IN_PLACE, lo, op=MPI.MIN)
+        particles.comm.Allreduce(MPI.IN_PLACE, hi, op=MPI.MAX)
+        self.bounds = np.array([lo, hi])
         self.comm = particles.comm
         self.frame = 0
         self._csv = None
