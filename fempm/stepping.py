@@ -50,7 +50,8 @@ class StepOptions:
 
     scheme: USL, USF or MUSL. flip: PIC/FLIP blend alpha (1 = FLIP, 0 = PIC).
     mass: lumped or consistent. cfl: Courant number in (0, 1]. mass_cutoff: nodes whose
-    lumped mass is below this fraction of the largest are inactive (velocity 0). position:
+    lumped mass is below this fraction of the largest get no force update (they keep the
+    mapped particle velocity, a bounded weighted average, instead of :math:`+\Delta t f_i/m_i`). position:
     move particles with the grid velocity (default) or their own updated velocity (the seed's
     :math:`x_p^+ = x_p + \Delta t\, v_p^+`). lumped_forces: with consistent mass, map the
     velocity with the consistent matrix but divide the forces by the lumped mass (stable with
@@ -217,18 +218,20 @@ class ExplicitSolver:
         basis = ParticleBasis(self.V, p, gradients=True)
         mass_op = Projector(
             self.V, p, mass=opts.mass, basis=basis, petsc_options_prefix=opts.petsc_options_prefix,
-            exclude=self._fixed_dofs, mass_cutoff=opts.mass_cutoff,
+            exclude=self._fixed_dofs,
         )
+        m = mass_op.lumped_masses()
+        weak = m <= opts.mass_cutoff * p.comm.allreduce(float(m.max(initial=0.0)), op=MPI.MAX)
         v_old = mass_op.solve(p2g(basis, p.mass[:, None] * fld["v"]), guess=self.grid_velocity)
         self._apply_bcs(v_old)
         if opts.scheme == "USF":
             self._update_stress(self._velocity_gradient(basis, v_old), dt)
         f_grid = self._forces(basis, self.t)
         if opts.mass == "consistent" and opts.lumped_forces:
-            m = mass_op.lumped_masses()
             a = np.where(mass_op.active[:, None], f_grid / np.where(m > 0, m, 1.0)[:, None], 0.0)
         else:
             a = mass_op.solve(f_grid)
+        a[weak] = 0.0  # nodes with a tiny share of mass keep their mapped velocity, no force update
         v_new = v_old + dt * a
         self._apply_bcs(v_new)
         # G2P
