@@ -78,11 +78,16 @@ class ParticleBasis:
         S = self.values if values is None else values
         w = np.asarray(weights, dtype=np.float64)
         w2 = w[:, None] if w.ndim == 1 else w.reshape(w.shape[0], int(np.prod(w.shape[1:])))
+        return self.scatter_contributions(S[:, :, None] * w2[:, None, :])
+
+    def scatter_contributions(self, contrib: npt.NDArray) -> npt.NDArray:
+        """Sum per-particle, per-local-dof contributions (n, ndofs_per_cell, k) into (owned +
+        ghost) dofs, shape (ndofs, k); ghost entries are partial sums."""
         nd = self.num_dofs_local
         idx = self.dofs.ravel()
-        out = np.empty((nd, w2.shape[1]))
-        for c in range(w2.shape[1]):  # loop over value components, not particles
-            out[:, c] = np.bincount(idx, weights=(S * w2[:, c, None]).ravel(), minlength=nd)
+        out = np.empty((nd, contrib.shape[2]))
+        for c in range(contrib.shape[2]):  # loop over value components, not particles
+            out[:, c] = np.bincount(idx, weights=contrib[:, :, c].ravel(), minlength=nd)
         return out
 
     def gather(self, nodal: npt.NDArray) -> npt.NDArray:

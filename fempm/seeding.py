@@ -22,7 +22,7 @@ import dolfinx
 import numpy as np
 import numpy.typing as npt
 
-from fempm.location import CellLocator
+from fempm.location import CellLocator, as_points3
 from fempm.particles import Particles
 
 _TDIM = {"interval": 1, "triangle": 2, "quadrilateral": 2, "tetrahedron": 3, "hexahedron": 3}
@@ -138,9 +138,7 @@ def create_particles(
     wsum = np.bincount(cells, weights=w, minlength=ncell)
     volume = geom.cell_volumes()[cells] * w / wsum[cells]
     if where is not None:
-        x3 = np.zeros((3, len(x)))
-        x3[: geom.gdim] = x.T
-        keep = np.asarray(where(x3), dtype=bool)
+        keep = np.asarray(where(as_points3(x).T), dtype=bool)
         x, cells, X, volume, ids = x[keep], cells[keep], X[keep], volume[keep], ids[keep]
     rho = density(x) if callable(density) else np.full(len(x), float(density))
     return Particles.from_located(locator, x, cells, X, rho * volume, volume, ids)

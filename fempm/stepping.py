@@ -162,6 +162,13 @@ class ExplicitSolver:
         for bc in self.bcs:
             bc.apply(v)
 
+    def _map_velocity(self, basis: ParticleBasis, mass_op: Projector, guess: npt.NDArray | None) -> npt.NDArray:
+        """Grid velocity from the particle momenta (P2G + mass solve), constrained."""
+        p = self.particles
+        v = mass_op.solve(p2g(basis, p.mass[:, None] * p.fields["v"]), guess=guess)
+        self._apply_bcs(v)
+        return v
+
     def _update_stress(self, L: npt.NDArray, dt: float) -> None:
         p = self.particles
         f = p.fields
@@ -222,8 +229,7 @@ class ExplicitSolver:
         )
         m = mass_op.lumped_masses()
         weak = m <= opts.mass_cutoff * p.comm.allreduce(float(m.max(initial=0.0)), op=MPI.MAX)
-        v_old = mass_op.solve(p2g(basis, p.mass[:, None] * fld["v"]), guess=self.grid_velocity)
-        self._apply_bcs(v_old)
+        v_old = self._map_velocity(basis, mass_op, guess=self.grid_velocity)
         if opts.scheme == "USF":
             self._update_stress(self._velocity_gradient(basis, v_old), dt)
         f_grid = self._forces(basis, self.t)
@@ -238,8 +244,7 @@ class ExplicitSolver:
         vp_grid = basis.gather(v_new)
         fld["v"] = opts.flip * (fld["v"] + basis.gather(v_new - v_old)) + (1.0 - opts.flip) * vp_grid
         if opts.scheme == "MUSL":
-            v_new = mass_op.solve(p2g(basis, p.mass[:, None] * fld["v"]))
-            self._apply_bcs(v_new)
+            v_new = self._map_velocity(basis, mass_op, guess=None)
             vp_grid = basis.gather(v_new)
         if opts.scheme != "USF":
             self._update_stress(self._velocity_gradient(basis, v_new), dt)

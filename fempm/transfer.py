@@ -29,6 +29,7 @@ from petsc4py import PETSc
 
 from fempm import petsc as fpetsc
 from fempm.basis import ParticleBasis
+from fempm.location import as_points3
 from fempm.particles import Particles
 
 log = logging.getLogger("fempm")
@@ -64,12 +65,7 @@ def p2g_gradients(basis: ParticleBasis, vectors: npt.NDArray) -> npt.NDArray:
     row ``a`` of the result is :math:`\sum_p \sum_b w_{p,a b}\, G[p, i, b]` (e.g. the internal
     force with :math:`w_p = -V_p \sigma_p`); returns (owned + ghost dofs, k)."""
     contrib = basis.gradients @ np.swapaxes(vectors, 1, 2)  # (n, ndofs_cell, k)
-    nd = basis.num_dofs_local
-    idx = basis.dofs.ravel()
-    local = np.column_stack(
-        [np.bincount(idx, weights=contrib[:, :, a].ravel(), minlength=nd) for a in range(contrib.shape[2])]
-    )
-    return sum_over_ranks(basis.index_map, local)
+    return sum_over_ranks(basis.index_map, basis.scatter_contributions(contrib))
 
 
 def lumped_mass(basis: ParticleBasis, particles: Particles) -> npt.NDArray:
@@ -97,9 +93,7 @@ def consistent_mass_matrix(basis: ParticleBasis, particles: Particles) -> PETSc.
 
 def _particle_values(values: npt.ArrayLike | Callable, particles: Particles, bs: int) -> npt.NDArray:
     if callable(values):  # DOLFINx convention: f(x) with x of shape (3, n)
-        x3 = np.zeros((3, len(particles)))
-        x3[: particles.gdim] = particles.x.T
-        values = np.asarray(values(x3), dtype=np.float64)
+        values = np.asarray(values(as_points3(particles.x).T), dtype=np.float64)
         values = values.reshape(bs, len(particles)).T  # (n, bs)
     f = np.asarray(values, dtype=np.float64)
     f = f[:, None] if f.ndim == 1 else f.reshape(f.shape[0], int(np.prod(f.shape[1:])))
@@ -117,8 +111,7 @@ class Projector:
 
     Assembles the mass (consistent matrix + KSP, or lumped vector) once; :meth:`project` then
     costs one P2G and one solve per value component. ``exclude`` lists (block) dofs held at 0
-    (Dirichlet); ``mass_cutoff`` drops dofs whose lumped mass is below that fraction of the
-    largest.
+    (Dirichlet).
 
     Attributes
     ----------
@@ -141,7 +134,6 @@ class Projector:
         petsc_options: dict[str, Any] | None = None,
         basis: ParticleBasis | None = None,
         exclude: npt.NDArray[np.int32] | None = None,
-        mass_cutoff: float = 0.0,
     ):
         if mass not in _MASS_MODES:
             raise ValueError(f"unknown option mass={mass!r}; expected one of {_MASS_MODES}")
@@ -164,9 +156,6 @@ class Projector:
             measure = p2g(self.basis, particles.mass, values=self.basis.values**2)[:, 0]
         top = comm.allreduce(float(measure[: self.num_owned].max(initial=0.0)), op=MPI.MAX)
         self.active = measure > SUPPORT_TOL * top
-        if mass_cutoff > 0.0:  # nodes with a tiny share of mass (edge of a body)
-            m = self.lumped_masses()
-            self.active &= m > mass_cutoff * comm.allreduce(float(m.max(initial=0.0)), op=MPI.MAX)
         if exclude is not None:  # constrained dofs (e.g. fixed velocity): value 0, not solved for
             self.active[exclude] = False
         self.num_inactive = comm.allreduce(int(np.count_nonzero(~self.active[: self.num_owned])))
