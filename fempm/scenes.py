@@ -9,11 +9,11 @@ import dolfinx.mesh as dm
 import numpy as np
 from mpi4py import MPI
 
-from fempm.boundary import fixed
-from fempm.materials import LinearElastic
+from fempm.boundary import fixed, slip
+from fempm.materials import LinearElastic, NeoHookean, NewtonianTait
 from fempm.scene import Scene
 from fempm.seeding import create_particles
-from fempm.stepping import StepOptions
+from fempm.stepping import Loads, StepOptions
 
 MESHES = Path(__file__).resolve().parents[1] / "meshes"
 
@@ -83,4 +83,111 @@ def two_disks(
     )
 
 
-SCENES = {"bar": vibrating_bar, "disks": two_disks}
+
+
+
+def cantilever_reference(L: float = 0.7, H: float = 0.047, E: float = 6e7, rho: float = 1000.0,
+                         g: float = 10.0) -> dict[str, float]:
+    r"""Euler-Bernoulli tip deflection :math:`q L^4 / (8 E I)` (q = rho g H, I = H^3 / 12) and
+    first-mode period :math:`2\pi / (1.8751^2 \sqrt{E I / (\rho H L^4)})` of a clamped beam of
+    unit depth."""
+    EI = E * H**3 / 12
+    return {"tip_deflection": rho * g * H * L**4 / (8 * EI),
+            "period": 2 * np.pi / (1.875104**2 * np.sqrt(EI / (rho * H * L**4)))}
+
+
+def cantilever(
+    cells: int = 4, ppc: int = 2, scheme: str = "MUSL", flip: float = 0.95, mass: str = "lumped",
+    cfl: float = 0.4, t_end: float = 0.6, L: float = 0.7, H: float = 0.047, E: float = 6e7, nu: float = 0.0,
+    rho: float = 1000.0, g: float = 10.0, material: str = "neo-hookean", degree: int = 1, mass_cutoff: float = 1e-9,
+    frames: int = 20,
+    comm: MPI.Comm = MPI.COMM_WORLD,
+) -> Scene:
+    r"""Cantilever under suddenly applied self-weight (VERIFICATION.md section 5).
+
+    Beam :math:`[0, L] \times [0, H]`, clamped at x = 0 (all grid velocities zero on the
+    mesh's left edge), ``cells`` cells through the thickness (cells as close to square as
+    fits L), plane strain
+    (nu = 0 makes it plane stress as well). Euler-Bernoulli static tip deflection
+    :math:`\delta = q L^4 / (8 E I)`, q = rho g H, I = H^3 / 12; with no damping the tip
+    oscillates about it (period :math:`2\pi / (1.875^2 \sqrt{EI / (\rho H L^4)})`).
+    Particles carry their initial position in ``fields["X0"]``.
+
+    ``material``: "neo-hookean" (default; objective, so the beam's rotation, up to 0.1 rad at the
+    tip, makes no stress) or "linear" (small strain :math:`\mathrm{sym}\,F - I`, which a
+    rotation by :math:`\theta` strains by :math:`\cos\theta - 1`: about 25 % of the bending
+    strain near the tip here).
+    """
+    if material not in ("neo-hookean", "linear"):
+        raise ValueError(f"unknown option material={material!r}; expected neo-hookean or linear")
+    hy = H / cells
+    nl = max(int(round(L / hy)), 1)
+    hx = L / nl
+    tip = cantilever_reference(L, H, E, rho, g)["tip_deflection"]
+    below = int(np.ceil(3 * tip / hy)) + 2  # room below the beam for the swing (twice the deflection)
+    mesh = dm.create_rectangle(comm, [[0.0, -below * hy], [(nl + 2) * hx, H + 2 * hy]], [nl + 2, below + cells + 2],
+                               dm.CellType.quadrilateral)
+    p = create_particles(mesh, ppc**2, density=rho, cells=lambda x: (x[0] < L) & (x[1] > 0) & (x[1] < H))
+    p.fields["X0"] = p.x.copy()
+    params = dict(cells=cells, ppc=ppc, scheme=scheme, flip=flip, mass=mass, cfl=cfl, L=L, H=H, E=E, nu=nu, rho=rho,
+                  g=g, material=material, degree=degree, mass_cutoff=mass_cutoff, **cantilever_reference(L, H, E, rho, g))
+    return Scene(
+        name="cantilever", mesh=mesh, particles=p,
+        materials=[NeoHookean(E, nu) if material == "neo-hookean" else LinearElastic(E, nu)], t_end=t_end, frames=frames,
+        bcs=lambda V: [fixed(V, lambda x: np.isclose(x[0], 0.0))], loads=Loads(body_force=(0.0, -g)),
+        options=StepOptions(scheme=scheme, flip=flip, mass=mass, cfl=cfl, mass_cutoff=mass_cutoff), degree=degree,
+        params=params,
+    )
+
+
+#: Martin and Moyce (1952), n^2 = 2: surge front Z = x / a against T = t sqrt(2 g / a)
+#: (their Table 2, as tabulated in the dam-break literature).
+MARTIN_MOYCE = np.array([
+    [0.41, 1.11], [0.84, 1.22], [1.19, 1.44], [1.43, 1.67], [1.63, 1.89], [1.83, 2.11], [1.98, 2.33], [2.20, 2.56],
+    [2.32, 2.78], [2.51, 3.00], [2.65, 3.22], [2.83, 3.44], [2.98, 3.67], [3.11, 3.89], [3.33, 4.11],
+])
+
+
+def dam_break(
+    cells: int = 10, ppc: int = 2, scheme: str = "MUSL", flip: float = 0.99, mass: str = "lumped",
+    cfl: float = 0.4, t_end: float = 0.22, a: float = 0.1, box: float = 0.4, rho0: float = 1000.0,
+    kappa: float = 2.0e4, gamma: float = 7.0, viscosity: float = 1.0e-3, g: float = 9.81, frames: int = 22,
+    comm: MPI.Comm = MPI.COMM_WORLD,
+) -> Scene:
+    r"""Dam break (VERIFICATION.md section 9): a water column ``a`` wide and ``2 a`` high
+    (n^2 = 2) at the left of a box ``box`` wide, slip walls left, right and at the bottom, open
+    top; Tait water :math:`p = \kappa((\rho/\rho_0)^\gamma - 1)`.
+
+    ``cells`` cells across the column width (square cells), ``ppc`` x ``ppc`` particles per
+    cell. The column starts at rest in hydrostatic equilibrium: the particle density is
+    :math:`\rho = \rho_0 (1 + \rho_0 g (2a - y) / \kappa)^{1/\gamma}` and its stress
+    :math:`-p I`. Reference: the surge front of Martin and Moyce (1952), ``MARTIN_MOYCE``.
+    """
+    h = a / cells
+    nx, ny = int(round(box / h)), int(round(3 * a / h))
+    mesh = dm.create_rectangle(comm, [[0.0, 0.0], [nx * h, ny * h]], [nx, ny], dm.CellType.quadrilateral)
+    H = 2 * a
+
+    def density(x):
+        return rho0 * (1 + rho0 * g * (H - x[:, 1]) / kappa) ** (1 / gamma)
+
+    p = create_particles(mesh, ppc**2, density=density, cells=lambda x: (x[0] < a) & (x[1] < H))
+    water = NewtonianTait(rho0=rho0, kappa=kappa, gamma=gamma, viscosity=viscosity)
+    pressure = water.pressure(p.mass / p.volume)
+    p.fields["sigma"] = -pressure[:, None, None] * np.eye(2)
+    params = dict(cells=cells, ppc=ppc, scheme=scheme, flip=flip, mass=mass, cfl=cfl, a=a, box=nx * h, rho0=rho0,
+                  kappa=kappa, gamma=gamma, viscosity=viscosity, g=g, spacing=h / ppc)
+    W = nx * h
+
+    def bcs(V):
+        return [slip(V, lambda x: np.isclose(x[0], 0.0) | np.isclose(x[0], W), (1.0, 0.0)),
+                slip(V, lambda x: np.isclose(x[1], 0.0), (0.0, 1.0))]
+
+    return Scene(
+        name="dam_break", mesh=mesh, particles=p, materials=[water], t_end=t_end, frames=frames, bcs=bcs,
+        loads=Loads(body_force=(0.0, -g)), options=StepOptions(scheme=scheme, flip=flip, mass=mass, cfl=cfl),
+        params=params,
+    )
+
+
+SCENES = {"bar": vibrating_bar, "disks": two_disks, "cantilever": cantilever, "dam": dam_break}

@@ -66,6 +66,7 @@ class StepOptions:
     mass_cutoff: float = 1e-9
     position: Literal["grid", "particle"] = "grid"
     lumped_forces: bool = False
+    lump_below: float = 0.0
     petsc_options_prefix: str = "fempm_step_"
 
     def __post_init__(self):
@@ -225,7 +226,7 @@ class ExplicitSolver:
         basis = ParticleBasis(self.V, p, gradients=True)
         mass_op = Projector(
             self.V, p, mass=opts.mass, basis=basis, petsc_options_prefix=opts.petsc_options_prefix,
-            exclude=self._fixed_dofs,
+            exclude=self._fixed_dofs, lump_below=opts.lump_below if opts.mass == "consistent" else 0.0,
         )
         m = mass_op.lumped_masses()
         weak = m <= opts.mass_cutoff * p.comm.allreduce(float(m.max(initial=0.0)), op=MPI.MAX)

@@ -73,11 +73,16 @@ def lumped_mass(basis: ParticleBasis, particles: Particles) -> npt.NDArray:
     return p2g(basis, particles.mass)[:, 0]
 
 
-def consistent_mass_matrix(basis: ParticleBasis, particles: Particles) -> PETSc.Mat:
+def consistent_mass_matrix(
+    basis: ParticleBasis, particles: Particles, lump: npt.NDArray[np.bool_] | None = None
+) -> PETSc.Mat:
     r"""PETSc matrix :math:`m_{ij} = \sum_p M_p N_i(x_p) N_j(x_p)` (one row per scalar dof).
 
     Particle contributions are summed per cell first (``np.bincount``), then inserted once as
-    COO data.
+    COO data. ``lump`` (mask over owned + ghost dofs, the same on every rank that sees a dof)
+    lumps the rows and columns of those dofs: every :math:`m_{ij}`, :math:`i \ne j`, with
+    :math:`i` or :math:`j` lumped moves to :math:`m_{ii}`. Row sums (the lumped masses, hence
+    the conservation of mass and momentum) and symmetry are kept.
     """
     S, M = basis.values, particles.mass
     n, k = S.shape
@@ -88,6 +93,8 @@ def consistent_mass_matrix(basis: ParticleBasis, particles: Particles) -> PETSc.
     dofs = np.asarray(basis.V.dofmap.list)[cells]
     rows = np.broadcast_to(dofs[:, :, None], (len(cells), k, k))
     cols = np.broadcast_to(dofs[:, None, :], (len(cells), k, k))
+    if lump is not None:
+        cols = np.where(lump[rows] | lump[cols], rows, cols)
     return fpetsc.coo_matrix(basis.index_map, rows, cols, Ae)
 
 
@@ -111,7 +118,9 @@ class Projector:
 
     Assembles the mass (consistent matrix + KSP, or lumped vector) once; :meth:`project` then
     costs one P2G and one solve per value component. ``exclude`` lists (block) dofs held at 0
-    (Dirichlet).
+    (Dirichlet). ``lump_below`` (consistent mode): dofs whose lumped mass is below this
+    fraction of the largest get lumped rows and columns (see :func:`consistent_mass_matrix`),
+    so that the solve does not extrapolate into nodes that particles barely reach.
 
     Attributes
     ----------
@@ -134,6 +143,7 @@ class Projector:
         petsc_options: dict[str, Any] | None = None,
         basis: ParticleBasis | None = None,
         exclude: npt.NDArray[np.int32] | None = None,
+        lump_below: float = 0.0,
     ):
         if mass not in _MASS_MODES:
             raise ValueError(f"unknown option mass={mass!r}; expected one of {_MASS_MODES}")
@@ -169,7 +179,11 @@ class Projector:
                     f"support {nactive} dofs (its rank is at most the number of particles); "
                     "seed more particles per cell or use a lower degree"
                 )
-            A = consistent_mass_matrix(self.basis, particles)
+            lump = None
+            if lump_below > 0.0:
+                m = self.lumped_masses()
+                lump = m < lump_below * comm.allreduce(float(m[: self.num_owned].max(initial=0.0)), op=MPI.MAX)
+            A = consistent_mass_matrix(self.basis, particles, lump)
             iset = fpetsc.owned_index_set(imap, self.active[: self.num_owned])
             self.matrix = A.createSubMatrix(iset, iset)
             A.destroy()

@@ -84,6 +84,26 @@ def test_mass_and_momentum_conserved(mass, degree):
     np.testing.assert_allclose(proj.grid_total(one), comm.allreduce(p.mass.sum()), rtol=1e-13)
 
 
+def test_partial_lumping_keeps_conservation_and_constants():
+    """Lumping the weakly supported dofs (a disk's rim) keeps row sums: mass and momentum are
+    conserved and constants reproduced to round-off, while interior linear fields stay exact."""
+    mesh = make_mesh("unstructured-triangle")
+    p = fempm.create_particles(mesh, 4, density=1000.0, where=lambda x: np.hypot(x[0] - 0.5, x[1] - 0.5) < 0.37)
+    V = fem.functionspace(mesh, ("Lagrange", 1, (2,)))
+    full = fempm.Projector(V, p, mass="consistent")
+    part = fempm.Projector(V, p, mass="consistent", lump_below=0.2)
+    m = part.lumped_masses()
+    lumped = comm.allreduce(int(np.count_nonzero(m[: part.num_owned] < 0.2 * comm.allreduce(m.max(), op=MPI.MAX))))
+    assert lumped > 10  # the rim is lumped
+    np.testing.assert_allclose(part.row_mass, full.row_mass, rtol=1e-12, atol=1e-12 * full.row_mass.max())
+    v = np.column_stack([np.sin(7 * p.x[:, 0]), np.cos(5 * p.x[:, 1])])
+    F = part.project(v)
+    np.testing.assert_allclose(part.grid_total(F), comm.allreduce(p.mass @ v), rtol=1e-13)
+    one = part.project(np.ones((len(p), 2)))
+    act = np.repeat(part.active, 2)
+    assert comm.allreduce(np.abs(one.x.array[act] - 1.0).max(initial=0.0), op=MPI.MAX) < 1e-12
+
+
 def test_unsupported_dofs_are_excluded_and_reported():
     """Particles only in the left half: the right half's dofs are inactive and set to 0."""
     mesh = make_mesh("triangle")
