@@ -21,6 +21,7 @@ study: venv
 
 bench: venv
 	$(PY) benchmarks/bench_mapping.py
+	$(PY) benchmarks/bench_step.py
 
 clean:
 	rm -rf $(VENV) output .pytest_cache
