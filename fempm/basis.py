@@ -42,7 +42,9 @@ class ParticleBasis:
         Also tabulate physical gradients ``G`` (n, ndofs_per_cell, gdim).
     """
 
-    def __init__(self, V: dolfinx.fem.FunctionSpace, particles: Particles, *, gradients: bool = False):
+    def __init__(
+        self, V: dolfinx.fem.FunctionSpace, particles: Particles, *, gradients: bool = False, domain=None
+    ):
         if V.mesh is not particles.mesh:
             raise ValueError("the function space and the particles live on different meshes")
         element = V.element.basix_element
@@ -55,14 +57,75 @@ class ParticleBasis:
         self.bs = V.dofmap.index_map_bs
         self.index_map = V.dofmap.index_map
         self.nonnegative = is_nonnegative(element)
-        cells, X = particles.cells, particles.X
-        tab = element.tabulate(1 if gradients else 0, np.ascontiguousarray(X))[..., 0]
-        self.values: npt.NDArray = tab[0]  # S, (n, ndofs)
-        self.dofs: npt.NDArray[np.int32] = np.asarray(V.dofmap.list)[cells]
+        self.domain = domain
         self.gradients: npt.NDArray | None = None
+        if domain is None or getattr(domain, "name", "") == "point":
+            cells, X = particles.cells, particles.X
+            self.cells: npt.NDArray[np.int32] | None = cells  # one cell per particle
+            tab = element.tabulate(1 if gradients else 0, np.ascontiguousarray(X))[..., 0]
+            self.values: npt.NDArray = tab[0]  # S, (n, ndofs)
+            self.dofs: npt.NDArray[np.int32] = np.asarray(V.dofmap.list)[cells]
+            if gradients:
+                K = particles.locator.geometry.inverse_jacobian(cells, X)  # (n, tdim, gdim)
+                self.gradients = np.transpose(tab[1:], (1, 2, 0)) @ K  # (n, k, tdim) @ (n, tdim, gdim)
+        else:
+            self.cells = None
+            self._averaged(V, particles, domain, gradients)
+
+    def _averaged(self, V, particles: Particles, domain, gradients: bool) -> None:
+        r"""Domain-averaged :math:`\langle N_i \rangle_p` and :math:`\langle \nabla N_i \rangle_p`
+        from the domain's sample points (:mod:`fempm.domains`), with each particle's entries
+        for the same dof summed: ``values`` (n, K), ``gradients`` (n, K, d), ``dofs`` (n, K),
+        K the largest number of distinct dofs a particle touches (unused slots hold 0)."""
+        smp = domain.samples(particles)
+        n, q, d = smp.x.shape
+        locator = particles.sample_locator
+        xs = smp.x.reshape(n * q, d)
+        cells, X = locator.relocate(xs, np.repeat(particles.cells, q))
+        lost = cells < 0
+        if np.any(lost):
+            from fempm.location import OutsideMeshError
+
+            raise OutsideMeshError(
+                f"{int(lost.sum())} sample point(s) of {domain.name} particle domains lie outside the mesh "
+                f"(or beyond this rank's ghost cells), e.g. at {xs[lost][:3].tolist()}; particle ids "
+                f"{np.unique(particles.ids[np.flatnonzero(lost) // q])[:5].tolist()}"
+            )
+        need_grad = gradients and smp.grad_from_values
+        tab = self.element.tabulate(1 if need_grad else 0, np.ascontiguousarray(X))[..., 0]
+        N = tab[0]  # (n q, k)
+        k = N.shape[1]
+        w = smp.w.reshape(n * q)
+        vals = (N * w[:, None]).reshape(n, q * k)
+        dofs = np.asarray(V.dofmap.list)[cells].reshape(n, q * k)
+        grads = None
         if gradients:
-            K = particles.locator.geometry.inverse_jacobian(cells, X)  # (n, tdim, gdim)
-            self.gradients = np.transpose(tab[1:], (1, 2, 0)) @ K  # (n, k, tdim) @ (n, tdim, gdim)
+            if smp.grad_from_values:
+                K = locator.geometry.inverse_jacobian(cells, X)
+                grads = (np.transpose(tab[1:], (1, 2, 0)) @ K) * w[:, None, None]
+            else:
+                grads = np.zeros((n * q, k, d))
+            if smp.g is not None:
+                grads = grads + N[:, :, None] * smp.g.reshape(n * q, 1, d)
+            grads = grads.reshape(n, q * k, d)
+        # sum each particle's entries per distinct dof
+        order = np.argsort(dofs, axis=1, kind="stable")
+        ds = np.take_along_axis(dofs, order, axis=1)
+        new = np.ones(ds.shape, dtype=bool)
+        new[:, 1:] = ds[:, 1:] != ds[:, :-1]
+        uid = np.cumsum(new, axis=1) - 1
+        Ku = int(uid.max(initial=0)) + 1
+        flat = (np.arange(n)[:, None] * Ku + uid).ravel()
+        self.values = np.bincount(flat, weights=np.take_along_axis(vals, order, axis=1).ravel(),
+                                  minlength=n * Ku).reshape(n, Ku)
+        self.dofs = np.repeat(ds[:, :1], Ku, axis=1) if n else np.zeros((0, Ku), dtype=np.int32)
+        self.dofs.reshape(-1)[flat] = ds.ravel()
+        self.dofs = self.dofs.astype(np.int32)
+        if grads is not None:
+            gs = np.take_along_axis(grads, order[:, :, None], axis=1)
+            self.gradients = np.stack(
+                [np.bincount(flat, weights=gs[:, :, c].ravel(), minlength=n * Ku) for c in range(d)], axis=-1
+            ).reshape(n, Ku, d)
 
     @property
     def num_dofs_local(self) -> int:

@@ -47,14 +47,20 @@ class CellLocator:
         The background mesh.
     tol:
         Tolerance on the reference coordinates for a point to count as inside a cell.
+    ghosts:
+        Also search the rank's ghost cells (for the sample points of particle domains, whose
+        contributions go to ghost dofs and are summed to their owners; particles themselves are
+        located in owned cells only).
     """
 
-    def __init__(self, mesh: dolfinx.mesh.Mesh, *, tol: float = 1e-10):
+    def __init__(self, mesh: dolfinx.mesh.Mesh, *, tol: float = 1e-10, ghosts: bool = False):
         self.mesh = mesh
         self.tol = tol
         self.geometry = CellGeometry(mesh)
         tdim = mesh.topology.dim
-        owned = np.arange(self.geometry.num_owned, dtype=np.int32)
+        imap = mesh.topology.index_map(tdim)
+        nlocal = imap.size_local + (imap.num_ghosts if ghosts else 0)
+        owned = np.arange(nlocal, dtype=np.int32)
         extent = np.ptp(self.geometry.x, axis=0).max() if len(self.geometry.x) else 1.0
         self.tree = dolfinx.geometry.bb_tree(mesh, tdim, entities=owned, padding=1e-8 * extent)
         self._global_tree = None
@@ -73,7 +79,7 @@ class CellLocator:
         return np.repeat(np.arange(len(x)), counts), np.asarray(adj.array)
 
     def locate(self, x: npt.NDArray) -> tuple[npt.NDArray[np.int32], npt.NDArray]:
-        """Owned cell (``-1`` if none) and reference coordinates of each point of ``x``."""
+        """Owned (or, with ``ghosts``, local) cell (``-1`` if none) and reference coordinates of each point of ``x``."""
         n = len(x)
         tdim = self.geometry.tdim
         cells = np.full(n, -1, dtype=np.int32)

@@ -145,6 +145,15 @@ class Particles:
         return self.mesh.comm
 
     @property
+    def sample_locator(self) -> CellLocator:
+        """Locator over owned and ghost cells, for the sample points of particle domains
+        (created on first use, then kept)."""
+        loc = getattr(self, "_sample_locator", None)
+        if loc is None:
+            loc = self._sample_locator = CellLocator(self.mesh, tol=self.locator.tol, ghosts=True)
+        return loc
+
+    @property
     def gdim(self) -> int:
         return self.mesh.geometry.dim
 

@@ -79,14 +79,27 @@ def consistent_mass_matrix(
     r"""PETSc matrix :math:`m_{ij} = \sum_p M_p N_i(x_p) N_j(x_p)` (one row per scalar dof).
 
     Particle contributions are summed per cell first (``np.bincount``), then inserted once as
-    COO data. ``lump`` (mask over owned + ghost dofs, the same on every rank that sees a dof)
+    COO data. For a domain-averaged basis (:mod:`fempm.domains`) the matrix is
+    :math:`\bar S^T \operatorname{diag}(M) \bar S` with :math:`\bar S_{pi} = \langle N_i \rangle_p`:
+    the normal equations of the mass-weighted least-squares fit
+    :math:`\min_F \sum_p M_p (\langle F \rangle_p - f_p)^2`. It couples dofs that share no cell,
+    and it reproduces every field whose domain averages are the particle values (linear fields
+    for domains centred on their particles). The average of the product,
+    :math:`\sum_p M_p \langle N_i N_j \rangle_p`, does not: in 1D it misses
+    :math:`\sum_p M_p f' \langle N_i (x - x_p) \rangle_p \ne 0`. ``lump`` (mask over owned + ghost dofs, the same on every rank that sees a dof)
     lumps the rows and columns of those dofs: every :math:`m_{ij}`, :math:`i \ne j`, with
     :math:`i` or :math:`j` lumped moves to :math:`m_{ii}`. Row sums (the lumped masses, hence
     the conservation of mass and momentum) and symmetry are kept.
     """
     S, M = basis.values, particles.mass
     n, k = S.shape
-    cells, inv = np.unique(particles.cells, return_inverse=True)
+    if basis.cells is None:  # averaged basis: S^T diag(M) S, entries per particle (PtAP)
+        rows = np.broadcast_to(basis.dofs[:, :, None], (n, k, k))
+        cols = np.broadcast_to(basis.dofs[:, None, :], (n, k, k))
+        if lump is not None:
+            cols = np.where(lump[rows] | lump[cols], rows, cols)
+        return fpetsc.coo_matrix(basis.index_map, rows, cols, M[:, None, None] * S[:, :, None] * S[:, None, :])
+    cells, inv = np.unique(basis.cells, return_inverse=True)
     contrib = (M[:, None, None] * S[:, :, None] * S[:, None, :]).reshape(n, k * k)
     key = (inv[:, None] * (k * k) + np.arange(k * k)[None, :]).ravel()
     Ae = np.bincount(key, weights=contrib.ravel(), minlength=len(cells) * k * k)
@@ -118,7 +131,8 @@ class Projector:
 
     Assembles the mass (consistent matrix + KSP, or lumped vector) once; :meth:`project` then
     costs one P2G and one solve per value component. ``exclude`` lists (block) dofs held at 0
-    (Dirichlet). ``lump_below`` (consistent mode): dofs whose lumped mass is below this
+    (Dirichlet). ``domain``: particle domains (:mod:`fempm.domains`; default the point).
+    ``lump_below`` (consistent mode): dofs whose lumped mass is below this
     fraction of the largest get lumped rows and columns (see :func:`consistent_mass_matrix`),
     so that the solve does not extrapolate into nodes that particles barely reach.
 
@@ -144,11 +158,12 @@ class Projector:
         basis: ParticleBasis | None = None,
         exclude: npt.NDArray[np.int32] | None = None,
         lump_below: float = 0.0,
+        domain=None,
     ):
         if mass not in _MASS_MODES:
             raise ValueError(f"unknown option mass={mass!r}; expected one of {_MASS_MODES}")
         self.V, self.particles, self.mass = V, particles, mass
-        self.basis = basis if basis is not None else ParticleBasis(V, particles)
+        self.basis = basis if basis is not None else ParticleBasis(V, particles, domain=domain)
         imap = self.basis.index_map
         self.num_owned = imap.size_local
         comm = particles.comm
@@ -299,10 +314,12 @@ def project(
     mass: MassMode = "consistent",
     petsc_options_prefix: str = "fempm_projection_",
     petsc_options: dict[str, Any] | None = None,
+    domain=None,
 ) -> dolfinx.fem.Function:
     """Galerkin projection of particle ``values`` onto ``V`` (see :class:`Projector`)."""
     projector = Projector(
-        V, particles, mass=mass, petsc_options_prefix=petsc_options_prefix, petsc_options=petsc_options
+        V, particles, mass=mass, petsc_options_prefix=petsc_options_prefix, petsc_options=petsc_options,
+        domain=domain,
     )
     return projector.project(values)
 
