@@ -100,13 +100,13 @@ def cantilever(
     cells: int = 4, ppc: int = 2, scheme: str = "MUSL", flip: float = 0.95, mass: str = "lumped",
     cfl: float = 0.4, t_end: float = 0.6, L: float = 0.7, H: float = 0.047, E: float = 6e7, nu: float = 0.0,
     rho: float = 1000.0, g: float = 10.0, material: str = "neo-hookean", degree: int = 1, mass_cutoff: float = 1e-9,
-    frames: int = 20,
+    domain: str = "point", frames: int = 20,
     comm: MPI.Comm = MPI.COMM_WORLD,
 ) -> Scene:
     r"""Cantilever under suddenly applied self-weight (VERIFICATION.md section 5).
 
-    Beam :math:`[0, L] \times [0, H]`, clamped at x = 0 (all grid velocities zero on the
-    mesh's left edge), ``cells`` cells through the thickness (cells as close to square as
+    Beam :math:`[0, L] \times [0, H]`, clamped at x = 0 (all grid velocities zero at x <= 0; the
+    mesh has one cell column behind the clamp), ``cells`` cells through the thickness (cells as close to square as
     fits L), plane strain
     (nu = 0 makes it plane stress as well). Euler-Bernoulli static tip deflection
     :math:`\delta = q L^4 / (8 E I)`, q = rho g H, I = H^3 / 12; with no damping the tip
@@ -125,17 +125,18 @@ def cantilever(
     hx = L / nl
     tip = cantilever_reference(L, H, E, rho, g)["tip_deflection"]
     below = int(np.ceil(3 * tip / hy)) + 2  # room below the beam for the swing (twice the deflection)
-    mesh = dm.create_rectangle(comm, [[0.0, -below * hy], [(nl + 2) * hx, H + 2 * hy]], [nl + 2, below + cells + 2],
+    # one cell column behind the clamp, so that particle domains (GIMP, CPDI) at the clamp stay in the mesh
+    mesh = dm.create_rectangle(comm, [[-hx, -below * hy], [(nl + 2) * hx, H + 2 * hy]], [nl + 3, below + cells + 2],
                                dm.CellType.quadrilateral)
-    p = create_particles(mesh, ppc**2, density=rho, cells=lambda x: (x[0] < L) & (x[1] > 0) & (x[1] < H))
+    p = create_particles(mesh, ppc**2, density=rho, cells=lambda x: (x[0] > 0) & (x[0] < L) & (x[1] > 0) & (x[1] < H))
     p.fields["X0"] = p.x.copy()
     params = dict(cells=cells, ppc=ppc, scheme=scheme, flip=flip, mass=mass, cfl=cfl, L=L, H=H, E=E, nu=nu, rho=rho,
-                  g=g, material=material, degree=degree, mass_cutoff=mass_cutoff, **cantilever_reference(L, H, E, rho, g))
+                  g=g, material=material, degree=degree, mass_cutoff=mass_cutoff, domain=domain, **cantilever_reference(L, H, E, rho, g))
     return Scene(
         name="cantilever", mesh=mesh, particles=p,
         materials=[NeoHookean(E, nu) if material == "neo-hookean" else LinearElastic(E, nu)], t_end=t_end, frames=frames,
-        bcs=lambda V: [fixed(V, lambda x: np.isclose(x[0], 0.0))], loads=Loads(body_force=(0.0, -g)),
-        options=StepOptions(scheme=scheme, flip=flip, mass=mass, cfl=cfl, mass_cutoff=mass_cutoff), degree=degree,
+        bcs=lambda V: [fixed(V, lambda x: x[0] < 1e-9 * L)], loads=Loads(body_force=(0.0, -g)),
+        options=StepOptions(scheme=scheme, flip=flip, mass=mass, cfl=cfl, mass_cutoff=mass_cutoff, domain=domain), degree=degree,
         params=params,
     )
 

@@ -33,6 +33,7 @@ from mpi4py import MPI
 
 from fempm.basis import ParticleBasis
 from fempm.boundary import Fixed
+from fempm.domains import make_domain
 from fempm.materials.base import identity
 from fempm.particles import Particles
 from fempm.transfer import Projector, p2g, p2g_gradients
@@ -62,7 +63,10 @@ class StepOptions:
     velocity with the consistent matrix but divide the forces by the lumped mass (stable with
     the CFL step when weakly supported boundary nodes make the consistent matrix nearly
     singular). lump_below: with consistent mass, lump the rows of dofs whose lumped mass is
-    below this fraction of the largest (free-surface rims; raises the stable step).
+    below this fraction of the largest (free-surface rims; raises the stable step). domain:
+    point (standard MPM), gimp (box average, ``gimp_order`` Gauss points per axis), cpdi1
+    (parallelograms that follow F) or cpdi2 (corner-tracked simplices), see
+    :mod:`fempm.domains`.
     """
 
     scheme: Scheme = "USL"
@@ -73,6 +77,8 @@ class StepOptions:
     position: Literal["grid", "particle"] = "grid"
     lumped_forces: bool = False
     lump_below: float = 0.1
+    domain: str = "point"
+    gimp_order: int = 2
     petsc_options_prefix: str = "fempm_step_"
 
     def __post_init__(self):
@@ -84,6 +90,10 @@ class StepOptions:
             raise ValueError(f"unknown option position={self.position!r}; expected grid or particle")
         if not 0.0 <= self.flip <= 1.0:
             raise ValueError(f"flip={self.flip} must lie in [0, 1]")
+        if self.domain == "cpdi2":
+            raise NotImplementedError("domain='cpdi2' in the explicit loop needs corner advection, which is not "
+                                      "built yet; use it in projections, or domain='cpdi1' / 'gimp' here")
+        self.particle_domain = make_domain(self.domain, **({"order": self.gimp_order} if self.domain == "gimp" else {}))
         if not 0.0 < self.cfl <= 1.0:
             raise ValueError(f"cfl={self.cfl} must lie in (0, 1]: a CFL number above 1 is unstable")
 
@@ -228,7 +238,7 @@ class ExplicitSolver:
         p = self.particles
         fld = p.fields
         self._check_finite()
-        basis = ParticleBasis(self.V, p, gradients=True)
+        basis = ParticleBasis(self.V, p, gradients=True, domain=opts.particle_domain)
         mass_op = Projector(
             self.V, p, mass=opts.mass, basis=basis, petsc_options_prefix=opts.petsc_options_prefix,
             exclude=self._fixed_dofs, lump_below=opts.lump_below if opts.mass == "consistent" else 0.0,

@@ -81,3 +81,10 @@ def test_slip_wall_along_any_normal():
     v = r["solver"].grid_velocity
     assert np.abs(v @ n).max() < 1e-14
     assert np.abs(v @ np.array([1.0, -1.0])).max() > 0.1  # tangential motion survives
+
+
+def test_unknown_domain_and_cpdi2_in_the_loop_are_errors():
+    with pytest.raises(ValueError, match="unknown option domain"):
+        StepOptions(domain="bspline")
+    with pytest.raises(NotImplementedError, match="cpdi2"):
+        StepOptions(domain="cpdi2")
