@@ -78,37 +78,36 @@ def consistent_mass_matrix(
 ) -> PETSc.Mat:
     r"""PETSc matrix :math:`m_{ij} = \sum_p M_p N_i(x_p) N_j(x_p)` (one row per scalar dof).
 
-    Particle contributions are summed per cell first (``np.bincount``), then inserted once as
-    COO data. For a domain-averaged basis (:mod:`fempm.domains`) the matrix is
-    :math:`\bar S^T \operatorname{diag}(M) \bar S` with :math:`\bar S_{pi} = \langle N_i \rangle_p`:
-    the normal equations of the mass-weighted least-squares fit
-    :math:`\min_F \sum_p M_p (\langle F \rangle_p - f_p)^2`. It couples dofs that share no cell,
-    and it reproduces every field whose domain averages are the particle values (linear fields
-    for domains centred on their particles). The average of the product,
-    :math:`\sum_p M_p \langle N_i N_j \rangle_p`, does not: in 1D it misses
-    :math:`\sum_p M_p f' \langle N_i (x - x_p) \rangle_p \ne 0`. ``lump`` (mask over owned + ghost dofs, the same on every rank that sees a dof)
-    lumps the rows and columns of those dofs: every :math:`m_{ij}`, :math:`i \ne j`, with
-    :math:`i` or :math:`j` lumped moves to :math:`m_{ii}`. Row sums (the lumped masses, hence
-    the conservation of mass and momentum) and symmetry are kept.
+    With the point basis, particle contributions are summed per cell first (``np.bincount``),
+    then inserted once as COO data. For a domain-averaged basis (:mod:`fempm.domains`) the
+    matrix is :math:`\bar S^T \operatorname{diag}(M) \bar S` with
+    :math:`\bar S_{pi} = \langle N_i \rangle_p`, inserted per particle: the normal equations
+    of the mass-weighted least-squares fit :math:`\min_F \sum_p M_p (\langle F \rangle_p - f_p)^2`.
+    It couples dofs that share no cell, and it reproduces every field whose domain averages are
+    the particle values (linear fields for domains centred on their particles). The average of
+    the product, :math:`\sum_p M_p \langle N_i N_j \rangle_p`, does not: in 1D it misses
+    :math:`\sum_p M_p f' \langle N_i (x - x_p) \rangle_p \ne 0`.
+
+    ``lump`` (mask over owned + ghost dofs, the same on every rank that sees a dof) lumps the
+    rows and columns of those dofs: every :math:`m_{ij}`, :math:`i \ne j`, with :math:`i` or
+    :math:`j` lumped moves to :math:`m_{ii}`. Row sums (the lumped masses, hence the
+    conservation of mass and momentum) and symmetry are kept.
     """
     S, M = basis.values, particles.mass
-    n, k = S.shape
-    if basis.cells is None:  # averaged basis: S^T diag(M) S, entries per particle (PtAP)
-        rows = np.broadcast_to(basis.dofs[:, :, None], (n, k, k))
-        cols = np.broadcast_to(basis.dofs[:, None, :], (n, k, k))
-        if lump is not None:
-            cols = np.where(lump[rows] | lump[cols], rows, cols)
-        return fpetsc.coo_matrix(basis.index_map, rows, cols, M[:, None, None] * S[:, :, None] * S[:, None, :])
-    cells, inv = np.unique(basis.cells, return_inverse=True)
-    contrib = (M[:, None, None] * S[:, :, None] * S[:, None, :]).reshape(n, k * k)
-    key = (inv[:, None] * (k * k) + np.arange(k * k)[None, :]).ravel()
-    Ae = np.bincount(key, weights=contrib.ravel(), minlength=len(cells) * k * k)
-    dofs = np.asarray(basis.V.dofmap.list)[cells]
-    rows = np.broadcast_to(dofs[:, :, None], (len(cells), k, k))
-    cols = np.broadcast_to(dofs[:, None, :], (len(cells), k, k))
+    k = S.shape[1]
+    contrib = M[:, None, None] * S[:, :, None] * S[:, None, :]  # (n, k, k)
+    if basis.cells is None:  # averaged basis: a particle's dofs span several cells
+        dofs, values = basis.dofs, contrib
+    else:
+        cells, inv = np.unique(basis.cells, return_inverse=True)
+        key = (inv[:, None] * (k * k) + np.arange(k * k)[None, :]).ravel()
+        values = np.bincount(key, weights=contrib.ravel(), minlength=len(cells) * k * k)
+        dofs = np.asarray(basis.V.dofmap.list)[cells]
+    rows = np.broadcast_to(dofs[:, :, None], (len(dofs), k, k))
+    cols = np.broadcast_to(dofs[:, None, :], (len(dofs), k, k))
     if lump is not None:
         cols = np.where(lump[rows] | lump[cols], rows, cols)
-    return fpetsc.coo_matrix(basis.index_map, rows, cols, Ae)
+    return fpetsc.coo_matrix(basis.index_map, rows, cols, values)
 
 
 def _particle_values(values: npt.ArrayLike | Callable, particles: Particles, bs: int) -> npt.NDArray:
