@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from dataclasses import dataclass
 from typing import Protocol
 
 import numpy as np
@@ -27,6 +28,28 @@ class Material(Protocol):
 def lame(E: float, nu: float) -> tuple[float, float]:
     """Lame parameters (lambda, mu) from Young's modulus and Poisson's ratio."""
     return E * nu / ((1 + nu) * (1 - 2 * nu)), E / (2 * (1 + nu))
+
+
+@dataclass(frozen=True)
+class IsotropicElastic:
+    r"""Young's modulus and Poisson's ratio (checked), the Lame parameters and the dilatational
+    wave speed :math:`\sqrt{(\lambda + 2\mu)/\rho}`, shared by the elastic laws."""
+
+    E: float
+    nu: float = 0.0
+    history: tuple[str, ...] = ()
+
+    def __post_init__(self):
+        if self.E <= 0 or not -1.0 < self.nu < 0.5:
+            raise ValueError(f"{type(self).__name__} needs E > 0 and -1 < nu < 0.5 (got E={self.E}, nu={self.nu})")
+
+    @property
+    def lame(self) -> tuple[float, float]:
+        return lame(self.E, self.nu)
+
+    def wave_speed(self, F: npt.NDArray, rho: npt.NDArray) -> npt.NDArray:
+        lam, mu = self.lame
+        return np.sqrt((lam + 2 * mu) / rho)
 
 
 def identity(n: int, d: int) -> npt.NDArray:

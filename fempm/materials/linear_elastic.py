@@ -12,23 +12,11 @@ from dataclasses import dataclass
 import numpy as np
 import numpy.typing as npt
 
-from fempm.materials.base import identity, lame, sym, trace
+from fempm.materials.base import IsotropicElastic, identity, sym, trace
 
 
 @dataclass(frozen=True)
-class LinearElastic:
-    E: float
-    nu: float = 0.0
-    history: tuple[str, ...] = ()
-
-    def __post_init__(self):
-        if self.E <= 0 or not -1.0 < self.nu < 0.5:
-            raise ValueError(f"LinearElastic needs E > 0 and -1 < nu < 0.5 (got E={self.E}, nu={self.nu})")
-
-    @property
-    def lame(self) -> tuple[float, float]:
-        return lame(self.E, self.nu)
-
+class LinearElastic(IsotropicElastic):
     def strain(self, F: npt.NDArray) -> npt.NDArray:
         return sym(F) - identity(len(F), F.shape[1])
 
@@ -36,10 +24,6 @@ class LinearElastic:
         lam, mu = self.lame
         eps = self.strain(F)
         return lam * trace(eps)[:, None, None] * identity(len(F), F.shape[1]) + 2 * mu * eps
-
-    def wave_speed(self, F, rho) -> npt.NDArray:
-        lam, mu = self.lame
-        return np.sqrt((lam + 2 * mu) / rho)
 
     def energy_density(self, F) -> npt.NDArray:
         lam, mu = self.lame

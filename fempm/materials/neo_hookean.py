@@ -10,31 +10,21 @@ from dataclasses import dataclass
 import numpy as np
 import numpy.typing as npt
 
-from fempm.materials.base import identity, lame
+from fempm.materials.base import IsotropicElastic, identity
 
 
 @dataclass(frozen=True)
-class NeoHookean:
-    E: float
+class NeoHookean(IsotropicElastic):
     nu: float = 0.3
-    history: tuple[str, ...] = ()
-
-    def __post_init__(self):
-        if self.E <= 0 or not -1.0 < self.nu < 0.5:
-            raise ValueError(f"NeoHookean needs E > 0 and -1 < nu < 0.5 (got E={self.E}, nu={self.nu})")
 
     def stress(self, F, L, sigma, dt, rho) -> npt.NDArray:
-        lam, mu = lame(self.E, self.nu)
+        lam, mu = self.lame
         J = np.linalg.det(F)
         B = F @ np.swapaxes(F, 1, 2)
         d = F.shape[1]
         return (mu * (B - identity(len(F), d)) + (lam * np.log(J))[:, None, None] * identity(len(F), d)) / J[:, None, None]
 
-    def wave_speed(self, F, rho) -> npt.NDArray:
-        lam, mu = lame(self.E, self.nu)
-        return np.sqrt((lam + 2 * mu) / rho)
-
     def energy_density(self, F) -> npt.NDArray:
-        lam, mu = lame(self.E, self.nu)
+        lam, mu = self.lame
         lnJ = np.log(np.linalg.det(F))
         return 0.5 * mu * (np.einsum("nij,nij->n", F, F) - F.shape[1]) - mu * lnJ + 0.5 * lam * lnJ**2
