@@ -102,22 +102,13 @@ def main(argv: list[str] | None = None) -> dict:
               f"({out['tip_error']:+.2%}; q L^4 / 8EI = {P['tip_deflection']:.5f} m); largest {d.max():.5f} m; "
               f"{res['steps']} steps")
         if not a.no_plot:
-            import matplotlib
+            from fempm.plot import plot_curves
 
-            matplotlib.use("Agg")
-            import matplotlib.pyplot as plt
-
-            fig, ax = plt.subplots(figsize=(7, 4))
-            ax.plot(t, d, label="fempm tip deflection")
-            ax.axhline(w_ref, color="k", ls="--", label=f"Euler-Bernoulli w(x = {x_tip:.4f})")
-            ax.axhline(mean, color="C1", ls=":", label=f"time average ({out['tip_error']:+.1%})")
-            ax.set_xlabel("t [s]")
-            ax.set_ylabel("tip deflection [m]")
-            ax.legend()
-            ax.set_title(f"cantilever: {a.cells} cells thick, {a.scheme}, flip {a.flip}, {a.mass} mass")
-            fig.tight_layout()
-            fig.savefig(a.out / "tip.png", dpi=130)
-            plt.close(fig)
+            plot_curves(a.out / "tip.png", [(t, d, "-", {"label": "fempm tip deflection"})],
+                        hlines=[(w_ref, {"color": "k", "ls": "--", "label": f"Euler-Bernoulli w(x = {x_tip:.4f})"}),
+                                (mean, {"color": "C1", "ls": ":", "label": f"time average ({out['tip_error']:+.1%})"})],
+                        xlabel="t [s]", ylabel="tip deflection [m]",
+                        title=f"cantilever: {a.cells} cells thick, {a.scheme}, flip {a.flip}, {a.mass} mass")
     return out
 
 

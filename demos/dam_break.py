@@ -79,21 +79,12 @@ def main(argv: list[str] | None = None) -> dict:
         for t, z, zs, e in zip(ref[:, 0], ref[:, 1], Zs, dev):
             print(f"  {t:4.2f}   {z:6.2f}               {zs:6.3f}      {e:+6.1%}")
         if not a.no_plot:
-            import matplotlib
+            from fempm.plot import plot_curves
 
-            matplotlib.use("Agg")
-            import matplotlib.pyplot as plt
-
-            fig, ax = plt.subplots(figsize=(6, 4))
-            ax.plot(T, Z, label=f"fempm ({a.cells} cells across the column)")
-            ax.plot(MARTIN_MOYCE[:, 0], MARTIN_MOYCE[:, 1], "ko", mfc="none", label="Martin & Moyce (1952)")
-            ax.set_xlabel(r"$T = t\sqrt{2g/a}$")
-            ax.set_ylabel(r"$Z = x_{front}/a$")
-            ax.legend()
-            ax.set_title("dam break: surge front")
-            fig.tight_layout()
-            fig.savefig(a.out / "front.png", dpi=130)
-            plt.close(fig)
+            plot_curves(a.out / "front.png", [
+                (T, Z, "-", {"label": f"fempm ({a.cells} cells across the column)"}),
+                (MARTIN_MOYCE[:, 0], MARTIN_MOYCE[:, 1], "ko", {"mfc": "none", "label": "Martin & Moyce (1952)"}),
+            ], xlabel=r"$T = t\sqrt{2g/a}$", ylabel=r"$Z = x_{front}/a$", title="dam break: surge front", figsize=(6, 4))
     return out
 
 

@@ -83,22 +83,10 @@ def _plot_particles(scene, path: Path) -> None:
     vm = np.sqrt(np.maximum(s[:, 0, 0] ** 2 - s[:, 0, 0] * s[:, 1, 1] + s[:, 1, 1] ** 2 + 3 * s[:, 0, 1] ** 2, 0.0))
     xs, vs = comm.gather(p.x, root=0), comm.gather(vm, root=0)
     if comm.rank == 0:
-        import matplotlib
+        from fempm.plot import plot_particle_frame
 
-        matplotlib.use("Agg")
-        import matplotlib.pyplot as plt
-
-        x, v = np.concatenate(xs), np.concatenate(vs)
-        fig, ax = plt.subplots(figsize=(5.5, 5))
-        sc = ax.scatter(x[:, 0], x[:, 1], c=v, s=6, cmap="viridis")
-        fig.colorbar(sc, ax=ax, label="von Mises stress")
-        ax.set_xlim(0, 1)
-        ax.set_ylim(0, 1)
-        ax.set_aspect("equal")
-        ax.set_title(f"two disks at t = {scene.t_end:g}")
-        fig.tight_layout()
-        fig.savefig(path, dpi=130)
-        plt.close(fig)
+        plot_particle_frame(np.concatenate(xs), np.concatenate(vs), path, title=f"two disks at t = {scene.t_end:g}",
+                            label="von Mises stress", bounds=np.array([[0.0, 0.0], [1.0, 1.0]]))
 
 
 if __name__ == "__main__":

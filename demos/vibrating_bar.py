@@ -62,21 +62,11 @@ def main(argv: list[str] | None = None) -> dict:
         print(f"bar ({a.dim}D), {a.cells} cells, {a.scheme}, flip={a.flip}, {a.mass}: max |v_cm error| / amplitude = "
               f"{out['vcm_error']:.4f}, energy error = {out['energy_error']:.2e}, {res['steps']} steps")
         if not a.no_plot:
-            import matplotlib
+            from fempm.plot import plot_curves
 
-            matplotlib.use("Agg")
-            import matplotlib.pyplot as plt
-
-            fig, ax = plt.subplots(figsize=(7, 4))
-            ax.plot(t, vcm, label="fempm")
-            ax.plot(t, exact, "--", label="exact")
-            ax.set_xlabel("t")
-            ax.set_ylabel("centre-of-mass velocity")
-            ax.legend()
-            ax.set_title(f"vibrating bar: {a.cells} cells, {a.scheme}-FLIP, {a.mass} mass")
-            fig.tight_layout()
-            fig.savefig(a.out / "vcm.png", dpi=130)
-            plt.close(fig)
+            plot_curves(a.out / "vcm.png", [(t, vcm, "-", {"label": "fempm"}), (t, exact, "--", {"label": "exact"})],
+                        xlabel="t", ylabel="centre-of-mass velocity",
+                        title=f"vibrating bar: {a.cells} cells, {a.scheme}-FLIP, {a.mass} mass")
     return out
 
 

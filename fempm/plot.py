@@ -124,6 +124,24 @@ def plot_energies(history: Sequence[dict], path: Path, *, title: str = "", extra
     _save(fig, path)
 
 
+def plot_curves(path: Path, curves: Sequence[tuple], *, xlabel: str, ylabel: str, title: str = "",
+                hlines: Sequence[tuple[float, dict]] = (), figsize: tuple[float, float] = (7, 4)) -> None:
+    """Line plot of ``curves``, each ``(x, y, fmt, kwargs)`` for ``ax.plot(x, y, fmt, **kwargs)``,
+    plus horizontal lines ``(y, kwargs)``; with a legend (a demo's result against its reference)."""
+    plt = _pyplot()
+    fig, ax = plt.subplots(figsize=figsize)
+    for x, y, fmt, kw in curves:
+        ax.plot(x, y, fmt, **kw)
+    for y, kw in hlines:
+        ax.axhline(y, **kw)
+    ax.set_xlabel(xlabel)
+    ax.set_ylabel(ylabel)
+    ax.legend()
+    if title:
+        ax.set_title(title)
+    _save(fig, path)
+
+
 def plot_particle_frame(x: npt.NDArray, values: npt.NDArray, path: Path, *, title: str = "", label: str = "",
                         bounds: npt.NDArray | None = None) -> None:
     """One PNG frame: particles (n, 3) coloured by ``values`` (2D/3D: x-y view; 1D: x vs value)."""
