@@ -32,10 +32,9 @@ from pathlib import Path
 
 import fempm  # noqa: F401
 import numpy as np
-from mpi4py import MPI
 
 from fempm.scene import run
-from fempm.scenes import cantilever, cantilever_reference
+from fempm.scenes import cantilever, cantilever_reference, cantilever_tip
 
 
 def main(argv: list[str] | None = None) -> dict:
@@ -57,24 +56,17 @@ def main(argv: list[str] | None = None) -> dict:
     P = scene.params
     p = scene.particles
     comm = p.comm
-    hx = P["L"] / round(P["L"] / (P["H"] / a.cells))
 
     # The tip: the particles seeded in the last cell column, averaged over ranks.
-    tip0 = p.fields["X0"][:, 0] > P["L"] - hx
-    x_tip = comm.allreduce(p.fields["X0"][tip0, 0].sum()) / comm.allreduce(int(tip0.sum()))
+    x_tip, _ = cantilever_tip(p, P)
     q, EI, L = P["rho"] * P["g"] * P["H"], P["E"] * P["H"] ** 3 / 12, P["L"]
     w_ref = q * x_tip**2 * (6 * L**2 - 4 * L * x_tip + x_tip**2) / (24 * EI)  # Euler-Bernoulli w(x_tip)
-
-    def tip_deflection() -> float:
-        tip = p.fields["X0"][:, 0] > P["L"] - hx
-        s = comm.allreduce(np.array([np.sum(p.fields["X0"][tip, 1] - p.x[tip, 1]), tip.sum()], dtype=float))
-        return s[0] / s[1]
 
     times, tips = [0.0], [0.0]
 
     def record(solver):
         times.append(solver.t)
-        tips.append(tip_deflection())
+        tips.append(cantilever_tip(p, P)[1])
 
     res = run(scene, a.out, progress=False, callback=record)
     t, d = np.array(times), np.array(tips)

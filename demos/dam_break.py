@@ -27,10 +27,9 @@ from pathlib import Path
 
 import fempm  # noqa: F401
 import numpy as np
-from mpi4py import MPI
 
 from fempm.scene import run
-from fempm.scenes import MARTIN_MOYCE, dam_break
+from fempm.scenes import MARTIN_MOYCE, dam_break, surge_front
 
 
 def main(argv: list[str] | None = None) -> dict:
@@ -46,14 +45,12 @@ def main(argv: list[str] | None = None) -> dict:
     P = scene.params
     p = scene.particles
     comm = p.comm
-    scale = np.sqrt(2 * P["g"] / P["a"])
     mass0 = comm.allreduce(p.mass.sum())
     T, Z = [0.0], [1.0]
 
     def record(solver):
-        front = comm.allreduce(p.x[:, 0].max(initial=-np.inf), op=MPI.MAX) + P["spacing"] / 2
-        T.append(solver.t * scale)
-        Z.append(front / P["a"])
+        T.append(solver.t * P["time_scale"])
+        Z.append(surge_front(p, P))
 
     res = run(scene, a.out, progress=False, callback=record, png=not a.no_plot)
     T, Z = np.array(T), np.array(Z)

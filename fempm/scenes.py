@@ -96,6 +96,15 @@ def cantilever_reference(L: float = 0.7, H: float = 0.047, E: float = 6e7, rho: 
             "period": 2 * np.pi / (1.875104**2 * np.sqrt(EI / (rho * H * L**4)))}
 
 
+def cantilever_tip(particles, params: dict) -> tuple[float, float]:
+    """Mean initial x and mean downward deflection of the particles seeded in the beam's last
+    cell column (``X0[:, 0] > L - hx``), over all ranks."""
+    X0 = particles.fields["X0"]
+    tip = X0[:, 0] > params["L"] - params["hx"]
+    n, x, w = particles.comm.allreduce(np.array([tip.sum(), X0[tip, 0].sum(), np.sum(X0[tip, 1] - particles.x[tip, 1])]))
+    return x / n, w / n
+
+
 def cantilever(
     cells: int = 4, ppc: int = 2, scheme: str = "MUSL", flip: float = 0.95, mass: str = "lumped",
     cfl: float = 0.4, t_end: float = 0.6, L: float = 0.7, H: float = 0.047, E: float = 6e7, nu: float = 0.0,
@@ -131,7 +140,7 @@ def cantilever(
     p = create_particles(mesh, ppc**2, density=rho, cells=lambda x: (x[0] > 0) & (x[0] < L) & (x[1] > 0) & (x[1] < H))
     p.fields["X0"] = p.x.copy()
     params = dict(cells=cells, ppc=ppc, scheme=scheme, flip=flip, mass=mass, cfl=cfl, L=L, H=H, E=E, nu=nu, rho=rho,
-                  g=g, material=material, degree=degree, mass_cutoff=mass_cutoff, domain=domain, **cantilever_reference(L, H, E, rho, g))
+                  g=g, hx=hx, material=material, degree=degree, mass_cutoff=mass_cutoff, domain=domain, **cantilever_reference(L, H, E, rho, g))
     return Scene(
         name="cantilever", mesh=mesh, particles=p,
         materials=[NeoHookean(E, nu) if material == "neo-hookean" else LinearElastic(E, nu)], t_end=t_end, frames=frames,
@@ -207,6 +216,13 @@ MARTIN_MOYCE = np.array([
 ])
 
 
+def surge_front(particles, params: dict) -> float:
+    """Martin and Moyce's Z = x_front / a: the rightmost particle plus half a particle spacing,
+    over all ranks (their T is ``t * params["time_scale"]``)."""
+    front = particles.comm.allreduce(particles.x[:, 0].max(initial=-np.inf), op=MPI.MAX)
+    return (front + params["spacing"] / 2) / params["a"]
+
+
 def dam_break(
     cells: int = 10, ppc: int = 2, scheme: str = "MUSL", flip: float = 0.99, mass: str = "lumped",
     cfl: float = 0.4, t_end: float = 0.22, a: float = 0.1, box: float = 0.4, rho0: float = 1000.0,
@@ -235,7 +251,7 @@ def dam_break(
     pressure = water.pressure(p.mass / p.volume)
     p.fields["sigma"] = -pressure[:, None, None] * np.eye(2)
     params = dict(cells=cells, ppc=ppc, scheme=scheme, flip=flip, mass=mass, cfl=cfl, a=a, box=nx * h, rho0=rho0,
-                  kappa=kappa, gamma=gamma, viscosity=viscosity, g=g, spacing=h / ppc)
+                  kappa=kappa, gamma=gamma, viscosity=viscosity, g=g, spacing=h / ppc, time_scale=np.sqrt(2 * g / a))
     W = nx * h
 
     def bcs(V):

@@ -5,18 +5,14 @@ import numpy as np
 from mpi4py import MPI
 
 from fempm.scene import run
-from fempm.scenes import MARTIN_MOYCE, cantilever, cantilever_reference, dam_break
+from fempm.scenes import MARTIN_MOYCE, cantilever, cantilever_reference, cantilever_tip, dam_break, surge_front
 
 comm = MPI.COMM_WORLD
 
 
 def tip_history(scene):
-    p = scene.particles
-    tip = p.fields["X0"][:, 0] > scene.params["L"] - scene.params["H"] / scene.params["cells"]
-    n = p.comm.allreduce(int(tip.sum()))
     out = []
-    run(scene, None, progress=False,
-        callback=lambda s: out.append(p.comm.allreduce(np.sum(p.fields["X0"][tip, 1] - p.x[tip, 1])) / n))
+    run(scene, None, progress=False, callback=lambda s: out.append(cantilever_tip(scene.particles, scene.params)[1]))
     return np.array(out)
 
 
@@ -34,12 +30,11 @@ def test_cantilever_coarse_parallel_equals_serial():
 
 
 def front(scene):
-    p, P = scene.particles, scene.params
     T, Z = [], []
 
     def record(s):
-        T.append(s.t * np.sqrt(2 * P["g"] / P["a"]))
-        Z.append((p.comm.allreduce(p.x[:, 0].max(initial=-np.inf), op=MPI.MAX) + P["spacing"] / 2) / P["a"])
+        T.append(s.t * scene.params["time_scale"])
+        Z.append(surge_front(scene.particles, scene.params))
 
     r = run(scene, None, progress=False, callback=record)
     return np.array(T), np.array(Z), r
