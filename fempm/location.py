@@ -60,9 +60,9 @@ class CellLocator:
         tdim = mesh.topology.dim
         imap = mesh.topology.index_map(tdim)
         nlocal = imap.size_local + (imap.num_ghosts if ghosts else 0)
-        owned = np.arange(nlocal, dtype=np.int32)
+        entities = np.arange(nlocal, dtype=np.int32)
         extent = np.ptp(self.geometry.x, axis=0).max() if len(self.geometry.x) else 1.0
-        self.tree = dolfinx.geometry.bb_tree(mesh, tdim, entities=owned, padding=1e-8 * extent)
+        self.tree = dolfinx.geometry.bb_tree(mesh, tdim, entities=entities, padding=1e-8 * extent)
         self._global_tree = None
 
     @property

@@ -11,6 +11,7 @@ from mpi4py import MPI
 
 from fempm.boundary import fixed, slip
 from fempm.materials import LinearElastic, NeoHookean, NewtonianTait
+from fempm.particles import Particles
 from fempm.scene import Scene
 from fempm.seeding import create_particles
 from fempm.stepping import Loads, StepOptions
@@ -182,8 +183,6 @@ def hanging_block(
     X, Y = np.meshgrid(s, s - 1.0, indexing="ij")
     x = np.column_stack([X.ravel(), Y.ravel()]) if comm.rank == 0 else np.zeros((0, 2))
     lattice = np.column_stack(np.unravel_index(np.arange(n * n), (n, n))) if comm.rank == 0 else np.zeros((0, 2))
-    from fempm.particles import Particles
-
     vol = (1.0 / n) ** 2
     p = Particles(m, x, rho * vol, vol, fields={"lattice": lattice.astype(float), "lp": np.full((len(x), 2), 0.5 / n)})
     params = dict(cells=cells, ppc=ppc, domain=domain, mesh=mesh, scheme=scheme, flip=flip, mass=mass, cfl=cfl, g=g, E=E,
