@@ -241,7 +241,7 @@ class ExplicitSolver:
         basis = ParticleBasis(self.V, p, gradients=True, domain=opts.particle_domain)
         mass_op = Projector(
             self.V, p, mass=opts.mass, basis=basis, petsc_options_prefix=opts.petsc_options_prefix,
-            exclude=self._fixed_dofs, lump_below=opts.lump_below if opts.mass == "consistent" else 0.0,
+            exclude=self._fixed_dofs, lump_below=opts.lump_below,
         )
         stable = self.stable_dt()
         if opts.mass == "consistent" and not opts.lumped_forces:  # omega_max^2 <= omega_L^2 / lambda_min
@@ -282,7 +282,7 @@ class ExplicitSolver:
 
     @staticmethod
     def _velocity_gradient(basis: ParticleBasis, v: npt.NDArray) -> npt.NDArray:
-        vd, G = v[basis.dofs], basis.gradients  # sum over the cell's dofs a (not over particles)
+        vd, G = v[basis.dofs], basis.gradients  # sum over the particle's dofs a (not over particles)
         return sum(vd[:, a, :, None] * G[:, a, None, :] for a in range(G.shape[1]))
 
     def _check_finite(self) -> None:
