@@ -35,24 +35,24 @@ def plate_with_hole(h=0.06):
     gmsh.model.mesh.generate(2)
 
 
-def square_quads(h=0.1):
-    gmsh.model.add("square_quads")
+def _unit_square(name, h, quads):
+    gmsh.model.add(name)
     s = gmsh.model.occ.addRectangle(0, 0, 0, 1, 1)
     gmsh.model.occ.synchronize()
     gmsh.model.addPhysicalGroup(2, [s], 1, "square")
     gmsh.option.setNumber("Mesh.CharacteristicLengthMax", h)
-    gmsh.option.setNumber("Mesh.Algorithm", 8)
-    gmsh.option.setNumber("Mesh.RecombineAll", 1)
+    if quads:
+        gmsh.option.setNumber("Mesh.Algorithm", 8)
+        gmsh.option.setNumber("Mesh.RecombineAll", 1)
     gmsh.model.mesh.generate(2)
+
+
+def square_quads(h=0.1):
+    _unit_square("square_quads", h, quads=True)
 
 
 def unit_square_tri(h=0.05):
-    gmsh.model.add("unit_square_tri")
-    s = gmsh.model.occ.addRectangle(0, 0, 0, 1, 1)
-    gmsh.model.occ.synchronize()
-    gmsh.model.addPhysicalGroup(2, [s], 1, "square")
-    gmsh.option.setNumber("Mesh.CharacteristicLengthMax", h)
-    gmsh.model.mesh.generate(2)
+    _unit_square("unit_square_tri", h, quads=False)
 
 
 def cube_tets(h=0.25):
