@@ -82,29 +82,25 @@ class ParticleBasis:
         locator = particles.sample_locator
         xs = smp.x.reshape(n * q, d)
         cells, X = locator.relocate(xs, np.repeat(particles.cells, q))
-        lost = cells < 0
-        if np.any(lost):
-            from fempm.location import OutsideMeshError
-
-            raise OutsideMeshError(
-                f"{int(lost.sum())} sample point(s) of {domain.name} particle domains lie outside the mesh "
-                f"(or beyond this rank's ghost cells), e.g. at {xs[lost][:3].tolist()}; particle ids "
-                f"{np.unique(particles.ids[np.flatnonzero(lost) // q])[:5].tolist()}"
-            )
         need_grad = gradients and smp.grad_from_values
-        tab = self.element.tabulate(1 if need_grad else 0, np.ascontiguousarray(X))[..., 0]
-        N = tab[0]  # (n q, k)
-        k = N.shape[1]
+        k = self.element.dim
+        N = np.empty((n * q, k))
+        dofs = np.empty((n * q, k), dtype=np.int32)
+        dN = np.empty((n * q, k, d)) if need_grad else None
+        here = np.flatnonzero(cells >= 0)
+        tab = self.element.tabulate(1 if need_grad else 0, np.ascontiguousarray(X[here]))[..., 0]
+        N[here] = tab[0]
+        dofs[here] = np.asarray(V.dofmap.list)[cells[here]]
+        if need_grad:
+            K = locator.geometry.inverse_jacobian(cells[here], X[here])
+            dN[here] = np.transpose(tab[1:], (1, 2, 0)) @ K
+        self._remote_samples(particles, domain, xs, cells, q, need_grad, N, dofs, dN)
         w = smp.w.reshape(n * q)
         vals = (N * w[:, None]).reshape(n, q * k)
-        dofs = np.asarray(V.dofmap.list)[cells].reshape(n, q * k)
+        dofs = dofs.reshape(n, q * k)
         grads = None
         if gradients:
-            if smp.grad_from_values:
-                K = locator.geometry.inverse_jacobian(cells, X)
-                grads = (np.transpose(tab[1:], (1, 2, 0)) @ K) * w[:, None, None]
-            else:
-                grads = np.zeros((n * q, k, d))
+            grads = dN * w[:, None, None] if need_grad else np.zeros((n * q, k, d))
             if smp.g is not None:
                 grads = grads + N[:, :, None] * smp.g.reshape(n * q, 1, d)
             grads = grads.reshape(n, q * k, d)
@@ -126,6 +122,61 @@ class ParticleBasis:
             self.gradients = np.stack(
                 [np.bincount(flat, weights=gs[:, :, c].ravel(), minlength=n * Ku) for c in range(d)], axis=-1
             ).reshape(n, Ku, d)
+
+    def _remote_samples(self, particles: Particles, domain, xs, cells, q, need_grad, N, dofs, dN) -> None:
+        """Fill the rows of sample points outside this rank's owned and ghost cells from the
+        ranks that own them (:mod:`fempm.halo`), extending :attr:`index_map` by their dofs.
+        Collective; sample points in no cell of any rank are an :class:`OutsideMeshError` on
+        every rank."""
+        from fempm.location import OutsideMeshError
+
+        comm = particles.comm
+        lost = np.flatnonzero(cells < 0)
+        nlost = comm.allreduce(len(lost)) if comm.size > 1 else len(lost)
+        if nlost == 0:
+            return
+        missing = lost
+        if comm.size > 1:
+            from fempm.halo import extend_index_map, remote_rows
+
+            rows = remote_rows(particles.locator, self.element, self.V, xs[lost], need_grad)
+            hit = lost[rows.found]
+            self.index_map, local = extend_index_map(self.index_map, rows.gdofs[rows.found], rows.owners[rows.found])
+            N[hit], dofs[hit] = rows.N[rows.found], local
+            if need_grad:
+                dN[hit] = rows.dN[rows.found]
+            missing = lost[~rows.found]
+        nmissing = comm.allreduce(len(missing)) if comm.size > 1 else len(missing)
+        if nmissing:
+            ex = np.concatenate(comm.allgather(xs[missing][:3])) if comm.size > 1 else xs[missing][:3]
+            ids = np.concatenate(comm.allgather(particles.ids[missing // q][:5])) if comm.size > 1 else particles.ids[missing // q]
+            raise OutsideMeshError(
+                f"{nmissing} sample point(s) of {domain.name} particle domains lie outside the mesh, "
+                f"e.g. at {ex[:3].tolist()}; particle ids {np.unique(ids)[:5].tolist()}"
+            )
+
+    @property
+    def extended(self) -> bool:
+        """Whether the dofs include extra ghosts for remote sample points (:mod:`fempm.halo`)."""
+        return self.index_map is not self.V.dofmap.index_map
+
+    @property
+    def num_dofs_space(self) -> int:
+        """Owned + ghost (block) dofs of the space itself (the length of ``Function.x`` / bs)."""
+        imap = self.V.dofmap.index_map
+        return imap.size_local + imap.num_ghosts
+
+    def update_ghosts(self, nodal: npt.NDArray) -> npt.NDArray:
+        """Nodal data (space dofs or all local dofs, k) with every ghost, the extra ones
+        included, set from its owner; returns (:attr:`num_dofs_local`, k). Without extra
+        ghosts the input is returned as is."""
+        if not self.extended and len(nodal) == self.num_dofs_local:
+            return nodal
+        k = nodal.shape[1]
+        vec = dolfinx.la.vector(self.index_map, bs=k)
+        vec.array[: nodal.size] = nodal.ravel()
+        vec.scatter_forward()
+        return vec.array.reshape(-1, k).copy()
 
     @property
     def num_dofs_local(self) -> int:
@@ -155,4 +206,6 @@ class ParticleBasis:
 
     def gather(self, nodal: npt.NDArray) -> npt.NDArray:
         r"""G2P: :math:`f_p = \sum_a S[p, a]\, F_{d(p,a)}` for nodal (ndofs, k) data -> (n, k)."""
+        if len(nodal) < self.num_dofs_local:  # the space's dofs: fetch the extra ghosts
+            nodal = self.update_ghosts(nodal)
         return np.einsum("na,nak->nk", self.values, nodal[self.dofs])

@@ -61,17 +61,25 @@ def _model_to_mesh(gmsh, comm: MPI.Comm, gdim: int) -> dolfinx.mesh.Mesh:
 
 
 def unstructured_rectangle(
-    comm: MPI.Comm, h: float, *, size: tuple[float, float] = (1.0, 1.0), quadrilateral: bool = False, seed: int = 0
+    comm: MPI.Comm, h: float, *, size: tuple[float, float] = (1.0, 1.0), quadrilateral: bool = False, seed: int = 0,
+    origin: tuple[float, float] = (0.0, 0.0), split_y: tuple[float, ...] = (),
 ) -> dolfinx.mesh.Mesh:
-    """Frontal-Delaunay triangles (or recombined quadrilaterals) of size ``h`` on a rectangle."""
+    """Frontal-Delaunay triangles (or recombined quadrilaterals) of size ``h`` on the rectangle
+    ``origin + [0, size]``; mesh edges follow the horizontal lines ``y = split_y`` (so a
+    constraint such as "fixed above y = 0" holds on a straight row of vertices)."""
     gmsh = _gmsh()
     if comm.rank == 0:
         _start(gmsh)
         gmsh.model.add("rectangle")
         gmsh.option.setNumber("Mesh.RandomSeed", seed)
-        s = gmsh.model.occ.addRectangle(0, 0, 0, *size)
+        (x0, y0), (w, hgt) = origin, size
+        cuts = sorted(y for y in split_y if y0 < y < y0 + hgt)
+        edges = [y0, *cuts, y0 + hgt]
+        parts = [(2, gmsh.model.occ.addRectangle(x0, a, 0, w, b - a)) for a, b in zip(edges[:-1], edges[1:])]
+        if len(parts) > 1:
+            parts, _ = gmsh.model.occ.fragment(parts[:1], parts[1:])
         gmsh.model.occ.synchronize()
-        gmsh.model.addPhysicalGroup(2, [s], 1)
+        gmsh.model.addPhysicalGroup(2, [t for _, t in parts], 1)
         gmsh.option.setNumber("Mesh.CharacteristicLengthMax", h)
         gmsh.option.setNumber("Mesh.Algorithm", 8 if quadrilateral else 6)
         if quadrilateral:

@@ -162,7 +162,7 @@ def hanging_block(
     (one clamped row of cells above the block), and the mesh reaches down to y = -4.
 
     ``mesh``: "structured" (``cells`` quadrilaterals per unit length) or "unstructured"
-    (triangles of about that size). Particles carry their lattice index
+    (triangles of about that size, with a row of vertices on the block's top y = 0). Particles carry their lattice index
     ``fields["lattice"]`` (i, j) for the neighbour-gap measure.
     """
     h = 1.0 / cells
@@ -172,9 +172,7 @@ def hanging_block(
     elif mesh == "unstructured":
         from fempm.meshes import unstructured_rectangle
 
-        m = unstructured_rectangle(comm, h, size=(2.0, 4.0 + h))
-        m.geometry.x[:, 0] -= 0.5
-        m.geometry.x[:, 1] -= 4.0
+        m = unstructured_rectangle(comm, h, size=(2.0, 4.0 + h), origin=(-0.5, -4.0), split_y=(0.0,))
     else:
         raise ValueError(f"unknown option mesh={mesh!r}; expected structured or unstructured")
     # particles on a regular lattice of spacing h / ppc (also on the triangle mesh)

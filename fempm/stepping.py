@@ -154,6 +154,7 @@ class ExplicitSolver:
         self.h_cell = cell_sizes(p.mesh)
         self.terms: Counter = Counter()  # how often each force term was assembled
         self.grid_velocity: npt.NDArray | None = None  # last step's, also the CG warm start
+        self.extended_steps = 0  # steps whose particle domains reached beyond this rank's ghost cells
         self.mass_ratio = 1.0  # last lambda_min(M_L^-1 M_C) estimate (consistent mass)
         fixed = [bc.dofs for bc in self.bcs if isinstance(bc, Fixed)]
         self._fixed_dofs = np.unique(np.concatenate(fixed)) if fixed else None
@@ -188,7 +189,7 @@ class ExplicitSolver:
         p = self.particles
         v = mass_op.solve(p2g(basis, p.mass[:, None] * p.fields["v"]), guess=guess)
         self._apply_bcs(v)
-        return v
+        return basis.update_ghosts(v)  # extra ghosts (remote domain samples) take their owners' values
 
     def _update_stress(self, L: npt.NDArray, dt: float) -> None:
         p = self.particles
@@ -239,6 +240,7 @@ class ExplicitSolver:
         fld = p.fields
         self._check_finite()
         basis = ParticleBasis(self.V, p, gradients=True, domain=opts.particle_domain)
+        self.extended_steps += basis.extended
         mass_op = Projector(
             self.V, p, mass=opts.mass, basis=basis, petsc_options_prefix=opts.petsc_options_prefix,
             exclude=self._fixed_dofs, lump_below=opts.lump_below,
@@ -264,6 +266,7 @@ class ExplicitSolver:
         a[weak] = 0.0  # nodes with a tiny share of mass keep their mapped velocity, no force update
         v_new = v_old + dt * a
         self._apply_bcs(v_new)
+        v_new = basis.update_ghosts(v_new)
         # G2P
         vp_grid = basis.gather(v_new)
         fld["v"] = opts.flip * (fld["v"] + basis.gather(v_new - v_old)) + (1.0 - opts.flip) * vp_grid
@@ -277,7 +280,7 @@ class ExplicitSolver:
         self.t += dt
         self.step_count += 1
         p.relocate()
-        self.grid_velocity = v_new
+        self.grid_velocity = v_new[: basis.num_dofs_space]
         return dt
 
     @staticmethod

@@ -266,7 +266,7 @@ class Projector:
         f = _particle_values(values, self.particles, bs)
         b = self.rhs(f)
         u = out if out is not None else dolfinx.fem.Function(self.V)
-        u.x.array[:] = self.solve(b).ravel()
+        u.x.array[:] = self.solve(b)[: self.basis.num_dofs_space].ravel()
         return u
 
     def solve(self, b: npt.NDArray, guess: npt.NDArray | None = None) -> npt.NDArray:
