@@ -1,6 +1,7 @@
 """Command line.
 
     python -m fempm study mapping [--full] [--out DIR]
+    python -m fempm study particle-basis [--out DIR]
     python -m fempm run SCENE [--out DIR] [--option value ...]   (SCENE: bar, disks)
 
 Scene options are the keyword arguments of the scene builders in :mod:`fempm.scenes`
@@ -17,7 +18,7 @@ def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(prog="python -m fempm", description="fempm: MPM on DOLFINx meshes")
     sub = parser.add_subparsers(dest="command", required=True)
     study = sub.add_parser("study", help="run a study and write its tables and figures")
-    study.add_argument("name", choices=["mapping"])
+    study.add_argument("name", choices=["mapping", "particle-basis"])
     study.add_argument("--full", action="store_true", help="more mesh sizes and particle densities")
     study.add_argument("--sizes", type=int, nargs="+", help="cells per side (default 8 16 32; --full: 8 ... 128)")
     study.add_argument("--ppc", type=int, nargs="+", help="particles per cell (default 4 9; --full: 1 4 9 16)")
@@ -34,6 +35,17 @@ def main(argv: list[str] | None = None) -> int:
 
     if args.command == "run":
         return _run(args, rest)
+
+    if args.command == "study" and args.name == "particle-basis":
+        from mpi4py import MPI
+
+        from fempm.studies import particle_basis
+
+        out = args.out or Path("output/study-particle-basis")
+        if MPI.COMM_WORLD.rank == 0:  # dense operators on small bodies: one rank
+            particle_basis.run(out)
+            print(f"wrote {out}/properties.md, properties.csv, particle_basis_*.png")
+        return 0
 
     if args.command == "study" and args.name == "mapping":
         from fempm.studies import mapping
