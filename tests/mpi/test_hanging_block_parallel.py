@@ -12,8 +12,8 @@ from fempm.scenes import hanging_block, largest_neighbour_gap
 comm = MPI.COMM_WORLD
 
 
-def history(mesh, c, t_end=0.1):
-    scene = hanging_block(domain="cpdi1", mesh=mesh, t_end=t_end, comm=c)
+def history(mesh, c, t_end=0.1, domain="cpdi1"):
+    scene = hanging_block(domain=domain, mesh=mesh, t_end=t_end, comm=c)
     solver, p, h = scene.solver(), scene.particles, scene.params["h"]
     gaps, bottom = [], []
     while solver.t < t_end:
@@ -35,3 +35,12 @@ def test_cpdi1_hanging_block_parallel_equals_serial(mesh):
         assert comm.allreduce(int(len(p) > 0), op=MPI.SUM) == comm.size  # the block spans both ranks
         if mesh == "unstructured":  # corners beyond the ghost layer were evaluated remotely
             assert comm.allreduce(solver.extended_steps, op=MPI.MAX) > 0
+
+
+def test_point_basis_separates_on_two_ranks():
+    """Standard MPM on the same block: the lower rows fall away within t = 0.05 (measured
+    7.1 cell sizes), on 2 ranks as on one."""
+    gaps, _, _, _ = history("structured", comm, t_end=0.05, domain="point")
+    sgaps, _, _, _ = history("structured", MPI.COMM_SELF, t_end=0.05, domain="point")
+    np.testing.assert_allclose(gaps, sgaps, rtol=0, atol=1e-8)
+    assert gaps[-1] > 5.0
