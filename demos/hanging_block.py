@@ -10,8 +10,8 @@ with 3 x 3 particles.
 * **Standard MPM** (point basis): once a row of particles is more than a cell apart from the
   next, no grid node sees both, and the lower part of the block falls away: an artificial
   fracture.
-* **GIMP** (boxes that stretch with the diagonal of $F$): the boxes keep neighbouring rows in
-  contact for longer.
+* **GIMP** (boxes of the initial particle size, 2x2 Gauss points): the boxes only widen the
+  reach of a particle by half its spacing, so the block separates as well, slightly later.
 * **CPDI1** (parallelograms that follow $F$): each particle's domain covers the gap to its
   neighbours, so the block stays continuous.
 

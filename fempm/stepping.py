@@ -64,7 +64,8 @@ class StepOptions:
     the CFL step when weakly supported boundary nodes make the consistent matrix nearly
     singular). lump_below: with consistent mass, lump the rows of dofs whose lumped mass is
     below this fraction of the largest (free-surface rims; raises the stable step). domain:
-    point (standard MPM), gimp (box average, ``gimp_order`` Gauss points per axis), cpdi1
+    point (standard MPM), gimp (box average, ``gimp_order`` Gauss points per axis; boxes of
+    the initial size (uGIMP), or stretched by the diagonal of F with ``gimp_deform``), cpdi1
     (parallelograms that follow F) or cpdi2 (corner-tracked simplices), see
     :mod:`fempm.domains`.
     """
@@ -79,6 +80,7 @@ class StepOptions:
     lump_below: float = 0.1
     domain: str = "point"
     gimp_order: int = 2
+    gimp_deform: bool = False
     petsc_options_prefix: str = "fempm_step_"
 
     def __post_init__(self):
@@ -93,7 +95,8 @@ class StepOptions:
         if self.domain == "cpdi2":
             raise NotImplementedError("domain='cpdi2' in the explicit loop needs corner advection, which is not "
                                       "built yet; use it in projections, or domain='cpdi1' / 'gimp' here")
-        self.particle_domain = make_domain(self.domain, **({"order": self.gimp_order} if self.domain == "gimp" else {}))
+        gimp = {"order": self.gimp_order, "deform": self.gimp_deform}
+        self.particle_domain = make_domain(self.domain, **(gimp if self.domain == "gimp" else {}))
         if not 0.0 < self.cfl <= 1.0:
             raise ValueError(f"cfl={self.cfl} must lie in (0, 1]: a CFL number above 1 is unstable")
 
