@@ -68,13 +68,27 @@ def p2g_gradients(basis: ParticleBasis, vectors: npt.NDArray) -> npt.NDArray:
     return sum_over_ranks(basis.index_map, basis.scatter_contributions(contrib))
 
 
-def lumped_mass(basis: ParticleBasis, particles: Particles) -> npt.NDArray:
-    r"""Lumped nodal mass :math:`m_i = \sum_p M_p N_i(x_p)` on owned + ghost dofs."""
-    return p2g(basis, particles.mass)[:, 0]
+WEIGHTS = ("mass", "volume")
+
+
+def particle_weights(particles: Particles, weight: str) -> npt.NDArray:
+    r"""The least-squares weights :math:`w_p`: the masses :math:`M_p` (per-mass fields such as
+    velocity) or the volumes :math:`V_p` (per-volume fields such as stress, seed 001)."""
+    if weight == "mass":
+        return particles.mass
+    if weight == "volume":
+        return particles.volume
+    raise ValueError(f"unknown option weight={weight!r}; expected one of {', '.join(WEIGHTS)}")
+
+
+def lumped_mass(basis: ParticleBasis, particles: Particles, weight: str = "mass") -> npt.NDArray:
+    r"""Lumped nodal mass :math:`m_i = \sum_p M_p N_i(x_p)` (or nodal volume
+    :math:`V_i = \sum_p V_p N_i(x_p)` with ``weight="volume"``) on owned + ghost dofs."""
+    return p2g(basis, particle_weights(particles, weight))[:, 0]
 
 
 def consistent_mass_matrix(
-    basis: ParticleBasis, particles: Particles, lump: npt.NDArray[np.bool_] | None = None
+    basis: ParticleBasis, particles: Particles, lump: npt.NDArray[np.bool_] | None = None, weight: str = "mass"
 ) -> PETSc.Mat:
     r"""PETSc matrix :math:`m_{ij} = \sum_p M_p N_i(x_p) N_j(x_p)` (one row per scalar dof).
 
@@ -91,9 +105,10 @@ def consistent_mass_matrix(
     ``lump`` (mask over owned + ghost dofs, the same on every rank that sees a dof) lumps the
     rows and columns of those dofs: every :math:`m_{ij}`, :math:`i \ne j`, with :math:`i` or
     :math:`j` lumped moves to :math:`m_{ii}`. Row sums (the lumped masses, hence the
-    conservation of mass and momentum) and symmetry are kept.
+    conservation of mass and momentum) and symmetry are kept. ``weight="volume"`` weights by
+    :math:`V_p` instead of :math:`M_p` (per-volume fields).
     """
-    S, M = basis.values, particles.mass
+    S, M = basis.values, particle_weights(particles, weight)
     k = S.shape[1]
     contrib = M[:, None, None] * S[:, :, None] * S[:, None, :]  # (n, k, k)
     if basis.cells is None:  # averaged basis: a particle's dofs span several cells
@@ -126,7 +141,7 @@ def _particle_values(values: npt.ArrayLike | Callable, particles: Particles, bs:
 
 
 class Projector:
-    """Projection of particle data onto ``V`` with a fixed set of particles.
+    r"""Projection of particle data onto ``V`` with a fixed set of particles.
 
     Assembles the mass (consistent matrix + KSP, or lumped vector) once; :meth:`project` then
     costs one P2G and one solve per value component. ``exclude`` lists (block) dofs held at 0
@@ -134,6 +149,16 @@ class Projector:
     ``lump_below`` (consistent mode): dofs whose lumped mass is below this
     fraction of the largest get lumped rows and columns (see :func:`consistent_mass_matrix`),
     so that the solve does not extrapolate into nodes that particles barely reach.
+
+    ``weight``: "mass" (default) fits :math:`\min_F \sum_p M_p (\langle F \rangle_p - f_p)^2`,
+    for per-mass (intensive) fields such as velocity; "volume" weights by :math:`V_p`, for
+    per-volume fields such as stress. This is seed 001's density-ratio kernel: dividing a
+    per-volume :math:`\sigma_p` by :math:`\rho_p = M_p / V_p`, mapping it with the mass
+    weights and multiplying the grid value by :math:`m_i / V_i` gives, for the lumped map,
+    :math:`\sigma_i = \sum_p \beta_{pi} \sigma_p = \sum_p V_p v_{ip} \sigma_p / V_i` with
+    :math:`V_i = \sum_p V_p v_{ip}`: the volume-weighted map, which conserves
+    :math:`\int \sigma` (:math:`\sum_i V_i \sigma_i = \sum_p V_p \sigma_p`) where the
+    mass-weighted one would not across a density jump.
 
     Attributes
     ----------
@@ -158,7 +183,10 @@ class Projector:
         exclude: npt.NDArray[np.int32] | None = None,
         lump_below: float = 0.0,
         domain=None,
+        weight: str = "mass",
     ):
+        self.weights = particle_weights(particles, weight)
+        self.weight = weight
         if mass not in _MASS_MODES:
             raise ValueError(f"unknown option mass={mass!r}; expected one of {_MASS_MODES}")
         self.V, self.particles, self.mass = V, particles, mass
@@ -177,7 +205,7 @@ class Projector:
                 )
             measure = self.lumped_masses()
         else:
-            measure = p2g(self.basis, particles.mass, values=self.basis.values**2)[:, 0]
+            measure = p2g(self.basis, self.weights, values=self.basis.values**2)[:, 0]
         top = comm.allreduce(float(measure[: self.num_owned].max(initial=0.0)), op=MPI.MAX)
         self.active = measure > SUPPORT_TOL * top
         if exclude is not None:  # constrained dofs (e.g. fixed velocity): value 0, not solved for
@@ -197,7 +225,7 @@ class Projector:
             if lump_below > 0.0:
                 m = self.lumped_masses()
                 lump = m < lump_below * comm.allreduce(float(m[: self.num_owned].max(initial=0.0)), op=MPI.MAX)
-            A = consistent_mass_matrix(self.basis, particles, lump)
+            A = consistent_mass_matrix(self.basis, particles, lump, weight)
             iset = fpetsc.owned_index_set(imap, self.active[: self.num_owned])
             self.matrix = A.createSubMatrix(iset, iset)
             A.destroy()
@@ -244,19 +272,20 @@ class Projector:
     def lumped_masses(self) -> npt.NDArray:
         """Lumped nodal masses on owned + ghost dofs (computed once)."""
         if self.lumped is None:
-            self.lumped = lumped_mass(self.basis, self.particles)
+            self.lumped = lumped_mass(self.basis, self.particles, self.weight)
         return self.lumped
 
     def grid_total(self, u: dolfinx.fem.Function) -> npt.NDArray:
         r"""Grid total :math:`\sum_{ij} m_{ij} F_j` (lumped: :math:`\sum_i m_i F_i`) per component,
         summed over ranks. For ``u`` the projection of :math:`f_p` it equals
-        :math:`\sum_p M_p f_p` (conservation); for ``u = 1`` the total mass."""
+        :math:`\sum_p M_p f_p` (conservation; :math:`\sum_p V_p f_p` with ``weight="volume"``);
+        for ``u = 1`` the total mass (volume)."""
         F = u.x.array.reshape(-1, self.basis.bs)[: self.num_owned]
         return self.particles.comm.allreduce(self.row_mass @ F)
 
     def rhs(self, f: npt.NDArray) -> npt.NDArray:
         r""":math:`b_i = \sum_p M_p f_p N_i(x_p)` on owned + ghost dofs, (ndofs, bs)."""
-        return p2g(self.basis, self.particles.mass[:, None] * f)
+        return p2g(self.basis, self.weights[:, None] * f)
 
     def project(
         self, values: npt.ArrayLike | Callable, out: dolfinx.fem.Function | None = None
@@ -314,11 +343,13 @@ def project(
     petsc_options_prefix: str = "fempm_projection_",
     petsc_options: dict[str, Any] | None = None,
     domain=None,
+    weight: str = "mass",
 ) -> dolfinx.fem.Function:
-    """Galerkin projection of particle ``values`` onto ``V`` (see :class:`Projector`)."""
+    """Galerkin projection of particle ``values`` onto ``V`` (see :class:`Projector`;
+    ``weight="volume"`` for per-volume fields such as stress)."""
     projector = Projector(
         V, particles, mass=mass, petsc_options_prefix=petsc_options_prefix, petsc_options=petsc_options,
-        domain=domain,
+        domain=domain, weight=weight,
     )
     return projector.project(values)
 

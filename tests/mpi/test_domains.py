@@ -154,3 +154,13 @@ def test_domain_outside_the_mesh_is_an_error():
         ParticleBasis(V, p, domain=GIMP(2, deform=True))
     with pytest.raises(ValueError, match="unknown option domain"):
         make_domain("bspline")
+
+
+def test_step_options_build_the_domains():
+    from fempm.stepping import StepOptions
+
+    assert StepOptions(domain="gimp", gimp_order=3, gimp_deform=True).particle_domain == GIMP(3, deform=True)
+    assert StepOptions(domain="gimp").particle_domain == GIMP(2, deform=False)
+    assert StepOptions(domain="cpdi1").particle_domain == CPDI1()
+    with pytest.raises(NotImplementedError, match="cpdi2"):
+        StepOptions(domain="cpdi2")
