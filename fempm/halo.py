@@ -27,7 +27,7 @@ import dolfinx
 import numpy as np
 import numpy.typing as npt
 
-from fempm.location import CellLocator
+from fempm.location import CellLocator, lowest_finding_rank
 
 #: MPI tag of the extended index map's neighbourhood set-up
 _TAG = 7411
@@ -44,15 +44,19 @@ class RemoteRows:
     dN: npt.NDArray | None  # (m, k, gdim)
 
 
+def _width(k: int, d: int, gradients: bool) -> int:
+    """Columns of a packed answer: found flag, k global dofs, k owners, k values [, k d gradients]."""
+    return 1 + k * (3 + (d if gradients else 0))
+
+
 def _answer(locator: CellLocator, element: basix.finite_element.FiniteElement, V, x: npt.NDArray,
             gradients: bool) -> npt.NDArray:
-    """Rows for points ``x`` received from another rank, packed as float64 (m, 1 + k(2 + 1 [+ d]))."""
+    """Rows for points ``x`` received from another rank, packed as float64 (m, :func:`_width`)."""
     imap = V.dofmap.index_map
     cells, X = locator.locate(x)
     k = element.dim
     d = locator.mesh.geometry.dim
-    width = 1 + k * (3 + (d if gradients else 0))
-    out = np.zeros((len(x), width))
+    out = np.zeros((len(x), _width(k, d, gradients)))
     hit = np.flatnonzero(cells >= 0)
     if len(hit) == 0:
         return out
@@ -75,28 +79,16 @@ def remote_rows(locator: CellLocator, element, V, x: npt.NDArray, gradients: boo
     """Basis rows at points ``x`` (m, gdim) that are not in this rank's local cells. Collective
     (call it on every rank, with ``m = 0`` where there is nothing to ask)."""
     comm = locator.mesh.comm
-    rank, size = comm.rank, comm.size
     k, d = element.dim, locator.mesh.geometry.dim
-    pidx, ranks = locator.candidate_ranks(x)
-    other = ranks != rank
-    pidx, ranks = pidx[other], ranks[other]
-    order = np.argsort(ranks, kind="stable")
-    pidx, ranks = pidx[order], ranks[order]
-    bounds = np.searchsorted(ranks, np.arange(size + 1))
-    sent = [pidx[bounds[r]: bounds[r + 1]] for r in range(size)]
-    received = comm.alltoall([np.ascontiguousarray(x[i]) for i in sent])
+    sent, received = locator.send_to_candidates(x)
     answers = comm.alltoall([_answer(locator, element, V, pts, gradients) for pts in received])
     m = len(x)
-    width = 1 + k * (3 + (d if gradients else 0))
-    rows = np.zeros((m, width))
-    found = np.zeros(m, dtype=bool)
-    for r in range(size):  # ascending: the lowest finding rank wins
-        a = answers[r]
-        hit = a[:, 0] > 0 if len(a) else np.zeros(0, dtype=bool)
-        idx = sent[r][hit]
-        free = ~found[idx]
-        rows[idx[free]] = a[hit][free]
-        found[idx[free]] = True
+    owner = lowest_finding_rank(sent, [a[:, 0] > 0 for a in answers], m)
+    rows = np.zeros((m, _width(k, d, gradients)))
+    for r, a in enumerate(answers):
+        mine = owner[sent[r]] == r
+        rows[sent[r][mine]] = a[mine]
+    found = owner < comm.size
     gdofs = np.rint(rows[:, 1: 1 + k]).astype(np.int64)
     owners = np.rint(rows[:, 1 + k: 1 + 2 * k]).astype(np.int32)
     N = rows[:, 1 + 2 * k: 1 + 3 * k]

@@ -78,6 +78,21 @@ class CellLocator:
         counts = np.diff(adj.offsets)
         return np.repeat(np.arange(len(x)), counts), np.asarray(adj.array)
 
+    def send_to_candidates(self, x: npt.NDArray) -> tuple[list[npt.NDArray], list[npt.NDArray]]:
+        """Send each point of ``x`` to every *other* rank whose bounding box holds it
+        (collective, one ``alltoall``): returns, per rank r, the indices into ``x`` sent to r
+        and the points received from r."""
+        comm = self.mesh.comm
+        rank, size = comm.rank, comm.size
+        pidx, ranks = self.candidate_ranks(x)
+        other = ranks != rank
+        pidx, ranks = pidx[other], ranks[other]
+        order = np.argsort(ranks, kind="stable")
+        pidx, ranks = pidx[order], ranks[order]
+        bounds = np.searchsorted(ranks, np.arange(size + 1))
+        sent = [pidx[bounds[r] : bounds[r + 1]] for r in range(size)]
+        return sent, comm.alltoall([np.ascontiguousarray(x[i]) for i in sent])
+
     def locate(self, x: npt.NDArray) -> tuple[npt.NDArray[np.int32], npt.NDArray]:
         """Owned (or, with ``ghosts``, local) cell (``-1`` if none) and reference coordinates of each point of ``x``."""
         n = len(x)
@@ -116,3 +131,16 @@ class CellLocator:
         if moved.size:
             new_cells[moved], X[moved] = self.locate(np.asarray(x)[moved])
         return new_cells, X
+
+
+def lowest_finding_rank(sent: list[npt.NDArray], found: list[npt.NDArray[np.bool_]], m: int) -> npt.NDArray[np.int64]:
+    """For ``m`` points sent to ranks (``sent[r]``: indices sent to rank r) and the ranks'
+    answers (``found[r]``: which of them rank r holds), the lowest rank holding each point,
+    or ``len(sent)`` where none does."""
+    size = len(sent)
+    owner = np.full(m, size, dtype=np.int64)
+    for r in range(size):  # ascending: the lowest finding rank wins
+        hit = sent[r][found[r]]
+        free = owner[hit] == size
+        owner[hit[free]] = r
+    return owner

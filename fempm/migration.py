@@ -14,7 +14,7 @@ from dataclasses import dataclass
 import numpy as np
 import numpy.typing as npt
 
-from fempm.location import CellLocator
+from fempm.location import CellLocator, lowest_finding_rank
 
 
 @dataclass
@@ -60,24 +60,11 @@ def distribute(
     if comm.size == 1:
         return Distributed(x[here], cells[here], X[here], keep_d[0], x[miss])
 
-    rank, size = comm.rank, comm.size
-    pidx, ranks = locator.candidate_ranks(x[miss])
-    other = ranks != rank
-    pidx, ranks = pidx[other], ranks[other]
-    order = np.argsort(ranks, kind="stable")
-    pidx, ranks = pidx[order], ranks[order]
-    bounds = np.searchsorted(ranks, np.arange(size + 1))
-    sent_idx = [pidx[bounds[r] : bounds[r + 1]] for r in range(size)]  # indices into miss
-    recv_pts = comm.alltoall([x[miss[i]] for i in sent_idx])
-
+    size = comm.size
+    sent_idx, recv_pts = locator.send_to_candidates(x[miss])  # sent_idx: indices into miss
     found = [locator.locate(p) for p in recv_pts]
     answers = comm.alltoall([c >= 0 for c, _ in found])
-
-    owner = np.full(len(miss), size, dtype=np.int64)
-    for r in range(size):  # ascending: the lowest finding rank wins
-        hit = sent_idx[r][answers[r]]
-        free = owner[hit] == size
-        owner[hit[free]] = r
+    owner = lowest_finding_rank(sent_idx, answers, len(miss))
     claims = []
     for r in range(size):
         pos = np.flatnonzero(owner[sent_idx[r]] == r)  # positions in the batch sent to r

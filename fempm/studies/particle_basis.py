@@ -68,7 +68,7 @@ class Body:
         """psi of option 1 ("lumped"), option 2 ("consistent") or option 2 with the rows and
         columns of dofs below 10 % of the largest lumped mass lumped ("partial", the explicit
         loop's default ``lump_below=0.1``)."""
-        mass = np.full(len(self.x), self.particles.mass[0])
+        mass = self.particles.mass[np.argsort(self.particles.ids)]  # id order, as the rows of S
         if option != "partial":
             return psi(self.S, mass, option)
         return partially_lumped_psi(self.S, mass, 0.1)

@@ -23,6 +23,15 @@ def _label(state: dict) -> str:
     return f"stretch {np.ravel(state['A'])[0]:g}"
 
 
+def _in_cells(state: dict, density: float) -> dict:
+    """A state's keyword arguments for :func:`line_body`, the shift given in cell sizes (the
+    grid of the 1/2-per-cell case is twice as fine)."""
+    kw = dict(state)
+    if "shift" in kw:
+        kw["shift"] = kw["shift"] * (1.0 if density >= 1 else 0.5)
+    return kw
+
+
 def _chosen(b) -> int:
     """The particle nearest to a point just right of the body's centre."""
     c = 0.5 * (b.lo + b.hi) + 0.3 * b.h
@@ -37,17 +46,14 @@ def figures_1d(out: Path, domain: str = "cpdi1") -> list[Path]:
             fig, axes = plt.subplots(len(states) + 1, len(DENSITIES), figsize=(4.0 * len(DENSITIES), 2.3 * (len(states) + 1)),
                                      sharey="row", squeeze=False)
             for j, dens in enumerate(DENSITIES):
-                for i, st in enumerate(states):
-                    kw = dict(st)
-                    if "shift" in kw:
-                        kw["shift"] = kw["shift"] * (1.0 if dens >= 1 else 0.5)
-                    b = line_body(dens, DOMAINS[domain], **kw)
+                bodies = [line_body(dens, DOMAINS[domain], **_in_cells(st, dens)) for st in states]
+                for i, (st, b) in enumerate(zip(states, bodies)):
                     P = b.psi(option)
                     order = np.argsort(b.xd[:, 0])
                     xn = b.xd[order, 0]
                     k = _chosen(b)
                     ax = axes[i, j]
-                    ell = b.spacing / 2 * (np.ravel(kw.get("A", [[1.0]]))[0])
+                    ell = b.spacing / 2 * (np.ravel(st.get("A", [[1.0]]))[0])
                     xp = b.x[k, 0]
                     ax.fill_between([xp - ell, xp + ell], 0, 1, color="0.85", lw=0, label="top hat")
                     for q in range(len(b.x)):
@@ -62,8 +68,7 @@ def figures_1d(out: Path, domain: str = "cpdi1") -> list[Path]:
                     ax.set_ylim(-0.45 if option == "consistent" else -0.05, 1.1)
                     ax.set_title(f"{dens:g} per cell, {_label(st)}", fontsize=9)
                 # last row: constant and linear data at the middle state
-                b = line_body(dens, DOMAINS[domain], **{k_: (v * (1.0 if dens >= 1 else 0.5) if k_ == "shift" else v)
-                                                     for k_, v in states[1].items()})
+                b = bodies[1]
                 P = b.psi(option)
                 order = np.argsort(b.xd[:, 0])
                 lin = (b.x[:, 0] - b.lo[0]) / (b.hi[0] - b.lo[0])
