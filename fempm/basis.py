@@ -95,6 +95,7 @@ class ParticleBasis:
             K = locator.geometry.inverse_jacobian(cells[here], X[here])
             dN[here] = np.transpose(tab[1:], (1, 2, 0)) @ K
         self._remote_samples(particles, domain, xs, cells, q, need_grad, N, dofs, dN)
+        self.sample_values, self.sample_dofs = N.reshape(n, q, k), dofs.reshape(n, q, k)
         w = smp.w.reshape(n * q)
         vals = (N * w[:, None]).reshape(n, q * k)
         dofs = dofs.reshape(n, q * k)
@@ -203,6 +204,15 @@ class ParticleBasis:
         for c in range(contrib.shape[2]):  # loop over value components, not particles
             out[:, c] = np.bincount(idx, weights=contrib[:, :, c].ravel(), minlength=nd)
         return out
+
+    def gather_samples(self, nodal: npt.NDArray) -> npt.NDArray:
+        r"""Nodal (ndofs, k) data at the domain's sample points, :math:`f(y_{pq}) = \sum_a
+        N_a(y_{pq}) F_{d(pq, a)}`, shape (n, q, k) (e.g. the velocity of CPDI2 corners)."""
+        if self.cells is not None:  # point particles: the sample is the particle
+            return self.gather(nodal)[:, None, :]
+        if len(nodal) < self.num_dofs_local:
+            nodal = self.update_ghosts(nodal)
+        return np.einsum("nqa,nqak->nqk", self.sample_values, nodal[self.sample_dofs])
 
     def gather(self, nodal: npt.NDArray) -> npt.NDArray:
         r"""G2P: :math:`f_p = \sum_a S[p, a]\, F_{d(p,a)}` for nodal (ndofs, k) data -> (n, k)."""

@@ -19,9 +19,12 @@ A domain turns each particle into sample points :math:`y_{pq}` with value weight
   :math:`s \in \{\pm 1\}^d` (Sadeghirad, Brannon and Burghardt 2011): :math:`w_c = 2^{-d}`,
   :math:`g_c = 2^{-d} R^{-T} s` (the average of the corner function's gradient), and no
   :math:`\nabla N` term.
-* :class:`CPDI2`: simplex domains tracked by their corners ``fields["corners"]``
-  (n, d + 1, d), moved with the grid velocity: the basis is replaced by its linear
-  interpolant between the corners, :math:`w_c = 1 / (d + 1)`, :math:`g_c = \nabla \lambda_c`.
+* :class:`CPDI2`: domains tracked by their corners ``fields["corners"]``, simplices
+  (n, d + 1, d) or quadrilaterals / hexahedra (n, 2^d, d), moved with the grid velocity: the
+  basis is replaced by its (multi)linear interpolant between the corners,
+  :math:`w_c = |\Omega_p|^{-1} \int_{\Omega_p} \phi_c`,
+  :math:`g_c = |\Omega_p|^{-1} \int_{\Omega_p} \nabla \phi_c` (Sadeghirad, Brannon and
+  Guilkey 2013); for simplices :math:`w_c = 1 / (d + 1)`, :math:`g_c = \nabla \lambda_c`.
 
 Averaged bases keep the partition of unity exactly; for affine cells they reproduce linear
 fields (:math:`\sum_i \langle N_i \rangle_p x_i = x_p` for a domain centred at :math:`x_p`, and
@@ -100,7 +103,8 @@ class GIMP:
         return Samples(x, np.broadcast_to(wts, (len(particles), len(wts))).copy())
 
 
-def _corner_signs(d: int) -> npt.NDArray:
+def corner_signs(d: int) -> npt.NDArray:
+    """The :math:`2^d` corner sign vectors :math:`s \\in \\{\\pm 1\\}^d`, the first axis slowest."""
     return np.array(list(itertools.product((-1.0, 1.0), repeat=d)))  # (2^d, d)
 
 
@@ -119,7 +123,7 @@ class CPDI1:
 
     def samples(self, particles: Particles) -> Samples:
         d = particles.gdim
-        s = _corner_signs(d)
+        s = corner_signs(d)
         R = self.vectors(particles)
         x = particles.x[:, None, :] + np.einsum("nij,qj->nqi", R, s)
         Rinv_T = np.swapaxes(np.linalg.inv(R), 1, 2)
@@ -128,25 +132,96 @@ class CPDI1:
         return Samples(x, w, g, grad_from_values=False)
 
 
+def _tensor_corner_rule(d: int) -> tuple[npt.NDArray, npt.NDArray, npt.NDArray]:
+    r"""Multilinear corner functions :math:`\phi_c(\xi) = \prod_a (1 + s_{ca} \xi_a)/2` on
+    :math:`[-1, 1]^d` at the 2-point Gauss rule: values (G, 2^d), reference gradients
+    (G, 2^d, d) and weights (G,)."""
+    s = corner_signs(d)
+    xi, wi = np.polynomial.legendre.leggauss(2)
+    pts = np.array(list(itertools.product(xi, repeat=d)))  # (G, d)
+    W = np.prod(np.array(list(itertools.product(wi, repeat=d))), axis=1)
+    f = (1.0 + pts[:, None, :] * s[None, :, :]) / 2.0  # (G, k, d) factors
+    phi = np.prod(f, axis=2)
+    dphi = np.empty(f.shape)
+    for b in range(d):
+        dphi[:, :, b] = s[None, :, b] / 2.0 * np.prod(np.delete(f, b, axis=2), axis=2)
+    return phi, dphi, W
+
+
+def domain_geometry(corners: npt.NDArray) -> tuple[npt.NDArray, npt.NDArray, npt.NDArray, npt.NDArray]:
+    r"""Corner weights of the linear (simplex, d + 1 corners) or multilinear (quadrilateral /
+    hexahedron, :math:`2^d` corners in :func:`corner_signs` order, the first axis slowest)
+    interpolant over each particle domain :math:`\Omega_p` of ``corners`` (n, k, d):
+
+    .. math::
+        w_c = \frac{1}{|\Omega_p|} \int_{\Omega_p} \phi_c, \qquad
+        g_c = \frac{1}{|\Omega_p|} \int_{\Omega_p} \nabla \phi_c,
+
+    with the volumes :math:`|\Omega_p|` and centroids :math:`\sum_c w_c y_c`. Simplices:
+    :math:`w_c = 1/(d + 1)`, :math:`g_c = \nabla \lambda_c`; tensor domains: the 2-point Gauss
+    rule of the isoparametric map (exact for its polynomial integrands). Returns (w (n, k),
+    g (n, k, d), volume (n,), centroid (n, d)); a degenerate or twisted domain is a ValueError."""
+    n, k, d = corners.shape
+    if k == d + 1:
+        J = np.swapaxes(corners[:, 1:, :] - corners[:, :1, :], 1, 2)  # (n, d, d), columns c_k - c_0
+        det = np.linalg.det(J)
+        _check_volumes(det, "simplex")
+        K = np.linalg.inv(J)  # row k - 1: grad lambda_k, k = 1..d
+        g = np.concatenate([-K.sum(axis=1, keepdims=True), K], axis=1)
+        w = np.full((n, k), 1.0 / k)
+        vol = np.abs(det) / np.prod(np.arange(1, d + 1))
+    elif k == 2**d:
+        phi, dphi, W = _tensor_corner_rule(d)
+        J = np.einsum("nci,gcb->ngib", corners, dphi)  # (n, G, d, d) dx/dxi
+        det = np.linalg.det(J)
+        _check_volumes(det, "quadrilateral/hexahedral")
+        dV = np.abs(det) * W[None, :]  # (n, G)
+        vol = dV.sum(axis=1)
+        w = dV @ phi / vol[:, None]
+        grad = np.einsum("ngbi,gcb->ngci", np.linalg.inv(J), dphi)  # J^-T grad_xi phi
+        g = np.einsum("ng,ngci->nci", dV, grad) / vol[:, None, None]
+    else:
+        raise ValueError(f"CPDI2 domains are simplices (d + 1 corners) or quadrilaterals/hexahedra (2^d corners): "
+                         f"got {k} corners in {d}D")
+    return w, g, vol, np.einsum("nc,nci->ni", w, corners)
+
+
+def _check_volumes(det: npt.NDArray, kind: str) -> None:
+    """Each domain's Jacobian determinants (n,) or (n, G) must be non-zero and of one sign
+    (a mirrored corner order is fine, a degenerate or twisted domain is not)."""
+    det = det.reshape(len(det), -1)
+    bad = ~((det > 0).all(axis=1) | (det < 0).all(axis=1))
+    if np.any(bad):
+        raise ValueError(f"{int(bad.sum())} CPDI2 {kind} domain(s) are degenerate or twisted (corner Jacobian "
+                         "zero or changing sign)")
+
+
+def box_corners(x: npt.NDArray, half_widths: npt.NDArray) -> npt.NDArray:
+    """Corners (n, 2^d, d) of axis-aligned boxes with centres ``x`` and ``half_widths`` (n, d),
+    in the order :func:`domain_geometry` expects (CPDI2 domains of box particles)."""
+    return x[:, None, :] + corner_signs(x.shape[1])[None, :, :] * half_widths[:, None, :]
+
+
 @dataclass(frozen=True)
 class CPDI2:
-    """Simplex domains tracked by their corners ``fields["corners"]`` (n, d + 1, d)."""
+    """Domains tracked by their corners ``fields["corners"]`` (n, k, d): simplices (k = d + 1)
+    or quadrilaterals / hexahedra (k = 2^d), moved with the grid velocity."""
 
     name: str = "cpdi2"
 
-    def samples(self, particles: Particles) -> Samples:
+    @staticmethod
+    def corners(particles: Particles) -> npt.NDArray:
         if "corners" not in particles.fields:
-            raise ValueError("CPDI2 needs particle corners: fields['corners'] of shape (n, d + 1, d) "
-                             "(create_particles(..., corners=True) on a simplex mesh sets them)")
+            raise ValueError("CPDI2 needs particle corners: fields['corners'] of shape (n, k, d) "
+                             "(create_particles(..., corners=True) or fempm.domains.box_corners set them)")
         c = particles.fields["corners"]
-        n, k, d = c.shape
-        if k != d + 1:
-            raise ValueError(f"CPDI2 corners must be simplices: {k} corners in {d}D")
-        J = np.swapaxes(c[:, 1:, :] - c[:, :1, :], 1, 2)  # (n, d, d), columns c_k - c_0
-        KT = np.swapaxes(np.linalg.inv(J), 1, 2)  # rows of K = grad lambda_k, k >= 1
-        grads = np.einsum("nij,kj->nki", KT, np.eye(d))  # (n, d, d): grad lambda_k, k = 1..d
-        g = np.concatenate([-grads.sum(axis=1, keepdims=True), grads], axis=1)
-        w = np.full((n, k), 1.0 / k)
+        if c.ndim != 3 or c.shape[0] != len(particles) or c.shape[2] != particles.gdim:
+            raise ValueError(f"CPDI2 corners must have shape (n, k, {particles.gdim}), got {c.shape}")
+        return c
+
+    def samples(self, particles: Particles) -> Samples:
+        c = self.corners(particles)
+        w, g, _, _ = domain_geometry(c)
         return Samples(c.copy(), w, g, grad_from_values=False)
 
 

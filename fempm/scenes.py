@@ -10,6 +10,7 @@ import numpy as np
 from mpi4py import MPI
 
 from fempm.boundary import fixed, slip
+from fempm.domains import box_corners
 from fempm.materials import LinearElastic, NeoHookean, NewtonianTait
 from fempm.particles import Particles
 from fempm.scene import Scene
@@ -163,7 +164,8 @@ def hanging_block(
 
     ``mesh``: "structured" (``cells`` quadrilaterals per unit length) or "unstructured"
     (triangles of about that size, with a row of vertices on the block's top y = 0). Particles carry their lattice index
-    ``fields["lattice"]`` (i, j) for the neighbour-gap measure.
+    ``fields["lattice"]`` (i, j) for the neighbour-gap measure; with ``domain="cpdi2"`` each particle is its lattice
+    square, ``fields["corners"]``.
     """
     h = 1.0 / cells
     box = [[-0.5, -4.0], [1.5, h]]
@@ -182,7 +184,10 @@ def hanging_block(
     x = np.column_stack([X.ravel(), Y.ravel()]) if comm.rank == 0 else np.zeros((0, 2))
     lattice = np.column_stack(np.unravel_index(np.arange(n * n), (n, n))) if comm.rank == 0 else np.zeros((0, 2))
     vol = (1.0 / n) ** 2
-    p = Particles(m, x, rho * vol, vol, fields={"lattice": lattice.astype(float), "lp": np.full((len(x), 2), 0.5 / n)})
+    fields = {"lattice": lattice.astype(float), "lp": np.full((len(x), 2), 0.5 / n)}
+    if domain == "cpdi2":  # each particle is its lattice square, tracked by its four corners
+        fields["corners"] = box_corners(x, fields["lp"])
+    p = Particles(m, x, rho * vol, vol, fields=fields)
     params = dict(cells=cells, ppc=ppc, domain=domain, mesh=mesh, scheme=scheme, flip=flip, mass=mass, cfl=cfl, g=g, E=E,
                   nu=nu, rho=rho, spacing=1.0 / n, h=h)
     return Scene(

@@ -22,6 +22,7 @@ import dolfinx
 import numpy as np
 import numpy.typing as npt
 
+from fempm.domains import corner_signs, domain_geometry
 from fempm.location import CellLocator, as_points3
 from fempm.particles import Particles
 
@@ -89,6 +90,7 @@ def create_particles(
     cells: npt.NDArray[np.int32] | Callable[[npt.NDArray], npt.NDArray] | None = None,
     where: Callable[[npt.NDArray], npt.NDArray] | None = None,
     locator: CellLocator | None = None,
+    corners: bool = False,
 ) -> Particles:
     """Seed ``ppc`` particles in every owned cell of ``mesh`` (collective).
 
@@ -96,9 +98,17 @@ def create_particles(
     restricts the seeding to some owned cells: local cell indices, or a predicate on the cell
     midpoints (x of shape (3, n), as ``dolfinx.mesh.locate_entities``). ``where`` keeps only
     the particles whose positions (3, n) satisfy it (a body's shape, e.g. a disk).
+
+    ``corners=True`` makes each particle its sub-cell, for CPDI2 (:class:`fempm.domains.CPDI2`):
+    ``fields["corners"]`` holds the sub-cell's physical vertices (simplices on simplex cells,
+    quadrilaterals/hexahedra in :func:`fempm.domains.box_corners` order on tensor cells), and the
+    particle's position and volume are its domain's centroid and volume (the same as without
+    corners on affine cells).
     """
     if not 0.0 <= jitter <= 1.0:
         raise ValueError(f"jitter={jitter} must lie in [0, 1]")
+    if corners and jitter > 0.0:
+        raise ValueError("corners=True needs jitter=0: a particle with corners sits at its domain's centroid")
     locator = locator if locator is not None else CellLocator(mesh)
     geom = locator.geometry
     comm = mesh.comm
@@ -137,8 +147,27 @@ def create_particles(
     w = np.abs(geom.detJ(cells, X))
     wsum = np.bincount(cells, weights=w, minlength=ncell)
     volume = geom.cell_volumes()[cells] * w / wsum[cells]
+    fields = {}
+    if corners:
+        fields["corners"], x, X, volume = _sub_cell_domains(geom, subs, cells, local)
     if where is not None:
         keep = np.asarray(where(as_points3(x).T), dtype=bool)
         x, cells, X, volume, ids = x[keep], cells[keep], X[keep], volume[keep], ids[keep]
+        fields = {k: v[keep] for k, v in fields.items()}
     rho = density(x) if callable(density) else np.full(len(x), float(density))
-    return Particles.from_located(locator, x, cells, X, rho * volume, volume, ids)
+    return Particles.from_located(locator, x, cells, X, rho * volume, volume, ids, fields=fields)
+
+
+def _sub_cell_domains(geom, subs: npt.NDArray, cells: npt.NDArray[np.int32], local: npt.NDArray):
+    """Physical corners (n, k, gdim) of the particles' sub-cells, with their centroids,
+    reference coordinates and volumes (:func:`fempm.domains.domain_geometry`)."""
+    tdim = subs.shape[2]
+    if subs.shape[1] == 2:  # boxes: lower/upper -> 2^d corners
+        s = (corner_signs(tdim) + 1.0) / 2.0
+        ref = subs[:, :1, :] + s[None, :, :] * (subs[:, 1:, :] - subs[:, :1, :])
+    else:
+        ref = subs
+    k = ref.shape[1]
+    C = geom.push_forward(np.repeat(cells, k), ref[local].reshape(-1, tdim)).reshape(len(cells), k, tdim)
+    _, _, volume, x = domain_geometry(C)
+    return C, x, geom.pull_back(cells, x), volume

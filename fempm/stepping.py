@@ -66,8 +66,9 @@ class StepOptions:
     below this fraction of the largest (free-surface rims; raises the stable step). domain:
     point (standard MPM), gimp (box average, ``gimp_order`` Gauss points per axis; boxes of
     the initial size (uGIMP), or stretched by the diagonal of F with ``gimp_deform``), cpdi1
-    (parallelograms that follow F) or cpdi2 (corner-tracked simplices), see
-    :mod:`fempm.domains`.
+    (parallelograms that follow F) or cpdi2 (domains tracked by their corners
+    ``fields["corners"]``, moved with the grid velocity; the particle sits at its domain's
+    centroid and has its volume), see :mod:`fempm.domains`.
     """
 
     scheme: Scheme = "USL"
@@ -92,9 +93,9 @@ class StepOptions:
             raise ValueError(f"unknown option position={self.position!r}; expected grid or particle")
         if not 0.0 <= self.flip <= 1.0:
             raise ValueError(f"flip={self.flip} must lie in [0, 1]")
-        if self.domain == "cpdi2":
-            raise NotImplementedError("domain='cpdi2' in the explicit loop needs corner advection, which is not "
-                                      "built yet; use it in projections, or domain='cpdi1' / 'gimp' here")
+        if self.domain == "cpdi2" and self.position == "particle":
+            raise ValueError("domain='cpdi2' moves the particle domains' corners with the grid velocity and the "
+                             "particle with its domain's centroid: position='particle' would detach them")
         gimp = {"order": self.gimp_order, "deform": self.gimp_deform}
         self.particle_domain = make_domain(self.domain, **(gimp if self.domain == "gimp" else {}))
         if not 0.0 < self.cfl <= 1.0:
@@ -278,13 +279,34 @@ class ExplicitSolver:
             vp_grid = basis.gather(v_new)
         if opts.scheme != "USF":
             self._update_stress(self._velocity_gradient(basis, v_new), dt)
-        p.x = p.x + dt * (fld["v"] if self.options.position == "particle" else vp_grid)
+        if opts.domain == "cpdi2":
+            self._move_corners(basis, v_new, dt)
+        else:
+            p.x = p.x + dt * (fld["v"] if self.options.position == "particle" else vp_grid)
         self._check_finite()
         self.t += dt
         self.step_count += 1
         p.relocate()
         self.grid_velocity = v_new[: basis.num_dofs_space]
         return dt
+
+    def _move_corners(self, basis: ParticleBasis, v: npt.NDArray, dt: float) -> None:
+        r"""CPDI2: corners :math:`y_c^+ = y_c + \Delta t \sum_i N_i(y_c) v_i^+`; the particle
+        moves to its domain's centroid and takes its volume (for simplices the centroid moves by
+        :math:`\Delta t \sum_i \langle N_i \rangle_p v_i^+` and :math:`|\Omega_p| = J_p V_p^0`,
+        since :math:`L_p` is the gradient of the corner velocities' linear interpolant)."""
+        from fempm.domains import domain_geometry
+
+        p = self.particles
+        corners = p.fields["corners"] + dt * basis.gather_samples(v)
+        try:
+            _, _, volume, centroid = domain_geometry(corners)
+            bad = 0
+        except ValueError:
+            bad = 1
+        if p.comm.allreduce(bad):
+            self._fail("inverted particle domain (CPDI2 corners degenerate or twisted)")
+        p.fields["corners"], p.x, p.volume = corners, centroid, volume
 
     @staticmethod
     def _velocity_gradient(basis: ParticleBasis, v: npt.NDArray) -> npt.NDArray:

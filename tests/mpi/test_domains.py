@@ -12,7 +12,7 @@ from conftest import make_mesh
 from mpi4py import MPI
 
 from fempm.basis import ParticleBasis
-from fempm.domains import CPDI1, CPDI2, GIMP, make_domain
+from fempm.domains import CPDI1, CPDI2, GIMP, box_corners, domain_geometry, make_domain
 from fempm.meshes import unstructured_rectangle
 from fempm.stepping import cell_sizes
 
@@ -23,7 +23,9 @@ AFFINE = ("interval", "triangle", "quadrilateral", "tetrahedron", "hexahedron", 
 
 
 def deformed_particles(mesh, name):
-    """Jittered particles in the middle of the mesh, with a random F and simplex corners."""
+    """Jittered particles in the middle of the mesh, with a random F; CPDI2 corners of a
+    sheared simplex (``fields["simplex"]``) and of a sheared, non-parallelogram box
+    (``fields["box"]``), neither centred at the particle."""
     d = mesh.geometry.dim
     x0 = mesh.geometry.x[:, :d]
     lo, hi = x0.min(axis=0, initial=np.inf), x0.max(axis=0, initial=-np.inf)
@@ -43,13 +45,22 @@ def deformed_particles(mesh, name):
     s = np.vstack([np.zeros(d), np.eye(d)])
     s -= s.mean(axis=0)
     h = np.ptp(x0, axis=0).max() / 40
-    p.fields["corners"] = p.x[:, None, :] + h * np.einsum("nij,kj->nki", A, s)
+    p.fields["simplex"] = p.x[:, None, :] + h * np.einsum("nij,kj->nki", A, s + 0.1)
+    box = box_corners(p.x, np.full((len(p), d), h))
+    box = p.x[:, None, :] + np.einsum("nij,nkj->nki", A, box - p.x[:, None, :])
+    box[:, -1] += 0.2 * h  # the last corner off the parallelogram (a general quadrilateral/hexahedron)
+    p.fields["box"] = box
     return p
 
 
-def domains_for(name):
-    out = [GIMP(2), GIMP(3, deform=True), CPDI1()]
-    return out + [CPDI2()] if name in SIMPLICES else out
+def domains_for(p):
+    """Domains with the centres their averaged bases reproduce: the particle (GIMP, CPDI1) or
+    the CPDI2 domain's centroid (simplices and boxes, on every cell type)."""
+    for dom in (GIMP(2), GIMP(3, deform=True), CPDI1()):
+        yield dom, p.x
+    for key in ("simplex", "box"):
+        p.fields["corners"] = p.fields[key]  # set just before its use
+        yield CPDI2(), domain_geometry(p.fields[key])[3]
 
 
 def test_averaged_basis_partition_of_unity_and_linear_completeness(mesh_name):
@@ -59,13 +70,13 @@ def test_averaged_basis_partition_of_unity_and_linear_completeness(mesh_name):
     assert p.num_global > 10
     V = fem.functionspace(mesh, ("Lagrange", 1))
     xd = V.tabulate_dof_coordinates()[:, :d]
-    for dom in domains_for(mesh_name):
+    for dom, centre in domains_for(p):
         b = ParticleBasis(V, p, gradients=True, domain=dom)
         xs = b.update_ghosts(xd)  # with the coordinates of extra ghost dofs (remote samples)
         err = {
             "sum N": np.abs(b.values.sum(axis=1) - 1).max(initial=0.0),
             "sum grad N": np.abs(b.gradients.sum(axis=1)).max(initial=0.0),
-            "sum N x": np.abs(np.einsum("nk,nkd->nd", b.values, xs[b.dofs]) - p.x).max(initial=0.0),
+            "sum N x": np.abs(np.einsum("nk,nkd->nd", b.values, xs[b.dofs]) - centre).max(initial=0.0),
             "sum x grad N": np.abs(np.einsum("nkd,nke->nde", xs[b.dofs], b.gradients) - np.eye(d)).max(initial=0.0),
         }
         err = {k: comm.allreduce(v, op=MPI.MAX) for k, v in err.items()}
@@ -92,12 +103,11 @@ def test_projection_with_averaged_bases(name, mass):
     lin = fem.Function(V)
     lin.interpolate(lambda x: np.vstack([1.0 + 2.0 * x[0] - x[1], *[0.5 - x[i] + 3 * x[0] for i in range(1, d)]]))
     f = fempm.interpolate(lin, p)  # the linear field at the particles = its domain average
-    doms = [GIMP(2), GIMP(3), CPDI1()]
-    if name in SIMPLICES:
-        s = np.vstack([np.zeros(d), np.eye(d)])
-        p.fields["corners"] = p.x[:, None, :] + 0.01 * (s - s.mean(axis=0))
-        doms.append(CPDI2())
-    for dom in doms:
+    # CPDI2: the particles are their seeding sub-cells, which tile the mesh
+    tiled = fempm.create_particles(mesh, 4 if d < 3 else 8, density=2.0, corners=True)
+    np.testing.assert_allclose(tiled.x, p.x, atol=1e-14)
+    p.fields["corners"] = tiled.fields["corners"]
+    for dom in (GIMP(2), GIMP(3), CPDI1(), CPDI2()):
         proj = fempm.Projector(V, p, mass=mass, domain=dom)
         F = proj.project(f if mass == "consistent" else np.ones_like(f))
         target = lin.x.array if mass == "consistent" else 1.0
@@ -162,5 +172,27 @@ def test_step_options_build_the_domains():
     assert StepOptions(domain="gimp", gimp_order=3, gimp_deform=True).particle_domain == GIMP(3, deform=True)
     assert StepOptions(domain="gimp").particle_domain == GIMP(2, deform=False)
     assert StepOptions(domain="cpdi1").particle_domain == CPDI1()
-    with pytest.raises(NotImplementedError, match="cpdi2"):
-        StepOptions(domain="cpdi2")
+    assert StepOptions(domain="cpdi2").particle_domain == CPDI2()
+    with pytest.raises(ValueError, match="position='particle' would detach"):
+        StepOptions(domain="cpdi2", position="particle")
+
+
+def test_cpdi2_corner_errors():
+    """Missing, misshapen, degenerate and twisted corner sets, and jittered corner seeding, are
+    errors that name the problem."""
+    mesh = make_mesh("triangle")
+    p = fempm.create_particles(mesh, 1, density=1.0)
+    with pytest.raises(ValueError, match="CPDI2 needs particle corners"):
+        CPDI2().samples(p)
+    with pytest.raises(ValueError, match="jitter=0"):
+        fempm.create_particles(mesh, 1, jitter=0.3, corners=True)
+    x = np.zeros((1, 2))
+    with pytest.raises(ValueError, match="got 5 corners in 2D"):
+        domain_geometry(np.zeros((1, 5, 2)))
+    with pytest.raises(ValueError, match="degenerate or twisted"):
+        domain_geometry(np.array([[[0.0, 0.0], [1.0, 1.0], [2.0, 2.0]]]))  # collinear triangle
+    twisted = box_corners(x, np.ones((1, 2)))[:, [0, 1, 3, 2]]  # a bow tie
+    with pytest.raises(ValueError, match="degenerate or twisted"):
+        domain_geometry(twisted)
+    mirrored = box_corners(x, np.ones((1, 2)))[:, [1, 0, 3, 2]]  # reflected order: a valid square
+    np.testing.assert_allclose(domain_geometry(mirrored)[2], [4.0], rtol=1e-14)
