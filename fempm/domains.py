@@ -148,7 +148,7 @@ def _tensor_corner_rule(d: int) -> tuple[npt.NDArray, npt.NDArray, npt.NDArray]:
     return phi, dphi, W
 
 
-def domain_geometry(corners: npt.NDArray) -> tuple[npt.NDArray, npt.NDArray, npt.NDArray, npt.NDArray]:
+def domain_geometry(corners: npt.NDArray, comm=None) -> tuple[npt.NDArray, npt.NDArray, npt.NDArray, npt.NDArray]:
     r"""Corner weights of the linear (simplex, d + 1 corners) or multilinear (quadrilateral /
     hexahedron, :math:`2^d` corners in :func:`corner_signs` order, the first axis slowest)
     interpolant over each particle domain :math:`\Omega_p` of ``corners`` (n, k, d):
@@ -160,12 +160,13 @@ def domain_geometry(corners: npt.NDArray) -> tuple[npt.NDArray, npt.NDArray, npt
     with the volumes :math:`|\Omega_p|` and centroids :math:`\sum_c w_c y_c`. Simplices:
     :math:`w_c = 1/(d + 1)`, :math:`g_c = \nabla \lambda_c`; tensor domains: the 2-point Gauss
     rule of the isoparametric map (exact for its polynomial integrands). Returns (w (n, k),
-    g (n, k, d), volume (n,), centroid (n, d)); a degenerate or twisted domain is a ValueError."""
+    g (n, k, d), volume (n,), centroid (n, d)); a degenerate or twisted domain is a ValueError,
+    raised on every rank of ``comm`` when one is given (collective)."""
     n, k, d = corners.shape
     if k == d + 1:
         J = np.swapaxes(corners[:, 1:, :] - corners[:, :1, :], 1, 2)  # (n, d, d), columns c_k - c_0
         det = np.linalg.det(J)
-        _check_volumes(det, "simplex")
+        _check_volumes(det, "simplex", comm)
         K = np.linalg.inv(J)  # row k - 1: grad lambda_k, k = 1..d
         g = np.concatenate([-K.sum(axis=1, keepdims=True), K], axis=1)
         w = np.full((n, k), 1.0 / k)
@@ -174,7 +175,7 @@ def domain_geometry(corners: npt.NDArray) -> tuple[npt.NDArray, npt.NDArray, npt
         phi, dphi, W = _tensor_corner_rule(d)
         J = np.einsum("nci,gcb->ngib", corners, dphi)  # (n, G, d, d) dx/dxi
         det = np.linalg.det(J)
-        _check_volumes(det, "quadrilateral/hexahedral")
+        _check_volumes(det, "quadrilateral/hexahedral", comm)
         dV = np.abs(det) * W[None, :]  # (n, G)
         vol = dV.sum(axis=1)
         w = dV @ phi / vol[:, None]
@@ -186,14 +187,16 @@ def domain_geometry(corners: npt.NDArray) -> tuple[npt.NDArray, npt.NDArray, npt
     return w, g, vol, np.einsum("nc,nci->ni", w, corners)
 
 
-def _check_volumes(det: npt.NDArray, kind: str) -> None:
+def _check_volumes(det: npt.NDArray, kind: str, comm=None) -> None:
     """Each domain's Jacobian determinants (n,) or (n, G) must be non-zero and of one sign
     (a mirrored corner order is fine, a degenerate or twisted domain is not)."""
-    det = det.reshape(len(det), -1)
-    bad = ~((det > 0).all(axis=1) | (det < 0).all(axis=1))
-    if np.any(bad):
-        raise ValueError(f"{int(bad.sum())} CPDI2 {kind} domain(s) are degenerate or twisted (corner Jacobian "
-                         "zero or changing sign)")
+    det = det if det.ndim == 2 else det[:, None]
+    nbad = int(np.count_nonzero(~((det > 0).all(axis=1) | (det < 0).all(axis=1))))
+    if comm is not None and comm.size > 1:
+        nbad = comm.allreduce(nbad)
+    if nbad:
+        raise ValueError(f"{nbad} CPDI2 {kind} domain(s) are degenerate or twisted (corner Jacobian zero or "
+                         "changing sign)")
 
 
 def box_corners(x: npt.NDArray, half_widths: npt.NDArray) -> npt.NDArray:
@@ -221,7 +224,7 @@ class CPDI2:
 
     def samples(self, particles: Particles) -> Samples:
         c = self.corners(particles)
-        w, g, _, _ = domain_geometry(c)
+        w, g, _, _ = domain_geometry(c, particles.comm)
         return Samples(c.copy(), w, g, grad_from_values=False)
 
 

@@ -300,12 +300,9 @@ class ExplicitSolver:
         p = self.particles
         corners = p.fields["corners"] + dt * basis.gather_samples(v)
         try:
-            _, _, volume, centroid = domain_geometry(corners)
-            bad = 0
-        except ValueError:
-            bad = 1
-        if p.comm.allreduce(bad):
-            self._fail("inverted particle domain (CPDI2 corners degenerate or twisted)")
+            _, _, volume, centroid = domain_geometry(corners, p.comm)  # collective error
+        except ValueError as e:
+            self._fail(f"inverted particle domain: {e}")
         p.fields["corners"], p.x, p.volume = corners, centroid, volume
 
     @staticmethod

@@ -13,7 +13,7 @@ Run ``python -m fempm study particle-basis [--out DIR]`` (one rank). It writes
   (4, 2, 1 and 1/2 particles per cell and direction; reference, translated and stretched
   bodies) and on an unstructured triangle mesh;
 * ``properties.md`` / ``properties.csv``: the properties (i)-(xiv) of seed 000 section 16
-  measured for each option and domain (point, GIMP, CPDI1) on a 1D body (2 particles per
+  measured for each option and domain (point, GIMP, CPDI1, CPDI2 lattice cells) on a 1D body (2 particles per
   cell) and on a 2D body on unstructured triangles (2 x 2 per cell), and the seed 001 claims
   on support and linear fields.
 
@@ -35,13 +35,13 @@ import numpy as np
 import ufl
 from mpi4py import MPI
 
-from fempm.domains import CPDI1, GIMP, Point
+from fempm.domains import CPDI1, CPDI2, GIMP, Point, box_corners
 from fempm.particle_basis import dense_operator, partially_lumped_psi, particle_basis_functions, psi
 from fempm.particles import Particles
 
 COMM = MPI.COMM_SELF
 OPTIONS = ("lumped", "consistent", "partial")
-DOMAINS = {"point": Point(), "gimp": GIMP(order=4, deform=True), "cpdi1": CPDI1()}
+DOMAINS = {"point": Point(), "gimp": GIMP(order=4, deform=True), "cpdi1": CPDI1(), "cpdi2": CPDI2()}
 DENSITIES = (4, 2, 1, 0.5)  # particles per cell (and per direction in 2D)
 TOL = 1e-12  # round-off
 ALG_TOL = 1e-8  # identities through a (possibly ill-conditioned) inverse: round-off times its condition
@@ -125,9 +125,10 @@ def body(make_mesh: Callable, density: float, domain, *, lo, hi, offset=0.0, shi
     if grid_moves:
         _moved(mesh, A, shift)
     x = cm + (x0 - cm) @ A.T + shift
+    corners = cm + (box_corners(x0, np.full((len(x0), d), spacing / 2)) - cm) @ A.T + shift  # CPDI2: lattice cells
     vol0 = spacing**d
     p = Particles(mesh, x, vol0, vol0 * abs(np.linalg.det(A)), fields={
-        "lp": np.full((len(x), d), spacing / 2), "F": np.broadcast_to(A, (len(x), d, d)).copy()})
+        "lp": np.full((len(x), d), spacing / 2), "F": np.broadcast_to(A, (len(x), d, d)).copy(), "corners": corners})
     V = dolfinx.fem.functionspace(mesh, ("Lagrange", 1))
     S = dense_operator(V, p, domain)
     return Body(mesh, V, p, x, S, V.tabulate_dof_coordinates()[:, :d], lo + offset, hi + offset, h, spacing)

@@ -83,8 +83,9 @@ def test_slip_wall_along_any_normal():
     assert np.abs(v @ np.array([1.0, -1.0])).max() > 0.1  # tangential motion survives
 
 
-def test_unknown_domain_and_cpdi2_in_the_loop_are_errors():
+def test_unknown_domain_and_cpdi2_without_corners_are_errors():
     with pytest.raises(ValueError, match="unknown option domain"):
         StepOptions(domain="bspline")
-    with pytest.raises(NotImplementedError, match="cpdi2"):
-        StepOptions(domain="cpdi2")
+    solver = block_scene(options=StepOptions(domain="cpdi2")).solver()  # particles without corners
+    with pytest.raises(ValueError, match="CPDI2 needs particle corners"):
+        solver.step()
