@@ -1,6 +1,6 @@
 """Command line.
 
-    python -m fempm study mapping [--full] [--out DIR]
+    python -m fempm study mapping [--full] [--domains point gimp cpdi1 cpdi2] [--out DIR]
     python -m fempm study particle-basis [--out DIR]
     python -m fempm run SCENE [--out DIR] [--option value ...]   (SCENE: bar, disks)
 
@@ -22,6 +22,8 @@ def main(argv: list[str] | None = None) -> int:
     study.add_argument("--full", action="store_true", help="more mesh sizes and particle densities")
     study.add_argument("--sizes", type=int, nargs="+", help="cells per side (default 8 16 32; --full: 8 ... 128)")
     study.add_argument("--ppc", type=int, nargs="+", help="particles per cell (default 4 9; --full: 1 4 9 16)")
+    study.add_argument("--domains", nargs="+", default=["point"], metavar="DOMAIN",
+                       help="mapping: particle domains point, gimp, cpdi1, cpdi2 (default point)")
     study.add_argument("--out", type=Path, default=None, help="output folder (default output/study-NAME)")
     runp = sub.add_parser("run", help="run a scene, writing outputs and a JSON summary", add_help=False)
     runp.add_argument("scene")
@@ -53,7 +55,7 @@ def main(argv: list[str] | None = None) -> int:
         sizes = args.sizes or ((8, 16, 32, 64, 128) if args.full else (8, 16, 32))
         ppcs = args.ppc or ((1, 4, 9, 16) if args.full else (4, 9))
         out = args.out or Path("output/study-mapping")
-        mapping.run(sizes=sizes, ppcs=ppcs, out=out)
+        mapping.run(sizes=sizes, ppcs=ppcs, out=out, domains=tuple(args.domains))
         from mpi4py import MPI
 
         if MPI.COMM_WORLD.rank == 0:

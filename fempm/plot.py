@@ -76,11 +76,12 @@ def _save(fig, path: Path) -> None:
 
 
 def plot_error_vs_time(rows: Sequence[dict], path: Path, *, title: str = "") -> None:
-    """Log-log L2 error against wall time, one line per (mesh, field, space, mass) series."""
+    """Log-log L2 error against wall time, one line per (mesh, field, space, mass, ppc, domain)
+    series."""
     plt = _pyplot()
     series: dict[tuple, list[dict]] = {}
     for r in rows:
-        series.setdefault((r["mesh"], r["field"], r["space"], r["mass"], r["ppc"]), []).append(r)
+        series.setdefault((r["mesh"], r["field"], r["space"], r["mass"], r["ppc"], r.get("domain", "point")), []).append(r)
     fig, axes = plt.subplots(1, 2, figsize=(13, 5.5), sharey=False)
     for ax, fld in zip(axes, sorted({r["field"] for r in rows})):
         for key, rs in sorted(series.items()):
@@ -94,7 +95,7 @@ def plot_error_vs_time(rows: Sequence[dict], path: Path, *, title: str = "") -> 
                 [max(r["l2_error"], 1e-17) for r in rs],
                 ls,
                 marker=marker,
-                label=f"{key[0]} {key[2]} {key[3]} ppc={key[4]}",
+                label=f"{key[0]} {key[2]} {key[3]} ppc={key[4]}" + ("" if key[5] == "point" else f" {key[5]}"),
             )
         ax.set_xlabel("wall time of the projection [s]")
         ax.set_ylabel("L2 error")

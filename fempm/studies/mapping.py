@@ -8,6 +8,15 @@ gmsh triangles, for several mesh sizes and particle densities:
 * ``fe``: a random function of the target space itself (consistent projection must return it
   to solver tolerance; lumped projection does not).
 
+Particle domains (``domains``: point, gimp, cpdi1, cpdi2) select the averaged basis
+:math:`\langle N_i \rangle_p` of the projection; the particle values are then the domain
+averages by the domain's own rule, :math:`f_p = \sum_q w_{pq} f(y_{pq})` (the point value for
+standard MPM), and for the ``fe`` field :math:`f_p = \sum_i \langle N_i \rangle_p u_i`, which
+the consistent projection returns exactly. CPDI2 particles are their (unjittered) seeding
+sub-cells (``create_particles(..., corners=True)``); the other domains use jittered particles,
+with boxes of half-width :math:`\tfrac12 V_p^{1/d}` shrunk where they would reach past the
+unit square (they stay centred at the particle).
+
 For each case the table holds :math:`\|F - f\|_{L^2}`, the wall time of the projection (basis
 tabulation, mass assembly, right-hand side and solve; maximum over ranks) and the KSP
 iterations. Fitted convergence rates :math:`\|F - f\| \sim h^r` (``numpy.polyfit``) of the
@@ -27,9 +36,11 @@ import numpy as np
 import ufl
 from mpi4py import MPI
 
+from fempm.basis import ParticleBasis
+from fempm.domains import half_widths, make_domain
 from fempm.errors import l2_error
 from fempm.seeding import create_particles
-from fempm.transfer import Projector, SingularMassError, interpolate
+from fempm.transfer import Projector, SingularMassError
 
 MESH_KINDS = ("structured-tri", "structured-quad", "unstructured-tri")
 SPACES = ((1, "lumped"), (1, "consistent"), (2, "consistent"))
@@ -66,17 +77,26 @@ def random_fe_function(V: dolfinx.fem.FunctionSpace, seed: int = 0) -> dolfinx.f
     return u
 
 
-def run_case(mesh, particles, degree: int, mass: str, field: str) -> dict:
+def domain_average(f, particles, domain) -> np.ndarray:
+    r""":math:`f_p = \sum_q w_{pq} f(y_{pq})` over the domain's sample points (f takes x of shape
+    (gdim, m), as ``Function.interpolate``)."""
+    smp = domain.samples(particles)
+    n, q, d = smp.x.shape
+    return np.einsum("nq,nq->n", smp.w, np.asarray(f(smp.x.reshape(n * q, d).T)).reshape(n, q))
+
+
+def run_case(mesh, particles, degree: int, mass: str, field: str, domain: str = "point") -> dict:
     comm = mesh.comm
     V = dolfinx.fem.functionspace(mesh, ("Lagrange", degree))
+    dom = make_domain(domain)
     if field == "smooth":
-        values, exact = smooth, smooth_ufl(mesh)
+        values, exact = domain_average(smooth, particles, dom), smooth_ufl(mesh)
     else:
         exact = random_fe_function(V)
-        values = interpolate(exact, particles)
+        values = ParticleBasis(V, particles, domain=dom).gather(exact.x.array[:, None])[:, 0]
     comm.Barrier()
     t0 = time.perf_counter()
-    projector = Projector(V, particles, mass=mass)
+    projector = Projector(V, particles, mass=mass, domain=dom)
     F = projector.project(values)
     wall = comm.allreduce(time.perf_counter() - t0, op=MPI.MAX)
     return {
@@ -96,9 +116,12 @@ def run(
     out: Path = Path("output/study-mapping"),
     comm: MPI.Comm = MPI.COMM_WORLD,
     jitter: float = 0.5,
+    domains=("point",),
     log=print,
 ) -> list[dict]:
     """Run every case, write ``mapping.csv``, ``mapping.md`` and ``mapping.png`` into ``out``."""
+    for domain in domains:
+        make_domain(domain)  # unknown names fail before any work
     rows = []
     warm = make_mesh("structured-tri", 4, comm)  # first-call costs (imports, PETSc set-up) untimed
     run_case(warm, create_particles(warm, 4), 1, "consistent", "smooth")
@@ -106,20 +129,26 @@ def run(
         mesh = make_mesh(kind, n, comm)
         ncells = mesh.topology.index_map(2).size_global
         h = 1.0 / np.sqrt(ncells / (2 if "tri" in kind else 1))  # equivalent structured size
-        for ppc in ppcs:
-            particles = create_particles(mesh, ppc, jitter=jitter, seed=1)
+        for ppc, domain in itertools.product(ppcs, domains):
+            if domain == "cpdi2":  # the particles are their sub-cells
+                particles = create_particles(mesh, ppc, corners=True)
+            else:
+                particles = create_particles(mesh, ppc, jitter=jitter, seed=1)
+                # boxes (GIMP, CPDI1) centred at the particle, shrunk where they would reach past the unit square
+                ell = half_widths(particles)
+                particles.fields["lp"] = np.minimum(ell, np.minimum(particles.x, 1.0 - particles.x) * (1 - 1e-9))
             for (degree, mass), field in itertools.product(SPACES, fields):
                 try:
-                    r = run_case(mesh, particles, degree, mass, field)
+                    r = run_case(mesh, particles, degree, mass, field, domain)
                 except SingularMassError:  # too few particles for the space: no row
                     if comm.rank == 0:
-                        log(f"{kind:17s} n={n:4d} ppc={ppc:2d} P{degree} {mass}: singular mass matrix, skipped")
+                        log(f"{kind:17s} n={n:4d} ppc={ppc:2d} {domain} P{degree} {mass}: singular mass matrix, skipped")
                     continue
-                row = {"mesh": kind, "n": n, "h": h, "cells": ncells, "ppc": ppc, "particles": particles.num_global,
-                       "field": field, "space": f"P{degree}", "mass": mass, **r}
+                row = {"mesh": kind, "n": n, "h": h, "cells": ncells, "ppc": ppc, "domain": domain,
+                       "particles": particles.num_global, "field": field, "space": f"P{degree}", "mass": mass, **r}
                 rows.append(row)
                 if comm.rank == 0:
-                    log(f"{kind:17s} n={n:4d} ppc={ppc:2d} {field:6s} P{degree} {mass:10s} "
+                    log(f"{kind:17s} n={n:4d} ppc={ppc:2d} {domain:5s} {field:6s} P{degree} {mass:10s} "
                         f"L2={r['l2_error']:.3e}  t={r['time_s']:.4f}s  its={r['ksp_its']}")
     if comm.rank == 0:
         write(rows, out)
@@ -129,16 +158,17 @@ def run(
 def convergence_rates(rows: list[dict]) -> list[dict]:
     """Fitted slope of log(error) against log(h) per series of the smooth field."""
     out = []
-    keys = sorted({(r["mesh"], r["space"], r["mass"], r["ppc"]) for r in rows if r["field"] == "smooth"})
+    series = ("mesh", "space", "mass", "ppc", "domain")
+    keys = sorted({tuple(r.get(k, "point") for k in series) for r in rows if r["field"] == "smooth"})
     for key in keys:
-        rs = [r for r in rows if r["field"] == "smooth" and (r["mesh"], r["space"], r["mass"], r["ppc"]) == key]
+        rs = [r for r in rows if r["field"] == "smooth" and tuple(r.get(k, "point") for k in series) == key]
         if len(rs) >= 2:
             slope = np.polyfit(np.log([r["h"] for r in rs]), np.log([r["l2_error"] for r in rs]), 1)[0]
-            out.append({"mesh": key[0], "space": key[1], "mass": key[2], "ppc": key[3], "rate": slope})
+            out.append({**dict(zip(series, key)), "rate": slope})
     return out
 
 
-COLUMNS = ["mesh", "n", "cells", "ppc", "particles", "field", "space", "mass", "l2_error", "time_s", "ksp_its", "dofs", "inactive"]
+COLUMNS = ["mesh", "n", "cells", "ppc", "domain", "particles", "field", "space", "mass", "l2_error", "time_s", "ksp_its", "dofs", "inactive"]
 
 
 def write(rows: list[dict], out: Path) -> None:
@@ -158,7 +188,8 @@ def write(rows: list[dict], out: Path) -> None:
     rates = convergence_rates(rows)
     if rates:
         lines += ["", "## Fitted convergence rates (smooth field, error ~ h^rate)", "",
-                  "| mesh | space | mass | ppc | rate |", "|---|---|---|---|---|"]
-        lines += [f"| {r['mesh']} | {r['space']} | {r['mass']} | {r['ppc']} | {r['rate']:.2f} |" for r in rates]
+                  "| mesh | space | mass | ppc | domain | rate |", "|---|---|---|---|---|---|"]
+        lines += [f"| {r['mesh']} | {r['space']} | {r['mass']} | {r['ppc']} | {r['domain']} | {r['rate']:.2f} |"
+                  for r in rates]
     (out / "mapping.md").write_text("\n".join(lines) + "\n")
     plot_error_vs_time(rows, out / "mapping.png", title="fempm mapping study: error vs projection time")
