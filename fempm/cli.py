@@ -105,5 +105,5 @@ def _run(args, rest: list[str]) -> int:
     out = args.out or Path("output") / args.scene
     run(scene, out)
     if MPI.COMM_WORLD.rank == 0:
-        print(f"wrote {out}/summary.json, energies.csv, particles/, grid_velocity.bp")
+        print(f"wrote {out}/summary.json, energies.csv, particles/, grid_velocity.bp, grid_stress.bp")
     return 0

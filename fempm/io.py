@@ -1,5 +1,5 @@
 """Output as a run goes: energies CSV (flushed every row), particle frames as VTK PolyData
-(legacy binary, one file per frame, gathered on rank 0), grid velocity with VTXWriter, and a
+(legacy binary, one file per frame, gathered on rank 0), grid velocity and stress with VTXWriter, and a
 JSON summary."""
 
 from __future__ import annotations
@@ -57,6 +57,7 @@ class RunWriter:
         self.comm = particles.comm
         self.frame = 0
         self._csv = None
+        self._stress_vtx = None
         if self.comm.rank == 0:
             (self.folder / "particles").mkdir(parents=True, exist_ok=True)
         self.comm.Barrier()
@@ -102,18 +103,28 @@ class RunWriter:
                                     title=f"t = {t:.4g}", label="|velocity|", bounds=self.bounds)
         self.frame += 1
 
-    def grid(self, v: npt.NDArray, t: float) -> None:
+    def grid(self, v: npt.NDArray, t: float, stress: dolfinx.fem.Function | None = None) -> None:
+        """Grid velocity (``grid_velocity.bp``) and, when given, grid stress (``grid_stress.bp``)
+        at time ``t`` (VTX, open in ParaView). Collective."""
         if self._vtx is None:
             return
         self.grid_v.x.array[:] = v.ravel()
         self._vtx.write(t)
+        if stress is not None:
+            if self._stress_vtx is None:
+                self.grid_sigma = dolfinx.fem.Function(stress.function_space, name="grid_stress")
+                self._stress_vtx = dolfinx.io.VTXWriter(self.comm, self.folder / "grid_stress.bp", [self.grid_sigma],
+                                                        engine="BP4")
+            self.grid_sigma.x.array[:] = stress.x.array
+            self._stress_vtx.write(t)
 
     def summary(self, data: dict) -> None:
         if self.comm.rank == 0:
             (self.folder / "summary.json").write_text(json.dumps(data, indent=2, default=float))
 
     def close(self) -> None:
-        if self._vtx is not None:
-            self._vtx.close()
+        for vtx in (self._vtx, self._stress_vtx):
+            if vtx is not None:
+                vtx.close()
         if self.comm.rank == 0 and self._csv is not None:
             self._file.close()

@@ -54,7 +54,8 @@ def run(
 ) -> dict:
     """Run ``scene`` to ``t_end``. Energies and momentum are recorded every step (returned in
     ``history`` and, with ``out``, written to ``energies.csv`` as the run goes, together with
-    particle VTK frames, the grid velocity (VTX), ``summary.json`` and, with ``png``, a PNG of
+    particle VTK frames, the grid velocity and stress (VTX, the stress projected as a per-volume
+    field, :meth:`ExplicitSolver.grid_stress`), ``summary.json`` and, with ``png``, a PNG of
     the particles per frame in ``frames/``)."""
     solver = scene.solver()
     comm = scene.mesh.comm
@@ -68,7 +69,7 @@ def run(
             if writer is not None and solver.t >= next_frame:
                 writer.particles(scene.particles, solver.t)
                 if solver.grid_velocity is not None:
-                    writer.grid(solver.grid_velocity, solver.t)
+                    writer.grid(solver.grid_velocity, solver.t, stress=solver.grid_stress())
                 next_frame += scene.t_end / max(scene.frames, 1)
             dt = solver.step(dt_max=scene.t_end - solver.t)
             row = {"step": solver.step_count, "dt": dt, **solver.energies()}

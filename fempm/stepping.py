@@ -318,6 +318,22 @@ class ExplicitSolver:
             self._fail(f"non-finite state at particle(s) {self._ids(bad)}")
 
     # -- diagnostics --------------------------------------------------------------------------
+    def grid_stress(self, mass: Literal["lumped", "consistent"] = "lumped") -> dolfinx.fem.Function:
+        r"""Cauchy stress on the grid (a tensor Lagrange Function of ``V``'s degree), projected
+        as a per-volume field with the particle domains of the loop: lumped,
+        :math:`\sigma_i = \sum_p V_p \langle N_i \rangle_p \sigma_p / \sum_p V_p \langle N_i \rangle_p`
+        (seed 001's density-ratio kernel), or the volume-weighted least-squares projection
+        (``mass="consistent"``). Collective."""
+        p = self.particles
+        d = p.gdim
+        if getattr(self, "_stress_space", None) is None:
+            self._stress_space = dolfinx.fem.functionspace(p.mesh, ("Lagrange", self.V.element.basix_element.degree, (d, d)))
+        proj = Projector(self._stress_space, p, mass=mass, weight="volume", domain=self.options.particle_domain,
+                         petsc_options_prefix=self.options.petsc_options_prefix + "stress_")
+        out = proj.project(p.fields["sigma"].reshape(len(p), d * d))
+        out.name = "grid_stress"
+        return out
+
     def energies(self) -> dict[str, float]:
         """Kinetic, strain and total energy and linear momentum, summed over ranks."""
         p = self.particles

@@ -43,3 +43,4 @@ def test_two_disks_demo_writes_outputs(tmp_path):
     rows = (out / "energies.csv").read_text().splitlines()
     assert len(rows) == res["steps"] + 1 and rows[0].startswith("step,dt,t,kinetic,strain,total")
     assert (out / "energies.png").stat().st_size > 10_000 and (out / "summary.json").exists()
+    assert (out / "grid_velocity.bp").is_dir() and (out / "grid_stress.bp").is_dir()
