@@ -45,7 +45,7 @@ def main(argv: list[str] | None = None) -> dict:
     ap.add_argument("--scheme", default="MUSL")
     ap.add_argument("--mass", default="lumped", choices=["lumped", "consistent"])
     ap.add_argument("--material", default="neo-hookean", choices=["neo-hookean", "linear"])
-    ap.add_argument("--domain", default="point", choices=["point", "gimp", "cpdi1"])
+    ap.add_argument("--domain", default="point", choices=["point", "gimp", "cpdi1", "cpdi2"])
     ap.add_argument("--cfl", type=float, default=0.4)
     ap.add_argument("--out", type=Path, default=Path("output/cantilever"))
     ap.add_argument("--no-plot", action="store_true")

@@ -139,7 +139,8 @@ def cantilever(
     # one cell column behind the clamp, so that particle domains (GIMP, CPDI) at the clamp stay in the mesh
     mesh = dm.create_rectangle(comm, [[-hx, -below * hy], [(nl + 2) * hx, H + 2 * hy]], [nl + 3, below + cells + 2],
                                dm.CellType.quadrilateral)
-    p = create_particles(mesh, ppc**2, density=rho, cells=lambda x: (x[0] > 0) & (x[0] < L) & (x[1] > 0) & (x[1] < H))
+    p = create_particles(mesh, ppc**2, density=rho, cells=lambda x: (x[0] > 0) & (x[0] < L) & (x[1] > 0) & (x[1] < H),
+                         corners=domain == "cpdi2")  # CPDI2: each particle is its sub-cell
     p.fields["X0"] = p.x.copy()
     params = dict(cells=cells, ppc=ppc, scheme=scheme, flip=flip, mass=mass, cfl=cfl, L=L, H=H, E=E, nu=nu, rho=rho,
                   g=g, hx=hx, material=material, degree=degree, mass_cutoff=mass_cutoff, domain=domain, **cantilever_reference(L, H, E, rho, g))
