@@ -23,17 +23,19 @@ from fempm.meshes import unstructured_rectangle
 from fempm.stepping import ExplicitSolver, StepOptions
 
 comm = MPI.COMM_WORLD
-A = np.array([[0.3, -0.5], [0.4, 0.2]])
-B = np.array([0.2, -0.1])
+AFFINE = {2: (np.array([[0.3, -0.5], [0.4, 0.2]]), np.array([0.2, -0.1])),
+          3: (np.array([[0.3, -0.5, 0.1], [0.4, 0.2, -0.2], [0.0, 0.3, -0.1]]), np.array([0.2, -0.1, 0.05]))}
 
 
-@pytest.mark.parametrize("name", ["triangle", "quadrilateral", "unstructured-triangle"])
+@pytest.mark.parametrize("name", ["triangle", "quadrilateral", "unstructured-triangle", "tetrahedron", "hexahedron"])
 def test_affine_velocity_moves_corners_exactly(name):
     mesh = make_mesh(name)
-    p = fempm.create_particles(mesh, 4, density=3.0, corners=True)
+    d = mesh.geometry.dim
+    A, B = AFFINE[d]
+    p = fempm.create_particles(mesh, 2**d, density=3.0, corners=True)
     p.fields["start"] = p.fields["corners"].copy()
     p.fields["v"] = p.x @ A.T + B
-    V = fem.functionspace(mesh, ("Lagrange", 1, (2,)))
+    V = fem.functionspace(mesh, ("Lagrange", 1, (d,)))
     opts = StepOptions(mass="consistent", flip=0.0, lump_below=0.0, domain="cpdi2")
     solver = ExplicitSolver(V, p, [LinearElastic(1.0, 0.3)], options=opts)
     dt = 1e-2
@@ -42,8 +44,8 @@ def test_affine_velocity_moves_corners_exactly(name):
     F = p.fields["F"]
     errs = [
         np.abs(c - (c_start + dt * (c_start @ A.T + B))).max(initial=0.0),
-        np.abs(F - (np.eye(2) + dt * A)).max(initial=0.0),
-        np.abs(p.volume - np.linalg.det(np.eye(2) + dt * A) * p.fields["volume0"]).max(initial=0.0),
+        np.abs(F - (np.eye(d) + dt * A)).max(initial=0.0),
+        np.abs(p.volume - np.linalg.det(np.eye(d) + dt * A) * p.fields["volume0"]).max(initial=0.0),
         np.abs(p.x - domain_geometry(c)[3]).max(initial=0.0) if len(c) else 0.0,
     ]
     errs = np.array(errs)
