@@ -28,7 +28,7 @@ from pathlib import Path
 import fempm  # noqa: F401
 import numpy as np
 
-from fempm.scene import run
+from fempm.scene import run, run_stats
 from fempm.scenes import MARTIN_MOYCE, dam_break, surge_front
 
 
@@ -63,10 +63,7 @@ def main(argv: list[str] | None = None) -> dict:
         "Z_fempm": Zs.tolist(),
         "deviation": dev.tolist(),
         "mass_defect": abs(comm.allreduce(p.mass.sum()) - mass0) / mass0,
-        "steps": res["steps"],
-        "particles": res["particles"],
-        "particle_steps_per_s": res["particle_steps_per_s"],
-        "terms_assembled": res["terms_assembled"],
+        **run_stats(res),
     }
     if comm.rank == 0:
         np.savetxt(a.out / "front.csv", np.c_[T, Z], delimiter=",", header="T,Z", comments="")

@@ -44,6 +44,15 @@ class Scene:
         return ExplicitSolver(V, self.particles, self.materials, bcs=bcs, loads=self.loads, options=self.options)
 
 
+#: the run summary's cost figures that demos report with their own results
+RUN_STATS = ("steps", "particles", "particle_steps_per_s", "terms_assembled")
+
+
+def run_stats(summary: dict) -> dict:
+    """The :data:`RUN_STATS` entries of a :func:`run` summary."""
+    return {k: summary[k] for k in RUN_STATS}
+
+
 def run(
     scene: Scene,
     out: Path | None = None,

@@ -22,7 +22,7 @@ import dolfinx
 import numpy as np
 import numpy.typing as npt
 
-from fempm.domains import corner_signs, domain_geometry
+from fempm.domains import box_corners, domain_geometry
 from fempm.location import CellLocator, as_points3
 from fempm.particles import Particles
 
@@ -163,8 +163,7 @@ def _sub_cell_domains(geom, subs: npt.NDArray, cells: npt.NDArray[np.int32], loc
     reference coordinates and volumes (:func:`fempm.domains.domain_geometry`)."""
     tdim = subs.shape[2]
     if subs.shape[1] == 2:  # boxes: lower/upper -> 2^d corners
-        s = (corner_signs(tdim) + 1.0) / 2.0
-        ref = subs[:, :1, :] + s[None, :, :] * (subs[:, 1:, :] - subs[:, :1, :])
+        ref = box_corners(subs.mean(axis=1), (subs[:, 1] - subs[:, 0]) / 2.0)
     else:
         ref = subs
     k = ref.shape[1]

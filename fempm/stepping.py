@@ -33,7 +33,7 @@ from mpi4py import MPI
 
 from fempm.basis import ParticleBasis
 from fempm.boundary import Fixed
-from fempm.domains import make_domain
+from fempm.domains import domain_geometry, make_domain
 from fempm.materials.base import identity
 from fempm.particles import Particles
 from fempm.transfer import Projector, p2g, p2g_gradients
@@ -160,6 +160,7 @@ class ExplicitSolver:
         self.grid_velocity: npt.NDArray | None = None  # last step's, also the CG warm start
         self.extended_steps = 0  # steps whose particle domains reached beyond this rank's ghost cells
         self.mass_ratio = 1.0  # last lambda_min(M_L^-1 M_C) estimate (consistent mass)
+        self._stress_space: dolfinx.fem.FunctionSpace | None = None  # tensor space of grid_stress, on first use
         fixed = [bc.dofs for bc in self.bcs if isinstance(bc, Fixed)]
         self._fixed_dofs = np.unique(np.concatenate(fixed)) if fixed else None
 
@@ -295,8 +296,6 @@ class ExplicitSolver:
         moves to its domain's centroid and takes its volume (for simplices the centroid moves by
         :math:`\Delta t \sum_i \langle N_i \rangle_p v_i^+` and :math:`|\Omega_p| = J_p V_p^0`,
         since :math:`L_p` is the gradient of the corner velocities' linear interpolant)."""
-        from fempm.domains import domain_geometry
-
         p = self.particles
         corners = p.fields["corners"] + dt * basis.gather_samples(v)
         try:
@@ -326,7 +325,7 @@ class ExplicitSolver:
         (``mass="consistent"``). Collective."""
         p = self.particles
         d = p.gdim
-        if getattr(self, "_stress_space", None) is None:
+        if self._stress_space is None:
             self._stress_space = dolfinx.fem.functionspace(p.mesh, ("Lagrange", self.V.element.basix_element.degree, (d, d)))
         proj = Projector(self._stress_space, p, mass=mass, weight="volume", domain=self.options.particle_domain,
                          petsc_options_prefix=self.options.petsc_options_prefix + "stress_")

@@ -56,9 +56,7 @@ def figures_1d(out: Path, domain: str = "cpdi1") -> list[Path]:
                     ell = b.spacing / 2 * (np.ravel(st.get("A", [[1.0]]))[0])
                     xp = b.x[k, 0]
                     ax.fill_between([xp - ell, xp + ell], 0, 1, color="0.85", lw=0, label="top hat")
-                    for q in range(len(b.x)):
-                        if q != k:
-                            ax.plot(xn, P[order, q], lw=0.7, alpha=0.8)
+                    ax.plot(xn, np.delete(P[order], k, axis=1), lw=0.7, alpha=0.8)  # the other particles' Phi
                     ax.fill_between(xn, 0, P[order, k], color="0.3", alpha=0.8, lw=0, label="Phi_p")
                     ax.plot(xn, P[order, k], "o", color="k", ms=2.5)
                     ax.plot(b.x[:, 0], np.zeros(len(b.x)), "|", color="C3", ms=6)
