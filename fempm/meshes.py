@@ -12,6 +12,9 @@ from pathlib import Path
 import dolfinx
 from mpi4py import MPI
 
+#: the gmsh meshes that ship with fempm (demos, tests, scenes)
+MESHES = Path(__file__).resolve().parents[1] / "meshes"
+
 
 def _gmshio():
     try:

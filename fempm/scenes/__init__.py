@@ -1,0 +1,15 @@
+"""Built-in scenes (the verification problems), usable from Python and from
+``python -m fempm run NAME --option value``; one scene per module."""
+
+from fempm.scenes.bar import vibrating_bar
+from fempm.scenes.block import hanging_block, largest_neighbour_gap
+from fempm.scenes.cantilever import cantilever, cantilever_reference, cantilever_tip
+from fempm.scenes.dam import MARTIN_MOYCE, dam_break, surge_front
+from fempm.scenes.disks import two_disks
+
+SCENES = {"bar": vibrating_bar, "disks": two_disks, "cantilever": cantilever, "dam": dam_break, "block": hanging_block}
+
+__all__ = [
+    "MARTIN_MOYCE", "SCENES", "cantilever", "cantilever_reference", "cantilever_tip", "dam_break", "hanging_block",
+    "largest_neighbour_gap", "surge_front", "two_disks", "vibrating_bar",
+]

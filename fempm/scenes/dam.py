@@ -1,0 +1,70 @@
+"""Dam break with Tait water (VERIFICATION.md section 9) and Martin and Moyce's surge front."""
+
+from __future__ import annotations
+
+import dolfinx.mesh as dm
+import numpy as np
+from mpi4py import MPI
+
+from fempm.boundary import slip
+from fempm.materials import NewtonianTait
+from fempm.scene import Scene
+from fempm.seeding import create_particles
+from fempm.stepping import Loads, StepOptions
+
+
+#: Martin and Moyce (1952), n^2 = 2: surge front Z = x / a against T = t sqrt(2 g / a)
+#: (their Table 2, as tabulated in the dam-break literature).
+MARTIN_MOYCE = np.array([
+    [0.41, 1.11], [0.84, 1.22], [1.19, 1.44], [1.43, 1.67], [1.63, 1.89], [1.83, 2.11], [1.98, 2.33], [2.20, 2.56],
+    [2.32, 2.78], [2.51, 3.00], [2.65, 3.22], [2.83, 3.44], [2.98, 3.67], [3.11, 3.89], [3.33, 4.11],
+])
+
+
+def surge_front(particles, params: dict) -> float:
+    """Martin and Moyce's Z = x_front / a: the rightmost particle plus half a particle spacing,
+    over all ranks (their T is ``t * params["time_scale"]``)."""
+    front = particles.comm.allreduce(particles.x[:, 0].max(initial=-np.inf), op=MPI.MAX)
+    return (front + params["spacing"] / 2) / params["a"]
+
+
+def dam_break(
+    cells: int = 10, ppc: int = 2, scheme: str = "MUSL", flip: float = 0.99, mass: str = "lumped",
+    cfl: float = 0.4, t_end: float = 0.22, a: float = 0.1, box: float = 0.4, rho0: float = 1000.0,
+    kappa: float = 2.0e4, gamma: float = 7.0, viscosity: float = 1.0e-3, g: float = 9.81, frames: int = 22,
+    comm: MPI.Comm = MPI.COMM_WORLD,
+) -> Scene:
+    r"""Dam break (VERIFICATION.md section 9): a water column ``a`` wide and ``2 a`` high
+    (n^2 = 2) at the left of a box ``box`` wide, slip walls left, right and at the bottom, open
+    top; Tait water :math:`p = \kappa((\rho/\rho_0)^\gamma - 1)`.
+
+    ``cells`` cells across the column width (square cells), ``ppc`` x ``ppc`` particles per
+    cell. The column starts at rest in hydrostatic equilibrium: the particle density is
+    :math:`\rho = \rho_0 (1 + \rho_0 g (2a - y) / \kappa)^{1/\gamma}` and its stress
+    :math:`-p I`. Reference: the surge front of Martin and Moyce (1952), ``MARTIN_MOYCE``.
+    """
+    h = a / cells
+    nx, ny = int(round(box / h)), int(round(3 * a / h))
+    mesh = dm.create_rectangle(comm, [[0.0, 0.0], [nx * h, ny * h]], [nx, ny], dm.CellType.quadrilateral)
+    H = 2 * a
+
+    def density(x):
+        return rho0 * (1 + rho0 * g * (H - x[:, 1]) / kappa) ** (1 / gamma)
+
+    p = create_particles(mesh, ppc**2, density=density, cells=lambda x: (x[0] < a) & (x[1] < H))
+    water = NewtonianTait(rho0=rho0, kappa=kappa, gamma=gamma, viscosity=viscosity)
+    pressure = water.pressure(p.mass / p.volume)
+    p.fields["sigma"] = -pressure[:, None, None] * np.eye(2)
+    params = dict(cells=cells, ppc=ppc, scheme=scheme, flip=flip, mass=mass, cfl=cfl, a=a, box=nx * h, rho0=rho0,
+                  kappa=kappa, gamma=gamma, viscosity=viscosity, g=g, spacing=h / ppc, time_scale=np.sqrt(2 * g / a))
+    W = nx * h
+
+    def bcs(V):
+        return [slip(V, lambda x: np.isclose(x[0], 0.0) | np.isclose(x[0], W), (1.0, 0.0)),
+                slip(V, lambda x: np.isclose(x[1], 0.0), (0.0, 1.0))]
+
+    return Scene(
+        name="dam_break", mesh=mesh, particles=p, materials=[water], t_end=t_end, frames=frames, bcs=bcs,
+        loads=Loads(body_force=(0.0, -g)), options=StepOptions(scheme=scheme, flip=flip, mass=mass, cfl=cfl),
+        params=params,
+    )
