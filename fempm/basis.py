@@ -74,9 +74,43 @@ class ParticleBasis:
 
     def _averaged(self, V, particles: Particles, domain, gradients: bool) -> None:
         r"""Domain-averaged :math:`\langle N_i \rangle_p` and :math:`\langle \nabla N_i \rangle_p`
-        from the domain's sample points (:mod:`fempm.domains`), with each particle's entries
-        for the same dof summed: ``values`` (n, K), ``gradients`` (n, K, d), ``dofs`` (n, K),
-        K the largest number of distinct dofs a particle touches (unused slots hold 0)."""
+        with each particle's entries for the same dof summed: ``values`` (n, K), ``gradients``
+        (n, K, d), ``dofs`` (n, K), K the largest number of distinct dofs a particle touches
+        (unused slots hold 0). Exact GIMP integrates over the boxes' pieces in the cells
+        (:mod:`fempm.box_average`); the other domains sum over their sample points
+        (:mod:`fempm.domains`)."""
+        if getattr(domain, "exact", False):
+            rows = self._box_rows(V, particles, domain, gradients)
+        else:
+            rows = self._sample_rows(V, particles, domain, gradients)
+        self.values, self.dofs, self.gradients = _dense_rows(*rows, len(particles), particles.gdim)
+
+    def _box_rows(self, V, particles: Particles, domain, gradients: bool):
+        """Rows (particle, local dof, value, gradient) of exact box averages: the integrals over
+        the boxes' pieces in this rank's owned cells plus those the other ranks own
+        (:func:`fempm.halo.remote_box_rows`), divided by the covered volume."""
+        from fempm.box_average import BoxIntegrator
+
+        lo, hi = domain.box(particles)
+        integ = BoxIntegrator(particles.locator.geometry, self.element, V.dofmap.list, particles.locator.cell_bins)
+        r = integ.integrals(lo, hi, gradients)
+        box, dofs, N, dN, volume = r.box, r.dofs, r.N, r.dN, r.volume
+        comm = particles.comm
+        if comm.size > 1:
+            from fempm.halo import extend_index_map, remote_box_rows
+
+            far = remote_box_rows(particles.locator, integ, lo, hi, gradients, V)
+            self.index_map, local = extend_index_map(self.index_map, far.gdofs, far.owners)
+            box, dofs, N = np.concatenate([box, far.box]), np.concatenate([dofs, local]), np.concatenate([N, far.N])
+            dN = np.concatenate([dN, far.dN]) if gradients else None
+            volume = volume + far.volume
+        if comm.allreduce(int(np.count_nonzero(~(volume > 0)))):
+            raise ValueError("GIMP boxes of zero size or entirely outside the mesh (particle half-widths lp must be > 0)")
+        N = N / volume[box]
+        return box, dofs, N, (dN / volume[box, None] if gradients else None)
+
+    def _sample_rows(self, V, particles: Particles, domain, gradients: bool):
+        """Rows (particle, local dof, value, gradient) of the domain's sample points."""
         smp = domain.samples(particles)
         n, q, d = smp.x.shape
         locator = particles.sample_locator
@@ -94,67 +128,56 @@ class ParticleBasis:
         if need_grad:
             K = locator.geometry.inverse_jacobian(cells[here], X[here])
             dN[here] = np.transpose(tab[1:], (1, 2, 0)) @ K
-        self._remote_samples(particles, domain, xs, cells, q, need_grad, N, dofs, dN)
+        w = smp.w.reshape(n * q).copy()
+        beyond = self._remote_samples(particles, domain, xs, cells, q, need_grad, N, dofs, dN)
+        if len(beyond) and smp.beyond == "cut":  # drop the points beyond the mesh, renormalise
+            w[beyond], N[beyond], dofs[beyond] = 0.0, 0.0, 0
+            wsum = w.reshape(n, q).sum(axis=1)
+            if particles.comm.allreduce(int(np.count_nonzero(wsum <= 0))):
+                raise ValueError(f"{domain.name} particle domains with no sample point inside the mesh")
+            w /= np.repeat(wsum, q)
+        elif len(beyond):  # clamp: evaluate at the closest point of the mesh
+            self._clamped_samples(particles, xs[beyond], beyond, need_grad, N, dofs, dN)
         self.sample_values, self.sample_dofs = N.reshape(n, q, k), dofs.reshape(n, q, k)
-        w = smp.w.reshape(n * q)
-        vals = (N * w[:, None]).reshape(n, q * k)
-        dofs = dofs.reshape(n, q * k)
+        vals = N * w[:, None]
         grads = None
         if gradients:
             grads = dN * w[:, None, None] if need_grad else np.zeros((n * q, k, d))
             if smp.g is not None:
                 grads = grads + N[:, :, None] * smp.g.reshape(n * q, 1, d)
-            grads = grads.reshape(n, q * k, d)
-        # sum each particle's entries per distinct dof
-        order = np.argsort(dofs, axis=1, kind="stable")
-        ds = np.take_along_axis(dofs, order, axis=1)
-        new = np.ones(ds.shape, dtype=bool)
-        new[:, 1:] = ds[:, 1:] != ds[:, :-1]
-        uid = np.cumsum(new, axis=1) - 1
-        Ku = int(uid.max(initial=0)) + 1
-        flat = (np.arange(n)[:, None] * Ku + uid).ravel()
-        self.values = np.bincount(flat, weights=np.take_along_axis(vals, order, axis=1).ravel(),
-                                  minlength=n * Ku).reshape(n, Ku)
-        self.dofs = np.repeat(ds[:, :1], Ku, axis=1) if n else np.zeros((0, Ku), dtype=np.int32)
-        self.dofs.reshape(-1)[flat] = ds.ravel()
-        self.dofs = self.dofs.astype(np.int32)
-        if grads is not None:
-            gs = np.take_along_axis(grads, order[:, :, None], axis=1)
-            self.gradients = np.stack(
-                [np.bincount(flat, weights=gs[:, :, c].ravel(), minlength=n * Ku) for c in range(d)], axis=-1
-            ).reshape(n, Ku, d)
+            grads = grads.reshape(n * q * k, d)
+        return np.repeat(np.arange(n), q * k), dofs.ravel(), vals.ravel(), grads
 
-    def _remote_samples(self, particles: Particles, domain, xs, cells, q, need_grad, N, dofs, dN) -> None:
+    def _clamped_samples(self, particles: Particles, x, idx, need_grad, N, dofs, dN) -> None:
+        """Rows of sample points beyond the mesh, evaluated at the closest point of the rank's
+        owned and ghost cells (:meth:`fempm.location.CellLocator.closest`)."""
+        locator = particles.sample_locator
+        cells, y = locator.closest(x)
+        X = locator.geometry.pull_back(cells, y)
+        tab = self.element.tabulate(1 if need_grad else 0, np.ascontiguousarray(X))[..., 0]
+        N[idx], dofs[idx] = tab[0], np.asarray(self.V.dofmap.list)[cells]
+        if need_grad:
+            dN[idx] = np.transpose(tab[1:], (1, 2, 0)) @ locator.geometry.inverse_jacobian(cells, X)
+
+    def _remote_samples(self, particles: Particles, domain, xs, cells, q, need_grad, N, dofs, dN) -> npt.NDArray:
         """Fill the rows of sample points outside this rank's owned and ghost cells from the
         ranks that own them (:mod:`fempm.halo`), extending :attr:`index_map` by their dofs.
-        Collective; sample points in no cell of any rank are an :class:`OutsideMeshError` on
-        every rank."""
-        from fempm.location import OutsideMeshError
-
+        Returns the indices of the points that lie in no cell of any rank (beyond the mesh).
+        Collective."""
         comm = particles.comm
         lost = np.flatnonzero(cells < 0)
         nlost = comm.allreduce(len(lost)) if comm.size > 1 else len(lost)
-        if nlost == 0:
-            return
-        missing = lost
-        if comm.size > 1:
-            from fempm.halo import extend_index_map, remote_rows
+        if nlost == 0 or comm.size == 1:
+            return lost
+        from fempm.halo import extend_index_map, remote_rows
 
-            rows = remote_rows(particles.locator, self.element, self.V, xs[lost], need_grad)
-            hit = lost[rows.found]
-            self.index_map, local = extend_index_map(self.index_map, rows.gdofs[rows.found], rows.owners[rows.found])
-            N[hit], dofs[hit] = rows.N[rows.found], local
-            if need_grad:
-                dN[hit] = rows.dN[rows.found]
-            missing = lost[~rows.found]
-        nmissing = comm.allreduce(len(missing)) if comm.size > 1 else len(missing)
-        if nmissing:
-            ex = np.concatenate(comm.allgather(xs[missing][:3])) if comm.size > 1 else xs[missing][:3]
-            ids = np.concatenate(comm.allgather(particles.ids[missing // q][:5])) if comm.size > 1 else particles.ids[missing // q]
-            raise OutsideMeshError(
-                f"{nmissing} sample point(s) of {domain.name} particle domains lie outside the mesh, "
-                f"e.g. at {ex[:3].tolist()}; particle ids {np.unique(ids)[:5].tolist()}"
-            )
+        rows = remote_rows(particles.locator, self.element, self.V, xs[lost], need_grad)
+        hit = lost[rows.found]
+        self.index_map, local = extend_index_map(self.index_map, rows.gdofs[rows.found], rows.owners[rows.found])
+        N[hit], dofs[hit] = rows.N[rows.found], local
+        if need_grad:
+            dN[hit] = rows.dN[rows.found]
+        return lost[~rows.found]
 
     @property
     def extended(self) -> bool:
@@ -219,3 +242,29 @@ class ParticleBasis:
         if len(nodal) < self.num_dofs_local:  # the space's dofs: fetch the extra ghosts
             nodal = self.update_ghosts(nodal)
         return np.einsum("na,nak->nk", self.values, nodal[self.dofs])
+
+
+def _dense_rows(p: npt.NDArray, dofs: npt.NDArray, vals: npt.NDArray, grads: npt.NDArray | None, n: int, d: int):
+    """Rows (particle ``p``, dof, value, gradient) summed per (particle, dof) into dense
+    per-particle arrays: values (n, K), dofs (n, K) and gradients (n, K, d) or None, with K
+    the largest number of distinct dofs of a particle, dofs ascending; unused slots hold 0 and
+    repeat the particle's first dof."""
+    width = int(dofs.max(initial=0)) + 1
+    uniq, inv = np.unique(p.astype(np.int64) * width + dofs, return_inverse=True)  # sorted by particle, then dof
+    up = uniq // width
+    count = np.bincount(up, minlength=n)
+    K = int(count.max(initial=1))
+    flat = up * K + np.arange(len(uniq)) - np.repeat(np.cumsum(count) - count, count)
+    values = np.zeros(n * K)
+    values[flat] = np.bincount(inv, weights=vals, minlength=len(uniq))
+    dense = np.zeros(n * K, dtype=np.int64)
+    dense[flat] = uniq % width
+    dense = dense.reshape(n, K)
+    dense = np.where(np.arange(K)[None, :] < count[:, None], dense, dense[:, :1])
+    gradients = None
+    if grads is not None:
+        gradients = np.zeros((n * K, d))
+        for c in range(d):  # loop over components, not particles
+            gradients[flat, c] = np.bincount(inv, weights=grads[:, c], minlength=len(uniq))
+        gradients = gradients.reshape(n, K, d)
+    return values.reshape(n, K), dense.astype(np.int32), gradients

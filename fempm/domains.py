@@ -9,10 +9,12 @@ A domain turns each particle into sample points :math:`y_{pq}` with value weight
         + N_i(y_{pq})\, g_{pq} \big).
 
 * :class:`Point`: standard MPM, :math:`y_p = x_p`, :math:`w = 1`.
-* :class:`GIMP`: the average over the particle's box (half-widths
-  :math:`\ell = \tfrac12 V_0^{1/d}` per axis, stretched by the diagonal of :math:`F` with
-  ``deform=True``) by a tensor Gauss-Legendre rule of ``order`` points per direction; gradient
-  weights are the value weights (:math:`g = 0`).
+* :class:`GIMP`: the average over the particle's axis-aligned box (half-widths
+  :math:`\ell = \tfrac12 V_0^{1/d}` per axis; uGIMP keeps them, cpGIMP stretches them by the
+  diagonal of :math:`F`, ``deform=True``), integrated exactly over the box's pieces in the
+  mesh cells (:mod:`fempm.box_average`), or, with an integer ``order``, by a tensor
+  Gauss-Legendre rule of ``order`` points per direction (inexact where the box straddles a
+  grid line); :math:`\langle \nabla N_i \rangle_p = |\Omega_p|^{-1} \int_{\Omega_p} \nabla N_i`.
 * :class:`CPDI1`: the parallelogram (parallelepiped) :math:`x_p + R \xi`,
   :math:`\xi \in [-1, 1]^d`, :math:`R = F R_0`, :math:`R_0 = \operatorname{diag}(\ell)`; the grid basis is replaced by
   its multilinear interpolant between the :math:`2^d` corners :math:`c = x_p + R s`,
@@ -28,8 +30,20 @@ A domain turns each particle into sample points :math:`y_{pq}` with value weight
 
 Averaged bases keep the partition of unity exactly; for affine cells they reproduce linear
 fields (:math:`\sum_i \langle N_i \rangle_p x_i = x_p` for a domain centred at :math:`x_p`, and
-:math:`\sum_i x_i \otimes \langle \nabla N_i \rangle_p = I`), as long as every sample point lies
-in the mesh.
+:math:`\sum_i x_i \otimes \langle \nabla N_i \rangle_p = I`) for domains inside the mesh.
+
+Domains at the mesh boundary: the part of a domain beyond the mesh is cut off. GIMP boxes are
+truncated and the average is taken over the part inside,
+:math:`\langle N_i \rangle_p = |\Omega_p \cap \Omega_h|^{-1} \int_{\Omega_p \cap \Omega_h} N_i`
+(Gauss-rule GIMP drops its points outside and renormalises the weights); CPDI corners outside
+the mesh are moved to the closest point of the mesh, which cuts a domain off along the boundary
+(exactly so for the part of a box beyond a straight wall parallel to its sides). Both keep the
+partition of unity and :math:`\sum_i \langle \nabla N_i \rangle_p = 0`, hence the
+conservation of mass and momentum, with the particle's mass and volume unchanged; the averaged
+basis then reproduces the centroid of the cut domain instead of :math:`x_p`. This is the
+truncation that keeps the particle's mass on the nodes of the mesh, rather than on nodes of a
+layer of extra cells beyond the boundary (Uintah's extra cells, NairnMPM's extra elements),
+which a DOLFINx mesh does not have.
 """
 
 from __future__ import annotations
@@ -46,13 +60,16 @@ from fempm.particles import Particles
 @dataclass
 class Samples:
     """Sample points of the particle domains: ``x`` (n, q, d), value weights ``w`` (n, q),
-    optional vector gradient weights ``g`` (n, q, d) (multiplying :math:`N_i(y)`), and whether
-    the value weights also weight :math:`\\nabla N_i(y)` (``grad_from_values``)."""
+    optional vector gradient weights ``g`` (n, q, d) (multiplying :math:`N_i(y)`), whether
+    the value weights also weight :math:`\\nabla N_i(y)` (``grad_from_values``), and what
+    happens to points beyond the mesh (``beyond``): ``"clamp"`` evaluates them at the closest
+    point of the mesh, ``"cut"`` drops them and renormalises the particle's weights."""
 
     x: npt.NDArray
     w: npt.NDArray
     g: npt.NDArray | None = None
     grad_from_values: bool = True
+    beyond: str = "clamp"
 
 
 def half_widths(particles: Particles, deform: bool = False) -> npt.NDArray:
@@ -83,24 +100,37 @@ class Point:
 
 @dataclass(frozen=True)
 class GIMP:
-    """Average over the particle's axis-aligned box, tensor Gauss rule of ``order`` per axis."""
+    """Average over the particle's axis-aligned box: exact (``order=None``, the default) or by a
+    tensor Gauss rule of ``order`` points per axis; ``deform`` stretches the box by diag(F)
+    (cpGIMP) instead of keeping its initial size (uGIMP)."""
 
-    order: int = 2
+    order: int | None = None
     deform: bool = False
     name: str = "gimp"
 
     def __post_init__(self):
-        if self.order < 1:
-            raise ValueError(f"GIMP order must be >= 1 (got {self.order})")
+        if self.order is not None and self.order < 1:
+            raise ValueError(f"GIMP order must be >= 1 or None (exact) (got {self.order})")
+
+    @property
+    def exact(self) -> bool:
+        return self.order is None
+
+    def box(self, particles: Particles) -> tuple[npt.NDArray, npt.NDArray]:
+        """Lower and upper corners (n, d) of the particles' boxes."""
+        ell = half_widths(particles, self.deform)
+        return particles.x - ell, particles.x + ell
 
     def samples(self, particles: Particles) -> Samples:
+        if self.exact:
+            raise ValueError("exact GIMP integrates over box pieces (fempm.box_average), it has no sample points")
         d = particles.gdim
         xi, wi = np.polynomial.legendre.leggauss(self.order)
         pts = np.array(list(itertools.product(xi, repeat=d)))  # (q, d) in [-1, 1]^d
         wts = np.prod(np.array(list(itertools.product(wi, repeat=d))), axis=1) / 2**d
         ell = half_widths(particles, self.deform)
         x = particles.x[:, None, :] + pts[None, :, :] * ell[:, None, :]
-        return Samples(x, np.broadcast_to(wts, (len(particles), len(wts))).copy())
+        return Samples(x, np.broadcast_to(wts, (len(particles), len(wts))).copy(), beyond="cut")
 
 
 def corner_signs(d: int) -> npt.NDArray:
@@ -228,11 +258,22 @@ class CPDI2:
         return Samples(c.copy(), w, g, grad_from_values=False)
 
 
-DOMAINS = {"point": Point, "gimp": GIMP, "cpdi1": CPDI1, "cpdi2": CPDI2}
+def _ugimp(order: int | None = None) -> GIMP:
+    return GIMP(order, deform=False, name="ugimp")
+
+
+def _cpgimp(order: int | None = None) -> GIMP:
+    return GIMP(order, deform=True, name="cpgimp")
+
+
+#: the domains by name: ``gimp`` (uGIMP unless ``deform=True``), ``ugimp`` (boxes of the
+#: initial size) and ``cpgimp`` (boxes stretched by diag F) are exact unless given an ``order``
+DOMAINS = {"point": Point, "gimp": GIMP, "ugimp": _ugimp, "cpgimp": _cpgimp, "cpdi1": CPDI1, "cpdi2": CPDI2}
+GIMP_NAMES = ("gimp", "ugimp", "cpgimp")
 
 
 def make_domain(name: str, **kwargs):
-    """A domain by name: point, gimp, cpdi1, cpdi2 (unknown names are errors)."""
+    """A domain by name: point, gimp, ugimp, cpgimp, cpdi1, cpdi2 (unknown names are errors)."""
     if name not in DOMAINS:
         raise ValueError(f"unknown option domain={name!r}; expected one of {', '.join(DOMAINS)}")
     return DOMAINS[name](**kwargs)

@@ -143,6 +143,24 @@ class CellGeometry:
                 inside &= np.all(X <= 1.0 + tol, axis=1)
         return inside & np.all(np.isfinite(X), axis=1)
 
+    def closest_points(self, cells: npt.NDArray[np.int32], x: npt.NDArray) -> npt.NDArray:
+        """The closest point of each cell to the point ``x`` outside it (n, gdim): the nearest
+        point of the cell's facets, taken as straight segments (2D) or triangles (3D; a
+        quadrilateral face as two triangles)."""
+        x = np.asarray(x, dtype=np.float64)[:, : self.gdim]
+        verts = self.x[self.dofmap[cells]]  # (n, nodes, gdim); vertices first
+        topo = basix.topology(self.basix_cell)[self.tdim - 1]
+        best = np.full(len(x), np.inf)
+        out = x.copy()
+        for facet in topo:  # loop over the few facets of a cell, not over points
+            tris = [facet] if len(facet) <= 3 else [[facet[0], facet[1], facet[3]], [facet[0], facet[2], facet[3]]]
+            for tri in tris:
+                y = _closest_on_simplex(verts[:, tri, :], x)
+                dist = np.linalg.norm(y - x, axis=1)
+                closer = dist < best
+                best[closer], out[closer] = dist[closer], y[closer]
+        return out
+
     def cell_volumes(self) -> npt.NDArray:
         """Volumes of all local cells (owned and ghost), by Gauss quadrature of ``|det J|``."""
         ncells = self.dofmap.shape[0]
@@ -154,3 +172,31 @@ class CellGeometry:
         dphi = self._tabulate(1, Xq)[1:]  # (tdim, q, ndofs)
         J = np.einsum("tqk,ckg->cqgt", dphi, self.x[self.dofmap[:ncells]])
         return np.abs(np.linalg.det(J)) @ wq
+
+
+def _closest_on_segment(a: npt.NDArray, b: npt.NDArray, x: npt.NDArray) -> npt.NDArray:
+    ab = b - a
+    t = np.einsum("nd,nd->n", x - a, ab) / np.maximum(np.einsum("nd,nd->n", ab, ab), 1e-300)
+    return a + np.clip(t, 0.0, 1.0)[:, None] * ab
+
+
+def _closest_on_simplex(S: npt.NDArray, x: npt.NDArray) -> npt.NDArray:
+    """Closest points of vertices (n, 1), segments (n, 2) or triangles (n, 3) to ``x`` (n, d)."""
+    k = S.shape[1]
+    if k == 1:
+        return S[:, 0]
+    if k == 2:
+        return _closest_on_segment(S[:, 0], S[:, 1], x)
+    a, b, c = S[:, 0], S[:, 1], S[:, 2]
+    E = np.stack([b - a, c - a], axis=2)  # (n, d, 2)
+    lam = np.linalg.solve(np.swapaxes(E, 1, 2) @ E, (np.swapaxes(E, 1, 2) @ (x - a)[:, :, None]))[:, :, 0]
+    y = a + np.einsum("ndk,nk->nd", E, lam)
+    inside = (lam >= 0).all(axis=1) & (lam.sum(axis=1) <= 1)
+    best = np.where(inside, 0.0, np.inf)
+    best_y = np.where(inside[:, None], y, x)
+    for p, q in ((a, b), (b, c), (c, a)):
+        z = _closest_on_segment(p, q, x)
+        dist = np.linalg.norm(z - x, axis=1)
+        closer = ~inside & (dist < best)
+        best[closer], best_y[closer] = dist[closer], z[closer]
+    return best_y

@@ -96,6 +96,63 @@ def remote_rows(locator: CellLocator, element, V, x: npt.NDArray, gradients: boo
     return RemoteRows(found, gdofs, owners, N, dN)
 
 
+@dataclass
+class RemoteBoxRows:
+    """Integrals over the parts of boxes in cells other ranks own: rows (box, global dof, owner
+    rank, :math:`\\int N`, :math:`\\int \\nabla N`) and the covered volume per box."""
+
+    box: npt.NDArray[np.int64]
+    gdofs: npt.NDArray[np.int64]
+    owners: npt.NDArray[np.int32]
+    N: npt.NDArray
+    dN: npt.NDArray | None
+    volume: npt.NDArray
+
+
+def _global_rows(V, local: npt.NDArray, rank: int) -> tuple[npt.NDArray, npt.NDArray]:
+    """Global numbers and owner ranks of local dofs of ``V``."""
+    imap = V.dofmap.index_map
+    gd = imap.local_to_global(local.astype(np.int32))
+    nown = imap.size_local
+    owners = np.where(local < nown, rank, np.asarray(imap.owners)[np.maximum(local - nown, 0)])
+    return gd.astype(np.int64), owners.astype(np.int32)
+
+
+def remote_box_rows(locator: CellLocator, integrator, lo: npt.NDArray, hi: npt.NDArray, gradients: bool,
+                    V) -> RemoteBoxRows:
+    """The integrals of :class:`fempm.box_average.BoxIntegrator` over the parts of the boxes
+    ``[lo, hi]`` (m, d) that lie in cells owned by other ranks. Each box goes to the ranks
+    whose owned cells' bounding box it overlaps; they integrate over their owned cells and
+    answer with global dofs. Collective."""
+    comm = locator.mesh.comm
+    rank, size, d = comm.rank, comm.size, lo.shape[1]
+    bins = integrator.bins
+    mine = np.concatenate([bins.lo.min(axis=0, initial=np.inf), bins.hi.max(axis=0, initial=-np.inf)])
+    extents = np.array(comm.allgather(mine))  # (size, 2 d)
+    sent = [np.flatnonzero(np.all((lo <= extents[r, d:]) & (hi >= extents[r, :d]), axis=1)) if r != rank
+            else np.zeros(0, dtype=np.int64) for r in range(size)]
+    received = comm.alltoall([np.hstack([lo[i], hi[i]]) for i in sent])
+    answers = []
+    for boxes in received:
+        r = integrator.integrals(boxes[:, :d], boxes[:, d:], gradients)
+        gd, own = _global_rows(V, r.dofs, rank)
+        cols = [r.box[:, None].astype(float), gd[:, None].astype(float), own[:, None].astype(float), r.N[:, None]]
+        if gradients:
+            cols.append(r.dN)
+        answers.append((np.hstack(cols) if len(r.box) else np.zeros((0, 4 + (d if gradients else 0))), r.volume))
+    back = comm.alltoall(answers)
+    volume = np.zeros(len(lo))
+    parts = []
+    for r, (rows, vol) in enumerate(back):
+        volume[sent[r]] += vol
+        rows = rows.copy()
+        rows[:, 0] = sent[r][np.rint(rows[:, 0]).astype(np.int64)] if len(rows) else rows[:, 0]
+        parts.append(rows)
+    rows = np.concatenate(parts) if parts else np.zeros((0, 4 + (d if gradients else 0)))
+    return RemoteBoxRows(np.rint(rows[:, 0]).astype(np.int64), np.rint(rows[:, 1]).astype(np.int64),
+                         np.rint(rows[:, 2]).astype(np.int32), rows[:, 3], rows[:, 4:] if gradients else None, volume)
+
+
 def extend_index_map(
     index_map: dolfinx.common.IndexMap, gdofs: npt.NDArray[np.int64], owners: npt.NDArray[np.int32]
 ) -> tuple[dolfinx.common.IndexMap, npt.NDArray[np.int32]]:

@@ -63,7 +63,10 @@ class CellLocator:
         entities = np.arange(nlocal, dtype=np.int32)
         extent = np.ptp(self.geometry.x, axis=0).max() if len(self.geometry.x) else 1.0
         self.tree = dolfinx.geometry.bb_tree(mesh, tdim, entities=entities, padding=1e-8 * extent)
+        self._entities = entities
         self._global_tree = None
+        self._midpoint_tree = None
+        self._cell_bins = None
 
     @property
     def global_tree(self):
@@ -71,6 +74,28 @@ class CellLocator:
         if self._global_tree is None:
             self._global_tree = self.tree.create_global_tree(self.mesh.comm)
         return self._global_tree
+
+    def closest(self, x: npt.NDArray) -> tuple[npt.NDArray[np.int32], npt.NDArray]:
+        """For points outside the located cells: the closest cell (owned, or with ``ghosts``
+        also ghost) and the closest point of it (n, gdim), the point clamped onto the mesh."""
+        if self._midpoint_tree is None:
+            self._midpoint_tree = dolfinx.geometry.create_midpoint_tree(self.mesh, self.geometry.tdim, self._entities)
+        if len(x) == 0:
+            return np.zeros(0, dtype=np.int32), np.zeros((0, self.geometry.gdim))
+        cells = np.asarray(dolfinx.geometry.compute_closest_entity(self.tree, self._midpoint_tree, self.mesh,
+                                                                   as_points3(x)), dtype=np.int32)
+        return cells, self.geometry.closest_points(cells, x)
+
+    @property
+    def cell_bins(self):
+        """Bounding boxes of the *owned* cells in a uniform bin grid (:class:`fempm.box_average.CellBins`),
+        made on first use."""
+        if self._cell_bins is None:
+            from fempm.box_average import CellBins
+
+            owned = self.mesh.topology.index_map(self.geometry.tdim).size_local
+            self._cell_bins = CellBins(self.geometry, np.arange(owned, dtype=np.int32))
+        return self._cell_bins
 
     def candidate_ranks(self, x: npt.NDArray) -> tuple[npt.NDArray, npt.NDArray]:
         """Pairs (point index, rank) whose rank's bounding box holds the point."""

@@ -12,7 +12,7 @@ from conftest import make_mesh
 from mpi4py import MPI
 
 from fempm.basis import ParticleBasis
-from fempm.domains import CPDI1, CPDI2, GIMP, box_corners, domain_geometry, make_domain
+from fempm.domains import CPDI1, CPDI2, GIMP, box_corners, domain_geometry, half_widths, make_domain
 from fempm.meshes import unstructured_rectangle
 from fempm.stepping import cell_sizes
 
@@ -155,13 +155,25 @@ def test_large_domains_across_ranks(name):
     assert comm.allreduce(err, op=MPI.MAX) < 1e-7
 
 
-def test_domain_outside_the_mesh_is_an_error():
+def test_domain_beyond_the_mesh_is_cut_off():
+    """Boxes stretched 3x past the sides of the square: exact GIMP averages over the part inside,
+    i.e. equals GIMP on the truncated boxes (lumped masses to round-off); the Gauss rule drops
+    its points outside; both keep the partition of unity. Unknown domain names are errors."""
+    from fempm.transfer import Projector
+
     mesh = make_mesh("quadrilateral")
-    p = fempm.create_particles(mesh, 4, density=1.0)  # boxes at the boundary reach past it with deform
+    p = fempm.create_particles(mesh, 4, density=1.0)
+    ell = 3.0 * half_widths(p)
     p.fields["F"] = np.broadcast_to(np.eye(2) * 3.0, (len(p), 2, 2)).copy()
     V = fem.functionspace(mesh, ("Lagrange", 1))
-    with pytest.raises(fempm.OutsideMeshError, match="sample point"):
-        ParticleBasis(V, p, domain=GIMP(2, deform=True))
+    for dom in (GIMP(None, deform=True), GIMP(2, deform=True)):
+        basis = ParticleBasis(V, p, domain=dom)
+        assert np.abs(basis.values.sum(axis=1) - 1).max(initial=0) < 1e-12
+    m_cut = Projector(V, p, mass="lumped", domain=GIMP(None, deform=True)).lumped_masses()
+    lo, hi = np.maximum(p.x - ell, 0.0), np.minimum(p.x + ell, 1.0)
+    q = fempm.Particles(mesh, (lo + hi) / 2, p.mass, p.volume, fields={"lp": (hi - lo) / 2})
+    m_trunc = Projector(V, q, mass="lumped", domain=GIMP(None)).lumped_masses()
+    assert np.abs(m_cut - m_trunc).max() < 1e-14 * m_cut.max()
     with pytest.raises(ValueError, match="unknown option domain"):
         make_domain("bspline")
 
@@ -170,7 +182,9 @@ def test_step_options_build_the_domains():
     from fempm.stepping import StepOptions
 
     assert StepOptions(domain="gimp", gimp_order=3, gimp_deform=True).particle_domain == GIMP(3, deform=True)
-    assert StepOptions(domain="gimp").particle_domain == GIMP(2, deform=False)
+    assert StepOptions(domain="gimp").particle_domain == GIMP(None, deform=False)  # exact by default
+    assert StepOptions(domain="cpgimp").particle_domain == GIMP(None, deform=True, name="cpgimp")
+    assert StepOptions(domain="ugimp", gimp_deform=True).particle_domain == GIMP(None, deform=False, name="ugimp")
     assert StepOptions(domain="cpdi1").particle_domain == CPDI1()
     assert StepOptions(domain="cpdi2").particle_domain == CPDI2()
     with pytest.raises(ValueError, match="position='particle' would detach"):
