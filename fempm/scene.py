@@ -11,6 +11,7 @@ from pathlib import Path
 
 import dolfinx.fem
 import dolfinx.mesh
+import numpy as np
 from mpi4py import MPI
 
 from fempm.io import RunWriter
@@ -23,7 +24,11 @@ class Scene:
     """Everything a run needs.
 
     ``bcs`` builds the grid conditions from the vector space (``V -> [Fixed | Slip]``).
-    ``frames`` particle/grid frames are written over ``[0, t_end]``.
+    ``frames`` particle/grid frames are written over ``[0, t_end]``. ``dt``: a fixed time step
+    (the last step is shortened so that the run ends exactly at ``t_end``; a step above the
+    stability limit is an error); None (default) takes the CFL step of
+    :meth:`ExplicitSolver.stable_dt` every step. ``variant``: the Lagrange variant of the
+    velocity space (e.g. ``"bernstein"``, non-negative on simplices), default the DOLFINx one.
     """
 
     name: str
@@ -37,9 +42,26 @@ class Scene:
     degree: int = 1
     frames: int = 20
     params: dict = field(default_factory=dict)
+    dt: float | None = None
+    variant: str | None = None
+
+    def __post_init__(self):
+        if self.dt is not None and not (np.isfinite(self.dt) and self.dt > 0):
+            raise ValueError(f"dt={self.dt} must be a positive number (or None for the CFL step)")
+
+    def space(self) -> dolfinx.fem.FunctionSpace:
+        """The vector Lagrange velocity space of the scene's degree (and variant)."""
+        d = self.mesh.geometry.dim
+        if self.variant is None:
+            return dolfinx.fem.functionspace(self.mesh, ("Lagrange", self.degree, (d,)))
+        import basix.ufl
+
+        variant = getattr(basix.LagrangeVariant, self.variant)
+        return dolfinx.fem.functionspace(
+            self.mesh, basix.ufl.element("Lagrange", self.mesh.basix_cell(), self.degree, variant, shape=(d,)))
 
     def solver(self) -> ExplicitSolver:
-        V = dolfinx.fem.functionspace(self.mesh, ("Lagrange", self.degree, (self.mesh.geometry.dim,)))
+        V = self.space()
         bcs = list(self.bcs(V)) if self.bcs is not None else []
         return ExplicitSolver(V, self.particles, self.materials, bcs=bcs, loads=self.loads, options=self.options)
 
@@ -74,13 +96,19 @@ def run(
     t0 = time.perf_counter()
     last_print = t0
     try:
-        while solver.t < scene.t_end * (1 - 1e-12):
+        while solver.t < scene.t_end:
             if writer is not None and solver.t >= next_frame:
                 writer.particles(scene.particles, solver.t)
                 if solver.grid_velocity is not None:
                     writer.grid(solver.grid_velocity, solver.t, stress=solver.grid_stress())
                 next_frame += scene.t_end / max(scene.frames, 1)
-            dt = solver.step(dt_max=scene.t_end - solver.t)
+            remaining = scene.t_end - solver.t
+            if scene.dt is None:
+                dt = solver.step(dt_max=remaining)
+            else:  # a last step shorter than 1e-9 dt is merged into the one before
+                dt = solver.step(remaining if remaining <= scene.dt * (1 + 1e-9) else scene.dt)
+            if dt >= remaining:  # the final step: end exactly at t_end
+                solver.t = scene.t_end
             row = {"step": solver.step_count, "dt": dt, **solver.energies()}
             history.append(row)
             if writer is not None:

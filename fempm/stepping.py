@@ -25,15 +25,16 @@ from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from typing import Literal
 
+import basix.ufl
 import dolfinx.fem
 import dolfinx.mesh
 import numpy as np
 import numpy.typing as npt
 from mpi4py import MPI
 
-from fempm.basis import ParticleBasis
+from fempm.basis import ParticleBasis, is_nonnegative
 from fempm.boundary import Fixed
-from fempm.domains import domain_geometry, make_domain
+from fempm.domains import GIMP_NAMES, domain_geometry, make_domain
 from fempm.materials.base import identity
 from fempm.particles import Particles
 from fempm.transfer import Projector, p2g, p2g_gradients
@@ -56,7 +57,8 @@ class StepOptions:
 
     scheme: USL, USF or MUSL. flip: PIC/FLIP blend alpha (1 = FLIP, 0 = PIC).
     mass: lumped or consistent. cfl: Courant number in (0, 1]. mass_cutoff: nodes whose
-    lumped mass is below this fraction of the largest get no force update (they keep the
+    lumped mass (for P2 Lagrange: :math:`\sum_p M_p |N_{ip}|`) is below this fraction of the
+    largest get no force update (they keep the
     mapped particle velocity, a bounded weighted average, instead of :math:`+\Delta t f_i/m_i`). position:
     move particles with the grid velocity (default) or their own updated velocity (the seed's
     :math:`x_p^+ = x_p + \Delta t\, v_p^+`). lumped_forces: with consistent mass, map the
@@ -64,11 +66,16 @@ class StepOptions:
     the CFL step when weakly supported boundary nodes make the consistent matrix nearly
     singular). lump_below: with consistent mass, lump the rows of dofs whose lumped mass is
     below this fraction of the largest (free-surface rims; raises the stable step). domain:
-    point (standard MPM), gimp (box average, ``gimp_order`` Gauss points per axis; boxes of
-    the initial size (uGIMP), or stretched by the diagonal of F with ``gimp_deform``), cpdi1
+    point (standard MPM), gimp (box average, integrated exactly over the box's pieces in the
+    cells, or with ``gimp_order`` Gauss points per axis; boxes of the initial size (uGIMP), or
+    stretched by the diagonal of F with ``gimp_deform``), ugimp and cpgimp (the same with the
+    box kept or stretched, whatever ``gimp_deform`` says), cpdi1
     (parallelograms that follow F) or cpdi2 (domains tracked by their corners
     ``fields["corners"]``, moved with the grid velocity; the particle sits at its domain's
-    centroid and has its volume), see :mod:`fempm.domains`.
+    centroid and has its volume), see :mod:`fempm.domains`. damping: mass-proportional
+    damping rate :math:`c` (1/s) of the grid acceleration, :math:`a_i \leftarrow a_i - c\, v_i`
+    (it leaves a static solution unchanged; :math:`c \approx 2\omega_1` damps the lowest mode
+    critically, for loading to a static state).
     """
 
     scheme: Scheme = "USL"
@@ -80,9 +87,10 @@ class StepOptions:
     lumped_forces: bool = False
     lump_below: float = 0.1
     domain: str = "point"
-    gimp_order: int = 2
+    gimp_order: int | None = None
     gimp_deform: bool = False
     petsc_options_prefix: str = "fempm_step_"
+    damping: float = 0.0
 
     def __post_init__(self):
         if self.scheme not in ("USL", "USF", "MUSL"):
@@ -96,23 +104,59 @@ class StepOptions:
         if self.domain == "cpdi2" and self.position == "particle":
             raise ValueError("domain='cpdi2' moves the particle domains' corners with the grid velocity and the "
                              "particle with its domain's centroid: position='particle' would detach them")
-        gimp = {"order": self.gimp_order, "deform": self.gimp_deform}
-        self.particle_domain = make_domain(self.domain, **(gimp if self.domain == "gimp" else {}))
+        gimp = {"order": self.gimp_order, **({"deform": self.gimp_deform} if self.domain == "gimp" else {})}
+        self.particle_domain = make_domain(self.domain, **(gimp if self.domain in GIMP_NAMES else {}))
+        if not self.damping >= 0.0:
+            raise ValueError(f"damping={self.damping} must be >= 0")
         if not 0.0 < self.cfl <= 1.0:
             raise ValueError(f"cfl={self.cfl} must lie in (0, 1]: a CFL number above 1 is unstable")
 
 
 @dataclass
 class Loads:
-    """External loads; a term left None is never assembled.
+    r"""External loads; a term left None is never assembled.
 
-    body_force: acceleration (d,) or a function (x (n, d), t) -> (n, d), per unit mass.
-    traction: per-particle traction (n, d) on surface particles (zero rows elsewhere) and the
-    particle's cell size ``h`` in :math:`\\bar t_p h^{-1} V_p`, given as a function t -> (n, d).
+    body_force: acceleration (d,), or a function of the current positions ``x`` (n, d) and the
+    time ``t``, ``f(x, t)``, or also of the reference positions ``X`` (n, d), ``f(x, t, X)``
+    (the particles' ``fields["X0"]``, e.g. a manufactured body force :math:`b(X, t)`); it
+    returns (n, d), per unit mass. The number of positional parameters decides which is called.
+
+    traction: a function t -> (n, d), the traction :math:`\bar t_p` on each particle (zero rows
+    away from the loaded surface), applied as the force :math:`\bar t_p A_p` where :math:`A_p`
+    is the particle's share of the loaded surface: ``fields["area"]`` when the particles carry
+    it (e.g. from :func:`surface_areas`), else :math:`(V^0_p)^{(d-1)/d}`, the face of a cubic
+    particle (exact for a layer of square/cubic particles on a flat face, at any number of
+    particles per cell).
     """
 
     body_force: npt.ArrayLike | Callable | None = None
     traction: Callable[[float], npt.NDArray] | None = None
+
+
+def takes_reference_positions(fn: Callable) -> bool:
+    """Whether a body-force callable takes ``(x, t, X)`` (three positional parameters) rather
+    than ``(x, t)``."""
+    import inspect
+
+    try:
+        params = inspect.signature(fn).parameters.values()
+    except (TypeError, ValueError):  # builtins without a signature: the (x, t) form
+        return False
+    if any(p.kind == p.VAR_POSITIONAL for p in params):
+        return True
+    positional = [p for p in params if p.kind in (p.POSITIONAL_ONLY, p.POSITIONAL_OR_KEYWORD)]
+    return len(positional) >= 3
+
+
+def surface_areas(volumes: npt.NDArray, loaded: npt.NDArray[np.bool_], measure: float, comm) -> npt.NDArray:
+    r"""Each loaded particle's share :math:`A_p = |\Gamma|\, V_p / \sum_{q\ loaded} V_q` of a
+    loaded surface of measure ``measure`` (length in 2D, area in 3D), 0 elsewhere, so that a
+    uniform traction :math:`\bar t` applies exactly the total force :math:`\bar t |\Gamma|`
+    (collective: the sum runs over all ranks)."""
+    total = comm.allreduce(float(np.sum(volumes[loaded])))
+    if total <= 0:
+        raise ValueError("no particle carries the loaded surface")
+    return np.where(loaded, measure * volumes / total, 0.0)
 
 
 def cell_sizes(mesh) -> npt.NDArray:
@@ -133,7 +177,8 @@ class ExplicitSolver:
     """Explicit MPM on the vector P1 (or P2/Bernstein) space ``V`` of the particles' mesh.
 
     Particle state lives in ``particles.fields``: ``v`` (n, d), ``F`` (n, d, d), ``sigma``
-    (n, d, d), ``volume0`` (n,), ``body`` (n,) index into ``materials``.
+    (n, d, d), ``volume0`` (n,), ``body`` (n,) index into ``materials``, and the reference
+    positions ``X0`` (n, d) (the positions when the solver is made, unless given).
     """
 
     V: dolfinx.fem.FunctionSpace
@@ -155,6 +200,7 @@ class ExplicitSolver:
         f.setdefault("sigma", np.zeros((n, d, d)))
         f.setdefault("volume0", p.volume.copy())
         f.setdefault("body", np.zeros(n, dtype=np.int32))
+        f.setdefault("X0", p.x.copy())  # reference positions (body forces b(X, t), error norms)
         self.h_cell = cell_sizes(p.mesh)
         self.terms: Counter = Counter()  # how often each force term was assembled
         self.grid_velocity: npt.NDArray | None = None  # last step's, also the CG warm start
@@ -226,15 +272,36 @@ class ExplicitSolver:
         f = p2g_gradients(basis, -p.volume[:, None, None] * p.fields["sigma"])
         self.terms["internal"] += 1
         if self.loads.body_force is not None:
-            b = self.loads.body_force
-            acc = b(p.x, t) if callable(b) else np.broadcast_to(np.asarray(b, float), p.x.shape)
-            f += p2g(basis, p.mass[:, None] * acc)
+            f += p2g(basis, p.mass[:, None] * self._body_force(t))
             self.terms["body_force"] += 1
         if self.loads.traction is not None:
-            tbar = self.loads.traction(t)
-            f += p2g(basis, tbar * (p.volume / self.h_cell[p.cells])[:, None])
+            f += p2g(basis, self.loads.traction(t) * self._surface_areas()[:, None])
             self.terms["traction"] += 1
         return f
+
+    def _body_force(self, t: float) -> npt.NDArray:
+        """Body force per unit mass at the particles (n, d)."""
+        p = self.particles
+        b = self.loads.body_force
+        if not callable(b):
+            return np.broadcast_to(np.asarray(b, float), p.x.shape)
+        if takes_reference_positions(b):
+            acc = b(p.x, t, p.fields["X0"])
+        else:
+            acc = b(p.x, t)
+        acc = np.asarray(acc, dtype=np.float64)
+        if acc.shape != p.x.shape:
+            raise ValueError(f"the body force returned shape {acc.shape} for {len(p)} particles in {p.gdim}D "
+                             f"(expected {p.x.shape})")
+        return acc
+
+    def _surface_areas(self) -> npt.NDArray:
+        """The particles' shares of the loaded surface (see :class:`Loads`)."""
+        f = self.particles.fields
+        if "area" in f:
+            return f["area"]
+        d = self.particles.gdim
+        return f["volume0"] ** ((d - 1) / d)
 
     # -- the step -----------------------------------------------------------------------------
     def step(self, dt: float | None = None, *, dt_max: float = np.inf) -> float:
@@ -259,7 +326,8 @@ class ExplicitSolver:
         elif dt > stable / opts.cfl:
             self._fail(f"time step {dt:.3g} exceeds the stability limit {stable / opts.cfl:.3g} (CFL > 1)")
         m = mass_op.lumped_masses()
-        weak = m <= opts.mass_cutoff * p.comm.allreduce(float(m.max(initial=0.0)), op=MPI.MAX)
+        support = mass_op.support_masses()
+        weak = support <= opts.mass_cutoff * p.comm.allreduce(float(support.max(initial=0.0)), op=MPI.MAX)
         v_old = self._map_velocity(basis, mass_op, guess=self.grid_velocity)
         if opts.scheme == "USF":
             self._update_stress(self._velocity_gradient(basis, v_old), dt)
@@ -268,6 +336,8 @@ class ExplicitSolver:
             a = np.where(mass_op.active[:, None], f_grid / np.where(m > 0, m, 1.0)[:, None], 0.0)
         else:
             a = mass_op.solve(f_grid)
+        if opts.damping > 0.0:
+            a -= opts.damping * v_old[: len(a)]
         a[weak] = 0.0  # nodes with a tiny share of mass keep their mapped velocity, no force update
         v_new = v_old + dt * a
         self._apply_bcs(v_new)
@@ -317,17 +387,24 @@ class ExplicitSolver:
             self._fail(f"non-finite state at particle(s) {self._ids(bad)}")
 
     # -- diagnostics --------------------------------------------------------------------------
-    def grid_stress(self, mass: Literal["lumped", "consistent"] = "lumped") -> dolfinx.fem.Function:
-        r"""Cauchy stress on the grid (a tensor Lagrange Function of ``V``'s degree), projected
-        as a per-volume field with the particle domains of the loop: lumped,
+    def grid_stress(self, mass: Literal["lumped", "consistent"] | None = None) -> dolfinx.fem.Function:
+        r"""Cauchy stress on the grid (a tensor Lagrange Function of ``V``'s degree and variant),
+        projected as a per-volume field with the particle domains of the loop: lumped,
         :math:`\sigma_i = \sum_p V_p \langle N_i \rangle_p \sigma_p / \sum_p V_p \langle N_i \rangle_p`
         (seed 001's density-ratio kernel), or the volume-weighted least-squares projection
-        (``mass="consistent"``). Collective."""
+        (``mass="consistent"``, rim dofs lumped as in the loop). The default is lumped where the
+        basis is non-negative (P1/Q1, Bernstein) and consistent otherwise (P2 Lagrange, whose
+        lumped vertex masses can vanish). Collective."""
         p = self.particles
         d = p.gdim
-        if self._stress_space is None:
-            self._stress_space = dolfinx.fem.functionspace(p.mesh, ("Lagrange", self.V.element.basix_element.degree, (d, d)))
+        if self._stress_space is None:  # the velocity space's element (family, degree, variant), tensor-valued
+            el = self.V.element.basix_element
+            self._stress_space = dolfinx.fem.functionspace(
+                p.mesh, basix.ufl.element(el.family, el.cell_type, el.degree, el.lagrange_variant, shape=(d, d)))
+        if mass is None:
+            mass = "lumped" if is_nonnegative(self._stress_space.element.basix_element) else "consistent"
         proj = Projector(self._stress_space, p, mass=mass, weight="volume", domain=self.options.particle_domain,
+                         lump_below=self.options.lump_below if mass == "consistent" else 0.0,
                          petsc_options_prefix=self.options.petsc_options_prefix + "stress_")
         out = proj.project(p.fields["sigma"].reshape(len(p), d * d))
         out.name = "grid_stress"

@@ -148,7 +148,9 @@ class Projector:
     (Dirichlet). ``domain``: particle domains (:mod:`fempm.domains`; default the point).
     ``lump_below`` (consistent mode): dofs whose lumped mass is below this
     fraction of the largest get lumped rows and columns (see :func:`consistent_mass_matrix`),
-    so that the solve does not extrapolate into nodes that particles barely reach.
+    so that the solve does not extrapolate into nodes that particles barely reach. It applies
+    to non-negative bases only: with P2 Lagrange, row sums can be zero or negative and moving
+    the (signed) couplings to the diagonal can make the matrix indefinite.
 
     ``weight``: "mass" (default) fits :math:`\min_F \sum_p M_p (\langle F \rangle_p - f_p)^2`,
     for per-mass (intensive) fields such as velocity; "volume" weights by :math:`V_p`, for
@@ -222,7 +224,7 @@ class Projector:
                     "seed more particles per cell or use a lower degree"
                 )
             lump = None
-            if lump_below > 0.0:
+            if lump_below > 0.0 and self.basis.nonnegative:  # P2 Lagrange: lumping can make it indefinite
                 m = self.lumped_masses()
                 lump = m < lump_below * comm.allreduce(float(m[: self.num_owned].max(initial=0.0)), op=MPI.MAX)
             A = consistent_mass_matrix(self.basis, particles, lump, weight)
@@ -268,6 +270,14 @@ class Projector:
         for obj in (ksp, x, b):
             obj.destroy()
         return float(min(max(smin, 0.0), 1.0))
+
+    def support_masses(self) -> npt.NDArray:
+        r"""How much particle mass each dof sees, :math:`\sum_p M_p |\langle N_i \rangle_p|` on
+        owned + ghost dofs: the lumped mass for a non-negative basis, and a positive measure of
+        support where lumped masses can vanish or be negative (P2 Lagrange)."""
+        if self.basis.nonnegative:
+            return self.lumped_masses()
+        return p2g(self.basis, self.weights, values=np.abs(self.basis.values))[:, 0]
 
     def lumped_masses(self) -> npt.NDArray:
         """Lumped nodal masses on owned + ghost dofs (computed once)."""
