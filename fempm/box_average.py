@@ -124,7 +124,15 @@ def clip_simplices(P: npt.NDArray, lo: npt.NDArray, hi: npt.NDArray) -> tuple[np
     triangles) or a prism (3D, ``j = 2, 3``: three tetrahedra
     :math:`(a_0 a_1 a_2 b_0), (a_1 a_2 b_0 b_1), (a_2 b_0 b_1 b_2)`)."""
     m, k, d = P.shape
-    parent = np.arange(m)
+    inside_box = (P >= lo[:, None, :]) & (P <= hi[:, None, :])  # (m, k, d)
+    whole = inside_box.all(axis=(1, 2))
+    apart = ((P < lo[:, None, :]).all(axis=1) | (P > hi[:, None, :]).all(axis=1)).any(axis=1)
+    cut_by = np.flatnonzero(~whole & ~apart)  # only these meet a plane of their box
+    kept, kept_parent = [P[whole]], [np.flatnonzero(whole)]
+    P, parent = P[cut_by], cut_by
+    # vertex orders with the inside vertices first, by the bit mask of inside vertices
+    masks = np.arange(2**k)
+    table = np.array([np.argsort([-((mk >> v) & 1) for v in range(k)], kind="stable") for mk in masks])
     for a, side in itertools.product(range(d), (-1.0, 1.0)):
         bound = (lo if side < 0 else hi)[parent, a]
         s = side * (P[:, :, a] - bound[:, None])  # <= 0 inside
@@ -132,11 +140,12 @@ def clip_simplices(P: npt.NDArray, lo: npt.NDArray, hi: npt.NDArray) -> tuple[np
         nin = inside.sum(axis=1)
         keep = nin == k
         pieces, parents = [P[keep]], [parent[keep]]
+        order_all = table[inside.astype(np.int64) @ (1 << np.arange(k))]
         for j in range(1, k):
             sel = np.flatnonzero(nin == j)
             if sel.size == 0:
                 continue
-            order = np.argsort(~inside[sel], axis=1, kind="stable")  # inside vertices first
+            order = order_all[sel]
             V = np.take_along_axis(P[sel], order[:, :, None], axis=1)
             S = np.take_along_axis(s[sel], order, axis=1)
 
@@ -148,7 +157,7 @@ def clip_simplices(P: npt.NDArray, lo: npt.NDArray, hi: npt.NDArray) -> tuple[np
                 pieces.append(simplex)
                 parents.append(parent[sel])
         P, parent = np.concatenate(pieces), np.concatenate(parents)
-    return P, parent
+    return np.concatenate(kept + [P]), np.concatenate(kept_parent + [parent])
 
 
 def _pieces(d: int, j: int, V: npt.NDArray, cut) -> list[npt.NDArray]:
