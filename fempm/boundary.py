@@ -38,16 +38,33 @@ class Slip:
         v[self.dofs] -= vn[:, None] * n
 
 
+def locate_dofs(V: dolfinx.fem.FunctionSpace, where: Callable[[npt.NDArray], npt.NDArray]) -> npt.NDArray[np.int32]:
+    """(Block) dofs where ``where(x)`` holds (x of shape (3, n)): at the dof positions for
+    Lagrange spaces with point evaluation; for others (Bernstein), the dofs of every mesh
+    entity (vertex, edge, face, cell) whose vertices all satisfy ``where``."""
+    if V.element.interpolation_ident:  # dofs are point values
+        return np.asarray(dolfinx.fem.locate_dofs_geometrical(V, where), dtype=np.int32)
+    mesh = V.mesh
+    found = []
+    for dim in range(mesh.topology.dim + 1):
+        mesh.topology.create_entities(dim)
+        entities = dolfinx.mesh.locate_entities(mesh, dim, where)
+        mesh.topology.create_connectivity(dim, mesh.topology.dim)
+        found.append(np.asarray(dolfinx.fem.locate_dofs_topological(V, dim, entities), dtype=np.int32))
+    return np.unique(np.concatenate(found))
+
+
 def fixed(V: dolfinx.fem.FunctionSpace, where: Callable[[npt.NDArray], npt.NDArray]) -> Fixed:
-    """All velocity components zero at the dofs where ``where(x)`` holds (x of shape (3, n))."""
-    return Fixed(np.asarray(dolfinx.fem.locate_dofs_geometrical(V, where), dtype=np.int32))
+    """All velocity components zero at the dofs where ``where(x)`` holds (x of shape (3, n);
+    see :func:`locate_dofs`)."""
+    return Fixed(locate_dofs(V, where))
 
 
 def slip(V: dolfinx.fem.FunctionSpace, where: Callable[[npt.NDArray], npt.NDArray], normal) -> Slip:
     """Zero normal velocity at the dofs where ``where(x)`` holds; ``normal`` any direction."""
     n = np.asarray(normal, dtype=np.float64)
     n = n / np.linalg.norm(n)
-    return Slip(np.asarray(dolfinx.fem.locate_dofs_geometrical(V, where), dtype=np.int32), n)
+    return Slip(locate_dofs(V, where), n)
 
 
 def fixed_on_facets(V: dolfinx.fem.FunctionSpace, facet_tags: dolfinx.mesh.MeshTags, tag: int) -> Fixed:

@@ -2,7 +2,8 @@
 
     python -m fempm study mapping [--full] [--domains point gimp cpdi1 cpdi2] [--out DIR]
     python -m fempm study particle-basis [--out DIR]
-    python -m fempm run SCENE [--out DIR] [--option value ...]   (SCENE: bar, disks)
+    python -m fempm study convergence [--quick] [--problems NAME ...] [--out DIR]
+    python -m fempm run SCENE [--out DIR] [--option value ...]   (SCENE: bar, disks, cantilever, dam, block)
 
 Scene options are the keyword arguments of the scene builders in :mod:`fempm.scenes`
 (``python -m fempm run disks --help`` lists them); an unknown option is an error.
@@ -18,8 +19,10 @@ def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(prog="python -m fempm", description="fempm: MPM on DOLFINx meshes")
     sub = parser.add_subparsers(dest="command", required=True)
     study = sub.add_parser("study", help="run a study and write its tables and figures")
-    study.add_argument("name", choices=["mapping", "particle-basis"])
-    study.add_argument("--full", action="store_true", help="more mesh sizes and particle densities")
+    study.add_argument("name", choices=["mapping", "particle-basis", "convergence"])
+    study.add_argument("--full", action="store_true", help="mapping: more mesh sizes and particle densities")
+    study.add_argument("--quick", action="store_true", help="convergence: fewer configurations and smaller sizes")
+    study.add_argument("--problems", nargs="+", metavar="NAME", help="convergence: a subset of the problems")
     study.add_argument("--sizes", type=int, nargs="+", help="cells per side (default 8 16 32; --full: 8 ... 128)")
     study.add_argument("--ppc", type=int, nargs="+", help="particles per cell (default 4 9; --full: 1 4 9 16)")
     study.add_argument("--domains", nargs="+", default=["point"], metavar="DOMAIN",
@@ -47,6 +50,20 @@ def main(argv: list[str] | None = None) -> int:
         if MPI.COMM_WORLD.rank == 0:  # dense operators on small bodies: one rank
             particle_basis.run(out)
             print(f"wrote {out}/properties.md, properties.csv, particle_basis_*.png")
+        return 0
+
+    if args.command == "study" and args.name == "convergence":
+        from mpi4py import MPI
+
+        from fempm.studies import convergence
+
+        out = args.out or Path("output/study-convergence")
+        try:
+            convergence.run(out, quick=args.quick, problems=args.problems)
+        except ValueError as e:
+            parser.error(str(e))
+        if MPI.COMM_WORLD.rank == 0:
+            print(f"wrote {out}/convergence.csv, convergence.md, convergence_*.png")
         return 0
 
     if args.command == "study" and args.name == "mapping":

@@ -63,6 +63,11 @@ class Problem:
     def upper(self) -> tuple[float, ...]:
         return (1.0,) * self.dim
 
+    def contains(self, X: npt.NDArray) -> npt.NDArray[np.bool_]:
+        """Whether reference points (n, d) belong to the body."""
+        X = _cols(X, self.dim)
+        return np.all((X >= np.array(self.lower)) & (X <= np.array(self.upper)), axis=1)
+
     def background(self, h: float) -> tuple[tuple[float, ...], tuple[float, ...]]:
         """Lower and upper corners of the background mesh box for cells of size ``h``."""
         return self.lower, self.upper
@@ -267,6 +272,10 @@ class GeneralizedVortex(Problem):
 
     def background(self, h: float):
         return (-self.half_width,) * 2, (self.half_width,) * 2
+
+    def contains(self, X):
+        R = np.hypot(*_cols(X, 2).T)
+        return (R >= self.r_in) & (R <= self.r_out)
 
     @staticmethod
     def _h(R):

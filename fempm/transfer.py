@@ -249,21 +249,24 @@ class Projector:
         :math:`\omega_{max}^2(M_C) \le \omega_{max}^2(M_L) / \lambda_{min}`, so the lumped-mass
         CFL step times :math:`\sqrt{\lambda_{min}}` is stable with the consistent matrix.
         Estimated from the Lanczos coefficients of ``iterations`` CG steps preconditioned by the
-        lumped mass (PETSc Jacobi of type rowsum) on a pseudo-random right-hand side. Ritz
+        lumped mass (PETSc Jacobi of type rowsum) on a pseudo-random right-hand side; for a
+        basis that is not non-negative (P2 Lagrange), whose row sums can vanish, of
+        :math:`\lambda_{min}(D^{-1} M_C)` with the diagonal :math:`D` instead. Ritz
         values lie inside the spectrum, so the estimate is an upper bound that tightens with
         ``iterations``; callers should keep a safety factor.
         """
         if self.mass != "consistent":
             return 1.0
         ksp = fpetsc.create_ksp(self.particles.comm, "fempm_mass_ratio_", {
-            "ksp_type": "cg", "pc_type": "jacobi", "pc_jacobi_type": "rowsum", "ksp_rtol": 1e-14,
+            "ksp_type": "cg", "pc_type": "jacobi", "ksp_rtol": 1e-14,
+            "pc_jacobi_type": "rowsum" if self.basis.nonnegative else "diagonal",
             "ksp_max_it": iterations, "ksp_norm_type": "preconditioned"})
         ksp.setComputeSingularValues(True)
         ksp.setOperators(self.matrix)
         x, b = self.matrix.createVecs()
         g = np.arange(*b.getOwnershipRange(), dtype=np.float64)
         r = np.sin(12.9898 * g + 1.0) * 43758.5453
-        b.array[:] = (r - np.floor(r) - 0.5) * self.row_mass[self.active[: self.num_owned]]
+        b.array[:] = (r - np.floor(r) - 0.5) * np.abs(self.row_mass[self.active[: self.num_owned]])
         x.set(0.0)
         ksp.solve(b, x)
         smax, smin = ksp.computeExtremeSingularValues()

@@ -1,0 +1,267 @@
+r"""Convergence study of the explicit MPM loop on exact and manufactured solutions.
+
+``python -m fempm study convergence [--quick] [--out DIR]`` runs every configuration of every
+problem (:data:`PROBLEMS`, :func:`configurations`) at a sequence of resolutions, each with a
+fixed time step proportional to the cell size,
+:math:`\Delta t = \mathrm{cfl}\, h / (k\, (c + v_{max}))` (:math:`c` the dilatational wave
+speed, :math:`v_{max}` the largest exact speed, :math:`k` the space's degree), and records the
+particle displacement errors against the exact motion (:func:`fempm.errors.particle_errors`,
+each the maximum over time):
+
+* ``DIR/convergence.csv``, one row per run with the columns :data:`COLUMNS`; ``status`` is
+  ``ok`` or the class of the error that ended the run (the errors are then those measured
+  until it stopped);
+* ``DIR/convergence.md``, the fitted rate of each configuration
+  (``numpy.polyfit`` of :math:`\log e` against :math:`\log h` over its finest ``ok`` sizes,
+  at most :data:`FIT_SIZES`), with a verdict, and the reasons of the failed runs;
+* ``DIR/convergence_<problem>.png``, the :math:`L^2` error against :math:`h` per problem.
+
+A run that fails or stops converging stays a row of the table.
+"""
+
+from __future__ import annotations
+
+import csv
+import time
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+from mpi4py import MPI
+
+from fempm import manufactured as mf
+
+COLUMNS = ["problem", "mesh", "degree", "variant", "mass", "domain", "scheme", "cells", "h", "dt", "steps",
+           "error_max", "error_rms", "error_l2", "wall_s", "status"]
+#: the number of finest ok sizes a rate is fitted over
+FIT_SIZES = 3
+DOMAINS = ("point", "ugimp", "cpgimp", "cpdi1", "cpdi2")
+
+
+@dataclass(frozen=True)
+class Config:
+    """One configuration of a problem: background mesh kind, velocity space (degree and
+    Lagrange variant), mass matrix, particle domain, scheme and particles per cell."""
+
+    mesh: str = "structured"
+    degree: int = 1
+    variant: str = "default"
+    mass: str = "lumped"
+    domain: str = "point"
+    scheme: str = "USL"
+    ppc: int | None = None
+    max_cells: int | None = None  # the finest size run (the costly P2 spaces in 2D stop earlier)
+
+    @property
+    def label(self) -> str:
+        space = f"P{self.degree}" + ("B" if self.variant == "bernstein" else "")
+        return f"{self.mesh} {space} {self.mass} {self.domain} {self.scheme}"
+
+
+@dataclass(frozen=True)
+class ProblemSpec:
+    """A problem of the study: the exact solution, its sizes (full, quick), the CFL number of
+    the fixed time step and its configurations (full, quick)."""
+
+    make: object
+    sizes: tuple[int, ...]
+    quick_sizes: tuple[int, ...]
+    cfl: float
+    configs: tuple[Config, ...]
+    quick_configs: tuple[Config, ...]
+
+
+def _c1d(**kw) -> list[Config]:
+    """1D configurations: P1 lumped and consistent with every domain, P2 consistent and
+    Bernstein P2 (lumped and consistent) with point, cpGIMP and CPDI1 particles (3 per cell)."""
+    out = [Config(mass=m, domain=d, **kw) for m in ("lumped", "consistent") for d in DOMAINS]
+    out += [Config(degree=2, mass="consistent", domain=d, ppc=3, **kw) for d in ("point", "cpgimp", "cpdi1")]
+    out += [Config(degree=2, variant="bernstein", mass=m, domain=d, ppc=3, **kw)
+            for m in ("lumped", "consistent") for d in ("point", "cpgimp")]
+    return out
+
+
+def _c2d(scheme: str, unstructured: tuple[str, ...], p2_max: int) -> list[Config]:
+    """2D configurations: structured quadrilaterals with P1 lumped (every domain) and consistent
+    (point, cpGIMP, CPDI1), Q2 consistent (3x3 particles); unstructured triangles with P1
+    lumped (``unstructured`` domains) and consistent, P2 consistent and Bernstein P2 lumped
+    (3x3 particles). The P2 spaces run up to ``p2_max`` cells."""
+    out = [Config("structured", mass="lumped", domain=d, scheme=scheme) for d in DOMAINS]
+    out += [Config("structured", mass="consistent", domain=d, scheme=scheme) for d in ("point", "cpgimp", "cpdi1")]
+    out += [Config("structured", degree=2, mass="consistent", scheme=scheme, ppc=9, max_cells=p2_max)]
+    out += [Config("unstructured", mass="lumped", domain=d, scheme=scheme) for d in unstructured]
+    out += [Config("unstructured", mass="consistent", scheme=scheme),
+            Config("unstructured", degree=2, mass="consistent", scheme=scheme, ppc=9, max_cells=p2_max),
+            Config("unstructured", degree=2, variant="bernstein", mass="lumped", scheme=scheme, ppc=9, max_cells=p2_max)]
+    return out
+
+
+def _quick1d(*domains: str) -> tuple[Config, ...]:
+    return tuple(Config(mass=m, domain=d) for d in domains for m in ("lumped", "consistent"))
+
+
+PROBLEMS: dict[str, ProblemSpec] = {
+    "vibrating_bar": ProblemSpec(lambda: mf.vibrating_bar(t_end=10.0), (8, 16, 32, 64, 128, 256), (8, 16, 32),
+                                 0.2, tuple([Config(domain="point")] + _c1d(scheme="MUSL")), _quick1d("point")),
+    "axis_aligned_1d_G1e-4": ProblemSpec(lambda: mf.axis_aligned_1d(1e-4), (8, 16, 32, 64, 128, 256),
+                                         (8, 16, 32, 64), 0.2, tuple(_c1d()), _quick1d("point", "cpgimp")),
+    "axis_aligned_1d_G0.05": ProblemSpec(lambda: mf.axis_aligned_1d(0.05), (8, 16, 32, 64, 128, 256),
+                                         (16, 32, 64, 128), 0.2, tuple(_c1d()),
+                                         tuple(Config(domain=d) for d in ("point", "ugimp", "cpgimp", "cpdi1", "cpdi2"))),
+    "axis_aligned_2d": ProblemSpec(lambda: mf.axis_aligned(0.05, 2), (8, 16, 32, 64), (8, 16), 0.1,
+                                   tuple(_c2d("USL", ("point", "cpgimp", "cpdi2"), 32)),
+                                   (Config(domain="point"), Config(domain="cpdi1"))),
+    "vortex_A0.01": ProblemSpec(lambda: mf.generalized_vortex(0.01), (24, 48, 96, 192), (24, 48), 0.2,
+                                tuple(_c2d("MUSL", ("point", "cpgimp", "cpdi1", "cpdi2"), 96)),
+                                (Config(domain="point", scheme="MUSL"), Config(domain="cpdi2", scheme="MUSL"))),
+    "vortex_A1": ProblemSpec(lambda: mf.generalized_vortex(1.0), (24, 48, 96), (24, 48), 0.2,
+                             tuple([Config(domain=d, scheme="MUSL") for d in DOMAINS]
+                                   + [Config(mass="consistent", domain=d, scheme="MUSL") for d in ("point", "cpdi2")]
+                                   + [Config("unstructured", domain=d, scheme="MUSL") for d in ("point", "cpdi1", "cpdi2")]),
+                             (Config(domain="cpdi2", scheme="MUSL"),)),
+}
+
+
+def max_speed(problem) -> float:
+    """Dilatational wave speed plus the largest exact particle speed (sampled over the body
+    and the run)."""
+    rng = np.random.default_rng(0)
+    lo, hi = np.array(problem.lower), np.array(problem.upper)
+    X = lo + (hi - lo) * rng.uniform(size=(4000, problem.dim))
+    X = X[problem.contains(X)]
+    v = max(np.linalg.norm(problem.velocity(X, t), axis=1).max() for t in np.linspace(0, problem.t_end, 21))
+    F = np.broadcast_to(np.eye(problem.dim), (1, problem.dim, problem.dim))
+    c = float(problem.material.wave_speed(F, np.array([problem.rho0]))[0])
+    return c + float(v)
+
+
+def run_case(name: str, config: Config, cells: int, comm: MPI.Comm = MPI.COMM_WORLD) -> dict:
+    """One run: returns its row (:data:`COLUMNS`) and the failure message (``reason``)."""
+    from fempm.errors import ErrorHistory
+    from fempm.scene import run
+    from fempm.scenes.manufactured import manufactured_scene
+
+    spec = PROBLEMS[name]
+    problem = spec.make()
+    row = {"problem": name, "mesh": config.mesh if problem.dim > 1 else "interval", "degree": config.degree,
+           "variant": config.variant, "mass": config.mass, "domain": config.domain, "scheme": config.scheme,
+           "cells": cells, "steps": 0, "status": "ok", "reason": ""}
+    t0 = time.perf_counter()
+    history = None
+    try:
+        scene = manufactured_scene(problem, cells, mesh=config.mesh, ppc=config.ppc, degree=config.degree,
+                                   variant=None if config.variant == "default" else config.variant, mass=config.mass,
+                                   domain=config.domain, scheme=config.scheme, comm=comm)
+        h = scene.params["h"]
+        dt = spec.cfl * h / (config.degree * max_speed(problem))
+        scene.dt = dt
+        row.update(h=h, dt=dt)
+        history = ErrorHistory(problem, scene.particles)
+        summary = run(scene, None, progress=False, callback=history)
+        row["steps"] = summary["steps"]
+    except Exception as e:  # noqa: BLE001 - every failure is a row of the table, with its class and message
+        row["status"] = type(e).__name__
+        row["reason"] = " ".join(str(e).split())[:300]
+        row.setdefault("h", np.nan)
+        row.setdefault("dt", np.nan)
+        if history is not None:
+            row["steps"] = len(history.rows) - 1
+    row["wall_s"] = comm.allreduce(time.perf_counter() - t0, op=MPI.MAX)
+    worst = history.worst if history is not None else {"max": np.nan, "rms": np.nan, "l2": np.nan}
+    row.update(error_max=worst["max"], error_rms=worst["rms"], error_l2=worst["l2"])
+    return row
+
+
+def run(out: Path = Path("output/study-convergence"), *, quick: bool = False, problems=None,
+        comm: MPI.Comm = MPI.COMM_WORLD, log=print) -> list[dict]:
+    """Run the study (``problems``: names of :data:`PROBLEMS`, default all), write its outputs
+    into ``out`` (CSV after every run, so that nothing measured is lost) and return the rows."""
+    names = list(problems or PROBLEMS)
+    for n in names:
+        if n not in PROBLEMS:
+            raise ValueError(f"unknown problem {n!r}; expected one of {', '.join(PROBLEMS)}")
+    out = Path(out)
+    if comm.rank == 0:
+        out.mkdir(parents=True, exist_ok=True)
+    rows: list[dict] = []
+    for name in names:
+        spec = PROBLEMS[name]
+        for config in (spec.quick_configs if quick else spec.configs):
+            for cells in (spec.quick_sizes if quick else spec.sizes):
+                if config.max_cells is not None and cells > config.max_cells:
+                    continue
+                row = run_case(name, config, cells, comm)
+                rows.append(row)
+                if comm.rank == 0:
+                    log(f"{name:22s} {config.label:40s} cells={cells:4d} L2={row['error_l2']:.3e} "
+                        f"max={row['error_max']:.3e} steps={row['steps']:5d} {row['wall_s']:7.1f}s {row['status']}")
+                    write_csv(rows, out / "convergence.csv")
+    if comm.rank == 0:
+        write_markdown(rows, out / "convergence.md", quick=quick)
+        from fempm.plot import plot_convergence
+
+        for name in names:
+            plot_convergence([r for r in rows if r["problem"] == name], out / f"convergence_{name}.png", title=name)
+    return rows
+
+
+def write_csv(rows: list[dict], path: Path) -> None:
+    with open(path, "w", newline="") as f:
+        w = csv.DictWriter(f, fieldnames=COLUMNS, extrasaction="ignore")
+        w.writeheader()
+        w.writerows(rows)
+
+
+SERIES = ("problem", "mesh", "degree", "variant", "mass", "domain", "scheme")
+
+
+def fitted_rates(rows: list[dict]) -> list[dict]:
+    """Per configuration: the slopes of log(error) against log(h) (L2 and max norms) over its
+    finest ok sizes (at most :data:`FIT_SIZES`), the sizes used, and a verdict: ``converging``
+    (L2 rate >= 1), ``slow`` (0.3 <= rate < 1), ``not converging`` (rate < 0.3, or fewer than
+    two ok sizes)."""
+    out = []
+    keys = []
+    for r in rows:
+        k = tuple(r[c] for c in SERIES)
+        if k not in keys:
+            keys.append(k)
+    for key in keys:
+        rs = [r for r in rows if tuple(r[c] for c in SERIES) == key]
+        ok = sorted((r for r in rs if r["status"] == "ok"), key=lambda r: r["h"])[:FIT_SIZES]
+        rate = {"l2": np.nan, "max": np.nan}
+        if len(ok) >= 2:
+            for norm in rate:
+                rate[norm] = float(np.polyfit(np.log([r["h"] for r in ok]), np.log([r[f"error_{norm}"] for r in ok]), 1)[0])
+        failed = [r for r in rs if r["status"] != "ok"]
+        if len(ok) < 2 or rate["l2"] < 0.3:
+            verdict = "not converging"
+        else:
+            verdict = "converging" if rate["l2"] >= 1.0 else "slow"
+        out.append({**dict(zip(SERIES, key)), "rate_l2": rate["l2"], "rate_max": rate["max"],
+                    "sizes": ",".join(str(r["cells"]) for r in sorted(ok, key=lambda r: r["cells"])),
+                    "finest_l2": min((r["error_l2"] for r in ok), default=np.nan), "failed": len(failed),
+                    "verdict": verdict})
+    return out
+
+
+def write_markdown(rows: list[dict], path: Path, *, quick: bool = False) -> None:
+    rates = fitted_rates(rows)
+    lines = [f"# Convergence of the MPM loop{' (quick)' if quick else ''}", "",
+             "Displacement error of the particles against the exact motion, maximum over time; "
+             f"rates fitted (numpy.polyfit) over the finest {FIT_SIZES} ok sizes of each configuration.", "",
+             "| problem | mesh | space | mass | domain | scheme | sizes fitted | finest L2 error | rate L2 | rate max | failed runs | verdict |",
+             "|---|---|---|---|---|---|---|---|---|---|---|---|"]
+    for r in rates:
+        space = f"P{r['degree']}" + (" Bernstein" if r["variant"] == "bernstein" else "")
+        lines.append(f"| {r['problem']} | {r['mesh']} | {space} | {r['mass']} | {r['domain']} | {r['scheme']} | "
+                     f"{r['sizes']} | {r['finest_l2']:.3e} | {r['rate_l2']:.2f} | {r['rate_max']:.2f} | {r['failed']} | "
+                     f"{r['verdict']} |")
+    failed = [r for r in rows if r["status"] != "ok"]
+    if failed:
+        lines += ["", "## Runs that stopped", "", "| problem | configuration | cells | steps | status | reason |",
+                  "|---|---|---|---|---|---|"]
+        for r in failed:
+            cfg = f"{r['mesh']} P{r['degree']}{'B' if r['variant'] == 'bernstein' else ''} {r['mass']} {r['domain']} {r['scheme']}"
+            lines.append(f"| {r['problem']} | {cfg} | {r['cells']} | {r['steps']} | {r['status']} | {r['reason']} |")
+    Path(path).write_text("\n".join(lines) + "\n")
