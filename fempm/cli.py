@@ -16,9 +16,9 @@ from pathlib import Path
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(prog="python -m fempm", description="fempm: MPM on DOLFINx meshes")
+    parser = argparse.ArgumentParser(prog="python -m fempm", description="fempm: MPM on DOLFINx meshes", allow_abbrev=False)
     sub = parser.add_subparsers(dest="command", required=True)
-    study = sub.add_parser("study", help="run a study and write its tables and figures")
+    study = sub.add_parser("study", help="run a study and write its tables and figures", allow_abbrev=False)
     study.add_argument("name", choices=["mapping", "particle-basis", "convergence"])
     study.add_argument("--full", action="store_true", help="mapping: more mesh sizes and particle densities")
     study.add_argument("--quick", action="store_true", help="convergence: fewer configurations and smaller sizes")
@@ -28,7 +28,7 @@ def main(argv: list[str] | None = None) -> int:
     study.add_argument("--domains", nargs="+", default=["point"], metavar="DOMAIN",
                        help="mapping: particle domains point, gimp, cpdi1, cpdi2 (default point)")
     study.add_argument("--out", type=Path, default=None, help="output folder (default output/study-NAME)")
-    runp = sub.add_parser("run", help="run a scene, writing outputs and a JSON summary", add_help=False)
+    runp = sub.add_parser("run", help="run a scene, writing outputs and a JSON summary", add_help=False, allow_abbrev=False)
     runp.add_argument("scene")
     runp.add_argument("--out", type=Path, default=None, help="output folder (default output/SCENE)")
     runp.add_argument("-h", "--help", action="store_true")
@@ -97,7 +97,15 @@ def _scene_options(builder, rest: list[str]) -> dict:
         if value is None:
             raise SystemExit(f"fempm run: option {flag} needs a value")
         default = params[name]
-        opts[name] = type(default)(value) if isinstance(default, (int, float)) and not isinstance(default, bool) else value
+        if isinstance(default, (int, float)) and not isinstance(default, bool):
+            opts[name] = type(default)(value)
+        elif default is None:  # an optional number (or a name)
+            try:
+                opts[name] = float(value)
+            except ValueError:
+                opts[name] = value
+        else:
+            opts[name] = value
     return opts
 
 

@@ -92,6 +92,24 @@ def unstructured_rectangle(
     return _model_to_mesh(gmsh, comm, 2)
 
 
+def unstructured_polygon(comm: MPI.Comm, vertices, h: float, *, seed: int = 0) -> dolfinx.mesh.Mesh:
+    """Frontal-Delaunay triangles of size ``h`` on the polygon with ``vertices`` (k, 2), in order."""
+    gmsh = _gmsh()
+    if comm.rank == 0:
+        _start(gmsh)
+        gmsh.model.add("polygon")
+        gmsh.option.setNumber("Mesh.RandomSeed", seed)
+        pts = [gmsh.model.occ.addPoint(float(x), float(y), 0.0) for x, y in vertices]
+        lines = [gmsh.model.occ.addLine(a, b) for a, b in zip(pts, pts[1:] + pts[:1])]
+        surface = gmsh.model.occ.addPlaneSurface([gmsh.model.occ.addCurveLoop(lines)])
+        gmsh.model.occ.synchronize()
+        gmsh.model.addPhysicalGroup(2, [surface], 1)
+        gmsh.option.setNumber("Mesh.CharacteristicLengthMax", h)
+        gmsh.option.setNumber("Mesh.Algorithm", 6)
+        gmsh.model.mesh.generate(2)
+    return _model_to_mesh(gmsh, comm, 2)
+
+
 def unstructured_box(comm: MPI.Comm, h: float, *, size=(1.0, 1.0, 1.0)) -> dolfinx.mesh.Mesh:
     """Delaunay tetrahedra of size ``h`` on a box."""
     gmsh = _gmsh()

@@ -118,7 +118,7 @@ PROBLEMS: dict[str, ProblemSpec] = {
                              tuple([Config(domain=d, scheme="MUSL") for d in DOMAINS]
                                    + [Config(mass="consistent", domain=d, scheme="MUSL") for d in ("point", "cpdi2")]
                                    + [Config("unstructured", domain=d, scheme="MUSL") for d in ("point", "cpdi1", "cpdi2")]),
-                             (Config(domain="cpdi2", scheme="MUSL"),)),
+                             (Config(domain="cpdi1", scheme="MUSL"), Config(domain="cpdi2", scheme="MUSL"))),
 }
 
 
