@@ -129,14 +129,14 @@ class ParticleBasis:
             K = locator.geometry.inverse_jacobian(cells[here], X[here])
             dN[here] = np.transpose(tab[1:], (1, 2, 0)) @ K
         w = smp.w.reshape(n * q).copy()
-        beyond = self._remote_samples(particles, domain, xs, cells, q, need_grad, N, dofs, dN)
-        if len(beyond) and smp.beyond == "cut":  # drop the points beyond the mesh, renormalise
+        beyond = self._remote_samples(particles, xs, cells, need_grad, N, dofs, dN)
+        if smp.beyond == "cut":  # drop the points beyond the mesh, renormalise (collective check)
             w[beyond], N[beyond], dofs[beyond] = 0.0, 0.0, 0
             wsum = w.reshape(n, q).sum(axis=1)
             if particles.comm.allreduce(int(np.count_nonzero(wsum <= 0))):
                 raise ValueError(f"{domain.name} particle domains with no sample point inside the mesh")
             w /= np.repeat(wsum, q)
-        elif len(beyond):  # clamp: evaluate at the closest point of the mesh
+        elif smp.beyond == "clamp" and particles.comm.allreduce(len(beyond)):  # at the closest point of the mesh
             self._clamped_samples(particles, xs[beyond], beyond, need_grad, N, dofs, dN)
         self.sample_values, self.sample_dofs = N.reshape(n, q, k), dofs.reshape(n, q, k)
         vals = N * w[:, None]
@@ -149,17 +149,27 @@ class ParticleBasis:
         return np.repeat(np.arange(n), q * k), dofs.ravel(), vals.ravel(), grads
 
     def _clamped_samples(self, particles: Particles, x, idx, need_grad, N, dofs, dN) -> None:
-        """Rows of sample points beyond the mesh, evaluated at the closest point of the rank's
-        owned and ghost cells (:meth:`fempm.location.CellLocator.closest`)."""
+        """Rows of sample points beyond the mesh, evaluated at the closest point of the mesh
+        (:meth:`fempm.location.CellLocator.closest_on_mesh`, over the owned cells of every rank,
+        so that the result does not depend on the partition). Collective."""
+        y = particles.locator.closest_on_mesh(x)
         locator = particles.sample_locator
-        cells, y = locator.closest(x)
-        X = locator.geometry.pull_back(cells, y)
-        tab = self.element.tabulate(1 if need_grad else 0, np.ascontiguousarray(X))[..., 0]
-        N[idx], dofs[idx] = tab[0], np.asarray(self.V.dofmap.list)[cells]
+        cells, X = locator.locate(y)
+        k, d = self.element.dim, particles.gdim
+        Ny, dofs_y = np.zeros((len(y), k)), np.zeros((len(y), k), dtype=np.int32)
+        dNy = np.zeros((len(y), k, d)) if need_grad else None
+        here = np.flatnonzero(cells >= 0)
+        tab = self.element.tabulate(1 if need_grad else 0, np.ascontiguousarray(X[here]))[..., 0]
+        Ny[here], dofs_y[here] = tab[0], np.asarray(self.V.dofmap.list)[cells[here]]
         if need_grad:
-            dN[idx] = np.transpose(tab[1:], (1, 2, 0)) @ locator.geometry.inverse_jacobian(cells, X)
+            dNy[here] = np.transpose(tab[1:], (1, 2, 0)) @ locator.geometry.inverse_jacobian(cells[here], X[here])
+        if len(self._remote_samples(particles, y, cells, need_grad, Ny, dofs_y, dNy)):
+            raise RuntimeError("a clamped sample point was not found on the mesh")
+        N[idx], dofs[idx] = Ny, dofs_y
+        if need_grad:
+            dN[idx] = dNy
 
-    def _remote_samples(self, particles: Particles, domain, xs, cells, q, need_grad, N, dofs, dN) -> npt.NDArray:
+    def _remote_samples(self, particles: Particles, xs, cells, need_grad, N, dofs, dN) -> npt.NDArray:
         """Fill the rows of sample points outside this rank's owned and ghost cells from the
         ranks that own them (:mod:`fempm.halo`), extending :attr:`index_map` by their dofs.
         Returns the indices of the points that lie in no cell of any rank (beyond the mesh).

@@ -86,6 +86,22 @@ class CellLocator:
                                                                    as_points3(x)), dtype=np.int32)
         return cells, self.geometry.closest_points(cells, x)
 
+    def closest_on_mesh(self, x: npt.NDArray) -> npt.NDArray:
+        """The closest point of the whole mesh (every rank's cells of this locator, owned cells
+        for a locator without ghosts) to each point of ``x`` (n, gdim), the same on any number
+        of ranks. Collective; ``x`` is gathered on every rank, so keep it small."""
+        comm = self.mesh.comm
+        if comm.size == 1:
+            return self.closest(x)[1]
+        parts = comm.allgather(np.asarray(x, dtype=np.float64).reshape(-1, self.geometry.gdim))
+        allx = np.concatenate(parts)
+        _, y = self.closest(allx)
+        dist = np.linalg.norm(y - allx, axis=1) if len(allx) else np.zeros(0)
+        dists, ys = np.array(comm.allgather(dist)), np.array(comm.allgather(y))  # (ranks, m), (ranks, m, d)
+        best = np.argmin(dists, axis=0)  # ties: the lowest rank
+        start = sum(len(p) for p in parts[: comm.rank])
+        return ys[best, np.arange(len(allx))][start : start + len(parts[comm.rank])]
+
     @property
     def cell_bins(self):
         """Bounding boxes of the *owned* cells in a uniform bin grid (:class:`fempm.box_average.CellBins`),

@@ -20,6 +20,7 @@ strain and position update).
 
 from __future__ import annotations
 
+import inspect
 from collections import Counter
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
@@ -136,8 +137,6 @@ class Loads:
 def takes_reference_positions(fn: Callable) -> bool:
     """Whether a body-force callable takes ``(x, t, X)`` (three positional parameters) rather
     than ``(x, t)``."""
-    import inspect
-
     try:
         params = inspect.signature(fn).parameters.values()
     except (TypeError, ValueError):  # builtins without a signature: the (x, t) form

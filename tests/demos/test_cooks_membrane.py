@@ -2,20 +2,11 @@
 within 5 % of the DOLFINx Taylor-Hood reference at nu = 1/3; at nu = 0.4999 the P1 background
 locks (the corner moves about a third less than the reference on the coarse mesh)."""
 
-import importlib.util
 from pathlib import Path
 
 import numpy as np
 from mpi4py import MPI
-
-DEMOS = Path(__file__).resolve().parents[2] / "demos"
-
-
-def load(name):
-    spec = importlib.util.spec_from_file_location(name, DEMOS / f"{name}.py")
-    mod = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(mod)
-    return mod
+from test_demos import load
 
 
 def test_cooks_membrane_against_fe(tmp_path):
