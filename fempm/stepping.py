@@ -34,7 +34,7 @@ import numpy.typing as npt
 from mpi4py import MPI
 
 from fempm.basis import ParticleBasis, is_nonnegative
-from fempm.boundary import Fixed
+from fempm.boundary import Fixed, Slip
 from fempm.domains import GIMP_NAMES, domain_geometry, make_domain
 from fempm.materials.base import identity
 from fempm.particles import Particles
@@ -208,8 +208,22 @@ class ExplicitSolver:
         self._stress_space: dolfinx.fem.FunctionSpace | None = None  # tensor space of grid_stress, on first use
         fixed = [bc.dofs for bc in self.bcs if isinstance(bc, Fixed)]
         self._fixed_dofs = np.unique(np.concatenate(fixed)) if fixed else None
+        self._slip_components = self._axis_slip_dofs()
 
     # -- helpers ------------------------------------------------------------------------------
+    def _axis_slip_dofs(self) -> list[npt.NDArray[np.int32]] | None:
+        """Per velocity component a, the dofs of slip walls normal to axis a: the consistent
+        solves hold that component at 0 (a constrained fit) rather than zeroing it afterwards."""
+        d = self.particles.gdim
+        comps: list[list] = [[] for _ in range(d)]
+        for bc in self.bcs:
+            n = np.asarray(getattr(bc, "normal", np.zeros(0)))
+            if isinstance(bc, Slip) and n.shape == (d,) and np.count_nonzero(np.abs(n) > 1e-14) == 1:
+                comps[int(np.argmax(np.abs(n)))].append(bc.dofs)
+        if not any(comps):
+            return None
+        return [np.unique(np.concatenate(c)).astype(np.int32) if c else np.zeros(0, dtype=np.int32) for c in comps]
+
     def _material_loop(self):
         body = self.particles.fields["body"]
         for b, mat in enumerate(self.materials):
@@ -314,7 +328,7 @@ class ExplicitSolver:
         self.extended_steps += basis.extended
         mass_op = Projector(
             self.V, p, mass=opts.mass, basis=basis, petsc_options_prefix=opts.petsc_options_prefix,
-            exclude=self._fixed_dofs, lump_below=opts.lump_below,
+            exclude=self._fixed_dofs, exclude_components=self._slip_components, lump_below=opts.lump_below,
         )
         stable = self.stable_dt()
         if opts.mass == "consistent" and not opts.lumped_forces:  # omega_max^2 <= omega_L^2 / lambda_min

@@ -16,7 +16,7 @@ replaces :math:`m_{ij}` by its row sum :math:`m_i = \sum_p M_p N_i(x_p)` (eqs. 1
 from __future__ import annotations
 
 import logging
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from typing import Any, Literal
 
 import dolfinx
@@ -145,7 +145,9 @@ class Projector:
 
     Assembles the mass (consistent matrix + KSP, or lumped vector) once; :meth:`project` then
     costs one P2G and one solve per value component. ``exclude`` lists (block) dofs held at 0
-    (Dirichlet). ``domain``: particle domains (:mod:`fempm.domains`; default the point).
+    (Dirichlet); ``exclude_components[c]`` lists dofs whose component ``c`` only is held at 0
+    (a slip wall normal to axis c): component c is then solved on its own active set, the
+    constrained least-squares fit, instead of being zeroed after an unconstrained solve. ``domain``: particle domains (:mod:`fempm.domains`; default the point).
     ``lump_below`` (consistent mode): dofs whose lumped mass is below this
     fraction of the largest get lumped rows and columns (see :func:`consistent_mass_matrix`),
     so that the solve does not extrapolate into nodes that particles barely reach. It applies
@@ -183,6 +185,7 @@ class Projector:
         petsc_options: dict[str, Any] | None = None,
         basis: ParticleBasis | None = None,
         exclude: npt.NDArray[np.int32] | None = None,
+        exclude_components: Sequence[npt.NDArray[np.int32]] | None = None,
         lump_below: float = 0.0,
         domain=None,
         weight: str = "mass",
@@ -230,10 +233,21 @@ class Projector:
             A = consistent_mass_matrix(self.basis, particles, lump, weight)
             iset = fpetsc.owned_index_set(imap, self.active[: self.num_owned])
             self.matrix = A.createSubMatrix(iset, iset)
-            A.destroy()
             self.ksp = fpetsc.create_ksp(comm, petsc_options_prefix, petsc_options)
             self.ksp.setOperators(self.matrix)
             self._x, self._b = self.matrix.createVecs()
+            base = (self.active[: self.num_owned], self.ksp, self._x, self._b)
+            self._systems = [base] * len(exclude_components or ())
+            for c, dofs in enumerate(exclude_components or ()):  # a system per constrained component
+                act = self.active.copy()
+                act[np.asarray(dofs, dtype=np.int32)] = False
+                if comm.allreduce(int(np.count_nonzero(act != self.active))):
+                    sub_is = fpetsc.owned_index_set(imap, act[: self.num_owned])
+                    M = A.createSubMatrix(sub_is, sub_is)
+                    ksp = fpetsc.create_ksp(comm, petsc_options_prefix, petsc_options)
+                    ksp.setOperators(M)
+                    self._systems[c] = (act[: self.num_owned], ksp, *M.createVecs())
+            A.destroy()
             ones, rows = self.matrix.createVecs()
             ones.set(1.0)
             self.matrix.mult(ones, rows)
@@ -241,6 +255,7 @@ class Projector:
             self.row_mass[self.active[: self.num_owned]] = rows.array
         else:
             self.row_mass = np.where(self.active, self.lumped, 0.0)[: self.num_owned]
+        self.exclude_components = [np.asarray(d, dtype=np.int32) for d in (exclude_components or ())]
 
     def mass_ratio_min(self, iterations: int = 40) -> float:
         r"""Estimate of :math:`\lambda_{min}(M_L^{-1} M_C) \in (0, 1]` (consistent mode).
@@ -320,25 +335,28 @@ class Projector:
         F = np.zeros((n, k))
         if self.mass == "lumped":
             F[act] = b[:n][act] / self.lumped[:n][act, None]
+            for c, dofs in enumerate(self.exclude_components[:k]):
+                F[dofs[dofs < n], c] = 0.0
         else:
             self.iterations = []
-            self.ksp.setInitialGuessNonzero(guess is not None)
             for c in range(k):
-                self._b.array[:] = b[:n][act, c]
+                act, ksp, x, rhs = self._systems[c] if c < len(self._systems) else (act, self.ksp, self._x, self._b)
+                ksp.setInitialGuessNonzero(guess is not None)
+                rhs.array[:] = b[:n][act, c]
                 if guess is None:
-                    self._x.set(0.0)
+                    x.set(0.0)
                 else:
-                    self._x.array[:] = guess[:n][act, c]
-                self.ksp.solve(self._b, self._x)
-                reason = self.ksp.getConvergedReason()
+                    x.array[:] = guess[:n][act, c]
+                ksp.solve(rhs, x)
+                reason = ksp.getConvergedReason()
                 if reason < 0:
                     raise RuntimeError(
                         f"consistent projection: KSP did not converge ({fpetsc.converged_reason_name(reason)}, "
-                        f"{self.ksp.getIterationNumber()} iterations); the particle mass matrix may be "
+                        f"{ksp.getIterationNumber()} iterations); the particle mass matrix may be "
                         "singular: too few particles per cell for this space?"
                     )
-                self.iterations.append(self.ksp.getIterationNumber())
-                F[act, c] = self._x.array
+                self.iterations.append(ksp.getIterationNumber())
+                F[act, c] = x.array
         full = np.zeros((len(self.active), k))
         full[:n] = F
         vec = dolfinx.la.vector(self.basis.index_map, bs=k)

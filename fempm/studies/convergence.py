@@ -197,12 +197,31 @@ def run(out: Path = Path("output/study-convergence"), *, quick: bool = False, pr
                         f"max={row['error_max']:.3e} steps={row['steps']:5d} {row['wall_s']:7.1f}s {row['status']}")
                     write_csv(rows, out / "convergence.csv")
     if comm.rank == 0:
-        write_markdown(rows, out / "convergence.md", quick=quick)
-        from fempm.plot import plot_convergence
-
-        for name in names:
-            plot_convergence([r for r in rows if r["problem"] == name], out / f"convergence_{name}.png", title=name)
+        write_report(rows, out, quick=quick)
     return rows
+
+
+def read_csv(path: Path) -> list[dict]:
+    """Rows of a ``convergence.csv`` with their numbers typed (e.g. to merge studies run in
+    parts and write their report again with :func:`write_report`)."""
+    ints, floats = ("degree", "cells", "steps"), ("h", "dt", "error_max", "error_rms", "error_l2", "wall_s")
+    with open(path, newline="") as f:
+        rows = list(csv.DictReader(f))
+    for r in rows:
+        r.update({k: int(r[k]) for k in ints}, **{k: float(r[k]) for k in floats})
+        r.setdefault("reason", "")
+    return rows
+
+
+def write_report(rows: list[dict], out: Path, *, quick: bool = False) -> None:
+    """``convergence.csv``, ``convergence.md`` and the figures of ``rows`` into ``out``."""
+    from fempm.plot import plot_convergence
+
+    out = Path(out)
+    write_csv(rows, out / "convergence.csv")
+    write_markdown(rows, out / "convergence.md", quick=quick)
+    for name in dict.fromkeys(r["problem"] for r in rows):
+        plot_convergence([r for r in rows if r["problem"] == name], out / f"convergence_{name}.png", title=name)
 
 
 def write_csv(rows: list[dict], path: Path) -> None:
@@ -263,5 +282,6 @@ def write_markdown(rows: list[dict], path: Path, *, quick: bool = False) -> None
                   "|---|---|---|---|---|---|"]
         for r in failed:
             cfg = f"{r['mesh']} P{r['degree']}{'B' if r['variant'] == 'bernstein' else ''} {r['mass']} {r['domain']} {r['scheme']}"
-            lines.append(f"| {r['problem']} | {cfg} | {r['cells']} | {r['steps']} | {r['status']} | {r['reason']} |")
+            reason = r["reason"].replace("|", "/")
+            lines.append(f"| {r['problem']} | {cfg} | {r['cells']} | {r['steps']} | {r['status']} | {reason} |")
     Path(path).write_text("\n".join(lines) + "\n")

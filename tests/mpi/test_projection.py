@@ -185,3 +185,30 @@ def test_per_volume_fields_are_volume_weighted(mass):
         assert np.abs(S_v.x.array - ref.x.array)[linear].max() < 1e-10
     with pytest.raises(ValueError, match="unknown option weight"):
         fempm.Projector(V, p, weight="density")
+
+
+def test_component_constraints_give_the_constrained_least_squares_fit():
+    """exclude_components: component 0 held at 0 on x = 0 and x = 1 (slip walls normal to x),
+    component 1 on y = 0. The consistent result is the constrained fit: those components vanish
+    and the residual sum_p M_p (F(x_p) - f_p) N_j(x_p) is zero for every free (dof, component)."""
+    from fempm.basis import ParticleBasis
+    from fempm.boundary import locate_dofs
+    from fempm.transfer import p2g
+
+    mesh = make_mesh("triangle")
+    p = fempm.create_particles(mesh, 4, density=2.0, jitter=0.5, seed=3)
+    V = fem.functionspace(mesh, ("Lagrange", 1, (2,)))
+    walls_x = locate_dofs(V, lambda x: np.isclose(x[0], 0.0) | np.isclose(x[0], 1.0))
+    walls_y = locate_dofs(V, lambda x: np.isclose(x[1], 0.0))
+    f = np.column_stack([np.cos(3 * p.x[:, 1]) + p.x[:, 0], np.exp(p.x[:, 0]) * (1 + p.x[:, 1])])
+    proj = fempm.Projector(V, p, mass="consistent", exclude_components=[walls_x, walls_y])
+    F = proj.project(f).x.array.reshape(-1, 2)
+    assert np.abs(F[walls_x, 0]).max(initial=0) == 0 and np.abs(F[walls_y, 1]).max(initial=0) == 0
+    assert np.abs(F[walls_x, 1]).max(initial=0) > 0.1  # the other component is free
+    basis = ParticleBasis(V, p)
+    residual = p2g(basis, p.mass[:, None] * (basis.gather(F) - f))
+    free = np.ones(residual.shape, dtype=bool)
+    free[walls_x, 0] = free[walls_y, 1] = False
+    n = V.dofmap.index_map.size_local
+    assert comm.allreduce(np.abs(residual[:n][free[:n]]).max(initial=0.0), op=MPI.MAX) < 1e-10
+    assert comm.allreduce(np.abs(residual[:n][~free[:n]]).max(initial=0.0), op=MPI.MAX) > 1e-3
