@@ -20,9 +20,8 @@ strain and position update).
 
 from __future__ import annotations
 
-import inspect
 from collections import Counter
-from collections.abc import Callable, Sequence
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 from typing import Literal
 
@@ -36,6 +35,7 @@ from mpi4py import MPI
 from fempm.basis import ParticleBasis, is_nonnegative
 from fempm.boundary import Fixed, Slip
 from fempm.domains import GIMP_NAMES, domain_geometry, make_domain
+from fempm.loads import Loads, body_force_at, surface_shares  # Loads: re-exported, scenes build it from here
 from fempm.materials.base import identity
 from fempm.particles import Particles
 from fempm.transfer import Projector, p2g, p2g_gradients
@@ -111,51 +111,6 @@ class StepOptions:
             raise ValueError(f"damping={self.damping} must be >= 0")
         if not 0.0 < self.cfl <= 1.0:
             raise ValueError(f"cfl={self.cfl} must lie in (0, 1]: a CFL number above 1 is unstable")
-
-
-@dataclass
-class Loads:
-    r"""External loads; a term left None is never assembled.
-
-    body_force: acceleration (d,), or a function of the current positions ``x`` (n, d) and the
-    time ``t``, ``f(x, t)``, or also of the reference positions ``X`` (n, d), ``f(x, t, X)``
-    (the particles' ``fields["X0"]``, e.g. a manufactured body force :math:`b(X, t)`); it
-    returns (n, d), per unit mass. The number of positional parameters decides which is called.
-
-    traction: a function t -> (n, d), the traction :math:`\bar t_p` on each particle (zero rows
-    away from the loaded surface), applied as the force :math:`\bar t_p A_p` where :math:`A_p`
-    is the particle's share of the loaded surface: ``fields["area"]`` when the particles carry
-    it (e.g. from :func:`surface_areas`), else :math:`(V^0_p)^{(d-1)/d}`, the face of a cubic
-    particle (exact for a layer of square/cubic particles on a flat face, at any number of
-    particles per cell).
-    """
-
-    body_force: npt.ArrayLike | Callable | None = None
-    traction: Callable[[float], npt.NDArray] | None = None
-
-
-def takes_reference_positions(fn: Callable) -> bool:
-    """Whether a body-force callable takes ``(x, t, X)`` (three positional parameters) rather
-    than ``(x, t)``."""
-    try:
-        params = inspect.signature(fn).parameters.values()
-    except (TypeError, ValueError):  # builtins without a signature: the (x, t) form
-        return False
-    if any(p.kind == p.VAR_POSITIONAL for p in params):
-        return True
-    positional = [p for p in params if p.kind in (p.POSITIONAL_ONLY, p.POSITIONAL_OR_KEYWORD)]
-    return len(positional) >= 3
-
-
-def surface_areas(volumes: npt.NDArray, loaded: npt.NDArray[np.bool_], measure: float, comm) -> npt.NDArray:
-    r"""Each loaded particle's share :math:`A_p = |\Gamma|\, V_p / \sum_{q\ loaded} V_q` of a
-    loaded surface of measure ``measure`` (length in 2D, area in 3D), 0 elsewhere, so that a
-    uniform traction :math:`\bar t` applies exactly the total force :math:`\bar t |\Gamma|`
-    (collective: the sum runs over all ranks)."""
-    total = comm.allreduce(float(np.sum(volumes[loaded])))
-    if total <= 0:
-        raise ValueError("no particle carries the loaded surface")
-    return np.where(loaded, measure * volumes / total, 0.0)
 
 
 def cell_sizes(mesh) -> npt.NDArray:
@@ -285,36 +240,12 @@ class ExplicitSolver:
         f = p2g_gradients(basis, -p.volume[:, None, None] * p.fields["sigma"])
         self.terms["internal"] += 1
         if self.loads.body_force is not None:
-            f += p2g(basis, p.mass[:, None] * self._body_force(t))
+            f += p2g(basis, p.mass[:, None] * body_force_at(self.loads.body_force, p, t))
             self.terms["body_force"] += 1
         if self.loads.traction is not None:
-            f += p2g(basis, self.loads.traction(t) * self._surface_areas()[:, None])
+            f += p2g(basis, self.loads.traction(t) * surface_shares(p)[:, None])
             self.terms["traction"] += 1
         return f
-
-    def _body_force(self, t: float) -> npt.NDArray:
-        """Body force per unit mass at the particles (n, d)."""
-        p = self.particles
-        b = self.loads.body_force
-        if not callable(b):
-            return np.broadcast_to(np.asarray(b, float), p.x.shape)
-        if takes_reference_positions(b):
-            acc = b(p.x, t, p.fields["X0"])
-        else:
-            acc = b(p.x, t)
-        acc = np.asarray(acc, dtype=np.float64)
-        if acc.shape != p.x.shape:
-            raise ValueError(f"the body force returned shape {acc.shape} for {len(p)} particles in {p.gdim}D "
-                             f"(expected {p.x.shape})")
-        return acc
-
-    def _surface_areas(self) -> npt.NDArray:
-        """The particles' shares of the loaded surface (see :class:`Loads`)."""
-        f = self.particles.fields
-        if "area" in f:
-            return f["area"]
-        d = self.particles.gdim
-        return f["volume0"] ** ((d - 1) / d)
 
     # -- the step -----------------------------------------------------------------------------
     def step(self, dt: float | None = None, *, dt_max: float = np.inf) -> float:

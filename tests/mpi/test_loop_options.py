@@ -13,7 +13,8 @@ from fempm.materials import LinearElastic
 from fempm.scene import Scene, run
 from fempm.scenes.manufactured import manufactured_scene
 from fempm.seeding import create_particles
-from fempm.stepping import ExplicitSolver, Loads, StepOptions, surface_areas, takes_reference_positions
+from fempm.loads import surface_areas, takes_reference_positions
+from fempm.stepping import ExplicitSolver, Loads, StepOptions
 
 import dolfinx.fem
 
