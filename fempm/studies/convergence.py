@@ -205,15 +205,24 @@ def run(out: Path = Path("output/study-convergence"), *, quick: bool = False, pr
     return rows
 
 
+FAILURE_COLUMNS = ["problem", "mesh", "degree", "variant", "mass", "domain", "scheme", "cells", "status", "reason"]
+
+
 def read_csv(path: Path) -> list[dict]:
-    """Rows of a ``convergence.csv`` with their numbers typed (e.g. to merge studies run in
-    parts and write their report again with :func:`write_report`)."""
+    """Rows of a ``convergence.csv`` with their numbers typed, and the reasons of failed runs
+    from ``convergence_failures.csv`` beside it when there is one (e.g. to merge studies run
+    in parts and write their report again with :func:`write_report`)."""
     ints, floats = ("degree", "cells", "steps"), ("h", "dt", "error_max", "error_rms", "error_l2", "wall_s")
     with open(path, newline="") as f:
         rows = list(csv.DictReader(f))
+    reasons = {}
+    failures = Path(path).with_name("convergence_failures.csv")
+    if failures.exists():
+        with open(failures, newline="") as f:
+            reasons = {tuple(r[c] for c in FAILURE_COLUMNS[:8]): r["reason"] for r in csv.DictReader(f)}
     for r in rows:
+        r["reason"] = reasons.get(tuple(r[c] for c in FAILURE_COLUMNS[:8]), "")
         r.update({k: int(r[k]) for k in ints}, **{k: float(r[k]) for k in floats})
-        r.setdefault("reason", "")
     return rows
 
 
@@ -229,10 +238,16 @@ def write_report(rows: list[dict], out: Path, *, quick: bool = False) -> None:
 
 
 def write_csv(rows: list[dict], path: Path) -> None:
+    """``convergence.csv`` (:data:`COLUMNS`) and, beside it, ``convergence_failures.csv`` with the
+    message that stopped each failed run."""
     with open(path, "w", newline="") as f:
         w = csv.DictWriter(f, fieldnames=COLUMNS, extrasaction="ignore")
         w.writeheader()
         w.writerows(rows)
+    with open(Path(path).with_name("convergence_failures.csv"), "w", newline="") as f:
+        w = csv.DictWriter(f, fieldnames=FAILURE_COLUMNS, extrasaction="ignore")
+        w.writeheader()
+        w.writerows(r for r in rows if r["status"] != "ok")
 
 
 SERIES = ("problem", "mesh", "degree", "variant", "mass", "domain", "scheme")
@@ -240,9 +255,10 @@ SERIES = ("problem", "mesh", "degree", "variant", "mass", "domain", "scheme")
 
 def fitted_rates(rows: list[dict]) -> list[dict]:
     """Per configuration: the slopes of log(error) against log(h) (L2 and max norms) over its
-    finest ok sizes (at most :data:`FIT_SIZES`), the sizes used, and a verdict: ``converging``
-    (L2 rate >= 1), ``slow`` (0.3 <= rate < 1), ``not converging`` (rate < 0.3, or fewer than
-    two ok sizes)."""
+    finest ok sizes (at most :data:`FIT_SIZES`), the sizes used, the L2 error at the finest ok
+    size, and a verdict: ``converging`` (L2 rate >= 1), ``slow`` (0.3 <= rate < 1), ``not
+    converging`` (rate < 0.3, or fewer than two ok sizes), with ``, stops when refined`` where
+    a run on a finer mesh than the finest ok one failed."""
     out = []
     keys = []
     for r in rows:
@@ -261,9 +277,11 @@ def fitted_rates(rows: list[dict]) -> list[dict]:
             verdict = "not converging"
         else:
             verdict = "converging" if rate["l2"] >= 1.0 else "slow"
+        if ok and any(r["h"] < ok[0]["h"] for r in failed if np.isfinite(r["h"])):
+            verdict += ", stops when refined"
         out.append({**dict(zip(SERIES, key)), "rate_l2": rate["l2"], "rate_max": rate["max"],
                     "sizes": ",".join(str(r["cells"]) for r in sorted(ok, key=lambda r: r["cells"])),
-                    "finest_l2": min((r["error_l2"] for r in ok), default=np.nan), "failed": len(failed),
+                    "finest_l2": ok[0]["error_l2"] if ok else np.nan, "failed": len(failed),
                     "verdict": verdict})
     return out
 
