@@ -164,24 +164,30 @@ def plot_particle_frame(x: npt.NDArray, values: npt.NDArray, path: Path, *, titl
 
 
 def plot_convergence(rows: Sequence[dict], path: Path, *, title: str = "") -> None:
-    """Log-log L2 error against h, one line per configuration of a convergence study (solid:
-    consistent mass, dashed: lumped); runs that stopped are marked with a cross at their h."""
+    """Log-log L2 error against h, one line per configuration of a convergence study: the colour
+    is the particle domain, the line the mass (solid: consistent, dashed: lumped), the marker the
+    mesh and space; runs that stopped are crosses at their h."""
     plt = _pyplot()
     keys = ("mesh", "degree", "variant", "mass", "domain", "scheme")
+    colours = {"point": "tab:red", "ugimp": "tab:olive", "cpgimp": "tab:green", "cpdi1": "tab:blue", "cpdi2": "tab:purple",
+               "gimp": "tab:cyan"}
+    markers: dict[tuple, str] = {}
     series: dict[tuple, list[dict]] = {}
     for r in rows:
         series.setdefault(tuple(r[k] for k in keys), []).append(r)
     fig, ax = plt.subplots(figsize=(9, 6))
     for key, rs in sorted(series.items(), key=lambda kv: str(kv[0])):
-        ok = sorted((r for r in rs if r["status"] == "ok"), key=lambda r: r["h"])
         mesh, degree, variant, mass, domain, scheme = key
+        marker = markers.setdefault((mesh, degree, variant), "osD^v<>"[len(markers) % 7])
+        ok = sorted((r for r in rs if r["status"] == "ok"), key=lambda r: r["h"])
         label = f"{mesh} P{degree}{'B' if variant == 'bernstein' else ''} {mass} {domain} {scheme}"
-        line, = ax.loglog([r["h"] for r in ok], [r["error_l2"] for r in ok], "-" if mass == "consistent" else "--",
-                          marker="o", ms=3, label=label)
+        style = dict(color=colours.get(domain, "gray"), marker=marker, ms=4)
+        ax.loglog([r["h"] for r in ok], [r["error_l2"] for r in ok], "-" if mass == "consistent" else "--",
+                  label=label, **style)
         bad = [r for r in rs if r["status"] != "ok" and np.isfinite(r["h"])]
         if bad:
-            ax.loglog([r["h"] for r in bad], [max(r["error_l2"], 1e-16) if np.isfinite(r["error_l2"]) else 1.0
-                                              for r in bad], "x", color=line.get_color(), ms=8)
+            ax.loglog([r["h"] for r in bad], [r["error_l2"] if np.isfinite(r["error_l2"]) and r["error_l2"] > 0 else 1.0
+                                              for r in bad], "x", color=style["color"], ms=9)
     ax.set_xlabel("h")
     ax.set_ylabel("L2 displacement error (max over time)")
     ax.grid(True, which="both", alpha=0.3)
