@@ -185,13 +185,6 @@ def _simplex_rule(P: npt.NDArray, degree: int) -> tuple[npt.NDArray, npt.NDArray
     return x, np.abs(np.linalg.det(E))[:, None] * wq[None, :]
 
 
-def _axis_aligned(J: npt.NDArray) -> bool:
-    """Whether every affine cell map (Jacobians (n, d, d)) maps the reference box onto an
-    axis-aligned box: one non-zero entry per row of J."""
-    big = np.abs(J) > 1e-12 * np.abs(J).max(initial=1.0)
-    return bool(np.all(big.sum(axis=2) == 1))
-
-
 class BoxIntegrator:
     """Integrates the basis of a Lagrange space over boxes cut by a set of cells (see the
     module docstring); built once per mesh, space and cell set.
@@ -206,8 +199,7 @@ class BoxIntegrator:
         self.bins = bins
         d, k = geometry.gdim, element.degree
         name = geometry.cell_name
-        self.tensor = name == "interval" or (geometry.affine and name in ("quadrilateral", "hexahedron")
-                                             and _axis_aligned(geometry._J))
+        self.tensor = name == "interval" or (name in ("quadrilateral", "hexahedron") and geometry.axis_aligned)
         if name in ("interval", "triangle", "tetrahedron"):
             self.degree = k
         else:

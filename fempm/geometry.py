@@ -73,6 +73,18 @@ class CellGeometry:
             self._detJ = np.linalg.det(J)
             self._K = np.linalg.inv(J)
 
+    @property
+    def axis_aligned(self) -> bool:
+        """Whether every cell is an affine image of the reference box that is itself an
+        axis-aligned box (one non-zero entry per row of J); computed once."""
+        if not hasattr(self, "_axis_aligned"):
+            aligned = False
+            if self.affine:
+                big = np.abs(self._J) > 1e-12 * np.abs(self._J).max(initial=1.0)
+                aligned = bool(np.all(big.sum(axis=2) == 1))
+            self._axis_aligned = aligned
+        return self._axis_aligned
+
     # -- push forward -------------------------------------------------------------------------
     def _tabulate(self, nderiv: int, X: npt.NDArray) -> npt.NDArray:
         return self.element.tabulate(nderiv, np.ascontiguousarray(X, dtype=np.float64))[..., 0]
