@@ -15,7 +15,7 @@ basis on that piece:
   :math:`dk + 2` (non-affine cells, whose basis is not a polynomial in :math:`x`: accurate to
   that rule, and hexahedra with non-planar faces are split along their diagonals).
 
-:func:`box_integrals` returns, per (particle, dof), :math:`\int_{\Omega_p \cap \Omega_h} N_i`,
+:meth:`BoxIntegrator.integrals` returns, per (particle, dof), :math:`\int_{\Omega_p \cap \Omega_h} N_i`,
 :math:`\int_{\Omega_p \cap \Omega_h} \nabla N_i` and the covered volume
 :math:`|\Omega_p \cap \Omega_h|` over the cells it is given (a rank's owned cells). The part of
 a box outside the mesh is cut off: :class:`fempm.domains.GIMP` divides by the covered volume,

@@ -49,10 +49,18 @@ def _width(k: int, d: int, gradients: bool) -> int:
     return 1 + k * (3 + (d if gradients else 0))
 
 
+def _global_rows(V, local: npt.NDArray, rank: int) -> tuple[npt.NDArray, npt.NDArray]:
+    """Global numbers and owner ranks of local dofs of ``V`` (any shape)."""
+    imap = V.dofmap.index_map
+    gd = imap.local_to_global(local.astype(np.int32).ravel()).reshape(local.shape)
+    nown = imap.size_local
+    owners = np.where(local < nown, rank, np.asarray(imap.owners)[np.maximum(local - nown, 0)])
+    return gd.astype(np.int64), owners.astype(np.int32)
+
+
 def _answer(locator: CellLocator, element: basix.finite_element.FiniteElement, V, x: npt.NDArray,
             gradients: bool) -> npt.NDArray:
     """Rows for points ``x`` received from another rank, packed as float64 (m, :func:`_width`)."""
-    imap = V.dofmap.index_map
     cells, X = locator.locate(x)
     k = element.dim
     d = locator.mesh.geometry.dim
@@ -63,10 +71,7 @@ def _answer(locator: CellLocator, element: basix.finite_element.FiniteElement, V
     c, Xh = cells[hit], np.ascontiguousarray(X[hit])
     tab = element.tabulate(1 if gradients else 0, Xh)[..., 0]
     local = np.asarray(V.dofmap.list)[c]  # (h, k)
-    gd = imap.local_to_global(local.ravel()).reshape(local.shape)
-    nown = imap.size_local
-    ghost_owner = np.asarray(imap.owners)
-    own = np.where(local < nown, locator.mesh.comm.rank, ghost_owner[np.maximum(local - nown, 0)])
+    gd, own = _global_rows(V, local, locator.mesh.comm.rank)
     cols = [np.ones((len(hit), 1)), gd.astype(np.float64), own.astype(np.float64), tab[0]]
     if gradients:
         K = locator.geometry.inverse_jacobian(c, Xh)
@@ -107,15 +112,6 @@ class RemoteBoxRows:
     N: npt.NDArray
     dN: npt.NDArray | None
     volume: npt.NDArray
-
-
-def _global_rows(V, local: npt.NDArray, rank: int) -> tuple[npt.NDArray, npt.NDArray]:
-    """Global numbers and owner ranks of local dofs of ``V``."""
-    imap = V.dofmap.index_map
-    gd = imap.local_to_global(local.astype(np.int32))
-    nown = imap.size_local
-    owners = np.where(local < nown, rank, np.asarray(imap.owners)[np.maximum(local - nown, 0)])
-    return gd.astype(np.int64), owners.astype(np.int32)
 
 
 def remote_box_rows(locator: CellLocator, integrator, lo: npt.NDArray, hi: npt.NDArray, gradients: bool,

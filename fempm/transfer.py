@@ -147,7 +147,8 @@ class Projector:
     costs one P2G and one solve per value component. ``exclude`` lists (block) dofs held at 0
     (Dirichlet); ``exclude_components[c]`` lists dofs whose component ``c`` only is held at 0
     (a slip wall normal to axis c): component c is then solved on its own active set, the
-    constrained least-squares fit, instead of being zeroed after an unconstrained solve. ``domain``: particle domains (:mod:`fempm.domains`; default the point).
+    constrained least-squares fit, instead of being zeroed after an unconstrained solve.
+    ``domain``: particle domains (:mod:`fempm.domains`; default the point).
     ``lump_below`` (consistent mode): dofs whose lumped mass is below this
     fraction of the largest get lumped rows and columns (see :func:`consistent_mass_matrix`),
     so that the solve does not extrapolate into nodes that particles barely reach. It applies
@@ -330,17 +331,18 @@ class Projector:
         """Solve ``m F = b`` on the active dofs for (owned + ghost dofs, k) right-hand sides;
         returns (owned + ghost dofs, k) with ghosts updated and 0 on inactive dofs.
         ``guess`` (same shape) warm-starts the KSP."""
-        act = self.active[: self.num_owned]
+        base = self.active[: self.num_owned]
         n, k = self.num_owned, b.shape[1]
         F = np.zeros((n, k))
         if self.mass == "lumped":
+            act = base
             F[act] = b[:n][act] / self.lumped[:n][act, None]
             for c, dofs in enumerate(self.exclude_components[:k]):
                 F[dofs[dofs < n], c] = 0.0
         else:
             self.iterations = []
             for c in range(k):
-                act, ksp, x, rhs = self._systems[c] if c < len(self._systems) else (act, self.ksp, self._x, self._b)
+                act, ksp, x, rhs = self._systems[c] if c < len(self._systems) else (base, self.ksp, self._x, self._b)
                 ksp.setInitialGuessNonzero(guess is not None)
                 rhs.array[:] = b[:n][act, c]
                 if guess is None:

@@ -68,11 +68,10 @@ def annulus_lattice(r_in: float, r_out: float, spacing: float) -> tuple[np.ndarr
     return centroid, area, corners
 
 
-def _body_particles(problem, mesh, cells: int, ppc: int, domain: str) -> Particles:
+def _body_particles(problem, mesh, h: float, ppc: int, domain: str) -> Particles:
     """The problem's body at its reference positions (particles not yet displaced)."""
     comm = mesh.comm
     if problem.name == "generalized_vortex":
-        h = (problem.background(0.0)[1][0] - problem.background(0.0)[0][0]) / cells
         spacing = h / round(ppc ** (1 / problem.dim))
         X, vol, C = annulus_lattice(problem.r_in, problem.r_out, spacing)
         if comm.rank != 0:
@@ -134,7 +133,7 @@ def manufactured_scene(
         per_unit = cells / max(b - a for a, b in zip(lo, hi))
         blo, bhi = problem.background(1.0 / per_unit)
     m = background_mesh(blo, bhi, per_unit, mesh, comm)
-    p = _body_particles(problem, m, cells, ppc, domain)
+    p = _body_particles(problem, m, 1.0 / per_unit, ppc, domain)
     p.fields["X0"] = p.x.copy()
     p.fields["volume0"] = p.volume.copy()
     if problem.start_displaced:
