@@ -3,6 +3,8 @@
     python -m fempm study mapping [--full] [--domains point gimp cpdi1 cpdi2] [--out DIR]
     python -m fempm study particle-basis [--out DIR]
     python -m fempm study convergence [--quick] [--problems NAME ...] [--out DIR]
+    python -m fempm study stability [--quick] [--cases NAME ...] [--out DIR]
+    python -m fempm study error-vs-time [--quick] [--problems NAME ...] [--out DIR]
     python -m fempm run SCENE [--out DIR] [--option value ...]   (SCENE: bar, disks, cantilever, dam, block)
 
 Scene options are the keyword arguments of the scene builders in :mod:`fempm.scenes`
@@ -12,6 +14,8 @@ Scene options are the keyword arguments of the scene builders in :mod:`fempm.sce
 from __future__ import annotations
 
 import argparse
+import dataclasses
+import sys
 from pathlib import Path
 
 
@@ -19,10 +23,12 @@ def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(prog="python -m fempm", description="fempm: MPM on DOLFINx meshes", allow_abbrev=False)
     sub = parser.add_subparsers(dest="command", required=True)
     study = sub.add_parser("study", help="run a study and write its tables and figures", allow_abbrev=False)
-    study.add_argument("name", choices=["mapping", "particle-basis", "convergence"])
+    study.add_argument("name", choices=["mapping", "particle-basis", "convergence", "stability", "error-vs-time"])
     study.add_argument("--full", action="store_true", help="mapping: more mesh sizes and particle densities")
-    study.add_argument("--quick", action="store_true", help="convergence: fewer configurations and smaller sizes")
-    study.add_argument("--problems", nargs="+", metavar="NAME", help="convergence: a subset of the problems")
+    study.add_argument("--quick", action="store_true",
+                       help="convergence, stability, error-vs-time: fewer configurations and smaller sizes")
+    study.add_argument("--problems", nargs="+", metavar="NAME", help="convergence, error-vs-time: a subset of the problems")
+    study.add_argument("--cases", nargs="+", metavar="NAME", help="stability: a subset of the cases")
     study.add_argument("--sizes", type=int, nargs="+", help="cells per side (default 8 16 32; --full: 8 ... 128)")
     study.add_argument("--ppc", type=int, nargs="+", help="particles per cell (default 4 9; --full: 1 4 9 16)")
     study.add_argument("--domains", nargs="+", default=["point"], metavar="DOMAIN",
@@ -64,6 +70,34 @@ def main(argv: list[str] | None = None) -> int:
             parser.error(str(e))
         if MPI.COMM_WORLD.rank == 0:
             print(f"wrote {out}/convergence.csv, convergence.md, convergence_*.png")
+        return 0
+
+    if args.command == "study" and args.name == "stability":
+        from mpi4py import MPI
+
+        from fempm.studies import stability
+
+        out = args.out or Path("output/study-stability")
+        try:
+            stability.run_study(out, quick=args.quick, cases=args.cases)
+        except ValueError as e:
+            parser.error(str(e))
+        if MPI.COMM_WORLD.rank == 0:
+            print(f"wrote {out}/stability.csv, stability.md")
+        return 0
+
+    if args.command == "study" and args.name == "error-vs-time":
+        from mpi4py import MPI
+
+        from fempm.studies import error_vs_time
+
+        out = args.out or Path("output/study-error-vs-time")
+        try:
+            error_vs_time.run_study(out, quick=args.quick, problems=args.problems)
+        except ValueError as e:
+            parser.error(str(e))
+        if MPI.COMM_WORLD.rank == 0:
+            print(f"wrote {out}/error_vs_time.csv, error_vs_time.md, error_vs_time_*.png")
         return 0
 
     if args.command == "study" and args.name == "mapping":
@@ -109,6 +143,32 @@ def _scene_options(builder, rest: list[str]) -> dict:
     return opts
 
 
+def _health_options(rest: list[str]) -> tuple[dict, list[str]]:
+    """Split the run-health limits (``--energy-tolerance X|none``, ``--j-min``, ``--j-max``,
+    ``--dt-floor``) from the scene options."""
+    from fempm.health import Health
+
+    defaults = Health().asdict()
+    health, others = {}, []
+    it = iter(rest)
+    for flag in it:
+        name = flag[2:].replace("-", "_") if flag.startswith("--") else ""
+        if name not in defaults:
+            others.append(flag)
+            continue
+        value = next(it, None)
+        if value is None:
+            raise SystemExit(f"fempm run: option {flag} needs a value")
+        if name == "energy_tolerance" and value.lower() in ("none", "off"):
+            health[name] = None
+            continue
+        try:
+            health[name] = float(value)
+        except ValueError:
+            raise SystemExit(f"fempm run: option {flag} expects a number, got {value!r}") from None
+    return health, others
+
+
 def _run(args, rest: list[str]) -> int:
     import inspect
 
@@ -116,6 +176,9 @@ def _run(args, rest: list[str]) -> int:
 
     from fempm.scene import run
     from fempm.scenes import SCENES
+    from fempm.health import Health
+    from fempm.stepping import SimulationError
+    from fempm.transfer import SingularMassError
 
     if args.scene not in SCENES:
         raise SystemExit(f"fempm run: unknown scene {args.scene!r}; scenes: {', '.join(SCENES)}")
@@ -125,10 +188,20 @@ def _run(args, rest: list[str]) -> int:
         for k, v in inspect.signature(builder).parameters.items():
             if k != "comm":
                 print(f"  --{k.replace('_', '-')} {v.default}")
+        print("run health (fempm.health.Health; a crossed limit stops the run with exit code 3):")
+        for k, v in Health().asdict().items():
+            print(f"  --{k.replace('_', '-')} {v}")
         return 0
+    health, rest = _health_options(rest)
     scene = builder(**_scene_options(builder, rest))
+    scene.health = dataclasses.replace(scene.health, **health)
     out = args.out or Path("output") / args.scene
-    run(scene, out)
+    try:
+        run(scene, out)
+    except (SimulationError, SingularMassError) as e:
+        if MPI.COMM_WORLD.rank == 0:
+            print(f"\nfempm run {args.scene}: aborted: {e}\n(summary and the failing state in {out})", file=sys.stderr)
+        return 3
     if MPI.COMM_WORLD.rank == 0:
         print(f"wrote {out}/summary.json, energies.csv, particles/, grid_velocity.bp, grid_stress.bp")
     return 0

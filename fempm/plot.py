@@ -195,3 +195,57 @@ def plot_convergence(rows: Sequence[dict], path: Path, *, title: str = "") -> No
     if title:
         ax.set_title(f"{title} (x: run stopped)")
     _save(fig, path)
+
+
+def plot_pareto(rows: Sequence[dict], path: Path, *, title: str = "") -> None:
+    """Log-log error against wall time of one problem's runs: colour by mass option, marker
+    by particle domain, filled for the Pareto-optimal rows (``pareto``), the front drawn."""
+    plt = _pyplot()
+    ok = [r for r in rows if np.isfinite(r["error"]) and np.isfinite(r["wall_s"]) and r["error"] > 0]
+    fig, ax = plt.subplots(figsize=(8.5, 5.5))
+    masses = list(dict.fromkeys(r["mass"] for r in ok))
+    colours = plt.get_cmap("tab10")
+    markers = {"point": "o", "gimp": "s", "cpgimp": "s", "ugimp": "D", "cpdi1": "^", "cpdi2": "v"}
+    for i, m in enumerate(masses):
+        for dom in dict.fromkeys(r["domain"] for r in ok if r["mass"] == m):
+            rs = [r for r in ok if r["mass"] == m and r["domain"] == dom]
+            ax.scatter([r["wall_s"] for r in rs], [r["error"] for r in rs], s=22, marker=markers.get(dom, "x"),
+                       facecolors=[colours(i) if r["pareto"] else "none" for r in rs], edgecolors=colours(i),
+                       label=f"{m} {dom}")
+    front = sorted((r for r in ok if r["pareto"]), key=lambda r: r["wall_s"])
+    if front:
+        ax.step([r["wall_s"] for r in front], [r["error"] for r in front], "k-", where="post", lw=1.0, label="Pareto front")
+    ax.set_xscale("log")
+    ax.set_yscale("log")
+    ax.set_xlabel("wall time [s]")
+    ax.set_ylabel("error")
+    ax.grid(True, which="both", alpha=0.3)
+    ax.legend(fontsize=7, loc="center left", bbox_to_anchor=(1.0, 0.5))
+    if title:
+        ax.set_title(title)
+    _save(fig, path)
+
+
+def plot_stability(rows: Sequence[dict], path: Path, *, title: str = "") -> None:
+    """The stability catalogue as a matrix: a row per case, a column per option, green stable,
+    orange unstable, red aborted, the energy ratio written in each cell."""
+    plt = _pyplot()
+    from matplotlib.colors import ListedColormap
+
+    cases = list(dict.fromkeys(r["case"] for r in rows))
+    options = list(dict.fromkeys(r["option"] for r in rows))
+    code = {"stable": 0, "unstable": 1, "aborted": 2}
+    grid = np.full((len(cases), len(options)), np.nan)
+    for r in rows:
+        grid[cases.index(r["case"]), options.index(r["option"])] = code[r["outcome"]]
+    fig, ax = plt.subplots(figsize=(1.0 + 0.55 * len(options), 1.5 + 0.4 * len(cases)))
+    ax.imshow(np.ma.masked_invalid(grid), cmap=ListedColormap(["#4caf50", "#ff9800", "#e53935"]), vmin=0, vmax=2,
+              aspect="auto")
+    for r in rows:
+        ratio = r["energy_ratio"]
+        ax.text(options.index(r["option"]), cases.index(r["case"]), f"{ratio:.2g}" if np.isfinite(ratio) else "-",
+                ha="center", va="center", fontsize=6)
+    ax.set_xticks(range(len(options)), options, rotation=90, fontsize=6)
+    ax.set_yticks(range(len(cases)), cases, fontsize=7)
+    ax.set_title(title or "stability: green stable, orange unstable (energy), red aborted; E/E0 in the cells", fontsize=8)
+    _save(fig, path)

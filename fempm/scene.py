@@ -14,9 +14,11 @@ import dolfinx.mesh
 import numpy as np
 from mpi4py import MPI
 
+from fempm.health import Health, HealthMonitor
 from fempm.io import RunWriter
 from fempm.particles import Particles
-from fempm.stepping import ExplicitSolver, Loads, StepOptions
+from fempm.stepping import ExplicitSolver, Loads, SimulationError, StepOptions
+from fempm.transfer import SingularMassError
 
 
 @dataclass
@@ -29,6 +31,8 @@ class Scene:
     stability limit is an error); None (default) takes the CFL step of
     :meth:`ExplicitSolver.stable_dt` every step. ``variant``: the Lagrange variant of the
     velocity space (e.g. ``"bernstein"``, non-negative on simplices), default the DOLFINx one.
+    ``health``: the limits that stop an unhealthy run (:class:`fempm.health.Health`: energy
+    growth beyond the work of the loads, J bounds, time-step floor).
     """
 
     name: str
@@ -44,6 +48,7 @@ class Scene:
     params: dict = field(default_factory=dict)
     dt: float | None = None
     variant: str | None = None
+    health: Health = field(default_factory=Health)
 
     def __post_init__(self):
         if self.dt is not None and not (np.isfinite(self.dt) and self.dt > 0):
@@ -87,14 +92,19 @@ def run(
     ``history`` and, with ``out``, written to ``energies.csv`` as the run goes, together with
     particle VTK frames, the grid velocity and stress (VTX, the stress projected as a per-volume
     field, :meth:`ExplicitSolver.grid_stress`), ``summary.json`` and, with ``png``, a PNG of
-    the particles per frame in ``frames/``)."""
+    the particles per frame in ``frames/``). The scene's :class:`~fempm.health.Health` limits are
+    checked every step; a run that crosses one (or fails otherwise: J <= 0, non-finite state,
+    singular mass) still writes its summary (``status`` "aborted", ``health.error``) and a
+    particle frame of the failing state, then raises the error."""
     solver = scene.solver()
     comm = scene.mesh.comm
     writer = RunWriter(Path(out), scene.particles, solver.V, png=png) if out is not None else None
     history = [solver.energies()]
+    monitor = HealthMonitor(solver, scene.health)
     next_frame = 0.0
     t0 = time.perf_counter()
     last_print = t0
+    failure: Exception | None = None
     try:
         while solver.t < scene.t_end:
             if writer is not None and solver.t >= next_frame:
@@ -107,12 +117,14 @@ def run(
                 dt = solver.step(dt_max=remaining)
             else:  # a last step shorter than 1e-9 dt is merged into the one before
                 dt = solver.step(remaining if remaining <= scene.dt * (1 + 1e-9) else scene.dt)
-            if dt >= remaining:  # the final step: end exactly at t_end
+            final = dt >= remaining
+            if final:  # the final step: end exactly at t_end
                 solver.t = scene.t_end
             row = {"step": solver.step_count, "dt": dt, **solver.energies()}
             history.append(row)
             if writer is not None:
                 writer.energies(row)
+            monitor.after_step(dt, row, final=final)
             if callback is not None:
                 callback(solver)
             now = time.perf_counter()
@@ -121,11 +133,15 @@ def run(
                 print(f"\r[{'#' * int(30 * frac):30s}] t = {solver.t:.4g} / {scene.t_end:g}  step {solver.step_count}  dt = {dt:.3g}",
                       end="", flush=True)
                 last_print = now
-        if writer is not None:
-            writer.particles(scene.particles, solver.t)
+        monitor.outcome = "completed"
+    except (SimulationError, SingularMassError) as e:  # collective: every rank raises the same
+        monitor.outcome, monitor.error, failure = "aborted", str(e), e
     finally:
         if writer is not None:
-            writer.close()
+            try:
+                writer.particles(scene.particles, solver.t)  # the final (or failing) state
+            finally:
+                writer.close()
     wall = comm.allreduce(time.perf_counter() - t0, op=MPI.MAX)
     nglob = scene.particles.num_global
     summary = {
@@ -139,12 +155,17 @@ def run(
         "terms_assembled": dict(solver.terms),
         "final": history[-1],
         "initial": history[0],
+        "status": monitor.outcome,
+        "health": monitor.summary(),
     }
-    if progress and comm.rank == 0:
+    if progress and comm.rank == 0 and failure is None:
         print(f"\r{scene.name}: {solver.step_count} steps to t = {solver.t:.4g} in {wall:.2f} s "
               f"({summary['particle_steps_per_s']:.3g} particle-steps/s)" + " " * 20)
     if writer is not None:
         writer.summary(summary)
+    if failure is not None:  # the summary and the frames are written: now stop
+        failure.health = {**summary["health"], "steps": solver.step_count}  # for studies that catalogue failures
+        raise failure
     summary["history"] = history
     summary["solver"] = solver
     return summary

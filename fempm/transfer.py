@@ -10,7 +10,10 @@ minimises :math:`\int (F - f)^2 \rho\, dV`, which with particle quadrature gives
 (seed 000, eqs. 16.6-16.17). *Consistent* mode assembles :math:`m_{ij}` as a PETSc matrix and
 solves with KSP (CG + Jacobi by default) on the dofs that particles support. *Lumped* mode
 replaces :math:`m_{ij}` by its row sum :math:`m_i = \sum_p M_p N_i(x_p)` (eqs. 16.21-16.23):
-:math:`F_i = b_i / m_i`, which needs a non-negative basis (P1/Q1 or Bernstein).
+:math:`F_i = b_i / m_i`, which needs a non-negative basis (P1/Q1 or Bernstein). *FMPM(k)*
+(``mass="fmpm3"`` or ``mass="fmpm", fmpm_order=3``) lies between them: the first k terms of
+the series of :math:`m^{-1}`-preconditioned corrections that sums to the consistent solve
+(:mod:`fempm.fmpm`).
 """
 
 from __future__ import annotations
@@ -29,13 +32,13 @@ from petsc4py import PETSc
 
 from fempm import petsc as fpetsc
 from fempm.basis import ParticleBasis
+from fempm.fmpm import fmpm_solve, mass_label, parse_mass
 from fempm.location import as_points3
 from fempm.particles import Particles
 
 log = logging.getLogger("fempm")
 
-MassMode = Literal["consistent", "lumped"]
-_MASS_MODES = ("consistent", "lumped")
+MassMode = Literal["consistent", "lumped", "fmpm"] | str  # also "fmpmK", "fmpm(K)"
 
 #: a dof is supported when its diagonal (consistent) or lumped mass exceeds this fraction
 #: of the largest one
@@ -151,7 +154,8 @@ class Projector:
     ``domain``: particle domains (:mod:`fempm.domains`; default the point).
     ``lump_below`` (consistent mode): dofs whose lumped mass is below this
     fraction of the largest get lumped rows and columns (see :func:`consistent_mass_matrix`),
-    so that the solve does not extrapolate into nodes that particles barely reach. It applies
+    so that the solve does not extrapolate into nodes that particles barely reach (FMPM: those
+    dofs keep the lumped solve, see :func:`fempm.fmpm.fmpm_solve`). It applies
     to non-negative bases only: with P2 Lagrange, row sums can be zero or negative and moving
     the (signed) couplings to the diagonal can make the matrix indefinite.
 
@@ -190,11 +194,12 @@ class Projector:
         lump_below: float = 0.0,
         domain=None,
         weight: str = "mass",
+        fmpm_order: int | None = None,
     ):
         self.weights = particle_weights(particles, weight)
         self.weight = weight
-        if mass not in _MASS_MODES:
-            raise ValueError(f"unknown option mass={mass!r}; expected one of {_MASS_MODES}")
+        mass, self.fmpm_order = parse_mass(mass, fmpm_order)
+        self.label = mass_label(mass, self.fmpm_order)
         self.V, self.particles, self.mass = V, particles, mass
         self.basis = basis if basis is not None else ParticleBasis(V, particles, domain=domain)
         imap = self.basis.index_map
@@ -202,10 +207,10 @@ class Projector:
         comm = particles.comm
         self.iterations: list[int] = []
         self.lumped: npt.NDArray | None = None
-        if mass == "lumped":
+        if mass in ("lumped", "fmpm"):
             if not self.basis.nonnegative:
                 raise ValueError(
-                    f"lumped mass needs a non-negative basis (degree 1 or Bernstein); this "
+                    f"{self.label} mass needs a non-negative basis (degree 1 or Bernstein); this "
                     f"Lagrange space of degree {self.basis.element.degree} has lumped vertex masses "
                     "that can be zero or negative: use mass='consistent' or a Bernstein variant"
                 )
@@ -219,18 +224,31 @@ class Projector:
         self.num_inactive = comm.allreduce(int(np.count_nonzero(~self.active[: self.num_owned])))
         if self.num_inactive:
             log.info("fempm: %d dof(s) without particle support excluded and set to 0", self.num_inactive)
+        lump = None
+        if mass != "lumped" and lump_below > 0.0 and self.basis.nonnegative:  # P2 Lagrange: lumping can make it indefinite
+            m = self.lumped_masses()
+            lump = m < lump_below * comm.allreduce(float(m[: self.num_owned].max(initial=0.0)), op=MPI.MAX)
+        self.lump = lump
         if mass == "consistent":
-            nactive = comm.allreduce(int(np.count_nonzero(self.active[: self.num_owned])))
+            coupled = self.active[: self.num_owned] & (~lump[: self.num_owned] if lump is not None else True)
+            nactive = comm.allreduce(int(np.count_nonzero(coupled)))
             if particles.num_global < nactive:  # rank(m) = rank(S) <= number of particles
                 raise SingularMassError(
                     f"the consistent mass matrix is singular: {particles.num_global} particles "
-                    f"support {nactive} dofs (its rank is at most the number of particles); "
+                    f"support {nactive} coupled dofs (its rank is at most the number of particles); "
                     "seed more particles per cell or use a lower degree"
                 )
-            lump = None
-            if lump_below > 0.0 and self.basis.nonnegative:  # P2 Lagrange: lumping can make it indefinite
-                m = self.lumped_masses()
-                lump = m < lump_below * comm.allreduce(float(m[: self.num_owned].max(initial=0.0)), op=MPI.MAX)
+            if self.basis.cells is not None:  # point particles: do they span the space? (fempm.mass_span)
+                from fempm.mass_span import singular_dofs
+
+                null, undetermined = singular_dofs(self.basis, self.weights, self.active, lump)
+                if null:
+                    raise SingularMassError(
+                        f"the consistent mass matrix is singular: the particles determine no unique value on "
+                        f"{null} direction(s) of the {undetermined} dofs that no cell's particles span "
+                        "(coincident or collinear particles, or too few per cell for this space); seed "
+                        "particles that span each cell, use lump_below, lumped mass or a lower degree"
+                    )
             A = consistent_mass_matrix(self.basis, particles, lump, weight)
             iset = fpetsc.owned_index_set(imap, self.active[: self.num_owned])
             self.matrix = A.createSubMatrix(iset, iset)
@@ -254,7 +272,7 @@ class Projector:
             self.matrix.mult(ones, rows)
             self.row_mass = np.zeros(self.num_owned)
             self.row_mass[self.active[: self.num_owned]] = rows.array
-        else:
+        else:  # lumped and FMPM: the rows of the consistent matrix sum to the lumped masses
             self.row_mass = np.where(self.active, self.lumped, 0.0)[: self.num_owned]
         self.exclude_components = [np.asarray(d, dtype=np.int32) for d in (exclude_components or ())]
 
@@ -273,6 +291,8 @@ class Projector:
         """
         if self.mass != "consistent":
             return 1.0
+        from fempm.mass_span import mass_ratio_rhs
+
         ksp = fpetsc.create_ksp(self.particles.comm, "fempm_mass_ratio_", {
             "ksp_type": "cg", "pc_type": "jacobi", "ksp_rtol": 1e-14,
             "pc_jacobi_type": "rowsum" if self.basis.nonnegative else "diagonal",
@@ -280,9 +300,8 @@ class Projector:
         ksp.setComputeSingularValues(True)
         ksp.setOperators(self.matrix)
         x, b = self.matrix.createVecs()
-        g = np.arange(*b.getOwnershipRange(), dtype=np.float64)
-        r = np.sin(12.9898 * g + 1.0) * 43758.5453
-        b.array[:] = (r - np.floor(r) - 0.5) * np.abs(self.row_mass[self.active[: self.num_owned]])
+        act = self.active[: self.num_owned]
+        b.array[:] = mass_ratio_rhs(self.V, act) * np.abs(self.row_mass[act])  # the same on any partition
         x.set(0.0)
         ksp.solve(b, x)
         smax, smin = ksp.computeExtremeSingularValues()
@@ -334,11 +353,15 @@ class Projector:
         base = self.active[: self.num_owned]
         n, k = self.num_owned, b.shape[1]
         F = np.zeros((n, k))
-        if self.mass == "lumped":
-            act = base
-            F[act] = b[:n][act] / self.lumped[:n][act, None]
+        if self.mass in ("lumped", "fmpm"):
+            free = np.repeat(base[:, None], k, axis=1)
             for c, dofs in enumerate(self.exclude_components[:k]):
-                F[dofs[dofs < n], c] = 0.0
+                free[dofs[dofs < n], c] = False
+            if self.mass == "lumped":
+                F[free] = (b[:n] / np.where(base, self.lumped[:n], 1.0)[:, None])[free]
+            else:
+                F = fmpm_solve(self.basis, self.weights, self.lumped, b, free, self.fmpm_order, self._ghosted,
+                               lump=None if self.lump is None else self.lump[:n])
         else:
             self.iterations = []
             for c in range(k):
@@ -359,12 +382,15 @@ class Projector:
                     )
                 self.iterations.append(ksp.getIterationNumber())
                 F[act, c] = x.array
-        full = np.zeros((len(self.active), k))
-        full[:n] = F
+        return self._ghosted(F)
+
+    def _ghosted(self, F: npt.NDArray) -> npt.NDArray:
+        """Owned values (owned dofs, k) -> (owned + ghost dofs, k), ghosts from their owners."""
+        k = F.shape[1]
         vec = dolfinx.la.vector(self.basis.index_map, bs=k)
-        vec.array[:] = full.ravel()
+        vec.array[: F.size] = F.ravel()
         vec.scatter_forward()
-        return vec.array.reshape(full.shape)
+        return vec.array.reshape(-1, k)
 
 
 def project(
@@ -377,12 +403,13 @@ def project(
     petsc_options: dict[str, Any] | None = None,
     domain=None,
     weight: str = "mass",
+    fmpm_order: int | None = None,
 ) -> dolfinx.fem.Function:
     """Galerkin projection of particle ``values`` onto ``V`` (see :class:`Projector`;
-    ``weight="volume"`` for per-volume fields such as stress)."""
+    ``weight="volume"`` for per-volume fields such as stress; ``mass="fmpmK"`` for FMPM(K))."""
     projector = Projector(
         V, particles, mass=mass, petsc_options_prefix=petsc_options_prefix, petsc_options=petsc_options,
-        domain=domain, weight=weight,
+        domain=domain, weight=weight, fmpm_order=fmpm_order,
     )
     return projector.project(values)
 

@@ -8,6 +8,7 @@ from mpi4py import MPI
 
 from fempm.boundary import slip
 from fempm.materials import NewtonianTait
+from fempm.health import Health
 from fempm.scene import Scene
 from fempm.seeding import create_particles
 from fempm.stepping import Loads, StepOptions
@@ -67,4 +68,7 @@ def dam_break(
         name="dam_break", mesh=mesh, particles=p, materials=[water], t_end=t_end, frames=frames, bcs=bcs,
         loads=Loads(body_force=(0.0, -g)), options=StepOptions(scheme=scheme, flip=flip, mass=mass, cfl=cfl),
         params=params,
+        # the column starts compressed with F = I, so the Tait energy W(J) misses the initial compression
+        # and the energy balance cannot be checked: J bounds and the step floor still apply
+        health=Health(energy_tolerance=None),
     )

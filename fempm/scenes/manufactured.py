@@ -110,7 +110,7 @@ def _start_displaced(problem, particles: Particles) -> None:
 
 def manufactured_scene(
     problem, cells: int = 16, *, mesh: str = "structured", ppc: int | None = None, degree: int = 1,
-    variant: str | None = None, mass: str = "lumped", domain: str = "point", scheme: str = "USL",
+    variant: str | None = None, mass: str = "lumped", domain: str = "point", scheme: str = "MUSL",
     flip: float = 1.0, cfl: float = 0.4, dt: float | None = None, t_end: float | None = None,
     frames: int = 10, comm: MPI.Comm = MPI.COMM_WORLD, **options,
 ) -> Scene:

@@ -1,0 +1,254 @@
+r"""Error against run time: ``python -m fempm study error-vs-time [--quick] [--out DIR]``.
+
+Which configuration is cheapest for a given error? Every configuration (background mesh,
+velocity space, mass matrix: lumped, FMPM(k) or consistent, particle domain, scheme, particles
+per cell) of every problem is run at several resolutions; each run records its error and its
+wall time (median of ``repeats`` runs; 3 for runs under :data:`REPEAT_BELOW_S` seconds, else 1;
+maximum over ranks), with the number of ranks times threads it ran on.
+
+Problems: the loop problems of the convergence study (:data:`fempm.studies.convergence.PROBLEMS`:
+the vibrating bar, the 1D and 2D axis-aligned manufactured solutions and the small-amplitude
+generalized vortex; error the :math:`V^0`-weighted :math:`L^2` particle displacement error,
+maximum over time) and ``mapping``, the particle-to-grid projection alone
+(:func:`fempm.studies.mapping.run_case` with the smooth field; error :math:`\|F - f\|_{L^2}`,
+time the projection's).
+
+Outputs: ``DIR/error_vs_time.csv`` with the columns :data:`COLUMNS` (``pareto`` true on the
+rows no other row of the problem beats in both error and time), ``DIR/error_vs_time.md`` (the
+fronts, and per problem the cheapest run of each mass option below error thresholds) and
+``DIR/error_vs_time_<problem>.png`` (log-log error against time, the front drawn).
+"""
+
+from __future__ import annotations
+
+import csv
+import os
+import time
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+from mpi4py import MPI
+
+from fempm.studies.convergence import Config
+
+COLUMNS = ["problem", "mesh", "degree", "mass", "domain", "scheme", "cells", "ppc", "error", "wall_s", "repeats",
+           "threads", "pareto"]
+#: runs faster than this are repeated (3 times) and their median time kept
+REPEAT_BELOW_S = 2.0
+
+
+@dataclass(frozen=True)
+class Sweep:
+    """A problem's sweep: configurations and resolutions (full, quick)."""
+
+    configs: tuple[Config, ...]
+    sizes: tuple[int, ...]
+    quick_configs: tuple[Config, ...]
+    quick_sizes: tuple[int, ...]
+
+
+def _sweep_1d(scheme: str) -> tuple[Config, ...]:
+    out = [Config(mass=m, domain=d, scheme=scheme, ppc=ppc) for m in ("lumped", "fmpm2", "fmpm5", "consistent")
+           for d in ("point", "cpdi1") for ppc in (2, 4)]
+    out += [Config(degree=2, mass="consistent", scheme=scheme, ppc=3)]
+    out += [Config(degree=2, variant="bernstein", mass=m, scheme=scheme, ppc=3) for m in ("lumped", "fmpm5", "consistent")]
+    return tuple(out)
+
+
+def _sweep_2d(scheme: str) -> tuple[Config, ...]:
+    out = [Config("structured", mass=m, domain=d, scheme=scheme, ppc=4) for m in ("lumped", "fmpm5", "consistent")
+           for d in ("point", "cpdi1")]
+    out += [Config("structured", mass="lumped", scheme=scheme, ppc=9)]
+    out += [Config("structured", degree=2, mass="consistent", scheme=scheme, ppc=9)]
+    out += [Config("unstructured", mass=m, scheme=scheme, ppc=4) for m in ("lumped", "fmpm5", "consistent")]
+    out += [Config("unstructured", mass="lumped", domain="cpdi1", scheme=scheme, ppc=4),
+            Config("unstructured", degree=2, variant="bernstein", mass="lumped", scheme=scheme, ppc=9)]
+    return tuple(out)
+
+
+def _quick(*masses: str, scheme: str = "USL", ppc: int = 2) -> tuple[Config, ...]:
+    return tuple(Config(mass=m, scheme=scheme, ppc=ppc) for m in masses)
+
+
+SWEEPS: dict[str, Sweep] = {
+    "vibrating_bar": Sweep(_sweep_1d("MUSL"), (8, 16, 32, 64), _quick("lumped", "fmpm3", "consistent", scheme="MUSL"), (8, 16)),
+    "axis_aligned_1d_G0.05": Sweep(_sweep_1d("USL"), (16, 32, 64, 128), _quick("lumped", "consistent"), (16, 32)),
+    "axis_aligned_2d": Sweep(_sweep_2d("USL"), (8, 16, 32), _quick("lumped", "consistent", ppc=4), (8,)),
+    "vortex_A0.01": Sweep(_sweep_2d("MUSL"), (24, 48), _quick("lumped", scheme="MUSL", ppc=4), (24,)),
+    "mapping": Sweep(
+        tuple(Config(mesh, degree=k, mass=m, domain=d, ppc=ppc) for mesh in ("structured", "unstructured")
+              for k, masses in ((1, ("lumped", "fmpm2", "fmpm5", "consistent")), (2, ("consistent",)))
+              for m in masses for d in ("point", "gimp", "cpdi1") for ppc in (4, 9) if not (k == 2 and ppc == 4)),
+        (8, 16, 32, 64),
+        tuple(Config("structured", mass=m, ppc=4) for m in ("lumped", "fmpm3", "consistent")), (8, 16)),
+}
+
+
+def threads() -> int:
+    """Ranks times threads per rank (OMP_NUM_THREADS, default 1)."""
+    return MPI.COMM_WORLD.size * int(os.environ.get("OMP_NUM_THREADS", "1") or 1)
+
+
+def _mapping_case(config: Config, cells: int, comm) -> dict:
+    from fempm.domains import half_widths
+    from fempm.seeding import create_particles
+    from fempm.studies import mapping
+
+    mesh = mapping.make_mesh("structured-quad" if config.mesh == "structured" else "unstructured-tri", cells, comm)
+    p = create_particles(mesh, config.ppc, jitter=0.5, seed=1)
+    ell = half_widths(p)
+    p.fields["lp"] = np.minimum(ell, np.minimum(p.x, 1.0 - p.x) * (1 - 1e-9))
+    r = mapping.run_case(mesh, p, config.degree, config.mass, "smooth", config.domain)
+    return {"error": r["l2_error"], "wall_s": r["time_s"], "status": "ok"}
+
+
+def _loop_case(problem: str, config: Config, cells: int, comm) -> dict:
+    from fempm.studies.convergence import run_case
+
+    r = run_case(problem, config, cells, comm)
+    return {"error": r["error_l2"] if r["status"] == "ok" else np.nan, "wall_s": r["wall_s"], "status": r["status"],
+            "reason": r.get("reason", "")}
+
+
+def run_case(problem: str, config: Config, cells: int, comm: MPI.Comm = MPI.COMM_WORLD) -> dict:
+    """One (problem, configuration, size), repeated when fast; returns its row."""
+    case = _mapping_case if problem == "mapping" else (lambda c, n, cm: _loop_case(problem, c, n, cm))
+    row = {"problem": problem, "mesh": config.mesh if problem in ("mapping", "axis_aligned_2d", "vortex_A0.01") else "interval",
+           "degree": f"{config.degree}{'B' if config.variant == 'bernstein' else ''}", "mass": config.mass,
+           "domain": config.domain, "scheme": "-" if problem == "mapping" else config.scheme, "cells": cells,
+           "ppc": config.ppc, "threads": threads()}
+    try:
+        first = case(config, cells, comm)
+    except Exception as e:  # noqa: BLE001 - a failed configuration is a row (SingularMassError, unsupported options)
+        first = {"error": np.nan, "wall_s": np.nan, "status": type(e).__name__, "reason": " ".join(str(e).split())[:300]}
+    walls = [first["wall_s"]]
+    if first["status"] == "ok" and first["wall_s"] < REPEAT_BELOW_S:
+        walls += [case(config, cells, comm)["wall_s"] for _ in range(2)]
+    row.update(error=first["error"], wall_s=float(np.median(walls)), repeats=len(walls), status=first["status"],
+               reason=first.get("reason", ""))
+    return row
+
+
+def pareto(rows: list[dict]) -> None:
+    """Mark each problem's Pareto-optimal rows: finite error, and no other row with both a
+    smaller-or-equal error and time, one of them strictly."""
+    for problem in dict.fromkeys(r["problem"] for r in rows):
+        rs = sorted((r for r in rows if r["problem"] == problem and np.isfinite(r["error"]) and np.isfinite(r["wall_s"])),
+                    key=lambda r: (r["wall_s"], r["error"]))
+        best = np.inf
+        for r in rows:
+            if r["problem"] == problem:
+                r["pareto"] = False
+        for r in rs:
+            if r["error"] < best:
+                r["pareto"] = True
+                best = r["error"]
+
+
+def run_study(out: Path = Path("output/study-error-vs-time"), *, quick: bool = False, problems=None,
+              comm: MPI.Comm = MPI.COMM_WORLD, log=print) -> list[dict]:
+    """Run the sweeps (``problems``: names of :data:`SWEEPS`, default all) into ``out``; the CSV
+    is rewritten after every run."""
+    names = list(problems or SWEEPS)
+    for n in names:
+        if n not in SWEEPS:
+            raise ValueError(f"unknown problem {n!r}; expected one of {', '.join(SWEEPS)}")
+    out = Path(out)
+    if comm.rank == 0:
+        out.mkdir(parents=True, exist_ok=True)
+    rows: list[dict] = []
+    t0 = time.perf_counter()
+    run_case("mapping", Config(ppc=4), 4, comm)  # first-call costs (imports, PETSc set-up) untimed
+    for name in names:
+        sw = SWEEPS[name]
+        for config in (sw.quick_configs if quick else sw.configs):
+            for cells in (sw.quick_sizes if quick else sw.sizes):
+                if config.degree == 2 and name != "mapping" and cells > max(sw.sizes[:-1], default=cells):
+                    continue  # the P2 spaces stop one size earlier
+                row = run_case(name, config, cells, comm)
+                rows.append(row)
+                if comm.rank == 0:
+                    log(f"{name:22s} {row['mesh']:12s} P{row['degree']:2s} {row['mass']:10s} {row['domain']:6s} "
+                        f"{row['scheme']:4s} cells={cells:4d} ppc={row['ppc']} error={row['error']:.3e} "
+                        f"t={row['wall_s']:.3f}s x{row['repeats']} {row['status']}")
+                    pareto(rows)
+                    write_csv(rows, out / "error_vs_time.csv")
+    pareto(rows)
+    if comm.rank == 0:
+        write_report(rows, out, quick=quick, wall=time.perf_counter() - t0)
+    return rows
+
+
+def write_csv(rows: list[dict], path: Path) -> None:
+    with open(path, "w", newline="") as f:
+        w = csv.DictWriter(f, fieldnames=COLUMNS, extrasaction="ignore")
+        w.writeheader()
+        w.writerows(rows)
+    failed = [r for r in rows if r.get("status", "ok") != "ok"]
+    with open(Path(path).with_name("error_vs_time_failures.csv"), "w", newline="") as f:
+        w = csv.DictWriter(f, fieldnames=COLUMNS[:8] + ["status", "reason"], extrasaction="ignore")
+        w.writeheader()
+        w.writerows(failed)
+
+
+def read_csv(path: Path) -> list[dict]:
+    """Rows of an ``error_vs_time.csv`` with their numbers typed, and the status and reason of
+    failed runs from ``error_vs_time_failures.csv`` beside it (to write the report again)."""
+    with open(path, newline="") as f:
+        rows = list(csv.DictReader(f))
+    failed = {}
+    failures = Path(path).with_name("error_vs_time_failures.csv")
+    if failures.exists():
+        with open(failures, newline="") as f:
+            failed = {tuple(r[c] for c in COLUMNS[:8]): r for r in csv.DictReader(f)}
+    for r in rows:
+        f = failed.get(tuple(r[c] for c in COLUMNS[:8]), {})
+        r.update(status=f.get("status", "ok"), reason=f.get("reason", ""))
+        r.update(error=float(r["error"]), wall_s=float(r["wall_s"]), cells=int(r["cells"]), ppc=int(r["ppc"]),
+                 repeats=int(r["repeats"]), threads=int(r["threads"]), pareto=r["pareto"] == "True")
+    return rows
+
+
+def _name(r: dict) -> str:
+    return f"{r['mesh']} P{r['degree']} {r['mass']} {r['domain']} {r['scheme']} ppc={r['ppc']} n={r['cells']}"
+
+
+def write_report(rows: list[dict], out: Path, *, quick: bool = False, wall: float | None = None) -> None:
+    """CSV, Markdown summary and one figure per problem."""
+    from fempm.plot import plot_pareto
+
+    out = Path(out)
+    out.mkdir(parents=True, exist_ok=True)
+    pareto(rows)
+    write_csv(rows, out / "error_vs_time.csv")
+    lines = [f"# Error against run time{' (quick)' if quick else ''}", "",
+             "Error: V0-weighted L2 particle displacement error, maximum over time (loop problems), or the L2 error "
+             "of the projected smooth field (mapping). Time: median wall time of the run (projection alone for "
+             f"mapping), on {rows[0]['threads'] if rows else 1} rank(s) x thread(s).", ""]
+    if wall is not None:
+        lines += [f"Run time of the study: {wall:.0f} s ({len(rows)} configurations x sizes).", ""]
+    for problem in dict.fromkeys(r["problem"] for r in rows):
+        rs = [r for r in rows if r["problem"] == problem]
+        front = sorted((r for r in rs if r["pareto"]), key=lambda r: r["wall_s"])
+        lines += [f"## {problem}", "", "Pareto front (cheapest first):", "", "| configuration | error | wall s |", "|---|---|---|"]
+        lines += [f"| {_name(r)} | {r['error']:.3e} | {r['wall_s']:.4g} |" for r in front]
+        ok = [r for r in rs if np.isfinite(r["error"])]
+        if ok:
+            errs = sorted(r["error"] for r in ok)
+            targets = sorted({float(f"{errs[int(q * (len(errs) - 1))]:.1e}") for q in (0.1, 0.3, 0.6)})
+            masses = list(dict.fromkeys(r["mass"] for r in ok))
+            lines += ["", "Cheapest run reaching each error, per mass option (time in s; - none reaches it):", "",
+                      "| error <= | " + " | ".join(masses) + " |", "|---|" + "---|" * len(masses)]
+            for e in targets:
+                cells = []
+                for m in masses:
+                    hit = [r for r in ok if r["mass"] == m and r["error"] <= e]
+                    cells.append(f"{min(r['wall_s'] for r in hit):.3g}" if hit else "-")
+                lines.append(f"| {e:.1e} | " + " | ".join(cells) + " |")
+        failed = [r for r in rs if r.get("status", "ok") != "ok"]
+        if failed:
+            lines += ["", f"{len(failed)} run(s) failed (reasons in error_vs_time_failures.csv)."]
+        lines.append("")
+        plot_pareto(rs, out / f"error_vs_time_{problem}.png", title=f"{problem}: error against wall time")
+    (out / "error_vs_time.md").write_text("\n".join(lines) + "\n")

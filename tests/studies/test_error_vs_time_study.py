@@ -1,0 +1,60 @@
+"""The error-against-run-time study at --quick size (fempm.studies.error_vs_time): the fixed
+CSV columns, a correct Pareto front per problem, the report and the figures."""
+
+import csv
+from pathlib import Path
+
+import numpy as np
+import pytest
+from mpi4py import MPI
+
+from fempm.studies import error_vs_time as evt
+
+
+@pytest.fixture(scope="module")
+def study(tmp_path_factory):
+    out = tmp_path_factory.mktemp("evt") if MPI.COMM_WORLD.rank == 0 else None
+    out = MPI.COMM_WORLD.bcast(str(out), root=0)
+    return out, evt.run_study(out, quick=True, log=lambda *a: None)
+
+
+def test_csv_has_the_fixed_columns_and_every_run(study):
+    out, rows = study
+    expected = sum(len(s.quick_configs) * len(s.quick_sizes) for s in evt.SWEEPS.values())
+    assert len(rows) == expected
+    if MPI.COMM_WORLD.rank == 0:
+        with open(Path(out) / "error_vs_time.csv", newline="") as f:
+            reader = csv.DictReader(f)
+            assert reader.fieldnames == ["problem", "mesh", "degree", "mass", "domain", "scheme", "cells", "ppc", "error",
+                                         "wall_s", "repeats", "threads", "pareto"]
+            assert len(list(reader)) == expected
+        assert (Path(out) / "error_vs_time.md").read_text().count("## ") == len(evt.SWEEPS)
+        for problem in evt.SWEEPS:
+            assert (Path(out) / f"error_vs_time_{problem}.png").stat().st_size > 10_000
+
+
+def test_runs_are_finite_and_timed(study):
+    _, rows = study
+    for r in rows:
+        assert np.isfinite(r["error"]) and r["error"] > 0 and r["wall_s"] > 0, r
+        assert r["repeats"] in (1, 3) and r["threads"] >= 1
+
+
+def test_pareto_front_is_exactly_the_non_dominated_rows(study):
+    _, rows = study
+    for problem in evt.SWEEPS:
+        rs = [r for r in rows if r["problem"] == problem]
+        for r in rs:
+            dominated = any(o is not r and o["error"] <= r["error"] and o["wall_s"] <= r["wall_s"]
+                            and (o["error"] < r["error"] or o["wall_s"] < r["wall_s"]) for o in rs)
+            assert r["pareto"] == (not dominated), (problem, r)
+        assert any(r["pareto"] for r in rs)
+
+
+def test_consistent_and_fmpm_beat_lumped_mapping_error(study):
+    """At equal resolution, the consistent projection of a smooth field is more accurate than
+    FMPM(3), which is more accurate than the lumped one."""
+    _, rows = study
+    for cells in (8, 16):
+        e = {r["mass"]: r["error"] for r in rows if r["problem"] == "mapping" and r["cells"] == cells}
+        assert e["consistent"] < e["fmpm3"] < e["lumped"]

@@ -1,0 +1,67 @@
+"""The stability catalogue at --quick size (fempm.studies.stability): a row for every option of
+every case, finite figures where stable, known causes where not, and no Python traceback."""
+
+import csv
+
+import numpy as np
+import pytest
+from mpi4py import MPI
+
+from fempm.studies import stability
+from fempm.studies.stability_cases import CASES
+
+
+@pytest.fixture(scope="module")
+def study(tmp_path_factory):
+    out = tmp_path_factory.mktemp("stability") if MPI.COMM_WORLD.rank == 0 else None
+    out = MPI.COMM_WORLD.bcast(str(out), root=0)
+    return out, stability.run_study(out, quick=True, log=lambda *a: None)
+
+
+def test_every_case_has_a_row_for_every_option(study):
+    out, rows = study
+    for case in CASES:
+        assert [r["option"] for r in rows if r["case"] == case] == [stability.label(o) for o in stability.options_for(case, quick=True)]
+    with open(f"{out}/stability.csv", newline="") as f:
+        reader = csv.DictReader(f)
+        assert reader.fieldnames == ["case", "option", "outcome", "reason", "energy_ratio", "momentum_drift", "j_min",
+                                     "j_max", "steps", "wall_s"]
+        assert len(list(reader)) == len(rows)
+    md = open(f"{out}/stability.md").read()
+    assert all(f"## {case}" in md for case in CASES)
+
+
+def test_stable_rows_are_finite_and_within_the_limits(study):
+    _, rows = study
+    stable = [r for r in rows if r["outcome"] == "stable"]
+    assert len(stable) >= len(rows) // 3
+    for r in stable:
+        figures = [r[k] for k in ("energy_ratio", "momentum_drift", "j_min", "j_max", "wall_s")]
+        assert np.all(np.isfinite(figures)), r
+        assert r["energy_ratio"] <= 1.2 and 1e-2 <= r["j_min"] <= r["j_max"] <= 1e2 and r["steps"] > 0, r
+        assert r["reason"] == ""
+
+
+def test_failures_name_their_cause(study):
+    _, rows = study
+    for r in rows:
+        assert r["outcome"] in ("stable", "unstable", "aborted")
+        if r["outcome"] == "unstable":
+            assert "energy growth" in r["reason"] and r["energy_ratio"] > 1.0, r
+        if r["outcome"] == "aborted":
+            assert r["reason"].split(":")[0] in ("SimulationError", "SingularMassError", "OutsideMeshError", "ValueError"), r
+
+
+def test_catalogue_findings(study):
+    """What the catalogue shows at this size, asserted so that a regression is seen: USL with
+    point particles blows up where a particle column sits next to nearly empty nodes, the
+    averaged domains survive near-incompressibility, a CFL number of 1 is not stable for USL,
+    and the long run stays stable with the default options."""
+    _, rows = study
+    get = {(r["case"], r["option"]): r for r in rows}
+    base = stability.label({})
+    assert get["near-empty-cells", base]["outcome"] != "stable"
+    assert get["nu=0.4999", stability.label({"domain": "cpdi1"})]["outcome"] == "stable"
+    assert get["cfl", stability.label({"cfl": 1.0})]["outcome"] != "stable"
+    assert get["long-run", base]["outcome"] == "stable"
+    assert get["high-velocity", base]["reason"].startswith("SimulationError") and "J = det F" in get["high-velocity", base]["reason"]
