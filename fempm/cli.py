@@ -58,46 +58,27 @@ def main(argv: list[str] | None = None) -> int:
             print(f"wrote {out}/properties.md, properties.csv, particle_basis_*.png")
         return 0
 
-    if args.command == "study" and args.name == "convergence":
+    sized = {  # the studies with --quick: (how to run, what they write)
+        "convergence": (lambda m, out: m.run(out, quick=args.quick, problems=args.problems),
+                        "convergence.csv, convergence.md, convergence_*.png"),
+        "stability": (lambda m, out: m.run_study(out, quick=args.quick, cases=args.cases),
+                      "stability.csv, stability.md, stability.png"),
+        "error-vs-time": (lambda m, out: m.run_study(out, quick=args.quick, problems=args.problems),
+                          "error_vs_time.csv, error_vs_time.md, error_vs_time_*.png"),
+    }
+    if args.command == "study" and args.name in sized:
+        import importlib
+
         from mpi4py import MPI
 
-        from fempm.studies import convergence
-
-        out = args.out or Path("output/study-convergence")
+        runner, outputs = sized[args.name]
+        out = args.out or Path(f"output/study-{args.name}")
         try:
-            convergence.run(out, quick=args.quick, problems=args.problems)
+            runner(importlib.import_module("fempm.studies." + args.name.replace("-", "_")), out)
         except ValueError as e:
             parser.error(str(e))
         if MPI.COMM_WORLD.rank == 0:
-            print(f"wrote {out}/convergence.csv, convergence.md, convergence_*.png")
-        return 0
-
-    if args.command == "study" and args.name == "stability":
-        from mpi4py import MPI
-
-        from fempm.studies import stability
-
-        out = args.out or Path("output/study-stability")
-        try:
-            stability.run_study(out, quick=args.quick, cases=args.cases)
-        except ValueError as e:
-            parser.error(str(e))
-        if MPI.COMM_WORLD.rank == 0:
-            print(f"wrote {out}/stability.csv, stability.md")
-        return 0
-
-    if args.command == "study" and args.name == "error-vs-time":
-        from mpi4py import MPI
-
-        from fempm.studies import error_vs_time
-
-        out = args.out or Path("output/study-error-vs-time")
-        try:
-            error_vs_time.run_study(out, quick=args.quick, problems=args.problems)
-        except ValueError as e:
-            parser.error(str(e))
-        if MPI.COMM_WORLD.rank == 0:
-            print(f"wrote {out}/error_vs_time.csv, error_vs_time.md, error_vs_time_*.png")
+            print(f"wrote {out}/: {outputs}")
         return 0
 
     if args.command == "study" and args.name == "mapping":

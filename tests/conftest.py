@@ -74,3 +74,9 @@ def pytest_runtest_makereport(item, call):
         sys.stderr.write(f"\n[rank {MPI.COMM_WORLD.rank}] FAILED {item.nodeid}\n{report.longreprtext}\n")
         sys.stderr.flush()
         MPI.COMM_WORLD.Abort(1)
+
+
+def shared_tmp(tmp_path_factory, name: str) -> str:
+    """A temporary folder made on rank 0 and known to every rank (for studies run under MPI)."""
+    out = tmp_path_factory.mktemp(name) if MPI.COMM_WORLD.rank == 0 else None
+    return MPI.COMM_WORLD.bcast(str(out), root=0)

@@ -225,7 +225,8 @@ def write_report(rows: list[dict], out: Path, *, quick: bool = False, wall: floa
     lines = [f"# Error against run time{' (quick)' if quick else ''}", "",
              "Error: V0-weighted L2 particle displacement error, maximum over time (loop problems), or the L2 error "
              "of the projected smooth field (mapping). Time: median wall time of the run (projection alone for "
-             f"mapping), on {rows[0]['threads'] if rows else 1} rank(s) x thread(s).", ""]
+             f"mapping), on {rows[0]['threads'] if rows else 1} rank(s) x thread(s) of a machine with "
+             f"{os.cpu_count()} cores.", ""]
     if wall is not None:
         lines += [f"Run time of the study: {wall:.0f} s ({len(rows)} configurations x sizes).", ""]
     for problem in dict.fromkeys(r["problem"] for r in rows):

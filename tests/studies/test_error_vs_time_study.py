@@ -6,6 +6,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from conftest import shared_tmp
 from mpi4py import MPI
 
 from fempm.studies import error_vs_time as evt
@@ -13,8 +14,7 @@ from fempm.studies import error_vs_time as evt
 
 @pytest.fixture(scope="module")
 def study(tmp_path_factory):
-    out = tmp_path_factory.mktemp("evt") if MPI.COMM_WORLD.rank == 0 else None
-    out = MPI.COMM_WORLD.bcast(str(out), root=0)
+    out = shared_tmp(tmp_path_factory, "evt")
     return out, evt.run_study(out, quick=True, log=lambda *a: None)
 
 

@@ -5,7 +5,7 @@ import csv
 
 import numpy as np
 import pytest
-from mpi4py import MPI
+from conftest import shared_tmp
 
 from fempm.studies import stability
 from fempm.studies.stability_cases import CASES
@@ -13,8 +13,7 @@ from fempm.studies.stability_cases import CASES
 
 @pytest.fixture(scope="module")
 def study(tmp_path_factory):
-    out = tmp_path_factory.mktemp("stability") if MPI.COMM_WORLD.rank == 0 else None
-    out = MPI.COMM_WORLD.bcast(str(out), root=0)
+    out = shared_tmp(tmp_path_factory, "stability")
     return out, stability.run_study(out, quick=True, log=lambda *a: None)
 
 
