@@ -47,9 +47,9 @@ class Health:
     Why 20 %: the explicit update is symplectic Euler, whose computed energy (kinetic energy of
     :math:`v^{n+1}` plus strain energy of :math:`F^{n+1}`) oscillates about a conserved shadow
     energy by up to :math:`\omega \Delta t / 2` of the energy in the highest excited modes.
-    Stable runs of the stability catalogue (``python -m fempm study stability``) peak at 6-10 %
-    above their budget during impacts (MUSL: near-empty cells 6.1 %, slivers 9.8 %, one
-    particle per cell 6.1 %) and settle back; the unstable ones grow without bound (x2 to x18
+    Stable runs of the stability catalogue (``python -m fempm study stability --quick``, run
+    without the energy check) peak at 6-10 % above their budget during impacts (MUSL:
+    near-empty cells 6.1 %, slivers 9.8 %, one particle per cell 6.1 %) and settle back; the unstable ones grow without bound (x2 to x18
     before they invert), so 20 % separates the two with margin on both sides."""
 
     energy_tolerance: float | None = 0.2

@@ -58,9 +58,9 @@ class StepOptions:
     r"""Transfer and time-stepping options.
 
     scheme: USL, USF or MUSL (default: the stability catalogue, ``python -m fempm study
-    stability``, found MUSL lumped stable in 11 of its 14 cases, at every CFL number up to 1 on
-    the colliding disks, where USL failed in 10 and already at CFL 0.5; see the README's "What
-    we found"). flip: PIC/FLIP blend alpha (1 = FLIP, 0 = PIC).
+    stability``, found MUSL lumped stable in 9 of its 13 hard cases and at every CFL number up
+    to 1 on the colliding disks, where USL was stable in 3 and only up to CFL 0.25; see
+    ``docs/error-vs-time-and-stability.md``). flip: PIC/FLIP blend alpha (1 = FLIP, 0 = PIC).
     mass: lumped, consistent or FMPM(k) (``"fmpm"`` with ``fmpm_order`` k, or ``"fmpmK"``;
     :mod:`fempm.fmpm`: k - 1 extra G2P/P2G sweeps, a step :math:`1/\sqrt{k}` of the lumped
     one unless ``lumped_forces``). cfl: Courant number in (0, 1]. mass_cutoff: nodes whose
