@@ -32,6 +32,7 @@ import numpy as np
 import numpy.typing as npt
 from mpi4py import MPI
 
+from fempm import kernels
 from fempm.basis import ParticleBasis, is_nonnegative
 from fempm.boundary import Fixed, Slip
 from fempm.domains import GIMP_NAMES, domain_geometry, make_domain
@@ -220,9 +221,7 @@ class ExplicitSolver:
     def _update_stress(self, L: npt.NDArray, dt: float) -> None:
         p = self.particles
         f = p.fields
-        F = (identity(len(p), p.gdim) + dt * L) @ f["F"]
-        with np.errstate(invalid="ignore"):
-            J = np.linalg.det(F)
+        F, J = kernels.deform(f["F"], L, dt)
         nonfinite = ~np.isfinite(J)
         bad = J <= 0
         finite = J[~nonfinite]
@@ -301,13 +300,12 @@ class ExplicitSolver:
         self._apply_bcs(v_new)
         v_new = basis.update_ghosts(v_new)
         # G2P
-        vp_grid = basis.gather(v_new)
-        fld["v"] = opts.flip * (fld["v"] + basis.gather(v_new - v_old)) + (1.0 - opts.flip) * vp_grid
+        fld["v"], vp_grid, L = self._g2p(basis, v_new, v_old, fld["v"], opts.flip)
         if opts.scheme == "MUSL":
             v_new = self._map_velocity(basis, mass_op, guess=None)
-            vp_grid = basis.gather(v_new)
+            vp_grid, L = self._interpolate(basis, v_new)
         if opts.scheme != "USF":
-            self._update_stress(self._velocity_gradient(basis, v_new), dt)
+            self._update_stress(L, dt)
         if opts.domain == "cpdi2":
             self._move_corners(basis, v_new, dt)
         else:
@@ -331,6 +329,23 @@ class ExplicitSolver:
         except ValueError as e:
             self._fail(f"inverted particle domain: {e}")
         p.fields["corners"], p.x, p.volume = corners, centroid, volume
+
+    @staticmethod
+    def _g2p(basis: ParticleBasis, v_new: npt.NDArray, v_old: npt.NDArray, vp: npt.NDArray, flip: float):
+        r"""G2P: (:math:`v_p^+` with the FLIP blend, the grid velocity at the particles,
+        :math:`L_p`); point particles go through the compiled kernel (:mod:`fempm.kernels`)."""
+        if basis.cells is not None and not basis.extended:
+            return kernels.g2p_point(basis.dofs, basis.values, basis.gradients, v_new, v_old, vp, flip)
+        vp_grid = basis.gather(v_new)
+        blended = flip * (vp + basis.gather(v_new - v_old)) + (1.0 - flip) * vp_grid
+        return blended, vp_grid, ExplicitSolver._velocity_gradient(basis, v_new)
+
+    @staticmethod
+    def _interpolate(basis: ParticleBasis, v: npt.NDArray) -> tuple[npt.NDArray, npt.NDArray]:
+        """(grid velocity at the particles, :math:`L_p`) of the nodal velocity ``v``."""
+        if basis.cells is not None and not basis.extended:
+            return kernels.velocity_and_gradient(basis.dofs, basis.values, basis.gradients, v)
+        return basis.gather(v), ExplicitSolver._velocity_gradient(basis, v)
 
     @staticmethod
     def _velocity_gradient(basis: ParticleBasis, v: npt.NDArray) -> npt.NDArray:

@@ -21,6 +21,13 @@ class LinearElastic(IsotropicElastic):
         return sym(F) - identity(len(F), F.shape[1])
 
     def stress(self, F, L, sigma, dt, rho) -> npt.NDArray:
+        """The compiled kernel :func:`fempm.kernels.linear_elastic_stress`; :meth:`stress_numpy`
+        is its reference."""
+        from fempm.kernels import linear_elastic_stress
+
+        return linear_elastic_stress(np.ascontiguousarray(F), *self.lame)
+
+    def stress_numpy(self, F, L, sigma, dt, rho) -> npt.NDArray:
         lam, mu = self.lame
         eps = self.strain(F)
         return lam * trace(eps)[:, None, None] * identity(len(F), F.shape[1]) + 2 * mu * eps

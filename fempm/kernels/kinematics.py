@@ -1,0 +1,130 @@
+r"""Kinematics and the elastic laws, per particle.
+
+* :func:`deform`: :math:`F^+ = (I + \Delta t\, L) F`, :math:`J = \det F^+` (closed form in
+  1, 2 and 3 dimensions), in one pass and without temporaries.
+* :func:`neo_hookean_stress`: :math:`\sigma = \frac{\mu}{J}(F F^T - I) + \frac{\lambda \ln J}{J} I`
+  (:class:`fempm.materials.NeoHookean`, whose numpy formula is the reference).
+* :func:`linear_elastic_stress`: :math:`\sigma = \lambda\, \mathrm{tr}\,\varepsilon\, I +
+  2\mu \varepsilon`, :math:`\varepsilon = \mathrm{sym}(F) - I`
+  (:class:`fempm.materials.LinearElastic`).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import numpy.typing as npt
+
+
+def deform_numpy(F, L, dt):
+    d = F.shape[1]
+    Fn = (np.eye(d) + dt * L) @ F
+    with np.errstate(invalid="ignore"):
+        return Fn, np.linalg.det(Fn)
+
+
+def neo_hookean_stress_numpy(F, lam, mu):
+    d = F.shape[1]
+    J = np.linalg.det(F)
+    B = F @ np.swapaxes(F, 1, 2)
+    return (mu * (B - np.eye(d)) + (lam * np.log(J))[:, None, None] * np.eye(d)) / J[:, None, None]
+
+
+def linear_elastic_stress_numpy(F, lam, mu):
+    d = F.shape[1]
+    eps = 0.5 * (F + np.swapaxes(F, 1, 2)) - np.eye(d)
+    return lam * np.trace(eps, axis1=1, axis2=2)[:, None, None] * np.eye(d) + 2 * mu * eps
+
+
+try:
+    from numba import njit
+
+    @njit(cache=True)
+    def _det(A, p):  # pragma: no cover - compiled
+        d = A.shape[1]
+        if d == 1:
+            return A[p, 0, 0]
+        if d == 2:
+            return A[p, 0, 0] * A[p, 1, 1] - A[p, 0, 1] * A[p, 1, 0]
+        return (A[p, 0, 0] * (A[p, 1, 1] * A[p, 2, 2] - A[p, 1, 2] * A[p, 2, 1])
+                - A[p, 0, 1] * (A[p, 1, 0] * A[p, 2, 2] - A[p, 1, 2] * A[p, 2, 0])
+                + A[p, 0, 2] * (A[p, 1, 0] * A[p, 2, 1] - A[p, 1, 1] * A[p, 2, 0]))
+
+    @njit(cache=True)
+    def _deform(F, L, dt, Fn, J):  # pragma: no cover - compiled
+        n, d = F.shape[0], F.shape[1]
+        for p in range(n):
+            for i in range(d):
+                for j in range(d):
+                    s = F[p, i, j]
+                    for k in range(d):
+                        s += dt * L[p, i, k] * F[p, k, j]
+                    Fn[p, i, j] = s
+            J[p] = _det(Fn, p)
+
+    @njit(cache=True)
+    def _neo_hookean(F, lam, mu, sigma):  # pragma: no cover - compiled
+        n, d = F.shape[0], F.shape[1]
+        for p in range(n):
+            J = _det(F, p)
+            vol = lam * np.log(J)
+            for i in range(d):
+                for j in range(d):
+                    b = 0.0
+                    for k in range(d):
+                        b += F[p, i, k] * F[p, j, k]
+                    if i == j:
+                        sigma[p, i, j] = (mu * (b - 1.0) + vol) / J
+                    else:
+                        sigma[p, i, j] = mu * b / J
+
+    @njit(cache=True)
+    def _linear_elastic(F, lam, mu, sigma):  # pragma: no cover - compiled
+        n, d = F.shape[0], F.shape[1]
+        for p in range(n):
+            tr = 0.0
+            for i in range(d):
+                tr += F[p, i, i] - 1.0
+            for i in range(d):
+                for j in range(d):
+                    e = 0.5 * (F[p, i, j] + F[p, j, i])
+                    if i == j:
+                        sigma[p, i, j] = lam * tr + 2.0 * mu * (e - 1.0)
+                    else:
+                        sigma[p, i, j] = 2.0 * mu * e
+
+    def deform_numba(F, L, dt):
+        Fn, J = np.empty_like(F), np.empty(len(F))
+        _deform(F, L, float(dt), Fn, J)
+        return Fn, J
+
+    def neo_hookean_stress_numba(F, lam, mu):
+        sigma = np.empty_like(F)
+        _neo_hookean(F, float(lam), float(mu), sigma)
+        return sigma
+
+    def linear_elastic_stress_numba(F, lam, mu):
+        sigma = np.empty_like(F)
+        _linear_elastic(F, float(lam), float(mu), sigma)
+        return sigma
+except ImportError:  # pragma: no cover
+    deform_numba, neo_hookean_stress_numba, linear_elastic_stress_numba = (
+        deform_numpy, neo_hookean_stress_numpy, linear_elastic_stress_numpy)
+
+
+def _pick(compiled, reference):
+    from fempm.kernels import COMPILED
+
+    return compiled if COMPILED else reference
+
+
+def deform(F: npt.NDArray, L: npt.NDArray, dt: float) -> tuple[npt.NDArray, npt.NDArray]:
+    """(F^+, J) for (n, d, d) ``F`` and ``L``; J is NaN or inf where F^+ is not finite."""
+    return _pick(deform_numba, deform_numpy)(F, L, dt)
+
+
+def neo_hookean_stress(F: npt.NDArray, lam: float, mu: float) -> npt.NDArray:
+    return _pick(neo_hookean_stress_numba, neo_hookean_stress_numpy)(F, lam, mu)
+
+
+def linear_elastic_stress(F: npt.NDArray, lam: float, mu: float) -> npt.NDArray:
+    return _pick(linear_elastic_stress_numba, linear_elastic_stress_numpy)(F, lam, mu)

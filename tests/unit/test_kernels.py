@@ -1,0 +1,55 @@
+"""The compiled kernels (fempm.kernels) against their numpy references, to round-off."""
+
+import numpy as np
+import pytest
+
+from fempm.kernels import g2p
+
+
+@pytest.fixture(params=[(1, 2), (2, 4), (2, 6), (3, 8)], ids=["interval", "quad", "P2-triangle", "hex"])
+def data(request):
+    d, k = request.param
+    rng = np.random.default_rng(k)
+    n, nd = 500, 97
+    dofs = rng.integers(0, nd, size=(n, k)).astype(np.int32)
+    S = rng.random((n, k))
+    G = rng.standard_normal((n, k, d))
+    v_new, v_old, vp = rng.standard_normal((nd, d)), rng.standard_normal((nd, d)), rng.standard_normal((n, d))
+    return dofs, S, G, v_new, v_old, vp
+
+
+@pytest.mark.parametrize("flip", [0.0, 0.95, 1.0])
+def test_g2p_kernel_equals_reference(data, flip):
+    dofs, S, G, v_new, v_old, vp = data
+    ref = g2p.g2p_point_numpy(dofs, S, G, v_new, v_old, vp, flip)
+    got = g2p.g2p_point_numba(dofs, S[:, ::-1][:, ::-1], G, v_new, v_old, vp, flip)  # also a strided S
+    for a, b in zip(ref, got):
+        assert a.shape == b.shape and np.abs(a - b).max() < 1e-13 * max(1.0, np.abs(a).max())
+
+
+def test_interpolation_kernel_equals_reference(data):
+    dofs, S, G, v_new, _, _ = data
+    for a, b in zip(g2p.velocity_and_gradient_numpy(dofs, S, G, v_new), g2p.velocity_and_gradient_numba(dofs, S, G, v_new)):
+        assert np.abs(a - b).max() < 1e-13 * max(1.0, np.abs(a).max())
+
+
+def test_kernels_are_compiled():
+    import fempm.kernels
+
+    assert fempm.kernels.COMPILED, "numba is a dependency of fempm: the compiled kernels must be in use"
+
+
+@pytest.mark.parametrize("d", [1, 2, 3])
+def test_kinematics_and_elastic_laws_equal_their_references(d):
+    from fempm.kernels import kinematics as k
+    from fempm.materials import LinearElastic, NeoHookean
+
+    rng = np.random.default_rng(d)
+    n = 300
+    F = np.eye(d) + 0.2 * rng.standard_normal((n, d, d))
+    L = rng.standard_normal((n, d, d))
+    for a, b in zip(k.deform_numpy(F, L, 0.01), k.deform_numba(F, L, 0.01)):
+        assert np.abs(a - b).max() < 1e-14
+    for law in (NeoHookean(7.0, 0.3), LinearElastic(7.0, 0.3)):
+        ref, got = law.stress_numpy(F, L, None, 0.01, None), law.stress(F, L, None, 0.01, None)
+        assert np.abs(ref - got).max() < 1e-13 * np.abs(ref).max(), type(law).__name__
