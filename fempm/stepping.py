@@ -40,7 +40,7 @@ from fempm.fmpm import parse_mass
 from fempm.loads import Loads, body_force_at, surface_shares  # Loads: re-exported, scenes build it from here
 from fempm.materials.base import identity
 from fempm.particles import Particles
-from fempm.transfer import Projector, p2g, p2g_gradients
+from fempm.transfer import Projector, p2g, p2g_gradients, sum_over_ranks
 
 Scheme = Literal["USL", "USF", "MUSL"]
 
@@ -247,6 +247,8 @@ class ExplicitSolver:
 
     def _forces(self, basis: ParticleBasis, t: float) -> npt.NDArray:
         p = self.particles
+        if basis.cells is not None and not basis.extended:  # point particles: one compiled scatter
+            return self._point_forces(basis, t)
         f = p2g_gradients(basis, -p.volume[:, None, None] * p.fields["sigma"])
         self.terms["internal"] += 1
         if self.loads.body_force is not None:
@@ -256,6 +258,21 @@ class ExplicitSolver:
             f += p2g(basis, self.loads.traction(t) * surface_shares(p)[:, None])
             self.terms["traction"] += 1
         return f
+
+    def _point_forces(self, basis: ParticleBasis, t: float) -> npt.NDArray:
+        """Internal + external nodal forces in one kernel pass and one ghost reduction."""
+        p = self.particles
+        fext = np.zeros((len(p), p.gdim))
+        self.terms["internal"] += 1
+        if self.loads.body_force is not None:
+            fext += p.mass[:, None] * body_force_at(self.loads.body_force, p, t)
+            self.terms["body_force"] += 1
+        if self.loads.traction is not None:
+            fext += self.loads.traction(t) * surface_shares(p)[:, None]
+            self.terms["traction"] += 1
+        local = kernels.nodal_forces(basis.dofs, basis.values, basis.gradients, p.volume, p.fields["sigma"], fext,
+                                     basis.num_dofs_local)
+        return sum_over_ranks(basis.index_map, local)
 
     # -- the step -----------------------------------------------------------------------------
     def step(self, dt: float | None = None, *, dt_max: float = np.inf) -> float:

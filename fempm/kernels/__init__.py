@@ -19,5 +19,7 @@ except ImportError:  # the numpy references
 
 from fempm.kernels.g2p import g2p_point, velocity_and_gradient  # noqa: E402
 from fempm.kernels.kinematics import deform, linear_elastic_stress, neo_hookean_stress  # noqa: E402
+from fempm.kernels.p2g import nodal_forces  # noqa: E402
 
-__all__ = ["COMPILED", "deform", "g2p_point", "linear_elastic_stress", "neo_hookean_stress", "velocity_and_gradient"]
+__all__ = ["COMPILED", "deform", "g2p_point", "linear_elastic_stress", "neo_hookean_stress", "nodal_forces",
+           "velocity_and_gradient"]

@@ -61,7 +61,7 @@ def test_loop_fmpm1_equals_lumped_and_fmpm_runs_stably():
         scene.dt = 0.1
         runs[mass] = run(scene, None, progress=False)["history"]
     a, b = (np.array([[r["total"], r["momentum_x"]] for r in runs[m]]) for m in ("lumped", "fmpm1"))
-    assert np.abs(a - b).max() < 1e-14
+    assert np.abs(a - b).max() < 1e-12 * np.abs(a).max()  # round-off: m^-1 b against b / m
     s = run(two_disks(cells=10, t_end=2.5, mass="fmpm5", frames=0, comm=comm), None, progress=False)
     assert s["status"] == "completed" and 0.7 < s["health"]["energy_ratio"] < 1.2
     assert abs(s["final"]["momentum_x"]) < 1e-12  # the disks' total momentum is zero

@@ -53,3 +53,15 @@ def test_kinematics_and_elastic_laws_equal_their_references(d):
     for law in (NeoHookean(7.0, 0.3), LinearElastic(7.0, 0.3)):
         ref, got = law.stress_numpy(F, L, None, 0.01, None), law.stress(F, L, None, 0.01, None)
         assert np.abs(ref - got).max() < 1e-13 * np.abs(ref).max(), type(law).__name__
+
+
+def test_nodal_force_kernel_equals_reference(data):
+    from fempm.kernels import p2g
+
+    dofs, S, G, _, _, _ = data
+    rng = np.random.default_rng(5)
+    n, d = G.shape[0], G.shape[2]
+    volume, sigma, fext = rng.random(n), rng.standard_normal((n, d, d)), rng.standard_normal((n, d))
+    ref = p2g.nodal_forces_numpy(dofs, S, G, volume, sigma, fext, 97)
+    got = p2g.nodal_forces_numba(dofs, S, G, volume, sigma, fext, 97)
+    assert np.abs(ref - got).max() < 1e-13 * np.abs(ref).max()
