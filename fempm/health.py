@@ -34,7 +34,7 @@ import numpy as np
 import numpy.typing as npt
 from mpi4py import MPI
 
-from fempm.loads import body_force_at, surface_shares
+from fempm.loads import external_forces
 
 
 @dataclass(frozen=True)
@@ -110,13 +110,8 @@ class HealthMonitor:
     def _external(self, t: float) -> tuple[float, npt.NDArray]:
         r"""Power :math:`\sum_p f_p \cdot v_p` and resultant :math:`\sum_p f_p` of the external
         loads at time ``t`` (body forces and tractions), summed over ranks."""
-        s = self.solver
-        p = s.particles
-        f = np.zeros((len(p), p.gdim))
-        if s.loads.body_force is not None:
-            f += p.mass[:, None] * body_force_at(s.loads.body_force, p, t)
-        if s.loads.traction is not None:
-            f += np.asarray(s.loads.traction(t)) * surface_shares(p)[:, None]
+        p = self.solver.particles
+        f = external_forces(self.solver.loads, p, t)
         local = np.concatenate([[np.einsum("nd,nd->", f, p.fields["v"])], f.sum(axis=0)])
         total = p.comm.allreduce(local)
         return float(total[0]), total[1:]

@@ -84,3 +84,15 @@ def surface_shares(particles) -> npt.NDArray:
         return f["area"]
     d = particles.gdim
     return f["volume0"] ** ((d - 1) / d)
+
+
+def external_forces(loads, particles, t: float) -> npt.NDArray:
+    r"""The external force on each particle (n, d) at time ``t``:
+    :math:`f^{ext}_p = M_p b_p + \bar t_p A_p` (the terms ``loads`` declares; zeros without any)."""
+    p = particles
+    f = np.zeros((len(p), p.gdim))
+    if loads.body_force is not None:
+        f += p.mass[:, None] * body_force_at(loads.body_force, p, t)
+    if loads.traction is not None:
+        f += np.asarray(loads.traction(t)) * surface_shares(p)[:, None]
+    return f

@@ -30,24 +30,14 @@ import numpy as np
 import numpy.typing as npt
 from mpi4py import MPI
 
+from fempm.transfer import sum_over_ranks
+
 log = logging.getLogger("fempm")
 
 #: relative eigenvalue (after Jacobi scaling) below which a matrix counts as singular
 RANK_TOL = 1e-10
 #: largest number of undetermined dofs whose mass matrix is checked densely
 DENSE_LIMIT = 4000
-
-
-def cell_blocks(basis, weights: npt.NDArray) -> tuple[npt.NDArray, npt.NDArray, npt.NDArray]:
-    r"""Cells holding particles, their dofs (nc, k) and local matrices
-    :math:`A_c = \sum_{p \in c} w_p N(x_p) N(x_p)^T` (nc, k, k)."""
-    S = basis.values
-    k = S.shape[1]
-    cells, inv = np.unique(basis.cells, return_inverse=True)
-    contrib = weights[:, None, None] * S[:, :, None] * S[:, None, :]
-    key = (inv[:, None] * (k * k) + np.arange(k * k)[None, :]).ravel()
-    blocks = np.bincount(key, weights=contrib.ravel(), minlength=len(cells) * k * k).reshape(len(cells), k, k)
-    return cells, np.asarray(basis.V.dofmap.list)[cells], blocks
 
 
 def _nonsingular(blocks: npt.NDArray, keep: npt.NDArray[np.bool_]) -> npt.NDArray[np.bool_]:
@@ -65,19 +55,18 @@ def _nonsingular(blocks: npt.NDArray, keep: npt.NDArray[np.bool_]) -> npt.NDArra
 
 def _share(index_map, flags: npt.NDArray[np.bool_]) -> npt.NDArray[np.bool_]:
     """A dof flag (owned + ghost) set on any rank, set on every rank that sees the dof."""
-    from fempm.transfer import sum_over_ranks
-
     return sum_over_ranks(index_map, flags[:, None].astype(np.float64))[:, 0] > 0
 
 
-def singular_dofs(basis, weights: npt.NDArray, active: npt.NDArray[np.bool_],
+def singular_dofs(basis, blocks: tuple[npt.NDArray, npt.NDArray, npt.NDArray], active: npt.NDArray[np.bool_],
                   lump: npt.NDArray[np.bool_] | None = None) -> tuple[int, int]:
     """(number of null directions of the consistent mass on the ``active`` dofs, number of dofs
-    left undetermined after the cell tests), both global. Collective; point basis only."""
+    left undetermined after the cell tests), both global, from the per-cell matrices ``blocks``
+    of :func:`fempm.transfer.cell_blocks`. Collective; point basis only."""
     imap = basis.index_map
     comm = imap.comm
     n_local = imap.size_local + imap.num_ghosts
-    cells, dofs, blocks = cell_blocks(basis, weights)
+    cells, dofs, blocks = blocks
     determined = ~active[:n_local].copy()
     if lump is not None:
         determined |= lump[:n_local]

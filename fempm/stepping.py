@@ -37,7 +37,7 @@ from fempm.basis import ParticleBasis, is_nonnegative
 from fempm.boundary import Fixed, Slip
 from fempm.domains import GIMP_NAMES, domain_geometry, make_domain
 from fempm.fmpm import parse_mass
-from fempm.loads import Loads, body_force_at, surface_shares  # Loads: re-exported, scenes build it from here
+from fempm.loads import Loads, external_forces  # Loads: re-exported, scenes build it from here
 from fempm.materials.base import identity
 from fempm.particles import Particles
 from fempm.transfer import Projector, p2g, p2g_gradients, sum_over_ranks
@@ -246,33 +246,20 @@ class ExplicitSolver:
         raise SimulationError(f"step {self.step_count}, t = {self.t:.6g}: {what}")
 
     def _forces(self, basis: ParticleBasis, t: float) -> npt.NDArray:
+        r"""Nodal forces :math:`f_i = \sum_p (-V_p \sigma_p \nabla N_{ip} + N_{ip} f^{ext}_p)`,
+        summed over ranks; point particles in one compiled scatter (:mod:`fempm.kernels`)."""
         p = self.particles
-        if basis.cells is not None and not basis.extended:  # point particles: one compiled scatter
-            return self._point_forces(basis, t)
+        self.terms["internal"] += 1
+        self.terms.update(k for k in ("body_force", "traction") if getattr(self.loads, k) is not None)
+        fext = external_forces(self.loads, p, t)
+        if basis.cells is not None and not basis.extended:
+            local = kernels.nodal_forces(basis.dofs, basis.values, basis.gradients, p.volume, p.fields["sigma"],
+                                         fext, basis.num_dofs_local)
+            return sum_over_ranks(basis.index_map, local)
         f = p2g_gradients(basis, -p.volume[:, None, None] * p.fields["sigma"])
-        self.terms["internal"] += 1
-        if self.loads.body_force is not None:
-            f += p2g(basis, p.mass[:, None] * body_force_at(self.loads.body_force, p, t))
-            self.terms["body_force"] += 1
-        if self.loads.traction is not None:
-            f += p2g(basis, self.loads.traction(t) * surface_shares(p)[:, None])
-            self.terms["traction"] += 1
+        if self.loads.body_force is not None or self.loads.traction is not None:
+            f += p2g(basis, fext)
         return f
-
-    def _point_forces(self, basis: ParticleBasis, t: float) -> npt.NDArray:
-        """Internal + external nodal forces in one kernel pass and one ghost reduction."""
-        p = self.particles
-        fext = np.zeros((len(p), p.gdim))
-        self.terms["internal"] += 1
-        if self.loads.body_force is not None:
-            fext += p.mass[:, None] * body_force_at(self.loads.body_force, p, t)
-            self.terms["body_force"] += 1
-        if self.loads.traction is not None:
-            fext += self.loads.traction(t) * surface_shares(p)[:, None]
-            self.terms["traction"] += 1
-        local = kernels.nodal_forces(basis.dofs, basis.values, basis.gradients, p.volume, p.fields["sigma"], fext,
-                                     basis.num_dofs_local)
-        return sum_over_ranks(basis.index_map, local)
 
     # -- the step -----------------------------------------------------------------------------
     def step(self, dt: float | None = None, *, dt_max: float = np.inf) -> float:

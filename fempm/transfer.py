@@ -90,13 +90,27 @@ def lumped_mass(basis: ParticleBasis, particles: Particles, weight: str = "mass"
     return p2g(basis, particle_weights(particles, weight))[:, 0]
 
 
+def cell_blocks(basis: ParticleBasis, weights: npt.NDArray) -> tuple[npt.NDArray, npt.NDArray, npt.NDArray]:
+    r"""Point particles: the cells holding particles, their dofs (nc, k) and the local matrices
+    :math:`A_c = \sum_{p \in c} w_p N(x_p) N(x_p)^T` (nc, k, k), summed per cell with
+    ``np.bincount``."""
+    S = basis.values
+    k = S.shape[1]
+    contrib = weights[:, None, None] * S[:, :, None] * S[:, None, :]  # (n, k, k)
+    cells, inv = np.unique(basis.cells, return_inverse=True)
+    key = (inv[:, None] * (k * k) + np.arange(k * k)[None, :]).ravel()
+    blocks = np.bincount(key, weights=contrib.ravel(), minlength=len(cells) * k * k).reshape(len(cells), k, k)
+    return cells, np.asarray(basis.V.dofmap.list)[cells], blocks
+
+
 def consistent_mass_matrix(
-    basis: ParticleBasis, particles: Particles, lump: npt.NDArray[np.bool_] | None = None, weight: str = "mass"
+    basis: ParticleBasis, particles: Particles, lump: npt.NDArray[np.bool_] | None = None, weight: str = "mass",
+    blocks: tuple[npt.NDArray, npt.NDArray, npt.NDArray] | None = None,
 ) -> PETSc.Mat:
     r"""PETSc matrix :math:`m_{ij} = \sum_p M_p N_i(x_p) N_j(x_p)` (one row per scalar dof).
 
-    With the point basis, particle contributions are summed per cell first (``np.bincount``),
-    then inserted once as COO data. For a domain-averaged basis (:mod:`fempm.domains`) the
+    With the point basis, particle contributions are summed per cell first
+    (:func:`cell_blocks`, or the ``blocks`` it returned), then inserted once as COO data. For a domain-averaged basis (:mod:`fempm.domains`) the
     matrix is :math:`\bar S^T \operatorname{diag}(M) \bar S` with
     :math:`\bar S_{pi} = \langle N_i \rangle_p`, inserted per particle: the normal equations
     of the mass-weighted least-squares fit :math:`\min_F \sum_p M_p (\langle F \rangle_p - f_p)^2`.
@@ -111,16 +125,13 @@ def consistent_mass_matrix(
     conservation of mass and momentum) and symmetry are kept. ``weight="volume"`` weights by
     :math:`V_p` instead of :math:`M_p` (per-volume fields).
     """
-    S, M = basis.values, particle_weights(particles, weight)
-    k = S.shape[1]
-    contrib = M[:, None, None] * S[:, :, None] * S[:, None, :]  # (n, k, k)
+    M = particle_weights(particles, weight)
     if basis.cells is None:  # averaged basis: a particle's dofs span several cells
-        dofs, values = basis.dofs, contrib
+        S = basis.values
+        dofs, values = basis.dofs, M[:, None, None] * S[:, :, None] * S[:, None, :]
     else:
-        cells, inv = np.unique(basis.cells, return_inverse=True)
-        key = (inv[:, None] * (k * k) + np.arange(k * k)[None, :]).ravel()
-        values = np.bincount(key, weights=contrib.ravel(), minlength=len(cells) * k * k)
-        dofs = np.asarray(basis.V.dofmap.list)[cells]
+        _, dofs, values = blocks if blocks is not None else cell_blocks(basis, M)
+    k = dofs.shape[1]
     rows = np.broadcast_to(dofs[:, :, None], (len(dofs), k, k))
     cols = np.broadcast_to(dofs[:, None, :], (len(dofs), k, k))
     if lump is not None:
@@ -238,10 +249,12 @@ class Projector:
                     f"support {nactive} coupled dofs (its rank is at most the number of particles); "
                     "seed more particles per cell or use a lower degree"
                 )
+            blocks = None
             if self.basis.cells is not None:  # point particles: do they span the space? (fempm.mass_span)
                 from fempm.mass_span import singular_dofs
 
-                null, undetermined = singular_dofs(self.basis, self.weights, self.active, lump)
+                blocks = cell_blocks(self.basis, self.weights)  # once, for the test and the matrix
+                null, undetermined = singular_dofs(self.basis, blocks, self.active, lump)
                 if null:
                     raise SingularMassError(
                         f"the consistent mass matrix is singular: the particles determine no unique value on "
@@ -249,7 +262,7 @@ class Projector:
                         "(coincident or collinear particles, or too few per cell for this space); seed "
                         "particles that span each cell, use lump_below, lumped mass or a lower degree"
                     )
-            A = consistent_mass_matrix(self.basis, particles, lump, weight)
+            A = consistent_mass_matrix(self.basis, particles, lump, weight, blocks)
             iset = fpetsc.owned_index_set(imap, self.active[: self.num_owned])
             self.matrix = A.createSubMatrix(iset, iset)
             self.ksp = fpetsc.create_ksp(comm, petsc_options_prefix, petsc_options)

@@ -18,6 +18,8 @@ from __future__ import annotations
 import numpy as np
 import numpy.typing as npt
 
+from fempm.kernels.choice import pick
+
 
 def g2p_point_numpy(dofs, S, G, v_new, v_old, vp, flip):
     """Reference: (v_p^+, grid velocity at the particles, L_p)."""
@@ -89,14 +91,10 @@ def g2p_point(dofs: npt.NDArray, S: npt.NDArray, G: npt.NDArray, v_new: npt.NDAr
               vp: npt.NDArray, flip: float) -> tuple[npt.NDArray, npt.NDArray, npt.NDArray]:
     """(v_p^+, the grid velocity at the particles, L_p) for nodal (ndofs, d) ``v_new``/``v_old``
     with ghosts up to date, particle velocities ``vp`` (n, d) and the FLIP fraction ``flip``."""
-    from fempm.kernels import COMPILED
-
-    return (g2p_point_numba if COMPILED else g2p_point_numpy)(dofs, S, G, v_new, v_old, vp, flip)
+    return pick(g2p_point_numba, g2p_point_numpy)(dofs, S, G, v_new, v_old, vp, flip)
 
 
 def velocity_and_gradient(dofs: npt.NDArray, S: npt.NDArray, G: npt.NDArray,
                           v: npt.NDArray) -> tuple[npt.NDArray, npt.NDArray]:
     """(the grid velocity at the particles, L_p) of nodal (ndofs, d) ``v``, ghosts up to date."""
-    from fempm.kernels import COMPILED
-
-    return (velocity_and_gradient_numba if COMPILED else velocity_and_gradient_numpy)(dofs, S, G, v)
+    return pick(velocity_and_gradient_numba, velocity_and_gradient_numpy)(dofs, S, G, v)

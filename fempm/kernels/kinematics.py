@@ -14,6 +14,8 @@ from __future__ import annotations
 import numpy as np
 import numpy.typing as npt
 
+from fempm.kernels.choice import pick
+
 
 def deform_numpy(F, L, dt):
     d = F.shape[1]
@@ -111,20 +113,14 @@ except ImportError:  # pragma: no cover
         deform_numpy, neo_hookean_stress_numpy, linear_elastic_stress_numpy)
 
 
-def _pick(compiled, reference):
-    from fempm.kernels import COMPILED
-
-    return compiled if COMPILED else reference
-
-
 def deform(F: npt.NDArray, L: npt.NDArray, dt: float) -> tuple[npt.NDArray, npt.NDArray]:
     """(F^+, J) for (n, d, d) ``F`` and ``L``; J is NaN or inf where F^+ is not finite."""
-    return _pick(deform_numba, deform_numpy)(F, L, dt)
+    return pick(deform_numba, deform_numpy)(F, L, dt)
 
 
 def neo_hookean_stress(F: npt.NDArray, lam: float, mu: float) -> npt.NDArray:
-    return _pick(neo_hookean_stress_numba, neo_hookean_stress_numpy)(F, lam, mu)
+    return pick(neo_hookean_stress_numba, neo_hookean_stress_numpy)(F, lam, mu)
 
 
 def linear_elastic_stress(F: npt.NDArray, lam: float, mu: float) -> npt.NDArray:
-    return _pick(linear_elastic_stress_numba, linear_elastic_stress_numpy)(F, lam, mu)
+    return pick(linear_elastic_stress_numba, linear_elastic_stress_numpy)(F, lam, mu)

@@ -12,6 +12,8 @@ from __future__ import annotations
 import numpy as np
 import numpy.typing as npt
 
+from fempm.kernels.choice import pick
+
 
 def nodal_forces_numpy(dofs, S, G, volume, sigma, fext, ndofs):
     contrib = -volume[:, None, None] * np.einsum("nae,nce->nac", G, sigma) + S[:, :, None] * fext[:, None, :]
@@ -49,6 +51,4 @@ def nodal_forces(dofs: npt.NDArray, S: npt.NDArray, G: npt.NDArray, volume: npt.
                  fext: npt.NDArray, ndofs: int) -> npt.NDArray:
     """Local nodal forces (ndofs, d) of the particles' stresses and external forces ``fext``
     (n, d); ghost rows are partial sums."""
-    from fempm.kernels import COMPILED
-
-    return (nodal_forces_numba if COMPILED else nodal_forces_numpy)(dofs, S, G, volume, sigma, fext, ndofs)
+    return pick(nodal_forces_numba, nodal_forces_numpy)(dofs, S, G, volume, sigma, fext, ndofs)

@@ -108,14 +108,13 @@ def _loop_case(problem: str, config: Config, cells: int, comm) -> dict:
 
     r = run_case(problem, config, cells, comm)
     return {"error": r["error_l2"] if r["status"] == "ok" else np.nan, "wall_s": r["wall_s"], "status": r["status"],
-            "reason": r.get("reason", "")}
+            "reason": r.get("reason", ""), "mesh": r["mesh"]}
 
 
 def run_case(problem: str, config: Config, cells: int, comm: MPI.Comm = MPI.COMM_WORLD) -> dict:
     """One (problem, configuration, size), repeated when fast; returns its row."""
     case = _mapping_case if problem == "mapping" else (lambda c, n, cm: _loop_case(problem, c, n, cm))
-    row = {"problem": problem, "mesh": config.mesh if problem in ("mapping", "axis_aligned_2d", "vortex_A0.01") else "interval",
-           "degree": f"{config.degree}{'B' if config.variant == 'bernstein' else ''}", "mass": config.mass,
+    row = {"problem": problem, "degree": f"{config.degree}{'B' if config.variant == 'bernstein' else ''}", "mass": config.mass,
            "domain": config.domain, "scheme": "-" if problem == "mapping" else config.scheme, "cells": cells,
            "ppc": config.ppc, "threads": threads()}
     try:
@@ -126,7 +125,7 @@ def run_case(problem: str, config: Config, cells: int, comm: MPI.Comm = MPI.COMM
     if first["status"] == "ok" and first["wall_s"] < REPEAT_BELOW_S:
         walls += [case(config, cells, comm)["wall_s"] for _ in range(2)]
     row.update(error=first["error"], wall_s=float(np.median(walls)), repeats=len(walls), status=first["status"],
-               reason=first.get("reason", ""))
+               reason=first.get("reason", ""), mesh=first.get("mesh", config.mesh))  # loop rows: "interval" in 1D
     return row
 
 
