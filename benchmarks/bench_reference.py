@@ -65,9 +65,7 @@ def build(n_target: int, mesh_kind: str, mass: str, reference: Path):
     if mesh_kind == "quad":
         mesh = dm.create_unit_square(comm, n_cells, n_cells, dm.CellType.quadrilateral)
     else:
-        from fempm.meshes import unstructured_rectangle
-
-        mesh = unstructured_rectangle(comm, dx)
+        mesh = triangle_mesh(comm, dx)
     rss0 = _rss_kb()
     vol = dx**2 / PPC
     mine = x if comm.rank == 0 else np.zeros((0, 2))
@@ -80,6 +78,26 @@ def build(n_target: int, mesh_kind: str, mass: str, reference: Path):
     solver = ExplicitSolver(V, p, [NeoHookean(1000.0, 0.25)], bcs=bcs, loads=Loads(body_force=(0.0, -9.8)),
                             options=opts)
     return solver, 0.1 * dx / 40.0, p, rss0
+
+
+def triangle_mesh(comm, dx: float):
+    """gmsh triangles of size ``dx`` on the unit square; kept as XDMF in ``$FEMPM_BENCH_MESHES``
+    (set by the driver for one run) so that each size is meshed once, not once per worker."""
+    from dolfinx.io import XDMFFile
+
+    from fempm.meshes import unstructured_rectangle
+
+    folder = os.environ.get("FEMPM_BENCH_MESHES")
+    path = Path(folder) / f"triangles_{dx:.6g}.xdmf" if folder else None
+    if path is not None and path.exists():
+        with XDMFFile(comm, str(path), "r") as f:
+            return f.read_mesh(name="mesh")
+    mesh = unstructured_rectangle(comm, dx)
+    if path is not None:
+        mesh.name = "mesh"
+        with XDMFFile(comm, str(path), "w") as f:
+            f.write_mesh(mesh)
+    return mesh
 
 
 def dolfinx_space(mesh):
@@ -198,6 +216,8 @@ def main(argv=None) -> None:
         return
     if not (a.reference / "common.py").exists():
         raise SystemExit(f"bench_reference: no reference kernels in {a.reference} (set --reference or FEMPM_REFERENCE_MPM)")
+    meshes = tempfile.TemporaryDirectory(prefix="fempm-bench-meshes-")
+    os.environ["FEMPM_BENCH_MESHES"] = meshes.name  # the workers share the triangle meshes
     out = {"check": None, "rows": []}
     if a.check:
         out["check"] = check_physics(a.reference)

@@ -20,6 +20,7 @@ import dolfinx
 import numpy as np
 import numpy.typing as npt
 
+from fempm.kernels import shape as shape_kernels
 from fempm.particles import Particles
 
 
@@ -62,6 +63,12 @@ class ParticleBasis:
         if domain is None or getattr(domain, "name", "") == "point":
             cells, X = particles.cells, particles.X
             self.cells: npt.NDArray[np.int32] | None = cells  # one cell per particle
+            geo = particles.locator.geometry
+            if element.degree == 1 and geo.affine and shape_kernels.AVAILABLE:  # closed form (fempm.kernels.shape)
+                self.values, G, self.dofs = shape_kernels.affine_basis(
+                    cells, X, geo._K, np.asarray(V.dofmap.list), geo.cell_name)
+                self.gradients = G if gradients else None
+                return
             tab = element.tabulate(1 if gradients else 0, np.ascontiguousarray(X))[..., 0]
             self.values: npt.NDArray = tab[0]  # S, (n, ndofs)
             self.dofs: npt.NDArray[np.int32] = np.asarray(V.dofmap.list)[cells]

@@ -33,9 +33,21 @@ class Slip:
     normal: npt.NDArray  # (d,) or (len(dofs), d), unit
 
     def apply(self, v: npt.NDArray) -> None:
+        axis = _axis(self.normal)
+        if axis is not None:  # a wall normal to a coordinate axis: that component is 0
+            v[self.dofs, axis] = 0.0
+            return
         n = np.broadcast_to(self.normal, (len(self.dofs), v.shape[1]))
         vn = np.einsum("nd,nd->n", v[self.dofs], n)
         v[self.dofs] -= vn[:, None] * n
+
+
+def _axis(normal: npt.NDArray) -> int | None:
+    """The axis of a single unit normal along a coordinate axis, else None."""
+    n = np.asarray(normal)
+    if n.ndim != 1 or np.count_nonzero(n) != 1 or abs(n[np.flatnonzero(n)[0]]) != 1.0:
+        return None
+    return int(np.flatnonzero(n)[0])
 
 
 def locate_dofs(V: dolfinx.fem.FunctionSpace, where: Callable[[npt.NDArray], npt.NDArray]) -> npt.NDArray[np.int32]:

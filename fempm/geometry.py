@@ -19,7 +19,7 @@ import numpy as np
 import numpy.typing as npt
 from mpi4py import MPI
 
-_SIMPLICES = {"interval", "triangle", "tetrahedron"}
+SIMPLICES = {"interval", "triangle", "tetrahedron"}
 
 
 def coordinate_map(mesh: dolfinx.mesh.Mesh):
@@ -68,10 +68,10 @@ class CellGeometry:
             scale = np.abs(nodes).max(initial=1.0)
             self.affine = bool(mesh.comm.allreduce(np.abs(pred - nodes).max(initial=0.0) <= 1e-13 * scale, op=MPI.LAND))
         if self.affine:
-            self._x0 = x0
+            self._x0 = np.ascontiguousarray(x0)
             self._J = J
             self._detJ = np.linalg.det(J)
-            self._K = np.linalg.inv(J)
+            self._K = np.ascontiguousarray(np.linalg.inv(J))
 
     @property
     def axis_aligned(self) -> bool:
@@ -149,7 +149,7 @@ class CellGeometry:
         """Whether reference points lie in the reference cell (within ``tol``)."""
         with np.errstate(invalid="ignore"):
             inside = np.all(X >= -tol, axis=1)
-            if self.cell_name in _SIMPLICES:
+            if self.cell_name in SIMPLICES:
                 inside &= X.sum(axis=1) <= 1.0 + tol
             else:
                 inside &= np.all(X <= 1.0 + tol, axis=1)
@@ -177,7 +177,7 @@ class CellGeometry:
         """Volumes of all local cells (owned and ghost), by Gauss quadrature of ``|det J|``."""
         ncells = self.dofmap.shape[0]
         if self.affine:
-            ref_volume = {1: 1.0, 2: 0.5, 3: 1.0 / 6.0}[self.tdim] if self.cell_name in _SIMPLICES else 1.0
+            ref_volume = {1: 1.0, 2: 0.5, 3: 1.0 / 6.0}[self.tdim] if self.cell_name in SIMPLICES else 1.0
             return np.abs(self._detJ) * ref_volume
         deg = 2 * self.element.degree * self.tdim
         Xq, wq = basix.make_quadrature(self.basix_cell, deg)

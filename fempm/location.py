@@ -13,7 +13,12 @@ import dolfinx.geometry
 import numpy as np
 import numpy.typing as npt
 
-from fempm.geometry import CellGeometry
+from fempm.geometry import SIMPLICES, CellGeometry
+from fempm.kernels import shape as shape_kernels
+
+
+#: points located at a time (bounds the memory of the candidate lists)
+LOCATE_CHUNK = 65536
 
 
 class OutsideMeshError(ValueError):
@@ -135,20 +140,34 @@ class CellLocator:
         return sent, comm.alltoall([np.ascontiguousarray(x[i]) for i in sent])
 
     def locate(self, x: npt.NDArray) -> tuple[npt.NDArray[np.int32], npt.NDArray]:
-        """Owned (or, with ``ghosts``, local) cell (``-1`` if none) and reference coordinates of each point of ``x``."""
+        """Owned (or, with ``ghosts``, local) cell (``-1`` if none) and reference coordinates of
+        each point of ``x``; in chunks of :data:`LOCATE_CHUNK` points, so that the candidate
+        lists stay small."""
         n = len(x)
         tdim = self.geometry.tdim
         cells = np.full(n, -1, dtype=np.int32)
         X = np.full((n, tdim), np.nan)
-        if n == 0:
-            return cells, X
+        for start in range(0, n, LOCATE_CHUNK):  # a loop over chunks, not over points
+            part = slice(start, min(start + LOCATE_CHUNK, n))
+            cells[part], X[part] = self._locate(np.asarray(x[part]))
+        return cells, X
+
+    def _locate(self, x: npt.NDArray) -> tuple[npt.NDArray[np.int32], npt.NDArray]:
+        n = len(x)
+        geo = self.geometry
+        cells = np.full(n, -1, dtype=np.int32)
+        X = np.full((n, geo.tdim), np.nan)
         adj = dolfinx.geometry.compute_collisions_points(self.tree, as_points3(x))
         cand = np.asarray(adj.array, dtype=np.int32)
         pidx = np.repeat(np.arange(n), np.diff(adj.offsets))
         if cand.size == 0:
             return cells, X
-        Xc = self.geometry.pull_back(cand, np.asarray(x)[pidx])
-        inside = self.geometry.contains(Xc, self.tol)
+        if geo.affine and shape_kernels.AVAILABLE:
+            Xc, inside = shape_kernels.affine_pull_back(cand, x[pidx], geo._x0, geo._K, geo.cell_name in SIMPLICES,
+                                                        self.tol)
+        else:
+            Xc = geo.pull_back(cand, x[pidx])
+            inside = geo.contains(Xc, self.tol)
         hit_p, first = np.unique(pidx[inside], return_index=True)
         hits = np.flatnonzero(inside)[first]
         cells[hit_p] = cand[hits]
@@ -162,8 +181,13 @@ class CellLocator:
         cells = np.asarray(cells, dtype=np.int32)
         X = np.full((len(x), self.geometry.tdim), np.nan)
         new_cells = np.full(len(x), -1, dtype=np.int32)
+        geo = self.geometry
         valid = np.flatnonzero(cells >= 0)
-        if valid.size:
+        if geo.affine and shape_kernels.AVAILABLE:  # closed form, one compiled pass
+            new_cells = cells.copy()
+            X, stay = shape_kernels.affine_pull_back(cells, x, geo._x0, geo._K, geo.cell_name in SIMPLICES, self.tol)
+            new_cells[~stay] = -1
+        elif valid.size:
             Xv = self.geometry.pull_back(cells[valid], np.asarray(x)[valid])
             stay = self.geometry.contains(Xv, self.tol)
             new_cells[valid[stay]] = cells[valid[stay]]

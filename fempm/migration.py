@@ -82,3 +82,56 @@ def distribute(
         _concat(keep_d, data),
         x[miss[owner == size]],
     )
+
+
+def replace_rows(arrays: dict[str, npt.NDArray], holes: npt.NDArray, arrivals: dict[str, npt.NDArray],
+                 slack: float = 0.05) -> dict[str, npt.NDArray]:
+    """Remove the rows ``holes`` (ascending) of every array and add the rows of ``arrivals``,
+    touching only O(len(holes) + len(arrivals)) rows: arrivals fill the holes, the last rows
+    fill the holes left over, and arrays shrink as views. When they grow they take the room
+    their base array has beyond them, or are reallocated with ``slack`` spare rows (so that
+    particles crossing between ranks every step do not copy every array every step). Row order
+    is not kept."""
+    if not arrays:
+        return arrays
+    n = len(next(iter(arrays.values())))
+    m = len(next(iter(arrivals.values()))) if arrivals else 0
+    h = len(holes)
+    n_new = n - h + m
+    fill = min(h, m)
+    out = {}
+    if m <= h:  # shrink: arrivals into the first holes, the last rows into the holes beyond n_new
+        rest = holes[fill:]
+        inside = rest[rest < n_new]  # holes that must be filled
+        tail = np.setdiff1d(np.arange(n_new, n), holes, assume_unique=True)  # rows to move in
+        for k, a in arrays.items():
+            a[holes[:fill]] = arrivals[k]
+            a[inside] = a[tail]
+            out[k] = a[:n_new]
+        return out
+    for k, a in arrays.items():  # grow: arrivals into every hole, the rest appended
+        a[holes] = arrivals[k][:fill]
+        base = a.base if isinstance(a.base, np.ndarray) else None
+        if (base is not None and base.shape[1:] == a.shape[1:] and base.shape[0] >= n_new
+                and base.ctypes.data == a.ctypes.data and base.flags.c_contiguous and a.flags.c_contiguous):
+            grown = base[:n_new]
+        else:
+            grown = np.empty((int(n_new * (1 + slack)) + 1, *a.shape[1:]), dtype=a.dtype)
+            grown[:n] = a
+            grown = grown[:n_new]
+        grown[n:] = arrivals[k][fill:]
+        out[k] = grown
+    return out
+
+
+def migrate(locator: CellLocator, arrays: dict[str, npt.NDArray], leaving: npt.NDArray) -> tuple[dict, npt.NDArray]:
+    """Send the particles ``leaving`` (indices, ascending; their cells are not owned here) to
+    the ranks that own their cells and take in the particles the other ranks send here, in
+    place (:func:`replace_rows`). ``arrays`` holds ``x``, ``cells``, ``X`` and the particle
+    data, one row per particle. Returns (the arrays, the positions of the leaving particles
+    that no rank holds). Collective."""
+    sub = _take(arrays, leaving)
+    x, cells, X = sub.pop("x"), sub.pop("cells"), sub.pop("X")
+    d = distribute(locator, x, sub, cells=cells, X=X)  # none is found here: the result is the arrivals
+    arrivals = {"x": d.x, "cells": d.cells, "X": d.X, **d.data}
+    return replace_rows(arrays, leaving, arrivals), d.outside

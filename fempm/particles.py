@@ -17,7 +17,7 @@ import numpy.typing as npt
 from mpi4py import MPI
 
 from fempm.location import CellLocator, OutsideMeshError, outside_message
-from fempm.migration import distribute
+from fempm.migration import distribute, migrate
 
 log = logging.getLogger("fempm")
 
@@ -169,14 +169,44 @@ class Particles:
         return self.mass / self.volume
 
     # -- motion -------------------------------------------------------------------------------
-    def relocate(self, outside: OutsidePolicy = "raise") -> None:
+    def relocate(self, outside: OutsidePolicy = "raise", *, left: npt.NDArray[np.bool_] | None = None) -> None:
         """Update cells and reference coordinates after ``x`` changed (collective).
 
         Each particle's previous cell is tested first; particles that left the rank's owned
-        cells move to the rank that owns their new cell.
+        cells move to the rank that owns their new cell. ``left``: the particles that may have
+        left their cells, when the caller has already updated ``X`` of all the others (the
+        compiled step does, in closed form); only those are searched for.
         """
-        cells, X = self.locator.relocate(self.x, self.cells)
-        if self.comm.size == 1 and np.all(cells >= 0):
+        if left is None:
+            cells, X = self.locator.relocate(self.x, self.cells)
+        else:
+            cells, X = self.cells, self.X
+            idx = np.flatnonzero(left)
+            if len(idx):
+                cells[idx], X[idx] = self.locator.locate(self.x[idx])
+        lost = int(np.count_nonzero(cells < 0))
+        if (lost if self.comm.size == 1 else self.comm.allreduce(lost)) == 0:
             self.cells, self.X = cells, X
             return
-        self._assign(distribute(self.locator, self.x, self._arrays(), cells=cells, X=X), outside)
+        if outside not in _OUTSIDE:
+            raise ValueError(f"unknown option outside={outside!r}; expected one of {_OUTSIDE}")
+        arrays = {"x": self.x, "cells": cells, "X": X, **self._arrays()}
+        arrays, gone = migrate(self.locator, arrays, np.flatnonzero(cells < 0))  # in place, O(leavers)
+        nout = self.comm.allreduce(len(gone))
+        if nout and outside == "raise":
+            raise OutsideMeshError(outside_message(nout, np.concatenate(self.comm.allgather(gone[:5]))))
+        if nout:
+            log.warning("fempm: removed %d particle(s) outside the mesh", nout)
+        self.removed = nout
+        self.x, self.cells, self.X = arrays.pop("x"), arrays.pop("cells"), arrays.pop("X")
+        self.mass, self.volume, self.ids = arrays.pop("mass"), arrays.pop("volume"), arrays.pop("ids")
+        self.fields = {k[6:]: v for k, v in arrays.items()}
+
+    def sort_by_cell(self) -> None:
+        """Order the particles by cell (stable), for memory locality in the particle passes."""
+        order = np.argsort(self.cells, kind="stable")
+        if np.all(order[1:] > order[:-1]):
+            return
+        self.x, self.cells, self.X = self.x[order], self.cells[order], self.X[order]
+        self.mass, self.volume, self.ids = self.mass[order], self.volume[order], self.ids[order]
+        self.fields = {k: v[order] for k, v in self.fields.items()}

@@ -128,9 +128,13 @@ def cell_sizes(mesh) -> npt.NDArray:
     nv = {"interval": 2, "triangle": 3, "quadrilateral": 4, "tetrahedron": 4, "hexahedron": 8}[
         mesh.topology.cell_type.name
     ]
-    xc = mesh.geometry.x[np.asarray(dofmap)[:, :nv]]
+    dofmap = np.asarray(dofmap)
     i, j = np.triu_indices(nv, 1)
-    return np.linalg.norm(xc[:, i] - xc[:, j], axis=2).min(axis=1)
+    out = np.empty(len(dofmap))
+    for start in range(0, len(dofmap), 65536):  # chunks of cells bound the temporaries
+        xc = mesh.geometry.x[dofmap[start : start + 65536, :nv]]
+        out[start : start + 65536] = np.linalg.norm(xc[:, i] - xc[:, j], axis=2).min(axis=1)
+    return out
 
 
 @dataclass
@@ -140,6 +144,11 @@ class ExplicitSolver:
     Particle state lives in ``particles.fields``: ``v`` (n, d), ``F`` (n, d, d), ``sigma``
     (n, d, d), ``volume0`` (n,), ``body`` (n,) index into ``materials``, and the reference
     positions ``X0`` (n, d) (the positions when the solver is made, unless given).
+
+    ``compiled``: take the compiled lumped step (:mod:`fempm.lumped_step`: lumped mass, point
+    particles, a degree-1 space on an affine mesh) where it applies (None, the default), insist
+    on it (True: an error where it does not apply) or never (False: the generic step, which is
+    its reference).
     """
 
     V: dolfinx.fem.FunctionSpace
@@ -150,6 +159,7 @@ class ExplicitSolver:
     options: StepOptions = field(default_factory=StepOptions)
     t: float = 0.0
     step_count: int = 0
+    compiled: bool | None = None
 
     def __post_init__(self):
         p = self.particles
@@ -172,6 +182,7 @@ class ExplicitSolver:
         fixed = [bc.dofs for bc in self.bcs if isinstance(bc, Fixed)]
         self._fixed_dofs = np.unique(np.concatenate(fixed)) if fixed else None
         self._slip_components = self._axis_slip_dofs()
+        self._lumped_step = None
 
     # -- helpers ------------------------------------------------------------------------------
     def _axis_slip_dofs(self) -> list[npt.NDArray[np.int32]] | None:
@@ -206,6 +217,20 @@ class ExplicitSolver:
         speed = c + np.linalg.norm(f["v"], axis=1)
         local = np.min(self.h_cell[p.cells] / np.maximum(speed, 1e-300), initial=np.inf)
         return self.options.cfl * p.comm.allreduce(local, op=MPI.MIN)
+
+    def _compiled_step(self):
+        """The compiled lumped step (:mod:`fempm.lumped_step`) when these options, space and
+        mesh take it (made on first use, remade when the options change), else None."""
+        from fempm import lumped_step
+
+        if not lumped_step.supported(self):
+            if self.compiled:
+                raise ValueError("compiled=True needs lumped mass, point particles and a degree-1 space on an "
+                                 "affine mesh (simplices, parallelograms) with numba installed")
+            return None
+        if self._lumped_step is None or self._lumped_step.options is not self.options:
+            self._lumped_step = lumped_step.LumpedPointStep(self)
+        return self._lumped_step
 
     def _apply_bcs(self, v: npt.NDArray) -> None:
         for bc in self.bcs:
@@ -265,6 +290,8 @@ class ExplicitSolver:
     def step(self, dt: float | None = None, *, dt_max: float = np.inf) -> float:
         """Advance one step; returns the ``dt`` used. ``dt`` defaults to the stable step
         (at most ``dt_max``); a given ``dt`` above the stability limit (CFL > 1) is an error."""
+        if self.compiled is not False and self._compiled_step() is not None:
+            return self._lumped_step.step(dt, dt_max)
         opts = self.options
         p = self.particles
         fld = p.fields

@@ -65,3 +65,38 @@ def test_nodal_force_kernel_equals_reference(data):
     ref = p2g.nodal_forces_numpy(dofs, S, G, volume, sigma, fext, 97)
     got = p2g.nodal_forces_numba(dofs, S, G, volume, sigma, fext, 97)
     assert np.abs(ref - got).max() < 1e-13 * np.abs(ref).max()
+
+
+@pytest.mark.parametrize("cell", ["interval", "triangle", "quadrilateral", "tetrahedron", "hexahedron"])
+def test_closed_form_basis_and_pull_back_equal_basix(cell):
+    """fempm.kernels.shape: degree-1 values and gradients against basix's tabulation, and the
+    affine pull-back against the particles' located reference coordinates."""
+    import dolfinx.fem
+    import dolfinx.mesh as dm
+    import fempm
+    from mpi4py import MPI
+
+    from fempm.kernels import shape
+
+    comm = MPI.COMM_SELF
+    mesh = {"interval": lambda: dm.create_unit_interval(comm, 7),
+            "triangle": lambda: dm.create_unit_square(comm, 5, 4),
+            "quadrilateral": lambda: dm.create_unit_square(comm, 5, 4, dm.CellType.quadrilateral),
+            "tetrahedron": lambda: dm.create_unit_cube(comm, 3, 3, 2),
+            "hexahedron": lambda: dm.create_unit_cube(comm, 3, 2, 2, dm.CellType.hexahedron)}[cell]()
+    d = mesh.geometry.dim
+    p = fempm.Particles(mesh, np.random.default_rng(0).random((300, d)) * 0.98 + 0.01, 1.0, 1.0)
+    V = dolfinx.fem.functionspace(mesh, ("Lagrange", 1, (d,)))
+    geo = p.locator.geometry
+    assert geo.affine
+    S, G, dofs = shape.affine_basis(p.cells, p.X, geo._K, np.asarray(V.dofmap.list), cell)
+    tab = V.element.basix_element.tabulate(1, p.X)[..., 0]
+    assert np.abs(S - tab[0]).max() < 1e-14
+    assert np.abs(G - np.transpose(tab[1:], (1, 2, 0)) @ geo._K[p.cells]).max() < 1e-12
+    assert np.array_equal(dofs, np.asarray(V.dofmap.list)[p.cells])
+    X, inside = shape.affine_pull_back(p.cells, p.x, geo._x0, geo._K, cell in ("interval", "triangle", "tetrahedron"),
+                                       1e-10)
+    assert inside.all() and np.abs(X - p.X).max() < 1e-14
+    X, inside = shape.affine_pull_back(p.cells, p.x + 2.0, geo._x0, geo._K, cell in ("interval", "triangle",
+                                                                                     "tetrahedron"), 1e-10)
+    assert not inside.any()

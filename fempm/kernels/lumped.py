@@ -1,0 +1,289 @@
+r"""The lumped-mass explicit step for point particles on affine degree-1 cells, in four
+compiled passes (:class:`fempm.lumped_step.LumpedPointStep` drives them; the generic
+:meth:`fempm.stepping.ExplicitSolver.step` is their reference). The basis is evaluated on the
+fly (:func:`fempm.kernels.shape.shape`), never stored.
+
+:func:`scatter` (P2G, one pass, one nodal array with columns ``[m | m v | f]``):
+
+.. math::
+    m_i = \sum_p M_p N_{ip}, \qquad (m v)_i = \sum_p M_p v_p N_{ip}, \qquad
+    f_i = \sum_p \big(N_{ip} (M_p g + f^{ext}_p) - V_p \sigma_p \nabla N_{ip}\big).
+
+:func:`grid_velocity` and :func:`grid_advance` (the grid update, on owned and ghost dofs):
+:math:`v_i = (m v)_i / m_i` on free dofs with :math:`m_i > \epsilon_a`, 0 elsewhere;
+:math:`a_i = f_i / m_i - c\, v_i` (0 on constrained dofs and where :math:`m_i \le \epsilon_w`),
+:math:`v_i^+ = v_i + \Delta t\, a_i`.
+
+:func:`g2p_update` (G2P, kinematics, constitutive update and motion in one pass, each part
+switched on by a flag): the FLIP blend
+:math:`v_p^+ = \alpha (v_p + \sum_i N_{ip}(v_i^+ - v_i)) + (1-\alpha) \sum_i N_{ip} v_i^+`,
+:math:`L_p = \sum_i v_i^+ \otimes \nabla N_{ip}`, :math:`F_p^+ = (I + \Delta t L_p) F_p`,
+:math:`V_p = J_p V_p^0`, the stress of the compiled laws (1: neo-Hookean, 2: linear elastic;
+0: left to the material's own ``stress``), and :math:`x_p^+ = x_p + \Delta t \bar v_p`.
+
+:func:`scatter` also returns the stable time of the state it reads,
+:math:`\min_p h_{c(p)} / (c_p + |v_p|)` with :math:`c_p = \sqrt{M_b / \rho_p}` for bodies with
+a P-wave modulus :math:`M_b` (else a given ``c_p``).
+
+The particle passes are compiled once per cell type (:func:`kernels_for`): the dimension, the
+number of vertices and the simplex/tensor-product basis are constants of the compiled code, so
+its small loops unroll (a kernel with run-time sizes is 2-4x slower), and numba caches each.
+"""
+
+from __future__ import annotations
+
+import functools
+from types import SimpleNamespace
+
+import numpy as np
+
+from fempm.kernels.shape import AVAILABLE, CELLS
+
+NEO_HOOKEAN, LINEAR_ELASTIC = 1, 2
+
+
+if AVAILABLE:
+    from numba import njit
+
+    from fempm.kernels.shape import shape
+
+    @njit(cache=True, error_model="numpy")
+    def grid_velocity(mass, mom, cv, free, active_min, v):  # pragma: no cover
+        """``v`` (ndofs, d) = momentum ``mom[:, cv:cv+d]`` / ``mass[:, 0]`` on free dofs with
+        mass above ``active_min``, else 0."""
+        nd, d = v.shape
+        for i in range(nd):
+            m = mass[i, 0]
+            for j in range(d):
+                v[i, j] = mom[i, cv + j] / m if (m > active_min and free[i, j]) else 0.0
+
+    @njit(cache=True, error_model="numpy")
+    def grid_advance(mass, force, free, active_min, weak_max, dt, damping, v_old, v_new):  # pragma: no cover
+        """``v_new = v_old + dt a`` with ``a = force / mass - damping v_old`` (0 on constrained or
+        inactive dofs and where the mass is at most ``weak_max``)."""
+        nd, d = v_old.shape
+        for i in range(nd):
+            m = mass[i, 0]
+            for j in range(d):
+                a = force[i, j] / m if (m > active_min and free[i, j]) else 0.0
+                a -= damping * v_old[i, j]
+                if m <= weak_max:
+                    a = 0.0
+                v_new[i, j] = v_old[i, j] + dt * a
+
+
+@functools.cache
+def kernels_for(cell: str) -> SimpleNamespace:
+    """The particle passes ``scatter`` and ``g2p_update`` compiled for one cell type."""
+    D, NK, SIMPLEX = CELLS[cell]
+
+    def scatter(cells, X, K, cell_dofs, mass, v, volume, sigma, g, fext, out, cm, cv, cf, h, body, modulus, c):
+        """See :func:`_scatter_kernel`; the columns (negative: skipped) choose the compiled variant."""
+        kernel = _scatter_kernel(cell, cm >= 0, cv >= 0, cf >= 0, h.shape[0] > 0, fext.shape[0] > 0)
+        return kernel(cells, X, K, cell_dofs, mass, v, volume, sigma, g, fext, out, h, body, modulus, c)
+
+    def g2p_update(cells, X, K, cell_dofs, v_new, v_old, flip, dt, blend, kinematics, move, *rest):
+        """See :func:`_g2p_kernel`; the flags choose the compiled variant (a momentum array
+        ``rest[-1]`` with a row per dof: the blend pass also re-maps the momenta, MUSL)."""
+        remap = blend and rest[-1].shape[0] > 0
+        return _g2p_kernel(cell, bool(blend), bool(kinematics), bool(move), remap)(cells, X, K, cell_dofs, v_new,
+                                                                                  v_old, flip, dt, *rest)
+
+    return SimpleNamespace(scatter=scatter, g2p_update=g2p_update)
+
+
+@functools.cache
+def _scatter_kernel(cell: str, with_mass: bool, with_momentum: bool, with_force: bool, with_dt: bool, has_fext: bool):
+    """The P2G pass of :func:`kernels_for` with its terms fixed at compile time: the columns of
+    ``out`` are [mass | momentum (d) | force (d)], of the terms present."""
+    D, NK, SIMPLEX = CELLS[cell]
+    CV = 1 if with_mass else 0
+    CF = CV + (D if with_momentum else 0)
+
+    @njit(cache=True, error_model="numpy")
+    def scatter(cells, X, K, cell_dofs, mass, v, volume, sigma, g, fext, out, h, body, modulus, c):  # pragma: no cover
+        """Add the particles' mass, momentum and force to ``out`` (ndofs, ncols). Returns the
+        stable time of the particles' state (inf without ``with_dt``)."""
+        N = np.empty(NK)
+        G = np.empty((NK, D))
+        mv = np.empty(D)
+        fe = np.empty(D)
+        sg = np.empty((D, D))
+        best = np.inf
+        for p in range(len(cells)):
+            cp = cells[p]
+            shape(X, p, K, cp, SIMPLEX, D, NK, N, G)
+            m = mass[p]
+            V = volume[p]
+            speed = 0.0
+            for j in range(D):
+                mv[j] = m * v[p, j]
+                speed += v[p, j] * v[p, j]
+                if with_force:
+                    fe[j] = m * g[j]
+                    if has_fext:
+                        fe[j] += fext[p, j]
+                    for e in range(D):
+                        sg[j, e] = sigma[p, j, e]
+            if with_dt:
+                mod = modulus[body[p]]
+                wave = np.sqrt(mod / (m / V)) if mod > 0.0 else c[p]
+                t = h[cp] / max(wave + np.sqrt(speed), 1e-300)
+                if not t >= best:  # NaN propagates
+                    best = t
+            for a in range(NK):
+                i = cell_dofs[cp, a]
+                w = N[a]
+                if with_mass:
+                    out[i, 0] += w * m
+                if with_momentum:
+                    for j in range(D):
+                        out[i, CV + j] += w * mv[j]
+                if with_force:
+                    for j in range(D):
+                        s = 0.0
+                        for e in range(D):
+                            s += sg[j, e] * G[a, e]
+                        out[i, CF + j] += w * fe[j] - V * s
+        return best
+
+    return scatter
+
+
+@functools.cache
+def _g2p_kernel(cell: str, blend: bool, kinematics: bool, move: bool, remap: bool):
+    """The G2P pass of :func:`kernels_for` with its parts (flags) fixed at compile time."""
+    D, NK, SIMPLEX = CELLS[cell]
+    det = _det(D)
+
+    @njit(cache=True, error_model="numpy")
+    def g2p_update(cells, X, K, cell_dofs, v_new, v_old, flip, dt, by_particle,
+                   x, v, F, volume0, volume, sigma, body, law, lam, mu, L, x0, tol, left, mass, mom):  # pragma: no cover
+        """One pass over the particles, in place. ``blend``: ``v`` <- the FLIP/PIC blend of
+        ``v_new`` against ``v_old``. ``kinematics``: ``F``, ``volume`` and the compiled laws'
+        ``sigma`` from :math:`L_p` of ``v_new`` (and :math:`L_p` into ``L`` when it has a row
+        per particle). ``move``: ``x`` += dt times the grid velocity (or, ``by_particle``, the
+        particle's), then ``X`` <- the reference coordinates in the same cell (origins ``x0``)
+        and ``left`` <- whether they lie outside it (beyond ``tol``). Returns (#non-finite J,
+        #J <= 0, min J, max J, #non-finite x or v, #left)."""
+        n = len(cells)
+        N = np.empty(NK)
+        G = np.empty((NK, D))
+        vg = np.empty(D)
+        Lp = np.empty((D, D))
+        Fn = np.empty((D, D))
+        keep_L = L.shape[0] == n
+        nonfinite_j = 0
+        inverted = 0
+        jmin = np.inf
+        jmax = -np.inf
+        nonfinite = 0
+        nleft = 0
+        dv = np.empty(D)
+        for p in range(n):
+            c = cells[p]
+            shape(X, p, K, c, SIMPLEX, D, NK, N, G)
+            for j in range(D):  # sums over the cell's dofs a, each loaded once
+                vg[j] = 0.0
+                dv[j] = 0.0
+                for e in range(D):
+                    Lp[j, e] = 0.0
+            for a in range(NK):
+                i = cell_dofs[c, a]
+                w = N[a]
+                for j in range(D):
+                    vij = v_new[i, j]
+                    vg[j] += w * vij
+                    if blend:
+                        dv[j] += w * (vij - v_old[i, j])
+                    if kinematics:
+                        for e in range(D):
+                            Lp[j, e] += vij * G[a, e]
+            if blend:
+                for j in range(D):
+                    v[p, j] = flip * (v[p, j] + dv[j]) + (1.0 - flip) * vg[j]
+            if remap:  # MUSL: the blended momenta back to the grid, in the same pass
+                for a in range(NK):
+                    i = cell_dofs[c, a]
+                    for j in range(D):
+                        mom[i, j] += N[a] * (mass[p] * v[p, j])
+            if kinematics:
+                for i in range(D):
+                    for j in range(D):
+                        t = F[p, i, j]
+                        for q in range(D):
+                            t += dt * Lp[i, q] * F[p, q, j]
+                        Fn[i, j] = t
+                J = det(Fn)
+                for i in range(D):
+                    for j in range(D):
+                        F[p, i, j] = Fn[i, j]
+                        if keep_L:
+                            L[p, i, j] = Lp[i, j]
+                volume[p] = J * volume0[p]
+                if not np.isfinite(J):
+                    nonfinite_j += 1
+                else:
+                    jmin = min(jmin, J)
+                    jmax = max(jmax, J)
+                    if J <= 0.0:
+                        inverted += 1
+                    else:
+                        b = body[p]
+                        if law[b] == NEO_HOOKEAN:
+                            vol = lam[b] * np.log(J)
+                            for i in range(D):
+                                for j in range(D):
+                                    bb = 0.0
+                                    for q in range(D):
+                                        bb += Fn[i, q] * Fn[j, q]
+                                    sigma[p, i, j] = (mu[b] * (bb - 1.0) + vol) / J if i == j else mu[b] * bb / J
+                        elif law[b] == LINEAR_ELASTIC:
+                            tr = 0.0
+                            for i in range(D):
+                                tr += Fn[i, i] - 1.0
+                            for i in range(D):
+                                for j in range(D):
+                                    e = 0.5 * (Fn[i, j] + Fn[j, i])
+                                    sigma[p, i, j] = lam[b] * tr + 2.0 * mu[b] * (e - 1.0) if i == j else 2.0 * mu[b] * e
+            if move:
+                ok = True
+                for j in range(D):  # the stress of the compiled laws is finite where J is
+                    x[p, j] += dt * (v[p, j] if by_particle else vg[j])
+                    ok = ok and np.isfinite(x[p, j]) and np.isfinite(v[p, j])
+                if not ok:
+                    nonfinite += 1
+                inside = True
+                total = 0.0
+                for i in range(D):
+                    r = 0.0
+                    for e in range(D):
+                        r += K[c, i, e] * (x[p, e] - x0[c, e])
+                    X[p, i] = r
+                    total += r
+                    if not (r >= -tol) or (not SIMPLEX and not (r <= 1.0 + tol)):
+                        inside = False
+                if SIMPLEX and not (total <= 1.0 + tol):
+                    inside = False
+                left[p] = not inside
+                if not inside:
+                    nleft += 1
+        return nonfinite_j, inverted, jmin, jmax, nonfinite, nleft
+
+    return g2p_update
+
+
+@functools.cache
+def _det(D: int):
+    """The determinant of a D x D matrix, inlined."""
+
+    @njit(inline="always")
+    def det(A):  # pragma: no cover
+        if D == 1:
+            return A[0, 0]
+        if D == 2:
+            return A[0, 0] * A[1, 1] - A[0, 1] * A[1, 0]
+        return (A[0, 0] * (A[1, 1] * A[2, 2] - A[1, 2] * A[2, 1]) - A[0, 1] * (A[1, 0] * A[2, 2] - A[1, 2] * A[2, 0])
+                + A[0, 2] * (A[1, 0] * A[2, 1] - A[1, 1] * A[2, 0]))
+
+    return det

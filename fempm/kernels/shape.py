@@ -1,0 +1,144 @@
+r"""Degree-1 Lagrange basis in closed form on affine cells (simplices, parallelograms,
+parallelepipeds), and the affine pull-back.
+
+On a cell :math:`c` with :math:`x = x_0 + J X` and :math:`K = J^{-1}`:
+
+.. math::
+    X = K (x - x_0), \qquad \nabla N_a(x) = \nabla_X \hat N_a(X)\, K,
+
+with :math:`\hat N_0 = 1 - \sum_t X_t`, :math:`\hat N_{a} = X_{a-1}` on simplices and
+:math:`\hat N_a = \prod_t \big(X_t \text{ if bit } t \text{ of } a \text{ else } 1 - X_t\big)`
+on the reference square and cube (basix's vertex order: vertex ``a`` has coordinate ``t``
+equal to bit ``t`` of ``a``). The pull-back's inside test is :meth:`fempm.geometry.CellGeometry.contains`.
+
+:func:`affine_basis` fills the per-particle arrays of :class:`fempm.basis.ParticleBasis`
+(basix tabulation and the geometry's inverse Jacobians are its reference);
+:func:`affine_pull_back` serves :meth:`fempm.location.CellLocator.relocate`. The other kernels
+evaluate the basis on the fly with :func:`shape` instead of storing it.
+"""
+
+from __future__ import annotations
+
+import functools
+
+import numpy as np
+import numpy.typing as npt
+
+from fempm.kernels.choice import COMPILED
+
+try:
+    from numba import njit
+except ImportError:  # pragma: no cover - numba is a dependency
+    njit = None
+
+if njit is not None:
+
+    @njit(inline="always")
+    def shape(X, p, K, c, simplex, t, k, N, G):  # pragma: no cover - compiled
+        """Values ``N`` (k,) and physical gradients ``G`` (k, t) of particle ``p`` at reference
+        point ``X[p]`` in cell ``c`` with inverse Jacobian ``K[c]`` (gdim = tdim = ``t``).
+        Inlined: where ``simplex``, ``t`` and ``k`` are compile-time constants (the kernels of
+        :func:`fempm.kernels.lumped.kernels_for`) the loops unroll and the branches fold."""
+        if simplex:
+            s = 1.0
+            for i in range(t):
+                s -= X[p, i]
+            N[0] = s
+            for e in range(t):
+                g = 0.0
+                for i in range(t):
+                    g -= K[c, i, e]
+                G[0, e] = g
+            for a in range(1, k):
+                N[a] = X[p, a - 1]
+                for e in range(t):
+                    G[a, e] = K[c, a - 1, e]
+        else:
+            for a in range(k):
+                v = 1.0
+                for i in range(t):
+                    v *= X[p, i] if (a >> i) & 1 else 1.0 - X[p, i]
+                N[a] = v
+                for e in range(t):
+                    G[a, e] = 0.0
+                for j in range(t):
+                    g = 1.0
+                    for i in range(t):
+                        if i == j:
+                            g *= 1.0 if (a >> i) & 1 else -1.0
+                        else:
+                            g *= X[p, i] if (a >> i) & 1 else 1.0 - X[p, i]
+                    for e in range(t):
+                        G[a, e] += g * K[c, j, e]
+
+    @njit(cache=True)
+    def _affine_pull_back(cells, x, x0, K, simplex, tol, X, inside):  # pragma: no cover - compiled
+        n, t = X.shape
+        g = K.shape[2]
+        for p in range(n):
+            c = cells[p]
+            ok = c >= 0
+            s = 0.0
+            for i in range(t):
+                r = 0.0
+                if c >= 0:
+                    for e in range(g):
+                        r += K[c, i, e] * (x[p, e] - x0[c, e])
+                X[p, i] = r
+                s += r
+                if not (r >= -tol) or (not simplex and not (r <= 1.0 + tol)):  # NaN fails too
+                    ok = False
+            if simplex and not (s <= 1.0 + tol):
+                ok = False
+            inside[p] = ok
+
+
+#: cell type -> (dimension, vertices, simplex)
+CELLS = {"interval": (1, 2, True), "triangle": (2, 3, True), "tetrahedron": (3, 4, True),
+         "quadrilateral": (2, 4, False), "hexahedron": (3, 8, False)}
+
+
+@functools.cache
+def _basis_kernel(cell: str):
+    """The per-particle basis of one cell type, its sizes compile-time constants."""
+    D, NK, SIMPLEX = CELLS[cell]
+
+    @njit(cache=True, error_model="numpy")
+    def affine_basis(cells, X, K, cell_dofs, S, G, dofs):  # pragma: no cover - compiled
+        Np = np.empty(NK)
+        Gp = np.empty((NK, D))
+        for p in range(len(cells)):
+            c = cells[p]
+            shape(X, p, K, c, SIMPLEX, D, NK, Np, Gp)
+            for a in range(NK):
+                S[p, a] = Np[a]
+                dofs[p, a] = cell_dofs[c, a]
+                for e in range(D):
+                    G[p, a, e] = Gp[a, e]
+
+    return affine_basis
+
+
+def affine_basis(cells: npt.NDArray[np.int32], X: npt.NDArray, K: npt.NDArray, cell_dofs: npt.NDArray[np.int32],
+                 cell: str) -> tuple[npt.NDArray, npt.NDArray, npt.NDArray[np.int32]]:
+    """(S (n, k), G (n, k, gdim), dofs (n, k)) of the degree-1 space with cell dofmap
+    ``cell_dofs`` at reference points ``X`` of ``cells`` (affine geometry of type ``cell``,
+    ``K`` per cell)."""
+    n, k, g = len(cells), cell_dofs.shape[1], K.shape[2]
+    S, G, dofs = np.empty((n, k)), np.empty((n, k, g)), np.empty((n, k), dtype=np.int32)
+    _basis_kernel(cell)(cells, np.ascontiguousarray(X), K, np.ascontiguousarray(cell_dofs), S, G, dofs)
+    return S, G, dofs
+
+
+def affine_pull_back(cells: npt.NDArray[np.int32], x: npt.NDArray, x0: npt.NDArray, K: npt.NDArray, simplex: bool,
+                     tol: float) -> tuple[npt.NDArray, npt.NDArray[np.bool_]]:
+    """Reference coordinates (n, tdim) of points ``x`` in ``cells`` (affine geometry, -1: none)
+    and whether each lies inside its cell within ``tol``."""
+    X, inside = np.empty((len(cells), K.shape[1])), np.empty(len(cells), dtype=np.bool_)
+    _affine_pull_back(np.asarray(cells, dtype=np.int32), np.ascontiguousarray(x), x0, K, bool(simplex), float(tol),
+                      X, inside)
+    return X, inside
+
+
+#: whether the closed-form kernels of this module are available (numba installed and selected)
+AVAILABLE = COMPILED and njit is not None

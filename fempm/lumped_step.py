@@ -1,0 +1,260 @@
+r"""The lumped-mass step for point particles on affine degree-1 cells, in compiled passes.
+
+This is :meth:`fempm.stepping.ExplicitSolver.step` (same equations, options and checks; that
+generic step is the reference it is tested against to round-off) for the common case: standard
+MPM particles, lumped mass, a P1/Q1 vector space on a mesh of simplices, parallelograms or
+parallelepipeds. Nothing per particle is stored between the passes; the basis is evaluated on
+the fly in each pass (:mod:`fempm.kernels.shape`):
+
+1. stable step: one pass, :math:`\Delta t = \mathrm{CFL} \min_p h_{c(p)} / (c_p + |v_p|)`;
+2. P2G: mass, momentum and force in one pass into one nodal array (ghosts summed once);
+3. grid update: :math:`v = (mv)/m`, boundary conditions, :math:`v^+ = v + \Delta t f/m`;
+4. G2P: FLIP blend, :math:`L_p`, :math:`F_p`, :math:`J_p` and its checks, the stress of the
+   compiled laws, the position and the finiteness check in one pass, state updated in place;
+5. relocation in the previous cell in closed form (the DOLFINx tree for those that left).
+
+USF splits 2 (forces after the stress update) and MUSL adds a momentum re-map between the
+blend and the kinematics, as in the generic step. Laws other than :class:`~fempm.materials.NeoHookean`
+and :class:`~fempm.materials.LinearElastic` keep their own ``stress`` (given :math:`L_p`) and
+``wave_speed``.
+"""
+
+from __future__ import annotations
+
+from typing import TYPE_CHECKING
+
+import dolfinx.la
+import numpy as np
+import numpy.typing as npt
+from mpi4py import MPI
+
+from fempm.kernels import lumped as kl
+from fempm.kernels.shape import AVAILABLE
+from fempm.loads import external_forces
+from fempm.materials.base import IsotropicElastic
+from fempm.transfer import SUPPORT_TOL
+
+#: steps between two sorts of the particles by cell
+SORT_EVERY = 100
+
+if TYPE_CHECKING:
+    from fempm.stepping import ExplicitSolver
+
+
+def supported(solver: ExplicitSolver) -> bool:
+    """Whether ``solver``'s options, space and mesh take the compiled lumped step."""
+    opts, V = solver.options, solver.V
+    el = V.element.basix_element
+    geo = solver.particles.locator.geometry
+    return (AVAILABLE and opts.mass_mode == "lumped" and getattr(opts.particle_domain, "name", "") == "point"
+            and el.degree == 1 and V.dofmap.index_map_bs == solver.particles.gdim and geo.affine)
+
+
+def _sum_ghosts(vec) -> None:
+    """Ghost contributions of a kept nodal vector to their owners, then the owners' sums back
+    to the ghosts (nothing on one rank)."""
+    if vec is not None:
+        vec.scatter_reverse(dolfinx.la.InsertMode.add)
+        vec.scatter_forward()
+
+
+def _law(mat) -> tuple[int, float, float, float]:
+    """(compiled law code, lambda, mu, P-wave modulus or 0) of a material."""
+    from fempm.materials import LinearElastic, NeoHookean
+
+    code = {NeoHookean: kl.NEO_HOOKEAN, LinearElastic: kl.LINEAR_ELASTIC}.get(type(mat), 0)
+    lam, mu = mat.lame if code else (0.0, 0.0)
+    wave = isinstance(mat, IsotropicElastic) and type(mat).wave_speed is IsotropicElastic.wave_speed
+    modulus = sum(mat.lame) + mat.lame[1] if wave else 0.0
+    return code, lam, mu, modulus
+
+
+class LumpedPointStep:
+    """The compiled lumped step of an :class:`~fempm.stepping.ExplicitSolver` (see the module)."""
+
+    def __init__(self, solver: ExplicitSolver):
+        self.solver = solver
+        self.options = solver.options
+        p, V = solver.particles, solver.V
+        geo = p.locator.geometry
+        self.K = geo._K
+        self.kernels = kl.kernels_for(geo.cell_name)
+        self.cell_dofs = np.ascontiguousarray(V.dofmap.list, dtype=np.int32)
+        self.index_map = V.dofmap.index_map
+        self.num_owned = self.index_map.size_local
+        self.num_dofs = self.num_owned + self.index_map.num_ghosts
+        d = self.d = p.gdim
+        self.free = np.ones((self.num_dofs, d), dtype=np.bool_)  # (dof, component) solved for
+        if solver._fixed_dofs is not None:
+            self.free[solver._fixed_dofs] = False
+        for c, dofs in enumerate(solver._slip_components or ()):
+            self.free[dofs, c] = False
+        laws = [_law(m) for m in solver.materials]
+        self.law = np.array([a[0] for a in laws], dtype=np.int64)
+        self.lam = np.array([a[1] for a in laws])
+        self.mu = np.array([a[2] for a in laws])
+        self.modulus = np.array([a[3] for a in laws])
+        self.all_modulus = bool(np.all(self.modulus > 0))
+        self.any_external = bool(np.any(self.law == 0))
+        self.x0 = geo._x0
+        self._left = np.zeros(0, dtype=np.bool_)
+        self._since_sort = SORT_EVERY  # sort on the first step
+        self._nodal = self._nodal_array(1 + 2 * d)  # [m | m v | f]
+        self._nodal_d = self._nodal_array(d)  # USF's forces, MUSL's re-mapped momenta
+        self._checked: tuple | None = None  # identities of the state arrays checked finite
+
+    # -- pieces -------------------------------------------------------------------------------
+    def _nodal_array(self, k: int):
+        """A nodal (owned + ghost dofs, k) array kept for the run: in parallel the array of a
+        DOLFINx vector, so that the ghost sums need no copy."""
+        if self.index_map.comm.size == 1 and self.index_map.num_ghosts == 0:
+            return None, np.empty((self.num_dofs, k))
+        vec = dolfinx.la.vector(self.index_map, bs=k)
+        return vec, vec.array.reshape(self.num_dofs, k)
+
+    def _wave_speeds(self) -> npt.NDArray:
+        """Wave speeds of the particles whose law has no P-wave modulus (empty if none has)."""
+        s = self.solver
+        p = s.particles
+        if self.all_modulus:
+            return np.zeros(0)
+        c = np.zeros(len(p))
+        rho = p.mass / p.volume
+        for b, (mat, idx) in enumerate(s._material_loop()):
+            if self.modulus[b] <= 0:
+                c[idx] = mat.wave_speed(p.fields["F"][idx], rho[idx])
+        return c
+
+    def _external(self, t: float) -> tuple[npt.NDArray, npt.NDArray]:
+        """(constant body force g (d,), per-particle external forces (n or 0, d))."""
+        s = self.solver
+        loads = s.loads
+        s.terms["internal"] += 1
+        s.terms.update(k for k in ("body_force", "traction") if getattr(loads, k) is not None)
+        if loads.traction is None and (loads.body_force is None or not callable(loads.body_force)):
+            g = np.zeros(self.d) if loads.body_force is None else np.asarray(loads.body_force, dtype=np.float64)
+            if g.shape != (self.d,):
+                raise ValueError(f"the body force has shape {g.shape}, expected ({self.d},)")
+            return g, np.zeros((0, self.d))
+        return np.zeros(self.d), np.ascontiguousarray(external_forces(loads, s.particles, t))
+
+    def _scatter(self, nodal, g, fext, cm: int, cv: int, cf: int, stable: bool = False):
+        """P2G of the chosen columns into the kept ``nodal`` (vector, array), summed over
+        ranks; with ``stable`` also this rank's stable time of the state (else inf)."""
+        s = self.solver
+        p = s.particles
+        f = p.fields
+        vec, out = nodal
+        out.fill(0.0)
+        h, c = (s.h_cell, self._wave_speeds()) if stable else (np.zeros(0), np.zeros(0))
+        local = self.kernels.scatter(p.cells, p.X, self.K, self.cell_dofs, p.mass, f["v"], p.volume, f["sigma"], g,
+                                     fext, out, cm, cv, cf, h, f["body"], self.modulus, c)
+        _sum_ghosts(vec)
+        return out, local
+
+    def _g2p(self, v_new, v_old, dt, *, blend: bool, kinematics: bool, move: bool, remap=None):
+        """One particle pass (:func:`fempm.kernels.lumped.kernels_for`); checks J (collective)
+        after a kinematics pass; returns (#non-finite particles, #that left their cells)."""
+        s = self.solver
+        p = s.particles
+        f = p.fields
+        opts = s.options
+        external = kinematics and self.any_external
+        L = np.empty((len(p) if external else 0, self.d, self.d))
+        left = np.empty(len(p) if move else 0, dtype=np.bool_)
+        counts = self.kernels.g2p_update(p.cells, p.X, self.K, self.cell_dofs, v_new, v_old, float(opts.flip),
+                                         float(dt), blend, kinematics, move, opts.position == "particle", p.x, f["v"],
+                                         f["F"], f["volume0"], p.volume, f["sigma"], f["body"], self.law, self.lam,
+                                         self.mu, L, self.x0, p.locator.tol, left, p.mass,
+                                         remap if remap is not None else np.zeros((0, self.d)))
+        nonfinite_j, inverted, jmin, jmax, nonfinite, nleft = counts
+        if kinematics:
+            flags = np.array([nonfinite_j, inverted, -jmin, jmax], dtype=float)
+            p.comm.Allreduce(MPI.IN_PLACE, flags, op=MPI.MAX)
+            if flags[0]:
+                s._fail(f"non-finite state (deformation gradient) at particle(s) {s._ids(~np.isfinite(p.volume))}")
+            if flags[1]:
+                s._fail(f"inverted deformation J <= 0 at particle(s) {s._ids(p.volume <= 0)}")
+            s.j_range = (-float(flags[2]), float(flags[3]))
+            if external:  # laws without a compiled kernel
+                rho = p.mass / p.volume
+                for b, (mat, idx) in enumerate(s._material_loop()):
+                    if self.law[b] == 0 and len(idx):
+                        f["sigma"][idx] = mat.stress(f["F"][idx], L[idx], f["sigma"][idx], dt, rho[idx])
+                        nonfinite += int(np.count_nonzero(~np.isfinite(f["sigma"][idx]).all(axis=(1, 2))))
+        self._left = left if move else self._left
+        return nonfinite
+
+    def _grid_velocity(self, mass, mom, cv: int, active_min: float) -> npt.NDArray:
+        v = np.empty((self.num_dofs, self.d))
+        kl.grid_velocity(mass, mom, cv, self.free, active_min, v)
+        self.solver._apply_bcs(v)
+        return v
+
+    def _state(self) -> tuple:
+        """Identities of the particle arrays the passes read and check."""
+        p = self.solver.particles
+        f = p.fields
+        return id(p.x), id(f["v"]), id(f["sigma"]), id(f["F"]), id(f["body"])
+
+    def _check_bodies(self) -> None:
+        """Every particle's body indexes a material (the compiled passes look its law up)."""
+        s = self.solver
+        body = s.particles.fields["body"]
+        bad = (body < 0) | (body >= len(s.materials))
+        if s.particles.comm.allreduce(int(np.count_nonzero(bad))):
+            raise ValueError(f"particle body index outside the {len(s.materials)} material(s) at particle(s) "
+                             f"{s._ids(bad)}")
+
+    # -- the step -----------------------------------------------------------------------------
+    def step(self, dt: float | None, dt_max: float) -> float:
+        s = self.solver
+        opts = s.options
+        p = s.particles
+        d = self.d
+        if p.comm.allreduce(self._state() != self._checked, op=MPI.LOR):  # arrays set from outside (any rank)
+            s._check_finite()  # collective; the passes check their own results
+            self._check_bodies()
+        if self._since_sort >= SORT_EVERY:
+            p.sort_by_cell()
+            self._since_sort = 0
+        self._since_sort += 1
+        g, fext = self._external(s.t)
+        usf = opts.scheme == "USF"
+        nodal, local = self._scatter(self._nodal, g, fext, 0, 1, -1 if usf else 1 + d, stable=True)
+        top = np.array([nodal[: self.num_owned, 0].max(initial=0.0), -local])
+        p.comm.Allreduce(MPI.IN_PLACE, top, op=MPI.MAX)  # one collective: the largest mass and the stable time
+        top, stable = float(top[0]), -opts.cfl * float(top[1])
+        if dt is None:
+            dt = min(stable, dt_max)
+        elif dt > stable / opts.cfl:
+            s._fail(f"time step {dt:.3g} exceeds the stability limit {stable / opts.cfl:.3g} (CFL > 1)")
+        active_min, weak_max = SUPPORT_TOL * top, opts.mass_cutoff * top
+        v_old = self._grid_velocity(nodal[:, :1], nodal, 1, active_min)
+        force, cf = nodal, 1 + d
+        if usf:  # stress from the mapped velocity, then the forces
+            nonfinite = self._g2p(v_old, v_old, dt, blend=False, kinematics=True, move=False)
+            force, cf = self._scatter(self._nodal_d, g, fext, -1, -1, 0)[0], 0
+        v_new = np.empty((self.num_dofs, d))
+        kl.grid_advance(nodal[:, :1], force[:, cf:cf + d], self.free, active_min, weak_max, float(dt),
+                        float(opts.damping), v_old, v_new)
+        s._apply_bcs(v_new)
+        if opts.scheme == "MUSL":  # blend, re-map the momenta, then the kinematics and motion
+            vec, mom = self._nodal_d
+            mom.fill(0.0)
+            self._g2p(v_new, v_old, dt, blend=True, kinematics=False, move=False, remap=mom)
+            _sum_ghosts(vec)
+            v_new = self._grid_velocity(nodal[:, :1], mom, 0, active_min)
+            nonfinite = self._g2p(v_new, v_new, dt, blend=False, kinematics=True, move=True)
+        elif usf:
+            nonfinite += self._g2p(v_new, v_old, dt, blend=True, kinematics=False, move=True)
+        else:
+            nonfinite = self._g2p(v_new, v_old, dt, blend=True, kinematics=True, move=True)
+        if p.comm.allreduce(nonfinite):
+            s._check_finite()  # names the particles
+        s.t += dt
+        s.step_count += 1
+        p.relocate(left=self._left)
+        self._checked = self._state()
+        s.grid_velocity = v_new[: self.num_dofs]
+        return dt
