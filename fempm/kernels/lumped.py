@@ -47,6 +47,18 @@ if AVAILABLE:
 
     from fempm.kernels.shape import shape
 
+    @njit(inline="always")
+    def det(A, D):  # pragma: no cover
+        """The determinant of the D x D matrix A (D a compile-time constant of the caller; a
+        module-level function, so that the callers' numba cache keys stay the same across
+        processes, which a closure over a compiled function would not)."""
+        if D == 1:
+            return A[0, 0]
+        if D == 2:
+            return A[0, 0] * A[1, 1] - A[0, 1] * A[1, 0]
+        return (A[0, 0] * (A[1, 1] * A[2, 2] - A[1, 2] * A[2, 1]) - A[0, 1] * (A[1, 0] * A[2, 2] - A[1, 2] * A[2, 0])
+                + A[0, 2] * (A[1, 0] * A[2, 1] - A[1, 1] * A[2, 0]))
+
     @njit(cache=True, error_model="numpy")
     def grid_velocity(mass, mom, cv, free, active_min, v):  # pragma: no cover
         """``v`` (ndofs, d) = momentum ``mom[:, cv:cv+d]`` / ``mass[:, 0]`` on free dofs with
@@ -154,7 +166,6 @@ def _scatter_kernel(cell: str, with_mass: bool, with_momentum: bool, with_force:
 def _g2p_kernel(cell: str, blend: bool, kinematics: bool, move: bool, remap: bool):
     """The G2P pass of :func:`kernels_for` with its parts (flags) fixed at compile time."""
     D, NK, SIMPLEX = CELLS[cell]
-    det = _det(D)
 
     @njit(cache=True, error_model="numpy")
     def g2p_update(cells, X, K, cell_dofs, v_new, v_old, flip, dt, by_particle,
@@ -214,7 +225,7 @@ def _g2p_kernel(cell: str, blend: bool, kinematics: bool, move: bool, remap: boo
                         for q in range(D):
                             t += dt * Lp[i, q] * F[p, q, j]
                         Fn[i, j] = t
-                J = det(Fn)
+                J = det(Fn, D)
                 for i in range(D):
                     for j in range(D):
                         F[p, i, j] = Fn[i, j]
@@ -271,19 +282,3 @@ def _g2p_kernel(cell: str, blend: bool, kinematics: bool, move: bool, remap: boo
         return nonfinite_j, inverted, jmin, jmax, nonfinite, nleft
 
     return g2p_update
-
-
-@functools.cache
-def _det(D: int):
-    """The determinant of a D x D matrix, inlined."""
-
-    @njit(inline="always")
-    def det(A):  # pragma: no cover
-        if D == 1:
-            return A[0, 0]
-        if D == 2:
-            return A[0, 0] * A[1, 1] - A[0, 1] * A[1, 0]
-        return (A[0, 0] * (A[1, 1] * A[2, 2] - A[1, 2] * A[2, 1]) - A[0, 1] * (A[1, 0] * A[2, 2] - A[1, 2] * A[2, 0])
-                + A[0, 2] * (A[1, 0] * A[2, 1] - A[1, 1] * A[2, 0]))
-
-    return det
