@@ -6,14 +6,15 @@ MPM particles, lumped mass, a P1/Q1 vector space on a mesh of simplices, paralle
 parallelepipeds. Nothing per particle is stored between the passes; the basis is evaluated on
 the fly in each pass (:mod:`fempm.kernels.shape`):
 
-1. stable step: one pass, :math:`\Delta t = \mathrm{CFL} \min_p h_{c(p)} / (c_p + |v_p|)`;
-2. P2G: mass, momentum and force in one pass into one nodal array (ghosts summed once);
-3. grid update: :math:`v = (mv)/m`, boundary conditions, :math:`v^+ = v + \Delta t f/m`;
-4. G2P: FLIP blend, :math:`L_p`, :math:`F_p`, :math:`J_p` and its checks, the stress of the
-   compiled laws, the position and the finiteness check in one pass, state updated in place;
-5. relocation in the previous cell in closed form (the DOLFINx tree for those that left).
+1. P2G: mass, momentum and force in one pass into one nodal array (ghosts summed once), with
+   the stable step of the state, :math:`\Delta t = \mathrm{CFL} \min_p h_{c(p)} / (c_p + |v_p|)`;
+2. grid update: :math:`v = (mv)/m`, boundary conditions, :math:`v^+ = v + \Delta t f/m`;
+3. G2P: FLIP blend, :math:`L_p`, :math:`F_p`, :math:`J_p` and its checks, the stress of the
+   compiled laws, the position, the finiteness check and the reference coordinates in the same
+   cell in one pass, state updated in place;
+4. relocation: the DOLFINx tree only for the particles that left their cell.
 
-USF splits 2 (forces after the stress update) and MUSL adds a momentum re-map between the
+USF splits 1 (forces after the stress update) and MUSL adds a momentum re-map between the
 blend and the kinematics, as in the generic step. Laws other than :class:`~fempm.materials.NeoHookean`
 and :class:`~fempm.materials.LinearElastic` keep their own ``stress`` (given :math:`L_p`) and
 ``wave_speed``.
@@ -97,7 +98,6 @@ class LumpedPointStep:
         self.all_modulus = bool(np.all(self.modulus > 0))
         self.any_external = bool(np.any(self.law == 0))
         self.x0 = geo._x0
-        self._left = np.zeros(0, dtype=np.bool_)
         self._since_sort = SORT_EVERY  # sort on the first step
         self._nodal = self._nodal_array(1 + 2 * d)  # [m | m v | f]
         self._nodal_d = self._nodal_array(d)  # USF's forces, MUSL's re-mapped momenta
@@ -129,8 +129,7 @@ class LumpedPointStep:
         """(constant body force g (d,), per-particle external forces (n or 0, d))."""
         s = self.solver
         loads = s.loads
-        s.terms["internal"] += 1
-        s.terms.update(k for k in ("body_force", "traction") if getattr(loads, k) is not None)
+        s._count_terms()
         if loads.traction is None and (loads.body_force is None or not callable(loads.body_force)):
             g = np.zeros(self.d) if loads.body_force is None else np.asarray(loads.body_force, dtype=np.float64)
             if g.shape != (self.d,):
@@ -154,7 +153,8 @@ class LumpedPointStep:
 
     def _g2p(self, v_new, v_old, dt, *, blend: bool, kinematics: bool, move: bool, remap=None):
         """One particle pass (:func:`fempm.kernels.lumped.kernels_for`); checks J (collective)
-        after a kinematics pass; returns (#non-finite particles, #that left their cells)."""
+        after a kinematics pass; returns (#non-finite particles, which left their cells (a
+        moving pass; else an empty mask))."""
         s = self.solver
         p = s.particles
         f = p.fields
@@ -167,7 +167,7 @@ class LumpedPointStep:
                                          f["F"], f["volume0"], p.volume, f["sigma"], f["body"], self.law, self.lam,
                                          self.mu, L, self.x0, p.locator.tol, left, p.mass,
                                          remap if remap is not None else np.zeros((0, self.d)))
-        nonfinite_j, inverted, jmin, jmax, nonfinite, nleft = counts
+        nonfinite_j, inverted, jmin, jmax, nonfinite = counts
         if kinematics:
             flags = np.array([nonfinite_j, inverted, -jmin, jmax], dtype=float)
             p.comm.Allreduce(MPI.IN_PLACE, flags, op=MPI.MAX)
@@ -182,8 +182,7 @@ class LumpedPointStep:
                     if self.law[b] == 0 and len(idx):
                         f["sigma"][idx] = mat.stress(f["F"][idx], L[idx], f["sigma"][idx], dt, rho[idx])
                         nonfinite += int(np.count_nonzero(~np.isfinite(f["sigma"][idx]).all(axis=(1, 2))))
-        self._left = left if move else self._left
-        return nonfinite
+        return nonfinite, left
 
     def _grid_velocity(self, mass, mom, cv: int, active_min: float) -> npt.NDArray:
         v = np.empty((self.num_dofs, self.d))
@@ -233,7 +232,7 @@ class LumpedPointStep:
         v_old = self._grid_velocity(nodal[:, :1], nodal, 1, active_min)
         force, cf = nodal, 1 + d
         if usf:  # stress from the mapped velocity, then the forces
-            nonfinite = self._g2p(v_old, v_old, dt, blend=False, kinematics=True, move=False)
+            nonfinite = self._g2p(v_old, v_old, dt, blend=False, kinematics=True, move=False)[0]
             force, cf = self._scatter(self._nodal_d, g, fext, -1, -1, 0)[0], 0
         v_new = np.empty((self.num_dofs, d))
         kl.grid_advance(nodal[:, :1], force[:, cf:cf + d], self.free, active_min, weak_max, float(dt),
@@ -245,16 +244,17 @@ class LumpedPointStep:
             self._g2p(v_new, v_old, dt, blend=True, kinematics=False, move=False, remap=mom)
             _sum_ghosts(vec)
             v_new = self._grid_velocity(nodal[:, :1], mom, 0, active_min)
-            nonfinite = self._g2p(v_new, v_new, dt, blend=False, kinematics=True, move=True)
+            nonfinite, left = self._g2p(v_new, v_new, dt, blend=False, kinematics=True, move=True)
         elif usf:
-            nonfinite += self._g2p(v_new, v_old, dt, blend=True, kinematics=False, move=True)
+            more, left = self._g2p(v_new, v_old, dt, blend=True, kinematics=False, move=True)
+            nonfinite += more
         else:
-            nonfinite = self._g2p(v_new, v_old, dt, blend=True, kinematics=True, move=True)
+            nonfinite, left = self._g2p(v_new, v_old, dt, blend=True, kinematics=True, move=True)
         if p.comm.allreduce(nonfinite):
             s._check_finite()  # names the particles
         s.t += dt
         s.step_count += 1
-        p.relocate(left=self._left)
+        p.relocate(left=left)
         self._checked = self._state()
         s.grid_velocity = v_new[: self.num_dofs]
         return dt

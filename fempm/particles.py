@@ -119,20 +119,29 @@ class Particles:
         _check_positive("volume", volume, locator.mesh.comm)
         return self
 
-    def _assign(self, d, outside: OutsidePolicy) -> None:
+    def _check_outside(self, outside_x: npt.NDArray, outside: OutsidePolicy) -> None:
+        """Apply the ``outside`` policy to the positions found in no cell of any rank
+        (collective): raise, or log and count them in :attr:`removed`."""
         if outside not in _OUTSIDE:
             raise ValueError(f"unknown option outside={outside!r}; expected one of {_OUTSIDE}")
         comm = self.mesh.comm
-        nout = comm.allreduce(len(d.outside))
+        nout = comm.allreduce(len(outside_x))
         if nout and outside == "raise":
-            examples = np.concatenate(comm.allgather(d.outside[:5]))
+            examples = np.concatenate(comm.allgather(outside_x[:5]))
             raise OutsideMeshError(outside_message(nout, examples))
         if nout:
             log.warning("fempm: removed %d particle(s) outside the mesh", nout)
         self.removed = nout
-        self.x, self.cells, self.X = d.x, d.cells, d.X
-        self.mass, self.volume, self.ids = d.data["mass"], d.data["volume"], d.data["ids"]
-        self.fields = {k[6:]: v for k, v in d.data.items() if k.startswith("field:")}
+
+    def _assign(self, d, outside: OutsidePolicy) -> None:
+        self._check_outside(d.outside, outside)
+        self._set_arrays({"x": d.x, "cells": d.cells, "X": d.X, **d.data})
+
+    def _set_arrays(self, arrays: dict[str, npt.NDArray]) -> None:
+        """Positions, cells, reference coordinates and the :meth:`_arrays` data, by name."""
+        self.x, self.cells, self.X = arrays["x"], arrays["cells"], arrays["X"]
+        self.mass, self.volume, self.ids = arrays["mass"], arrays["volume"], arrays["ids"]
+        self.fields = {k[6:]: v for k, v in arrays.items() if k.startswith("field:")}
 
     def _arrays(self) -> dict[str, npt.NDArray]:
         data = {"mass": self.mass, "volume": self.volume, "ids": self.ids}
@@ -188,19 +197,12 @@ class Particles:
         if (lost if self.comm.size == 1 else self.comm.allreduce(lost)) == 0:
             self.cells, self.X = cells, X
             return
-        if outside not in _OUTSIDE:
+        if outside not in _OUTSIDE:  # before anything moves
             raise ValueError(f"unknown option outside={outside!r}; expected one of {_OUTSIDE}")
         arrays = {"x": self.x, "cells": cells, "X": X, **self._arrays()}
         arrays, gone = migrate(self.locator, arrays, np.flatnonzero(cells < 0))  # in place, O(leavers)
-        nout = self.comm.allreduce(len(gone))
-        if nout and outside == "raise":
-            raise OutsideMeshError(outside_message(nout, np.concatenate(self.comm.allgather(gone[:5]))))
-        if nout:
-            log.warning("fempm: removed %d particle(s) outside the mesh", nout)
-        self.removed = nout
-        self.x, self.cells, self.X = arrays.pop("x"), arrays.pop("cells"), arrays.pop("X")
-        self.mass, self.volume, self.ids = arrays.pop("mass"), arrays.pop("volume"), arrays.pop("ids")
-        self.fields = {k[6:]: v for k, v in arrays.items()}
+        self._check_outside(gone, outside)
+        self._set_arrays(arrays)
 
     def sort_by_cell(self) -> None:
         """Order the particles by cell (stable), for memory locality in the particle passes."""

@@ -274,8 +274,7 @@ class ExplicitSolver:
         r"""Nodal forces :math:`f_i = \sum_p (-V_p \sigma_p \nabla N_{ip} + N_{ip} f^{ext}_p)`,
         summed over ranks; point particles in one compiled scatter (:mod:`fempm.kernels`)."""
         p = self.particles
-        self.terms["internal"] += 1
-        self.terms.update(k for k in ("body_force", "traction") if getattr(self.loads, k) is not None)
+        self._count_terms()
         fext = external_forces(self.loads, p, t)
         if basis.cells is not None and not basis.extended:
             local = kernels.nodal_forces(basis.dofs, basis.values, basis.gradients, p.volume, p.fields["sigma"],
@@ -285,6 +284,11 @@ class ExplicitSolver:
         if self.loads.body_force is not None or self.loads.traction is not None:
             f += p2g(basis, fext)
         return f
+
+    def _count_terms(self) -> None:
+        """Count the force terms assembled this step (:attr:`terms`)."""
+        self.terms["internal"] += 1
+        self.terms.update(k for k in ("body_force", "traction") if getattr(self.loads, k) is not None)
 
     # -- the step -----------------------------------------------------------------------------
     def step(self, dt: float | None = None, *, dt_max: float = np.inf) -> float:

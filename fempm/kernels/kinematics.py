@@ -63,36 +63,43 @@ try:
                     Fn[p, i, j] = s
             J[p] = _det(Fn, p)
 
+    @njit(inline="always")
+    def neo_hookean_at(F, p, d, J, lam, mu, sigma):  # pragma: no cover - compiled
+        """sigma[p] of the neo-Hookean law from F[p] (d x d) with J = det F[p] > 0."""
+        vol = lam * np.log(J)
+        for i in range(d):
+            for j in range(d):
+                b = 0.0
+                for k in range(d):
+                    b += F[p, i, k] * F[p, j, k]
+                if i == j:
+                    sigma[p, i, j] = (mu * (b - 1.0) + vol) / J
+                else:
+                    sigma[p, i, j] = mu * b / J
+
+    @njit(inline="always")
+    def linear_elastic_at(F, p, d, lam, mu, sigma):  # pragma: no cover - compiled
+        """sigma[p] of the linear elastic law from F[p] (d x d)."""
+        tr = 0.0
+        for i in range(d):
+            tr += F[p, i, i] - 1.0
+        for i in range(d):
+            for j in range(d):
+                e = 0.5 * (F[p, i, j] + F[p, j, i])
+                if i == j:
+                    sigma[p, i, j] = lam * tr + 2.0 * mu * (e - 1.0)
+                else:
+                    sigma[p, i, j] = 2.0 * mu * e
+
     @njit(cache=True)
     def _neo_hookean(F, lam, mu, sigma):  # pragma: no cover - compiled
-        n, d = F.shape[0], F.shape[1]
-        for p in range(n):
-            J = _det(F, p)
-            vol = lam * np.log(J)
-            for i in range(d):
-                for j in range(d):
-                    b = 0.0
-                    for k in range(d):
-                        b += F[p, i, k] * F[p, j, k]
-                    if i == j:
-                        sigma[p, i, j] = (mu * (b - 1.0) + vol) / J
-                    else:
-                        sigma[p, i, j] = mu * b / J
+        for p in range(F.shape[0]):
+            neo_hookean_at(F, p, F.shape[1], _det(F, p), lam, mu, sigma)
 
     @njit(cache=True)
     def _linear_elastic(F, lam, mu, sigma):  # pragma: no cover - compiled
-        n, d = F.shape[0], F.shape[1]
-        for p in range(n):
-            tr = 0.0
-            for i in range(d):
-                tr += F[p, i, i] - 1.0
-            for i in range(d):
-                for j in range(d):
-                    e = 0.5 * (F[p, i, j] + F[p, j, i])
-                    if i == j:
-                        sigma[p, i, j] = lam * tr + 2.0 * mu * (e - 1.0)
-                    else:
-                        sigma[p, i, j] = 2.0 * mu * e
+        for p in range(F.shape[0]):
+            linear_elastic_at(F, p, F.shape[1], lam, mu, sigma)
 
     def deform_numba(F, L, dt):
         Fn, J = np.empty_like(F), np.empty(len(F))

@@ -45,19 +45,8 @@ NEO_HOOKEAN, LINEAR_ELASTIC = 1, 2
 if AVAILABLE:
     from numba import njit
 
-    from fempm.kernels.shape import shape
-
-    @njit(inline="always")
-    def det(A, D):  # pragma: no cover
-        """The determinant of the D x D matrix A (D a compile-time constant of the caller; a
-        module-level function, so that the callers' numba cache keys stay the same across
-        processes, which a closure over a compiled function would not)."""
-        if D == 1:
-            return A[0, 0]
-        if D == 2:
-            return A[0, 0] * A[1, 1] - A[0, 1] * A[1, 0]
-        return (A[0, 0] * (A[1, 1] * A[2, 2] - A[1, 2] * A[2, 1]) - A[0, 1] * (A[1, 0] * A[2, 2] - A[1, 2] * A[2, 0])
-                + A[0, 2] * (A[1, 0] * A[2, 1] - A[1, 1] * A[2, 0]))
+    from fempm.kernels.kinematics import _det, linear_elastic_at, neo_hookean_at
+    from fempm.kernels.shape import inside_after_pull_back, shape
 
     @njit(cache=True, error_model="numpy")
     def grid_velocity(mass, mom, cv, free, active_min, v):  # pragma: no cover
@@ -176,7 +165,7 @@ def _g2p_kernel(cell: str, blend: bool, kinematics: bool, move: bool, remap: boo
         per particle). ``move``: ``x`` += dt times the grid velocity (or, ``by_particle``, the
         particle's), then ``X`` <- the reference coordinates in the same cell (origins ``x0``)
         and ``left`` <- whether they lie outside it (beyond ``tol``). Returns (#non-finite J,
-        #J <= 0, min J, max J, #non-finite x or v, #left)."""
+        #J <= 0, min J, max J, #non-finite x or v)."""
         n = len(cells)
         N = np.empty(NK)
         G = np.empty((NK, D))
@@ -189,7 +178,6 @@ def _g2p_kernel(cell: str, blend: bool, kinematics: bool, move: bool, remap: boo
         jmin = np.inf
         jmax = -np.inf
         nonfinite = 0
-        nleft = 0
         dv = np.empty(D)
         for p in range(n):
             c = cells[p]
@@ -225,12 +213,12 @@ def _g2p_kernel(cell: str, blend: bool, kinematics: bool, move: bool, remap: boo
                         for q in range(D):
                             t += dt * Lp[i, q] * F[p, q, j]
                         Fn[i, j] = t
-                J = det(Fn, D)
                 for i in range(D):
                     for j in range(D):
                         F[p, i, j] = Fn[i, j]
                         if keep_L:
                             L[p, i, j] = Lp[i, j]
+                J = _det(F, p)
                 volume[p] = J * volume0[p]
                 if not np.isfinite(J):
                     nonfinite_j += 1
@@ -239,24 +227,10 @@ def _g2p_kernel(cell: str, blend: bool, kinematics: bool, move: bool, remap: boo
                     jmax = max(jmax, J)
                     if J <= 0.0:
                         inverted += 1
-                    else:
-                        b = body[p]
-                        if law[b] == NEO_HOOKEAN:
-                            vol = lam[b] * np.log(J)
-                            for i in range(D):
-                                for j in range(D):
-                                    bb = 0.0
-                                    for q in range(D):
-                                        bb += Fn[i, q] * Fn[j, q]
-                                    sigma[p, i, j] = (mu[b] * (bb - 1.0) + vol) / J if i == j else mu[b] * bb / J
-                        elif law[b] == LINEAR_ELASTIC:
-                            tr = 0.0
-                            for i in range(D):
-                                tr += Fn[i, i] - 1.0
-                            for i in range(D):
-                                for j in range(D):
-                                    e = 0.5 * (Fn[i, j] + Fn[j, i])
-                                    sigma[p, i, j] = lam[b] * tr + 2.0 * mu[b] * (e - 1.0) if i == j else 2.0 * mu[b] * e
+                    elif law[body[p]] == NEO_HOOKEAN:
+                        neo_hookean_at(F, p, D, J, lam[body[p]], mu[body[p]], sigma)
+                    elif law[body[p]] == LINEAR_ELASTIC:
+                        linear_elastic_at(F, p, D, lam[body[p]], mu[body[p]], sigma)
             if move:
                 ok = True
                 for j in range(D):  # the stress of the compiled laws is finite where J is
@@ -264,21 +238,7 @@ def _g2p_kernel(cell: str, blend: bool, kinematics: bool, move: bool, remap: boo
                     ok = ok and np.isfinite(x[p, j]) and np.isfinite(v[p, j])
                 if not ok:
                     nonfinite += 1
-                inside = True
-                total = 0.0
-                for i in range(D):
-                    r = 0.0
-                    for e in range(D):
-                        r += K[c, i, e] * (x[p, e] - x0[c, e])
-                    X[p, i] = r
-                    total += r
-                    if not (r >= -tol) or (not SIMPLEX and not (r <= 1.0 + tol)):
-                        inside = False
-                if SIMPLEX and not (total <= 1.0 + tol):
-                    inside = False
-                left[p] = not inside
-                if not inside:
-                    nleft += 1
-        return nonfinite_j, inverted, jmin, jmax, nonfinite, nleft
+                left[p] = not inside_after_pull_back(x, p, x0, K, c, SIMPLEX, D, tol, X)
+        return nonfinite_j, inverted, jmin, jmax, nonfinite
 
     return g2p_update

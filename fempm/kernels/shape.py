@@ -71,26 +71,32 @@ if njit is not None:
                     for e in range(t):
                         G[a, e] += g * K[c, j, e]
 
+    @njit(inline="always")
+    def inside_after_pull_back(x, p, x0, K, c, simplex, t, tol, X):  # pragma: no cover - compiled
+        """X[p] <- K[c] (x[p] - x0[c]); whether it lies in the reference cell within ``tol``
+        (:meth:`fempm.geometry.CellGeometry.contains`; NaN lies outside)."""
+        ok = True
+        s = 0.0
+        for i in range(t):
+            r = 0.0
+            for e in range(t):
+                r += K[c, i, e] * (x[p, e] - x0[c, e])
+            X[p, i] = r
+            s += r
+            if not (r >= -tol) or (not simplex and not (r <= 1.0 + tol)):
+                ok = False
+        if simplex and not (s <= 1.0 + tol):
+            ok = False
+        return ok
+
     @njit(cache=True)
     def _affine_pull_back(cells, x, x0, K, simplex, tol, X, inside):  # pragma: no cover - compiled
-        n, t = X.shape
-        g = K.shape[2]
-        for p in range(n):
-            c = cells[p]
-            ok = c >= 0
-            s = 0.0
-            for i in range(t):
-                r = 0.0
-                if c >= 0:
-                    for e in range(g):
-                        r += K[c, i, e] * (x[p, e] - x0[c, e])
-                X[p, i] = r
-                s += r
-                if not (r >= -tol) or (not simplex and not (r <= 1.0 + tol)):  # NaN fails too
-                    ok = False
-            if simplex and not (s <= 1.0 + tol):
-                ok = False
-            inside[p] = ok
+        for p in range(len(cells)):
+            if cells[p] < 0:
+                X[p, :] = 0.0
+                inside[p] = False
+            else:
+                inside[p] = inside_after_pull_back(x, p, x0, K, cells[p], simplex, K.shape[2], tol, X)
 
 
 #: cell type -> (dimension, vertices, simplex)
