@@ -43,11 +43,12 @@ if TYPE_CHECKING:
 
 
 def supported(solver: ExplicitSolver) -> bool:
-    """Whether ``solver``'s options, space and mesh take the compiled lumped step."""
+    """Whether ``solver``'s options, space and mesh take a compiled step (lumped, or consistent:
+    :mod:`fempm.consistent_step`)."""
     opts, V = solver.options, solver.V
     el = V.element.basix_element
     geo = solver.particles.locator.geometry
-    return (AVAILABLE and opts.mass_mode == "lumped" and getattr(opts.particle_domain, "name", "") == "point"
+    return (AVAILABLE and opts.mass_mode in ("lumped", "consistent") and getattr(opts.particle_domain, "name", "") == "point"
             and el.degree == 1 and V.dofmap.index_map_bs == solver.particles.gdim and geo.affine)
 
 
@@ -184,11 +185,26 @@ class LumpedPointStep:
                         nonfinite += int(np.count_nonzero(~np.isfinite(f["sigma"][idx]).all(axis=(1, 2))))
         return nonfinite, left
 
-    def _grid_velocity(self, mass, mom, cv: int, active_min: float) -> npt.NDArray:
+    # -- the grid: lumped here, consistent in fempm.consistent_step ----------------------------
+    def _stable_factor(self, nodal, need: bool) -> float:
+        """Called after P2G: what the stable time of the state is multiplied by (1: lumped)."""
+        return 1.0
+
+    def _grid_velocity(self, mass, mom, cv: int, active_min: float, guess=None) -> npt.NDArray:
+        """Grid velocity from the nodal momenta ``mom[:, cv:cv+d]``, constrained."""
         v = np.empty((self.num_dofs, self.d))
         kl.grid_velocity(mass, mom, cv, self.free, active_min, v)
         self.solver._apply_bcs(v)
         return v
+
+    def _advance(self, mass, force, cf: int, active_min: float, weak_max: float, dt: float,
+                 v_old: npt.NDArray) -> npt.NDArray:
+        r""":math:`v^+ = v + \Delta t\, a` from the nodal forces ``force[:, cf:cf+d]``, constrained."""
+        v_new = np.empty((self.num_dofs, self.d))
+        kl.grid_advance(mass, force[:, cf:cf + self.d], self.free, active_min, weak_max, float(dt),
+                        float(self.solver.options.damping), v_old, v_new)
+        self.solver._apply_bcs(v_new)
+        return v_new
 
     def _state(self) -> tuple:
         """Identities of the particle arrays the passes read and check."""
@@ -224,20 +240,18 @@ class LumpedPointStep:
         top = np.array([nodal[: self.num_owned, 0].max(initial=0.0), -local])
         p.comm.Allreduce(MPI.IN_PLACE, top, op=MPI.MAX)  # one collective: the largest mass and the stable time
         top, stable = float(top[0]), -opts.cfl * float(top[1])
+        stable *= self._stable_factor(nodal, dt is None)
         if dt is None:
             dt = min(stable, dt_max)
         elif dt > stable / opts.cfl:
             s._fail(f"time step {dt:.3g} exceeds the stability limit {stable / opts.cfl:.3g} (CFL > 1)")
         active_min, weak_max = SUPPORT_TOL * top, opts.mass_cutoff * top
-        v_old = self._grid_velocity(nodal[:, :1], nodal, 1, active_min)
+        v_old = self._grid_velocity(nodal[:, :1], nodal, 1, active_min, guess=s.grid_velocity)
         force, cf = nodal, 1 + d
         if usf:  # stress from the mapped velocity, then the forces
             nonfinite = self._g2p(v_old, v_old, dt, blend=False, kinematics=True, move=False)[0]
             force, cf = self._scatter(self._nodal_d, g, fext, -1, -1, 0)[0], 0
-        v_new = np.empty((self.num_dofs, d))
-        kl.grid_advance(nodal[:, :1], force[:, cf:cf + d], self.free, active_min, weak_max, float(dt),
-                        float(opts.damping), v_old, v_new)
-        s._apply_bcs(v_new)
+        v_new = self._advance(nodal[:, :1], force, cf, active_min, weak_max, dt, v_old)
         if opts.scheme == "MUSL":  # blend, re-map the momenta, then the kinematics and motion
             vec, mom = self._nodal_d
             mom.fill(0.0)

@@ -30,7 +30,11 @@ import numpy as np
 import numpy.typing as npt
 from mpi4py import MPI
 
-from fempm.transfer import sum_over_ranks
+from fempm.kernels.shape import AVAILABLE
+from fempm.transfer import SingularMassError, sum_over_ranks
+
+if AVAILABLE:
+    from fempm.kernels.consistent import eigenvalue_bounds, propagate
 
 log = logging.getLogger("fempm")
 
@@ -40,17 +44,55 @@ RANK_TOL = 1e-10
 DENSE_LIMIT = 4000
 
 
-def _nonsingular(blocks: npt.NDArray, keep: npt.NDArray[np.bool_]) -> npt.NDArray[np.bool_]:
+def _nonsingular(blocks: npt.NDArray, keep: npt.NDArray[np.bool_], exact: bool = False) -> npt.NDArray[np.bool_]:
     """Whether each block restricted to its ``keep`` rows/columns is nonsingular (Jacobi-scaled
-    smallest eigenvalue above RANK_TOL); blocks with nothing to keep count as nonsingular."""
+    smallest eigenvalue above RANK_TOL; ``exact``: by ``eigvalsh`` for every block); blocks with
+    nothing to keep count as nonsingular."""
     diag = np.einsum("nii->ni", blocks)
     k = blocks.shape[1]
     touched = keep & (diag > 0)
     scale = np.where(touched, 1.0 / np.sqrt(np.where(diag > 0, diag, 1.0)), 0.0)
     B = blocks * scale[:, :, None] * scale[:, None, :]
     B = np.where(keep[:, :, None] & keep[:, None, :], B, 0.0) + np.eye(k) * (~keep)[:, :, None]
-    lam = np.linalg.eigvalsh(B)[:, 0] if len(B) else np.zeros(0)
-    return (lam > RANK_TOL) & ~np.any(keep & ~touched, axis=1)
+    return _smallest_above(B, RANK_TOL, exact) & ~np.any(keep & ~touched, axis=1)
+
+
+def _smallest_above(B: npt.NDArray, tol: float, exact: bool = False) -> npt.NDArray[np.bool_]:
+    """Whether the smallest eigenvalue of each symmetric positive semi-definite ``B[n]`` exceeds
+    ``tol``: decided from pivot bounds (:func:`fempm.kernels.consistent.eigenvalue_bounds`)
+    where they are clear by a factor 2, by ``eigvalsh`` for the others."""
+    above = np.zeros(len(B), dtype=np.bool_)
+    unsure = np.ones(len(B), dtype=np.bool_)
+    if AVAILABLE and len(B) and not exact:
+        bounds = np.empty((len(B), 2))
+        eigenvalue_bounds(np.ascontiguousarray(B), bounds)
+        above = bounds[:, 1] > 2.0 * tol
+        unsure = ~above & (bounds[:, 0] >= 0.5 * tol)
+    if unsure.any():
+        above[unsure] = np.linalg.eigvalsh(B[unsure])[:, 0] > tol
+    return above
+
+
+def _propagate(blocks: npt.NDArray, dofs: npt.NDArray, determined: npt.NDArray[np.bool_],
+               pending: npt.NDArray[np.bool_]) -> None:
+    """Step 2 of the module on this rank, in place, until nothing changes: compiled
+    (:func:`fempm.kernels.consistent.propagate`, the cells its bounds leave unsure tested with
+    ``eigvalsh``), or in rounds over all pending cells without numba."""
+    while True:
+        if AVAILABLE:
+            unsure = np.zeros(len(dofs), dtype=np.bool_)
+            propagate(np.ascontiguousarray(blocks), np.ascontiguousarray(dofs), determined, pending, RANK_TOL, unsure)
+            idx = np.flatnonzero(pending & unsure)
+            solved = _nonsingular(blocks[idx], ~determined[dofs[idx]], exact=True)
+        else:
+            idx = np.flatnonzero(pending)
+            solved = _nonsingular(blocks[idx], ~determined[dofs[idx]])
+        newly = np.zeros_like(determined)
+        newly[dofs[idx[solved]].ravel()] = True
+        pending[idx[solved]] = False
+        if not np.any(newly & ~determined):
+            return
+        determined |= newly
 
 
 def _share(index_map, flags: npt.NDArray[np.bool_]) -> npt.NDArray[np.bool_]:
@@ -58,12 +100,39 @@ def _share(index_map, flags: npt.NDArray[np.bool_]) -> npt.NDArray[np.bool_]:
     return sum_over_ranks(index_map, flags[:, None].astype(np.float64))[:, 0] > 0
 
 
-def singular_dofs(basis, blocks: tuple[npt.NDArray, npt.NDArray, npt.NDArray], active: npt.NDArray[np.bool_],
+def check_nonsingular(index_map, num_particles: int, active: npt.NDArray[np.bool_], lump: npt.NDArray[np.bool_] | None,
+                      blocks: tuple[npt.NDArray, npt.NDArray, npt.NDArray] | None) -> None:
+    """Raise :class:`fempm.transfer.SingularMassError` when the consistent mass on the ``active``
+    dofs (``lump`` ones lumped) is singular: more coupled dofs than ``num_particles`` (global),
+    or, given the point particles' cell ``blocks`` (:func:`fempm.transfer.cell_blocks`), a null
+    direction (:func:`singular_dofs`). Collective."""
+    n = index_map.size_local
+    coupled = active[:n] & (~lump[:n] if lump is not None else True)
+    nactive = index_map.comm.allreduce(int(np.count_nonzero(coupled)))
+    if num_particles < nactive:  # rank(m) = rank(S) <= number of particles
+        raise SingularMassError(
+            f"the consistent mass matrix is singular: {num_particles} particles "
+            f"support {nactive} coupled dofs (its rank is at most the number of particles); "
+            "seed more particles per cell or use a lower degree"
+        )
+    if blocks is None:
+        return
+    null, undetermined = singular_dofs(index_map, blocks, active, lump)
+    if null:
+        raise SingularMassError(
+            f"the consistent mass matrix is singular: the particles determine no unique value on "
+            f"{null} direction(s) of the {undetermined} dofs that no cell's particles span "
+            "(coincident or collinear particles, or too few per cell for this space); seed "
+            "particles that span each cell, use lump_below, lumped mass or a lower degree"
+        )
+
+
+def singular_dofs(imap, blocks: tuple[npt.NDArray, npt.NDArray, npt.NDArray], active: npt.NDArray[np.bool_],
                   lump: npt.NDArray[np.bool_] | None = None) -> tuple[int, int]:
     """(number of null directions of the consistent mass on the ``active`` dofs, number of dofs
     left undetermined after the cell tests), both global, from the per-cell matrices ``blocks``
-    of :func:`fempm.transfer.cell_blocks`. Collective; point basis only."""
-    imap = basis.index_map
+    of :func:`fempm.transfer.cell_blocks`, dofs of the ``imap`` (owned + ghost). Collective;
+    point basis only."""
     comm = imap.comm
     n_local = imap.size_local + imap.num_ghosts
     cells, dofs, blocks = blocks
@@ -72,17 +141,11 @@ def singular_dofs(basis, blocks: tuple[npt.NDArray, npt.NDArray, npt.NDArray], a
         determined |= lump[:n_local]
     pending = np.ones(len(cells), dtype=bool)
     while True:
-        keep = ~determined[dofs[pending]]
-        solved = _nonsingular(blocks[pending], keep)
-        newly = np.zeros(n_local, dtype=bool)
-        newly[dofs[pending][solved].ravel()] = True
-        newly &= ~determined
-        idx = np.flatnonzero(pending)
-        pending[idx[solved]] = False
-        changed = comm.allreduce(int(np.count_nonzero(newly)))
-        if not changed:
-            break
-        determined = _share(imap, determined | newly)
+        before = determined.copy()
+        _propagate(blocks, dofs, determined, pending)
+        if comm.size == 1 or not comm.allreduce(int(np.count_nonzero(determined & ~before))):
+            break  # one rank: _propagate reached the fixed point
+        determined = _share(imap, determined)
     undetermined = ~determined[: imap.size_local]
     n_und = comm.allreduce(int(np.count_nonzero(undetermined)))
     if n_und == 0:

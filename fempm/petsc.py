@@ -3,6 +3,7 @@ index sets and KSP set-up with an options prefix."""
 
 from __future__ import annotations
 
+import contextlib
 from typing import Any
 
 import dolfinx
@@ -17,17 +18,15 @@ def local_to_global_map(index_map: dolfinx.common.IndexMap) -> PETSc.LGMap:
     return PETSc.LGMap().create(g, comm=index_map.comm)
 
 
-def coo_matrix(
+def coo_pattern(
     index_map: dolfinx.common.IndexMap,
     rows: npt.NDArray,
     cols: npt.NDArray,
-    values: npt.NDArray,
     lgmap: PETSc.LGMap | None = None,
 ) -> PETSc.Mat:
-    """Square AIJ matrix on ``index_map`` from COO entries in *local* indices (owned + ghost).
-
-    Repeated entries are summed; entries in rows owned by another rank are sent there.
-    """
+    """Square AIJ matrix on ``index_map`` with the sparsity of COO entries in *local* indices
+    (owned + ghost); its values come with ``setValuesCOO`` (one per entry, in this order;
+    repeated entries are summed, entries in rows owned by another rank are sent there)."""
     n, N = index_map.size_local, index_map.size_global
     A = PETSc.Mat().create(comm=index_map.comm)
     A.setSizes(((n, N), (n, N)))
@@ -37,6 +36,19 @@ def coo_matrix(
         np.asarray(rows, dtype=PETSc.IntType).ravel().copy(),
         np.asarray(cols, dtype=PETSc.IntType).ravel().copy(),
     )
+    return A
+
+
+def coo_matrix(
+    index_map: dolfinx.common.IndexMap,
+    rows: npt.NDArray,
+    cols: npt.NDArray,
+    values: npt.NDArray,
+    lgmap: PETSc.LGMap | None = None,
+) -> PETSc.Mat:
+    """Square AIJ matrix on ``index_map`` from COO entries in *local* indices (owned + ghost),
+    see :func:`coo_pattern`."""
+    A = coo_pattern(index_map, rows, cols, lgmap)
     A.setValuesCOO(np.asarray(values, dtype=PETSc.ScalarType).ravel(), addv=PETSc.InsertMode.ADD_VALUES)
     A.assemble()
     return A
@@ -58,20 +70,29 @@ DEFAULT_KSP_OPTIONS: dict[str, Any] = {
 }
 
 
+@contextlib.contextmanager
+def temporary_options(prefix: str, values: dict[str, Any]):
+    """PETSc options ``values`` under ``prefix`` for the time of the block, where the options
+    database (the command line) does not hold them already."""
+    opts = PETSc.Options()
+    added = [k for k in values if not opts.hasName(prefix + k)]
+    for k in added:
+        opts[prefix + k] = values[k]
+    try:
+        yield
+    finally:
+        for k in added:
+            opts.delValue(prefix + k)
+
+
 def create_ksp(comm, prefix: str, options: dict[str, Any] | None = None) -> PETSc.KSP:
     """KSP with options prefix ``prefix``: fempm defaults (CG + Jacobi), then ``options``, then
     whatever the PETSc options database holds under the prefix (command line wins)."""
     ksp = PETSc.KSP().create(comm)
     ksp.setOptionsPrefix(prefix)
-    opts = PETSc.Options()
-    merged = {**DEFAULT_KSP_OPTIONS, **(options or {})}
-    added = [k for k in merged if not opts.hasName(prefix + k)]
-    for k in added:
-        opts[prefix + k] = merged[k]
-    ksp.setFromOptions()
-    ksp.getPC().setFromOptions()
-    for k in added:
-        opts.delValue(prefix + k)
+    with temporary_options(prefix, {**DEFAULT_KSP_OPTIONS, **(options or {})}):
+        ksp.setFromOptions()
+        ksp.getPC().setFromOptions()
     return ksp
 
 

@@ -219,17 +219,20 @@ class ExplicitSolver:
         return self.options.cfl * p.comm.allreduce(local, op=MPI.MIN)
 
     def _compiled_step(self):
-        """The compiled lumped step (:mod:`fempm.lumped_step`) when these options, space and
-        mesh take it (made on first use, remade when the options change), else None."""
-        from fempm import lumped_step
+        """The compiled step (:mod:`fempm.lumped_step`, :mod:`fempm.consistent_step`) when these
+        options, space and mesh take it (made on first use, remade when the options change),
+        else None."""
+        from fempm import consistent_step, lumped_step
 
         if not lumped_step.supported(self):
             if self.compiled:
-                raise ValueError("compiled=True needs lumped mass, point particles and a degree-1 space on an "
-                                 "affine mesh (simplices, parallelograms) with numba installed")
+                raise ValueError("compiled=True needs lumped or consistent mass, point particles and a degree-1 space "
+                                 "on an affine mesh (simplices, parallelograms) with numba installed")
             return None
         if self._lumped_step is None or self._lumped_step.options is not self.options:
-            self._lumped_step = lumped_step.LumpedPointStep(self)
+            kind = consistent_step.ConsistentPointStep if self.options.mass_mode == "consistent" else \
+                lumped_step.LumpedPointStep
+            self._lumped_step = kind(self)
         return self._lumped_step
 
     def _apply_bcs(self, v: npt.NDArray) -> None:

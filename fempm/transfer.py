@@ -244,27 +244,12 @@ class Projector:
             lump = m < lump_below * comm.allreduce(float(m[: self.num_owned].max(initial=0.0)), op=MPI.MAX)
         self.lump = lump
         if mass == "consistent":
-            coupled = self.active[: self.num_owned] & (~lump[: self.num_owned] if lump is not None else True)
-            nactive = comm.allreduce(int(np.count_nonzero(coupled)))
-            if particles.num_global < nactive:  # rank(m) = rank(S) <= number of particles
-                raise SingularMassError(
-                    f"the consistent mass matrix is singular: {particles.num_global} particles "
-                    f"support {nactive} coupled dofs (its rank is at most the number of particles); "
-                    "seed more particles per cell or use a lower degree"
-                )
             blocks = None
-            if self.basis.cells is not None:  # point particles: do they span the space? (fempm.mass_span)
-                from fempm.mass_span import singular_dofs
+            if self.basis.cells is not None:  # point particles: the cell blocks, once for the test and the matrix
+                blocks = cell_blocks(self.basis, self.weights)
+            from fempm.mass_span import check_nonsingular
 
-                blocks = cell_blocks(self.basis, self.weights)  # once, for the test and the matrix
-                null, undetermined = singular_dofs(self.basis, blocks, self.active, lump)
-                if null:
-                    raise SingularMassError(
-                        f"the consistent mass matrix is singular: the particles determine no unique value on "
-                        f"{null} direction(s) of the {undetermined} dofs that no cell's particles span "
-                        "(coincident or collinear particles, or too few per cell for this space); seed "
-                        "particles that span each cell, use lump_below, lumped mass or a lower degree"
-                    )
+            check_nonsingular(imap, particles.num_global, self.active, lump, blocks)
             A = consistent_mass_matrix(self.basis, particles, lump, weight, blocks)
             iset = fpetsc.owned_index_set(imap, self.active[: self.num_owned])
             self.matrix = A.createSubMatrix(iset, iset)

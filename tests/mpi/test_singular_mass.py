@@ -66,3 +66,45 @@ def test_consistent_run_is_independent_of_the_number_of_ranks():
     serial = energies(MPI.COMM_SELF)
     assert parallel.shape == serial.shape
     assert np.abs(parallel - serial).max() < 1e-10 * np.abs(serial).max()
+
+
+@pytest.mark.parametrize("cell", [dm.CellType.triangle, dm.CellType.quadrilateral])
+def test_compiled_span_test_equals_the_rounds_of_eigenvalue_tests(monkeypatch, cell):
+    """The worklist kernel with pivot bounds (fempm.kernels.consistent.propagate) reaches the
+    same determined dofs as rounds of eigvalsh tests, on sparse random particles (many cells
+    span nothing, some are determined only through their neighbours) and collinear ones."""
+    from fempm import mass_span
+    from fempm.transfer import cell_blocks
+
+    mesh = dm.create_unit_square(comm, 9, 7, cell)
+    V1 = fem.functionspace(mesh, ("Lagrange", 1))
+    rng = np.random.default_rng(4)
+    t = rng.random(60)
+    x = np.r_[rng.random((90, 2)), np.c_[t, 0.5 + 0 * t]] if comm.rank == 0 else np.zeros((0, 2))
+    p = fempm.Particles(mesh, x, 1.0, 1.0)
+    basis = fempm.ParticleBasis(V1, p)
+    blocks = cell_blocks(basis, p.mass)
+    n = V1.dofmap.index_map.size_local + V1.dofmap.index_map.num_ghosts
+    active = fempm.transfer.p2g(basis, p.mass)[:, 0] > 0
+    results = []
+    for compiled in (True, False):
+        monkeypatch.setattr(mass_span, "AVAILABLE", compiled)
+        results.append(mass_span.singular_dofs(V1.dofmap.index_map, blocks, active, np.zeros(n, bool)))
+    assert results[0] == results[1]
+    assert results[0][1] > 0  # some dofs are left to the dense test
+
+
+def test_eigenvalue_bounds_decide_like_eigvalsh():
+    from fempm.mass_span import _smallest_above
+
+    rng = np.random.default_rng(1)
+    for k in (2, 3, 4, 8):
+        A = rng.standard_normal((3000, k, 6))
+        A[:1000, :, 1:] *= 1e-6 * rng.random((1000, 1, 1))  # nearly rank 1
+        A[1000:1500, :, 2:] = 0.0  # rank 2
+        B = A @ A.transpose(0, 2, 1)
+        d = np.sqrt(np.einsum("nii->ni", B))
+        B = B / d[:, :, None] / d[:, None, :]
+        ref = np.linalg.eigvalsh(B)[:, 0] > 1e-10
+        assert np.array_equal(_smallest_above(B, 1e-10), ref)
+        assert 0 < ref.sum() < len(ref) or k == 8

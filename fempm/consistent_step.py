@@ -1,0 +1,118 @@
+r"""The consistent-mass step for point particles on affine degree-1 cells, in compiled passes.
+
+The lumped step's passes (:mod:`fempm.lumped_step`: P2G, G2P with the kinematics and the laws,
+motion and relocation) with the grid update of :meth:`fempm.stepping.ExplicitSolver.step`
+for ``mass="consistent"``, its reference:
+
+.. math::
+    \sum_j m_{ij} v_j = (m v)_i, \qquad \sum_j m_{ij} a_j = f_i, \qquad
+    m_{ij} = \sum_p M_p N_i(x_p) N_j(x_p),
+
+on the supported dofs, rows and columns of lightly supported dofs lumped (``lump_below``),
+slip components solved on their own dofs, the acceleration 0 where the lumped mass is below
+``mass_cutoff``, and the stable step times :math:`\sqrt{0.8\,\lambda_{min}(M_L^{-1} M_C)}`.
+One more particle pass (:func:`fempm.kernels.consistent.cell_mass`) sums :math:`m_{ij}` per
+cell; the PETSc matrices, their sparsity and their KSPs are kept for the run
+(:class:`fempm.mass_systems.ConsistentSystems`), the velocity solve starts from the last grid
+velocity and the acceleration solve from the last acceleration.
+
+With a given ``dt`` the stable-step estimate (30 CG steps) only checks that ``dt`` is stable,
+and is refreshed every :data:`RATIO_EVERY` steps and whenever the sparsity changes; with the
+stable step (``dt=None``) it is refreshed every step.
+"""
+
+from __future__ import annotations
+
+from typing import TYPE_CHECKING
+
+import numpy as np
+import numpy.typing as npt
+
+from fempm.kernels import consistent as kc
+from fempm.lumped_step import LumpedPointStep, _sum_ghosts
+from fempm.mass_systems import ConsistentSystems
+
+if TYPE_CHECKING:
+    from fempm.stepping import ExplicitSolver
+
+#: steps between two refreshes of the stable-step estimate when ``dt`` is given
+RATIO_EVERY = 20
+
+
+class ConsistentPointStep(LumpedPointStep):
+    """The compiled consistent step of an :class:`~fempm.stepping.ExplicitSolver` (see the module)."""
+
+    def __init__(self, solver: ExplicitSolver):
+        super().__init__(solver)
+        fixed = np.zeros(self.num_dofs, dtype=np.bool_)
+        if solver._fixed_dofs is not None:
+            fixed[solver._fixed_dofs] = True
+        self.systems = ConsistentSystems(solver.V, self.cell_dofs, self.free, fixed,
+                                         prefix=self.options.petsc_options_prefix,
+                                         lump_below=self.options.lump_below)
+        self.cell_mass = kc.cell_mass(solver.particles.locator.geometry.cell_name)
+        self._ghosted = self._nodal_array(self.d)
+        self._accel: npt.NDArray | None = None  # the last acceleration, the warm start of its solve
+        self._ratio_age = RATIO_EVERY
+        self._ratio_key = -1
+
+    def _stable_factor(self, nodal, need: bool) -> float:
+        """The mass pass and the matrices' values; :math:`\\sqrt{0.8\\,\\lambda_{min}}` (1 with
+        lumped forces)."""
+        from fempm.stepping import MASS_RATIO_ITERATIONS, MASS_RATIO_SAFETY
+
+        s = self.solver
+        p = s.particles
+        sy = self.systems
+        while True:
+            blocks, diagonal, count, dvec = sy.work_arrays()
+            missing = self.cell_mass(p.cells, p.X, self.K, self.cell_dofs, p.mass, sy.pattern, blocks, diagonal,
+                                     count)
+            if not p.comm.allreduce(missing):
+                break
+            sy.rebuild(p.cells)
+        _sum_ghosts(dvec[0])
+        sy.update(diagonal, nodal[:, 0], p.num_global)
+        if self.options.lumped_forces:
+            return 1.0
+        key = sy.rebuilds
+        self._ratio_age += 1
+        if need or key != self._ratio_key or self._ratio_age >= RATIO_EVERY:
+            s.mass_ratio = sy.mass_ratio_min(s.V, MASS_RATIO_ITERATIONS)
+            self._ratio_key, self._ratio_age = key, 0
+        return float(np.sqrt(MASS_RATIO_SAFETY * s.mass_ratio))
+
+    def _ghosts(self, u: npt.NDArray) -> npt.NDArray:
+        """Owned values of ``u`` (dofs, d) to the ghosts (in place)."""
+        vec, arr = self._ghosted
+        if vec is not None:
+            arr[:] = u
+            vec.scatter_forward()
+            u[:] = arr
+        return u
+
+    def _grid_velocity(self, mass, mom, cv: int, active_min: float, guess=None) -> npt.NDArray:
+        v = np.zeros((self.num_dofs, self.d))
+        self.systems.solve(mom, cv, v, guess)
+        self.solver._apply_bcs(v)
+        return self._ghosts(v)
+
+    def _advance(self, mass, force, cf: int, active_min: float, weak_max: float, dt: float,
+                 v_old: npt.NDArray) -> npt.NDArray:
+        s = self.solver
+        opts = s.options
+        sy = self.systems
+        a = np.zeros((self.num_dofs, self.d))
+        if opts.lumped_forces:
+            m = mass[:, 0]
+            a[sy.active] = force[sy.active, cf:cf + self.d] / m[sy.active, None]
+        else:
+            sy.solve(force, cf, a, self._accel)
+            self._ghosts(a)
+            self._accel = a.copy()
+        if opts.damping > 0.0:
+            a -= opts.damping * v_old
+        a[mass[:, 0] <= weak_max] = 0.0
+        v_new = v_old + dt * a
+        s._apply_bcs(v_new)
+        return self._ghosts(v_new)

@@ -1,0 +1,193 @@
+r"""Compiled pieces of the consistent mass for point particles on affine degree-1 cells
+(:class:`fempm.consistent_step.ConsistentPointStep` drives them; :func:`fempm.transfer.cell_blocks`
+and :func:`fempm.transfer.consistent_mass_matrix` are their reference).
+
+:func:`cell_mass` (one particle pass): the local matrices, the diagonal and the occupancy,
+
+.. math::
+    A_c = \sum_{p \in c} M_p N(x_p) N(x_p)^T, \qquad
+    d_i = \sum_p M_p N_{ip}^2, \qquad n_c = \#\{p \in c\}.
+
+:func:`coo_values` (one pass over the cells of a fixed sparsity): the COO values of the matrix
+on the dofs ``keep`` (the others get an identity row, and right-hand side 0, so they solve to
+0 as if removed), with the rows and columns of ``lump`` dofs moved to the diagonal: every
+:math:`m_{ij}`, :math:`i \ne j`, with :math:`i` or :math:`j` lumped is added to :math:`m_{ii}`.
+"""
+
+from __future__ import annotations
+
+import functools
+
+import numpy as np
+
+from fempm.kernels.shape import AVAILABLE, CELLS
+
+if AVAILABLE:
+    from numba import njit
+
+    from fempm.kernels.shape import shape
+
+    @njit(cache=True)
+    def coo_values(blocks, pattern_cells, cell_dofs, keep, lump, slot, identity_dofs, diagonal_slot,
+                   out):  # pragma: no cover
+        """``out`` = the values of the sparsity's entries: entry (row ``a``, column ``b``) of the
+        block ``blocks[q]`` of cell ``pattern_cells[q]`` adds to ``out[slot[q, a, b]]``, and 1
+        to the diagonal entry ``out[diagonal_slot[r]]`` of each dof ``identity_dofs[r]`` not
+        kept."""
+        out[:] = 0.0
+        k = blocks.shape[1]
+        for q in range(len(pattern_cells)):
+            c = pattern_cells[q]
+            for a in range(k):
+                i = cell_dofs[c, a]
+                if not keep[i]:
+                    continue
+                for b in range(k):
+                    j = cell_dofs[c, b]
+                    v = blocks[q, a, b]
+                    if a == b or lump[i] or lump[j]:
+                        out[slot[q, a, a]] += v
+                    elif keep[j]:
+                        out[slot[q, a, b]] += v
+        for r in range(len(identity_dofs)):
+            if not keep[identity_dofs[r]]:
+                out[diagonal_slot[r]] += 1.0
+
+
+    @njit(cache=True)
+    def eigenvalue_bounds(B, out):  # pragma: no cover
+        r"""Bounds of the smallest eigenvalue of each symmetric positive semi-definite ``B[n]``
+        (k, k) from its :math:`LDL^T` pivots :math:`d_i`: ``out[n] = (min d_i, \prod d_i /
+        \mathrm{tr}(B)^{k-1})``, an upper and a lower bound (a pivot
+        :math:`d_i = 1 / (B_i^{-1})_{ii}` of the leading block :math:`B_i` is at least its
+        smallest eigenvalue, hence at least :math:`B`'s, and
+        :math:`\lambda_{min} \ge \det B / \lambda_{max}^{k-1}`). A pivot at or below 0 gives
+        (that pivot, 0)."""
+        n, k = B.shape[0], B.shape[1]
+        L = np.empty((k, k))
+        d = np.empty(k)
+        for c in range(n):
+            lo, det, tr = np.inf, 1.0, 0.0
+            for i in range(k):
+                tr += B[c, i, i]
+                for j in range(i + 1):
+                    v = B[c, i, j]
+                    for m in range(j):
+                        v -= L[i, m] * L[j, m] * d[m]
+                    if j < i:
+                        L[i, j] = v / d[j]
+                    else:
+                        d[i] = v
+                lo = min(lo, d[i])
+                if d[i] <= 0.0:
+                    break
+                det *= d[i]
+            out[c, 0] = lo
+            out[c, 1] = det / tr ** (k - 1) if lo > 0.0 else 0.0
+
+
+    @njit(cache=True)
+    def propagate(blocks, dofs, determined, pending, tol, unsure):  # pragma: no cover
+        """The cell-by-cell determination of :func:`fempm.mass_span.singular_dofs` on one rank,
+        in place, to its fixed point: a ``pending`` cell whose Jacobi-scaled block restricted to
+        its undetermined dofs has its smallest eigenvalue clearly above ``tol`` (pivot bounds,
+        :func:`eigenvalue_bounds`, by a factor 2) makes them ``determined`` and is done; cells
+        sharing a newly determined dof are tested again (a worklist). ``unsure[c]``: the last
+        test of cell ``c`` was not clear either way (for an exact eigenvalue test)."""
+        n, k = dofs.shape
+        nd = len(determined)
+        start = np.zeros(nd + 1, dtype=np.int64)  # dof -> cells (CSR)
+        for c in range(n):
+            for a in range(k):
+                start[dofs[c, a] + 1] += 1
+        for i in range(nd):
+            start[i + 1] += start[i]
+        fill = start[:-1].copy()
+        adjacent = np.empty(n * k, dtype=np.int64)
+        for c in range(n):
+            for a in range(k):
+                i = dofs[c, a]
+                adjacent[fill[i]] = c
+                fill[i] += 1
+        queue = np.empty(n, dtype=np.int64)  # a ring of at most n queued cells
+        queued = np.zeros(n, dtype=np.bool_)
+        head, size = 0, 0
+        for c in range(n):
+            if pending[c]:
+                queue[size] = c
+                queued[c] = True
+                size += 1
+        B = np.empty((1, k, k))
+        bounds = np.empty((1, 2))
+        scale = np.empty(k)
+        while size > 0:
+            c = queue[head]
+            head = (head + 1) % n
+            size -= 1
+            queued[c] = False
+            unsure[c] = False
+            if not pending[c]:
+                continue
+            untouched = False
+            for a in range(k):
+                diag = blocks[c, a, a]
+                if not determined[dofs[c, a]] and diag <= 0.0:
+                    untouched = True
+                scale[a] = 1.0 / np.sqrt(diag) if diag > 0.0 else 0.0
+            if untouched:
+                continue
+            for a in range(k):
+                ka = not determined[dofs[c, a]]
+                for b in range(k):
+                    if ka and not determined[dofs[c, b]]:
+                        B[0, a, b] = blocks[c, a, b] * scale[a] * scale[b]
+                    else:
+                        B[0, a, b] = 1.0 if a == b and not ka else 0.0
+            eigenvalue_bounds(B, bounds)
+            if bounds[0, 1] <= 2.0 * tol:
+                unsure[c] = bounds[0, 0] >= 0.5 * tol
+                continue
+            pending[c] = False
+            for a in range(k):
+                i = dofs[c, a]
+                if determined[i]:
+                    continue
+                determined[i] = True
+                for e in adjacent[start[i]:start[i + 1]]:
+                    if pending[e] and not queued[e]:
+                        queue[(head + size) % n] = e
+                        queued[e] = True
+                        size += 1
+
+
+@functools.cache
+def cell_mass(cell: str):
+    """The particle pass of the consistent mass, compiled for one cell type:
+    ``kernel(cells, X, K, cell_dofs, mass, row, blocks, diagonal, count)`` adds to ``blocks``
+    (rows, k, k), ``diagonal`` (ndofs,) and ``count`` (rows,), where cell ``c`` has row
+    ``row[c]``; returns the number of particles in cells without a row (-1), which it skips."""
+    D, NK, SIMPLEX = CELLS[cell]
+
+    @njit(cache=True)
+    def kernel(cells, X, K, cell_dofs, mass, row, blocks, diagonal, count):  # pragma: no cover
+        N = np.empty(NK)
+        G = np.empty((NK, D))
+        missing = 0
+        for p in range(len(cells)):
+            c = cells[p]
+            q = row[c]
+            if q < 0:
+                missing += 1
+                continue
+            shape(X, p, K, c, SIMPLEX, D, NK, N, G)
+            m = mass[p]
+            count[q] += 1
+            for a in range(NK):
+                w = m * N[a]
+                diagonal[cell_dofs[c, a]] += w * N[a]
+                for b in range(NK):
+                    blocks[q, a, b] += w * N[b]
+        return missing
+
+    return kernel
+

@@ -1,0 +1,304 @@
+r"""Consistent mass systems kept for a run: sparsity fixed, values set each step, KSPs kept.
+
+The compiled consistent step (:mod:`fempm.consistent_step`) solves
+:math:`\sum_j m_{ij} u_j = b_i` with :math:`m_{ij} = \sum_p M_p N_i(x_p) N_j(x_p)` every step,
+twice (velocity and acceleration) or three times (MUSL). What :class:`fempm.transfer.Projector`
+builds for one use is kept here:
+
+- the *sparsity*: the cells holding particles plus one layer of cells around them (those that
+  share a dof), numbered on a sub index map of their dofs (:func:`create_sub_index_map`), so
+  vectors and matrix rows cover the particles' region, not the whole mesh; it is rebuilt only
+  when a particle enters a cell outside it;
+- the *matrices*: one per set of constrained dofs (a velocity component held at 0 on slip walls
+  normal to its axis is solved on its own dofs, the constrained fit), their values written with
+  ``setValuesCOO`` from the per-cell blocks (:func:`fempm.kernels.consistent.coo_values`): dofs
+  not solved for get identity rows and a zero right-hand side, which solves them to 0 exactly as
+  removing them would;
+- the *KSPs* (the options prefix of the step), warm-started from the last solution;
+- the *singularity tests* (:func:`fempm.mass_span.check_nonsingular`) run when the occupied
+  cells, the supported dofs or the lumped dofs change, not every step;
+- the *stable-step estimate* :math:`\lambda_{min}(M_L^{-1} M_C)` (Lanczos coefficients of CG,
+  :meth:`fempm.transfer.Projector.mass_ratio_min`) on the system without slip constraints,
+  refreshed when asked (every step when the step size is the stable one).
+"""
+
+from __future__ import annotations
+
+import contextlib
+from dataclasses import dataclass
+
+import dolfinx.la
+import numpy as np
+import numpy.typing as npt
+from dolfinx.cpp.common import create_sub_index_map
+from mpi4py import MPI
+from petsc4py import PETSc
+
+from fempm import petsc as fpetsc
+from fempm.kernels import consistent as kc
+from fempm.mass_span import check_nonsingular, mass_ratio_rhs
+from fempm.transfer import SUPPORT_TOL
+
+
+#: KSP defaults of the kept systems (the options prefix overrides them): CG with incomplete
+#: Cholesky on each rank's block, 5-10 iterations where Jacobi takes 50-60 (P1/Q1, 4 particles
+#: per cell)
+KSP_OPTIONS = {"ksp_type": "cg", "pc_type": "bjacobi", "sub_pc_type": "icc"}
+#: the preconditioner is set up again when a solve takes more than this factor times the
+#: iterations it took fresh (plus 2), and whenever the sparsity, the supported or the lumped
+#: dofs change
+REFRESH_GROWTH = 1.5
+
+
+@dataclass(eq=False)
+class _System:
+    """One matrix: the dofs it solves for (``free``: owned + ghost), the velocity components
+    it serves, and its KSP and vectors."""
+
+    free: npt.NDArray[np.bool_]
+    components: list[int]
+    ksp: PETSc.KSP
+    matrix: PETSc.Mat | None = None
+    x: PETSc.Vec | None = None
+    b: PETSc.Vec | None = None
+    keep: npt.NDArray[np.bool_] | None = None  # this step's dofs solved for (supported and free)
+    refresh: bool = True  # set the preconditioner up from the current values at the next solve
+    fresh_iterations: int = 0  # KSP iterations with a fresh preconditioner
+
+
+def _share(index_map, flags: npt.NDArray[np.bool_]) -> npt.NDArray[np.bool_]:
+    """A dof flag set on any rank, set on every rank that sees the dof."""
+    if index_map.comm.size == 1:
+        return flags
+    vec = dolfinx.la.vector(index_map)
+    vec.array[:] = flags
+    vec.scatter_reverse(dolfinx.la.InsertMode.add)
+    vec.scatter_forward()
+    return vec.array > 0
+
+
+class ConsistentSystems:
+    """The kept consistent mass systems of a degree-1 vector space (see the module).
+
+    ``cell_dofs`` (cells, k): the dofmap; ``free`` (dofs, d): which dof components are solved
+    for (False on Dirichlet dofs and, per component, on axis-normal slip walls); ``fixed``
+    (dofs,): the Dirichlet dofs (excluded from the stable-step system too); ``V``: the space
+    (dof coordinates of the stable-step estimate's right-hand side)."""
+
+    def __init__(self, V, cell_dofs: npt.NDArray[np.int32], free: npt.NDArray[np.bool_],
+                 fixed: npt.NDArray[np.bool_], *, prefix: str, lump_below: float):
+        self.index_map = V.dofmap.index_map
+        self.comm = self.index_map.comm
+        self.cell_dofs = cell_dofs
+        self.num_owned = self.index_map.size_local
+        self.num_dofs = self.num_owned + self.index_map.num_ghosts
+        self.num_cells = V.mesh.topology.index_map(V.mesh.topology.dim).size_local
+        self.lump_below = lump_below
+        self.prefix = prefix
+        base = ~fixed
+        self.systems: list[_System] = []
+        for c in range(free.shape[1]):  # components with the same constrained dofs share a matrix
+            col = free[:, c] & base
+            for s in self.systems:
+                if not self.comm.allreduce(bool(np.any(s.free != col)), op=MPI.LOR):
+                    s.components.append(c)
+                    break
+            else:
+                self.systems.append(_System(col, [c], fpetsc.create_ksp(self.comm, prefix, KSP_OPTIONS)))
+        same = [not self.comm.allreduce(bool(np.any(s.free != base)), op=MPI.LOR) for s in self.systems]
+        self.base = self.systems[same.index(True)] if any(same) else _System(base, [], None)
+        self._ratio_ksp: PETSc.KSP | None = None
+        self._ratio_rhs: npt.NDArray | None = None  # over all owned dofs, made on first use
+        self.pattern = np.full(len(cell_dofs), -1, dtype=np.int32)  # cell -> its row in the blocks (-1: outside)
+        self.pattern_cells = np.zeros(0, dtype=np.int32)
+        self._base_values_stale = True
+        self._blocks: npt.NDArray | None = None
+        self._count = np.zeros(0, dtype=np.int64)
+        if self.comm.size > 1:
+            vec = dolfinx.la.vector(self.index_map)
+            self._diagonal = (vec, vec.array)
+        else:
+            self._diagonal = (None, np.zeros(self.num_dofs))
+        self._structure: tuple | None = None  # (occupied, active, lump) of the last singularity test
+        self.active = np.zeros(self.num_dofs, dtype=np.bool_)
+        self.lump = np.zeros(self.num_dofs, dtype=np.bool_)
+        self.iterations: list[int] = []
+        self.rebuilds = 0  # sparsity builds and singularity tests, for diagnostics
+        self.tests = 0
+
+    # -- sparsity -----------------------------------------------------------------------------
+    def work_arrays(self) -> tuple[npt.NDArray, npt.NDArray, npt.NDArray, tuple]:
+        """Zeroed (blocks (pattern cells, k, k), diagonal (dofs,), count (pattern cells,)) for
+        :func:`fempm.kernels.consistent.cell_mass`, and the diagonal's vector (ghost sums)."""
+        k = self.cell_dofs.shape[1]
+        nq = len(self.pattern_cells)
+        if self._blocks is None or len(self._blocks) != nq:
+            self._blocks = np.empty((nq, k, k))
+            self._count = np.empty(nq, dtype=np.int64)
+        self._blocks.fill(0.0)
+        self._count.fill(0)
+        self._diagonal[1].fill(0.0)
+        return self._blocks, self._diagonal[1], self._count, self._diagonal
+
+    def rebuild(self, particle_cells: npt.NDArray[np.int32]) -> None:
+        """Sparsity of the cells holding particles and one layer around them (cells sharing a
+        dof with them), on a sub index map of their dofs. Collective."""
+        cd = self.cell_dofs[: self.num_cells]
+        touched = np.zeros(self.num_dofs, dtype=np.bool_)
+        touched[cd[np.unique(particle_cells)].ravel()] = True
+        touched = _share(self.index_map, touched)
+        cells = np.flatnonzero(touched[cd].any(axis=1)).astype(np.int32)
+        dofs = np.zeros(self.num_dofs, dtype=np.bool_)
+        dofs[cd[cells].ravel()] = True
+        dofs = _share(self.index_map, dofs)
+        self.sub_map, self.sub_to_parent = create_sub_index_map(self.index_map, np.flatnonzero(dofs).astype(np.int32),
+                                                                False)
+        n_sub = self.sub_map.size_local
+        self.owned_parent = np.ascontiguousarray(self.sub_to_parent[:n_sub])
+        parent_to_sub = np.full(self.num_dofs, -1, dtype=np.int64)
+        parent_to_sub[self.sub_to_parent] = np.arange(len(self.sub_to_parent))
+        local = parent_to_sub[cd[cells]]  # (cells, k)
+        k = local.shape[1]
+        width = len(self.sub_to_parent)
+        key = np.concatenate([(np.repeat(local, k, axis=1) * width + np.tile(local, (1, k))).ravel(),
+                              np.arange(n_sub) * (width + 1)])  # every owned dof's diagonal: identity rows
+        unique, slot = np.unique(key, return_inverse=True)  # the entries summed per (row, column), row-major
+        rows, cols = unique // width, unique % width
+        self.slot = slot[: len(cells) * k * k].reshape(len(cells), k, k).astype(np.int32)
+        self.diagonal_slot = np.searchsorted(unique, np.arange(n_sub) * (width + 1)).astype(np.int32)
+        self.pattern_cells = cells
+        self.pattern = np.full(len(self.cell_dofs), -1, dtype=np.int32)  # cell -> its row in the blocks
+        self.pattern[cells] = np.arange(len(cells), dtype=np.int32)
+        self.values = np.empty(len(rows))
+        lgmap = fpetsc.local_to_global_map(self.sub_map)
+        for s in self._all():
+            if s.matrix is not None:
+                for obj in (s.matrix, s.x, s.b):
+                    obj.destroy()
+            s.matrix = fpetsc.coo_pattern(self.sub_map, rows, cols, lgmap)
+            s.x, s.b = s.matrix.createVecs()
+            if s.ksp is not None:
+                s.ksp.reset()  # new sizes
+                s.ksp.setOperators(s.matrix)
+            s.refresh = True
+        self._structure = None
+        self.rebuilds += 1
+
+    def _all(self) -> list[_System]:
+        return self.systems + ([self.base] if self.base not in self.systems else [])
+
+    # -- values -------------------------------------------------------------------------------
+    def update(self, diagonal: npt.NDArray, lumped: npt.NDArray, num_particles: int) -> None:
+        r"""New values from the blocks and counts of :meth:`work_arrays` (filled by the particle
+        pass), the diagonal :math:`\sum_p M_p N_{ip}^2` and lumped masses (owned + ghost dofs,
+        summed over ranks): the supported dofs (diagonal above
+        :data:`fempm.transfer.SUPPORT_TOL` of the largest), the lumped dofs (lumped mass below
+        ``lump_below`` of the largest), the singularity tests when these or the occupied cells
+        changed, and the values of every matrix. Collective."""
+        top = np.array([diagonal[: self.num_owned].max(initial=0.0), lumped[: self.num_owned].max(initial=0.0)])
+        self.comm.Allreduce(MPI.IN_PLACE, top, op=MPI.MAX)
+        self.active = (diagonal > SUPPORT_TOL * top[0]) & self.base.free
+        self.lump = lumped < self.lump_below * top[1] if self.lump_below > 0.0 else np.zeros(self.num_dofs, bool)
+        occupied = np.flatnonzero(self._count)
+        prev = self._structure
+        changed = (prev is None or not np.array_equal(prev[0], occupied) or not np.array_equal(prev[1], self.active)
+                   or not np.array_equal(prev[2], self.lump))
+        if self.comm.allreduce(changed, op=MPI.LOR):
+            cells = self.pattern_cells[occupied]
+            check_nonsingular(self.index_map, num_particles, self.active, self.lump,
+                              (cells, self.cell_dofs[cells], self._blocks[occupied]))
+            self._structure = (occupied, self.active, self.lump)
+            self.tests += 1
+            for s in self.systems:  # a few changed rows cost more iterations than a new set-up
+                s.refresh = True
+        systems = self._all()
+        keeps = [self.active & t.free for t in systems]
+        n = len(systems)
+        differs = np.array([[j < i and bool(np.any(keeps[i] != keeps[j])) for j in range(n)] for i in range(n)])
+        self.comm.Allreduce(MPI.IN_PLACE, differs, op=MPI.LOR)
+        # a system whose dofs solved for are those of an earlier one (constraints outside the
+        # supported dofs) uses its matrix
+        self._matrix_of = [next(j for j in range(i + 1) if j == i or not differs[i, j]) for i in range(n)]
+        for i, t in enumerate(systems):
+            t.keep = keeps[i]
+            if self._matrix_of[i] == i and t.components:
+                self._set_values(t)
+        self._base_values_stale = True
+
+    def _set_values(self, s: _System) -> None:
+        kc.coo_values(self._blocks, self.pattern_cells, self.cell_dofs, s.keep, self.lump, self.slot,
+                      self.owned_parent, self.diagonal_slot, self.values)
+        s.matrix.setValuesCOO(self.values, addv=PETSc.InsertMode.INSERT_VALUES)
+
+    # -- solves -------------------------------------------------------------------------------
+    def solve(self, rhs: npt.NDArray, col: int, out: npt.NDArray, guess: npt.NDArray | None = None) -> None:
+        """``out`` (owned + ghost dofs, d) <- the solution of ``m u = rhs[:, col:col+d]`` on the
+        solved-for dofs of each component, 0 elsewhere, on owned dofs (ghosts: the caller
+        updates them). ``guess`` (dofs, d) warm-starts the KSPs."""
+        out[: self.num_owned] = 0.0
+        sel = self.owned_parent
+        self.iterations = []
+        systems = self._all()
+        for i, own in enumerate(self.systems):
+            s = systems[self._matrix_of[i]]
+            keep = s.keep[sel]
+            s.ksp.getPC().setReusePreconditioner(not s.refresh)
+            most = 0
+            for c in own.components:
+                s.b.array[:] = np.where(keep, rhs[sel, col + c], 0.0)
+                s.ksp.setInitialGuessNonzero(guess is not None)
+                if guess is None:
+                    s.x.set(0.0)
+                else:
+                    s.x.array[:] = np.where(keep, guess[sel, c], 0.0)
+                with fpetsc.temporary_options(self.prefix, KSP_OPTIONS) if s.refresh else contextlib.nullcontext():
+                    s.ksp.solve(s.b, s.x)  # a fresh set-up reads the sub-block options (bjacobi)
+                reason = s.ksp.getConvergedReason()
+                if reason < 0:
+                    raise RuntimeError(
+                        f"consistent mass solve: KSP did not converge ({fpetsc.converged_reason_name(reason)}, "
+                        f"{s.ksp.getIterationNumber()} iterations); the particle mass matrix may be singular")
+                self.iterations.append(s.ksp.getIterationNumber())
+                most = max(most, self.iterations[-1])
+                out[sel, c] = s.x.array
+            if s.refresh:
+                s.refresh, s.fresh_iterations = False, most
+            elif most > REFRESH_GROWTH * s.fresh_iterations + 2:
+                s.refresh = True
+
+    def mass_ratio_min(self, V, iterations: int) -> float:
+        r"""Estimate of :math:`\lambda_{min}(M_L^{-1} M_C)` on the system without slip
+        constraints, as :meth:`fempm.transfer.Projector.mass_ratio_min` (the same right-hand
+        side, preconditioner and iterations). Collective."""
+        systems = self._all()
+        s = systems[self._matrix_of[systems.index(self.base)]]
+        if not s.components and self._base_values_stale:  # a matrix of its own, set only here
+            self._set_values(s)
+            self._base_values_stale = False
+        if self._ratio_ksp is None:
+            self._ratio_ksp = fpetsc.create_ksp(self.comm, "fempm_mass_ratio_", {
+                "ksp_type": "cg", "pc_type": "jacobi", "ksp_rtol": 1e-14, "pc_jacobi_type": "rowsum",
+                "ksp_max_it": iterations, "ksp_norm_type": "preconditioned"})
+            self._ratio_ksp.setComputeSingularValues(True)
+            self._ratio_rhs = mass_ratio_rhs(V, np.ones(self.num_owned, dtype=np.bool_))
+        ksp = self._ratio_ksp
+        ksp.reset()  # the matrix may have new sizes
+        ksp.setOperators(s.matrix)
+        keep = s.keep[self.owned_parent]
+        s.x.set(1.0)
+        s.matrix.mult(s.x, s.b)  # row sums: the lumped masses of the (lumped) matrix
+        rows = s.b.array.copy()
+        s.b.array[:] = np.where(keep, self._ratio_rhs[self.owned_parent] * np.abs(rows), 0.0)
+        s.x.set(0.0)
+        ksp.solve(s.b, s.x)
+        smax, smin = ksp.computeExtremeSingularValues()
+        return float(min(max(smin, 0.0), 1.0))
+
+    def destroy(self) -> None:
+        for s in self._all():
+            for obj in (s.matrix, s.x, s.b, s.ksp):
+                if obj is not None:
+                    obj.destroy()
+        if self._ratio_ksp is not None:
+            self._ratio_ksp.destroy()
+
