@@ -20,6 +20,8 @@ import numpy.typing as npt
 from mpi4py import MPI
 
 SIMPLICES = {"interval", "triangle", "tetrahedron"}
+#: cells per chunk of the whole-mesh set-up (bounds its temporaries)
+CHUNK = 65536
 
 
 def coordinate_map(mesh: dolfinx.mesh.Mesh):
@@ -58,20 +60,32 @@ class CellGeometry:
         self.affine = False
         if cmap.degree == 1:
             # the map is affine when every geometry node is x0 + J X_node with J from the nodes at
-            # the reference unit points (simplices always; parallelogram quads, parallelepiped hexes)
+            # the reference unit points (simplices always; parallelogram quads, parallelepiped
+            # hexes); checked in chunks of cells, keeping x0 and K = J^-1 per cell (J and det J
+            # are recomputed from the nodes when asked, by the same arithmetic)
             ref = basix.geometry(self.basix_cell)
-            unit = [int(np.flatnonzero(np.all(np.isclose(ref, e), axis=1))[0]) for e in np.eye(self.tdim)]
-            nodes = self.x[self.dofmap]  # (ncells, nnodes, gdim)
-            x0 = nodes[:, 0, :]
-            J = np.swapaxes(nodes[:, unit, :] - x0[:, None, :], 1, 2)  # J[c, g, t]
-            pred = x0[:, None, :] + np.einsum("cgt,kt->ckg", J, ref)
-            scale = np.abs(nodes).max(initial=1.0)
-            self.affine = bool(mesh.comm.allreduce(np.abs(pred - nodes).max(initial=0.0) <= 1e-13 * scale, op=MPI.LAND))
-        if self.affine:
-            self._x0 = np.ascontiguousarray(x0)
-            self._J = J
-            self._detJ = np.linalg.det(J)
-            self._K = np.ascontiguousarray(np.linalg.inv(J))
+            self._unit = [int(np.flatnonzero(np.all(np.isclose(ref, e), axis=1))[0]) for e in np.eye(self.tdim)]
+            n = len(self.dofmap)
+            x0 = np.empty((n, self.gdim))
+            K = np.empty((n, self.tdim, self.gdim))
+            scale = np.abs(self.x).max(initial=1.0)
+            worst = 0.0
+            for start in range(0, n, CHUNK):
+                cells = np.arange(start, min(start + CHUNK, n))
+                nodes = self.x[self.dofmap[cells]]  # (chunk, nnodes, gdim)
+                J = self._nodal_jacobian(nodes)
+                pred = nodes[:, :1, :] + np.einsum("cgt,kt->ckg", J, ref)
+                worst = max(worst, float(np.abs(pred - nodes).max(initial=0.0)))
+                x0[cells] = nodes[:, 0, :]
+                if worst <= 1e-13 * scale:
+                    K[cells] = np.linalg.inv(J)
+            self.affine = bool(mesh.comm.allreduce(worst <= 1e-13 * scale, op=MPI.LAND))
+            if self.affine:
+                self._x0, self._K = x0, K
+
+    def _nodal_jacobian(self, nodes: npt.NDArray) -> npt.NDArray:
+        """``J[c, g, t]`` of affine cells from their geometry nodes (c, nnodes, gdim)."""
+        return np.swapaxes(nodes[:, self._unit, :] - nodes[:, :1, :], 1, 2)
 
     @property
     def axis_aligned(self) -> bool:
@@ -80,7 +94,8 @@ class CellGeometry:
         if not hasattr(self, "_axis_aligned"):
             aligned = False
             if self.affine:
-                big = np.abs(self._J) > 1e-12 * np.abs(self._J).max(initial=1.0)
+                J = self.jacobian(np.arange(len(self.dofmap)), None)
+                big = np.abs(J) > 1e-12 * np.abs(J).max(initial=1.0)
                 aligned = bool(np.all(big.sum(axis=2) == 1))
             self._axis_aligned = aligned
         return self._axis_aligned
@@ -99,7 +114,7 @@ class CellGeometry:
     def jacobian(self, cells: npt.NDArray[np.int32], X: npt.NDArray) -> npt.NDArray:
         """``J[n, g, t] = dx_g / dX_t`` at the points, shape (n, gdim, tdim)."""
         if self.affine:
-            return self._J[cells]
+            return self._nodal_jacobian(self.x[self.dofmap[cells]])
         dphi = self._tabulate(1, X)[1:]  # (tdim, n, ndofs)
         return np.einsum("tnk,nkg->ngt", dphi, self.x[self.dofmap[cells]])
 
@@ -110,8 +125,6 @@ class CellGeometry:
         return np.linalg.inv(self.jacobian(cells, X))
 
     def detJ(self, cells: npt.NDArray[np.int32], X: npt.NDArray) -> npt.NDArray:
-        if self.affine:
-            return self._detJ[cells]
         return np.linalg.det(self.jacobian(cells, X))
 
     # -- pull back ----------------------------------------------------------------------------
@@ -178,7 +191,7 @@ class CellGeometry:
         ncells = self.dofmap.shape[0]
         if self.affine:
             ref_volume = {1: 1.0, 2: 0.5, 3: 1.0 / 6.0}[self.tdim] if self.cell_name in SIMPLICES else 1.0
-            return np.abs(self._detJ) * ref_volume
+            return np.abs(self.detJ(np.arange(ncells), None)) * ref_volume
         deg = 2 * self.element.degree * self.tdim
         Xq, wq = basix.make_quadrature(self.basix_cell, deg)
         dphi = self._tabulate(1, Xq)[1:]  # (tdim, q, ndofs)

@@ -3,7 +3,9 @@
 Candidates come from a bounding-box tree over the *owned* cells only (a ghost cell would count a
 particle twice in P2G); each candidate is tested with the vectorized pull-back of
 :class:`fempm.geometry.CellGeometry`, which also gives the reference coordinates. Relocation
-tests each point's previous cell first and searches the tree only for the points that left it.
+tests each point's previous cell first, then the cells sharing a vertex with it
+(:meth:`CellLocator.locate_near`), and searches the tree only for the points found in neither;
+the tree is built on its first search.
 """
 
 from __future__ import annotations
@@ -65,13 +67,28 @@ class CellLocator:
         tdim = mesh.topology.dim
         imap = mesh.topology.index_map(tdim)
         nlocal = imap.size_local + (imap.num_ghosts if ghosts else 0)
-        entities = np.arange(nlocal, dtype=np.int32)
-        extent = np.ptp(self.geometry.x, axis=0).max() if len(self.geometry.x) else 1.0
-        self.tree = dolfinx.geometry.bb_tree(mesh, tdim, entities=entities, padding=1e-8 * extent)
-        self._entities = entities
+        self._entities = np.arange(nlocal, dtype=np.int32)
+        self._tree = None
+        self._star: tuple | None = None
         self._global_tree = None
         self._midpoint_tree = None
         self._cell_bins = None
+
+    @property
+    def tree(self):
+        """Bounding-box tree of the searched cells, made on first use (local to the rank): a
+        mesh-sized structure (0.1 kB a cell in 2D) that runs which only relocate particles to
+        neighbouring cells (:meth:`locate_near`) never build."""
+        if self._tree is None:
+            extent = np.ptp(self.geometry.x, axis=0).max() if len(self.geometry.x) else 1.0
+            self._tree = dolfinx.geometry.bb_tree(self.mesh, self.geometry.tdim, entities=self._entities,
+                                                  padding=1e-8 * extent)
+        return self._tree
+
+    def release_tree(self) -> None:
+        """Free the bounding-box tree (and the trees made from it); the next search makes it
+        again."""
+        self._tree = self._global_tree = self._midpoint_tree = None
 
     @property
     def global_tree(self):
@@ -174,6 +191,28 @@ class CellLocator:
         X[hit_p] = Xc[hits]
         return cells, X
 
+    def locate_near(self, x: npt.NDArray, previous: npt.NDArray[np.int32]) -> tuple[npt.NDArray[np.int32], npt.NDArray]:
+        """Like :meth:`locate` for points that left their ``previous`` owned cells: the cells
+        sharing a vertex with the previous one are tested first (the lowest-numbered cell
+        containing the point wins; affine cells, compiled), the tree searches only for the
+        points not found there."""
+        geo = self.geometry
+        if not (geo.affine and shape_kernels.AVAILABLE) or len(x) == 0:
+            return self.locate(x)
+        if self._star is None:
+            top = self.mesh.topology
+            top.create_connectivity(geo.tdim, 0)
+            top.create_connectivity(0, geo.tdim)
+            c2v, v2c = top.connectivity(geo.tdim, 0), top.connectivity(0, geo.tdim)
+            self._star = (c2v.array.reshape(-1, len(c2v.links(0))), v2c.offsets, v2c.array)
+        cells, X = shape_kernels.near_pull_back(np.asarray(previous, dtype=np.int32), np.ascontiguousarray(x),
+                                                geo._x0, geo._K, *self._star, len(self._entities),
+                                                geo.cell_name in SIMPLICES, self.tol)
+        miss = np.flatnonzero(cells < 0)
+        if len(miss):
+            cells[miss], X[miss] = self.locate(np.asarray(x)[miss])
+        return cells, X
+
     def relocate(
         self, x: npt.NDArray, cells: npt.NDArray[np.int32]
     ) -> tuple[npt.NDArray[np.int32], npt.NDArray]:
@@ -194,7 +233,10 @@ class CellLocator:
             X[valid[stay]] = Xv[stay]
         moved = np.flatnonzero(new_cells < 0)
         if moved.size:
-            new_cells[moved], X[moved] = self.locate(np.asarray(x)[moved])
+            had = moved[cells[moved] >= 0]
+            new_cells[had], X[had] = self.locate_near(np.asarray(x)[had], cells[had])
+            fresh = moved[cells[moved] < 0]
+            new_cells[fresh], X[fresh] = self.locate(np.asarray(x)[fresh])
         return new_cells, X
 
 

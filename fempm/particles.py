@@ -94,6 +94,8 @@ class Particles:
                 raise ValueError(f"field {k!r} has {len(v)} rows for {n} particles")
             data["field:" + k] = v
         self._assign(distribute(self.locator, x, data), outside)
+        if locator is None:  # runs relocate to neighbouring cells: the tree comes back if a search needs it
+            self.locator.release_tree()
 
     # -- construction helpers -----------------------------------------------------------------
     @classmethod
@@ -192,7 +194,7 @@ class Particles:
             cells, X = self.cells, self.X
             idx = np.flatnonzero(left)
             if len(idx):
-                cells[idx], X[idx] = self.locator.locate(self.x[idx])
+                cells[idx], X[idx] = self.locator.locate_near(self.x[idx], cells[idx])
         lost = int(np.count_nonzero(cells < 0))
         if (lost if self.comm.size == 1 else self.comm.allreduce(lost)) == 0:
             self.cells, self.X = cells, X
@@ -209,6 +211,7 @@ class Particles:
         order = np.argsort(self.cells, kind="stable")
         if np.all(order[1:] > order[:-1]):
             return
-        self.x, self.cells, self.X = self.x[order], self.cells[order], self.X[order]
-        self.mass, self.volume, self.ids = self.mass[order], self.volume[order], self.ids[order]
-        self.fields = {k: v[order] for k, v in self.fields.items()}
+        for name in ("x", "cells", "X", "mass", "volume", "ids"):  # one array at a time: one temporary
+            setattr(self, name, getattr(self, name)[order])
+        for k in list(self.fields):
+            self.fields[k] = self.fields[k][order]

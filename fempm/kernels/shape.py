@@ -98,6 +98,25 @@ if njit is not None:
             else:
                 inside[p] = inside_after_pull_back(x, p, x0, K, cells[p], simplex, K.shape[2], tol, X)
 
+    @njit(cache=True)
+    def _near_pull_back(previous, x, x0, K, c2v, v_offsets, v_cells, num_cells, simplex, tol, cells,
+                        X):  # pragma: no cover - compiled
+        t = K.shape[1]
+        for p in range(len(previous)):
+            c0 = previous[p]
+            best = -1
+            for a in range(c2v.shape[1]):
+                v = c2v[c0, a]
+                for q in range(v_offsets[v], v_offsets[v + 1]):
+                    e = v_cells[q]
+                    if e >= num_cells or e == c0 or (best >= 0 and e >= best):
+                        continue
+                    if inside_after_pull_back(x, p, x0, K, e, simplex, t, tol, X):
+                        best = e
+            cells[p] = best
+            if best >= 0:
+                inside_after_pull_back(x, p, x0, K, best, simplex, t, tol, X)
+
 
 #: cell type -> (dimension, vertices, simplex)
 CELLS = {"interval": (1, 2, True), "triangle": (2, 3, True), "tetrahedron": (3, 4, True),
@@ -144,6 +163,19 @@ def affine_pull_back(cells: npt.NDArray[np.int32], x: npt.NDArray, x0: npt.NDArr
     _affine_pull_back(np.asarray(cells, dtype=np.int32), np.ascontiguousarray(x), x0, K, bool(simplex), float(tol),
                       X, inside)
     return X, inside
+
+
+def near_pull_back(previous: npt.NDArray[np.int32], x: npt.NDArray, x0: npt.NDArray, K: npt.NDArray,
+                   c2v: npt.NDArray[np.int32], v_offsets: npt.NDArray[np.int32], v_cells: npt.NDArray[np.int32],
+                   num_cells: int, simplex: bool, tol: float) -> tuple[npt.NDArray[np.int32], npt.NDArray]:
+    """For points ``x`` that left their ``previous`` cells: the lowest-numbered cell below
+    ``num_cells`` sharing a vertex with the previous one (cell -> vertices ``c2v``, vertex ->
+    cells ``v_offsets``/``v_cells``) that contains the point within ``tol`` (-1: none), and the
+    reference coordinates there (affine geometry)."""
+    cells, X = np.empty(len(previous), dtype=np.int32), np.full((len(previous), K.shape[1]), np.nan)
+    _near_pull_back(previous, x, x0, K, np.ascontiguousarray(c2v), v_offsets, v_cells, int(num_cells), bool(simplex),
+                    float(tol), cells, X)
+    return cells, X
 
 
 #: whether the closed-form kernels of this module are available (numba installed and selected)

@@ -97,3 +97,32 @@ def test_relocate_moves_particles_between_cells_and_ranks(name):
     if any_left:
         with pytest.raises(fempm.OutsideMeshError):
             p.relocate()
+
+
+@pytest.mark.parametrize("name", ["interval", "triangle", "quadrilateral", "tetrahedron", "hexahedron"])
+def test_particles_moving_to_neighbouring_cells_are_found_without_the_tree(name):
+    """A small motion: every particle that leaves its cell is found in the cells sharing a
+    vertex with it (CellLocator.locate_near), in the cell and at the reference point the tree
+    search finds; on one rank the tree, freed after the particles were placed, is not rebuilt."""
+    mesh = make_mesh(name)
+    p = fempm.create_particles(mesh, 2 ** mesh.topology.dim, jitter=0.5, seed=2)
+    p.locator.release_tree()
+    from fempm.stepping import cell_sizes
+
+    h = cell_sizes(mesh)[p.cells]
+    rng = np.random.default_rng(comm.rank)
+    shift = 0.3 * h[:, None] * rng.uniform(-1.0, 1.0, p.x.shape)
+    p.x = np.clip(p.x + shift, 1e-9, 1.0 - 1e-9)
+    geom = p.locator.geometry
+    left = ~geom.contains(geom.pull_back(p.cells, p.x), 1e-10)
+    assert comm.allreduce(int(np.count_nonzero(left))) > 0  # some did leave their cells
+    p.relocate()
+    if comm.size == 1:
+        assert p.locator._tree is None
+        cells, X = p.locator.locate(p.x)  # the tree search, for reference
+        same = cells == p.cells
+        assert np.count_nonzero(~same) <= 0.01 * len(same)
+        np.testing.assert_allclose(X[same], p.X[same], rtol=0.0, atol=1e-14)
+        # elsewhere a point on a face shared by both cells
+        assert np.all(geom.contains(geom.pull_back(p.cells[~same], p.x[~same]), 1e-9))
+    np.testing.assert_allclose(geom.push_forward(p.cells, p.X), p.x, atol=1e-12)
