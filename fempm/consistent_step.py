@@ -29,7 +29,7 @@ import numpy as np
 import numpy.typing as npt
 
 from fempm.kernels import consistent as kc
-from fempm.lumped_step import LumpedPointStep, _sum_ghosts
+from fempm.lumped_step import LumpedPointStep, sum_ghosts
 from fempm.mass_systems import ConsistentSystems
 
 if TYPE_CHECKING:
@@ -71,7 +71,7 @@ class ConsistentPointStep(LumpedPointStep):
             if not p.comm.allreduce(missing):
                 break
             sy.rebuild(p.cells)
-        _sum_ghosts(dvec[0])
+        sum_ghosts(dvec[0])
         sy.update(diagonal, nodal[:, 0], p.num_global)
         if self.options.lumped_forces:
             return 1.0

@@ -52,7 +52,7 @@ def supported(solver: ExplicitSolver) -> bool:
             and el.degree == 1 and V.dofmap.index_map_bs == solver.particles.gdim and geo.affine)
 
 
-def _sum_ghosts(vec) -> None:
+def sum_ghosts(vec) -> None:
     """Ghost contributions of a kept nodal vector to their owners, then the owners' sums back
     to the ghosts (nothing on one rank)."""
     if vec is not None:
@@ -149,7 +149,7 @@ class LumpedPointStep:
         h, c = (s.h_cell, self._wave_speeds()) if stable else (np.zeros(0), np.zeros(0))
         local = self.kernels.scatter(p.cells, p.X, self.K, self.cell_dofs, p.mass, f["v"], p.volume, f["sigma"], g,
                                      fext, out, cm, cv, cf, h, f["body"], self.modulus, c)
-        _sum_ghosts(vec)
+        sum_ghosts(vec)
         return out, local
 
     def _g2p(self, v_new, v_old, dt, *, blend: bool, kinematics: bool, move: bool, remap=None):
@@ -256,7 +256,7 @@ class LumpedPointStep:
             vec, mom = self._nodal_d
             mom.fill(0.0)
             self._g2p(v_new, v_old, dt, blend=True, kinematics=False, move=False, remap=mom)
-            _sum_ghosts(vec)
+            sum_ghosts(vec)
             v_new = self._grid_velocity(nodal[:, :1], mom, 0, active_min)
             nonfinite, left = self._g2p(v_new, v_new, dt, blend=False, kinematics=True, move=True)
         elif usf:

@@ -95,7 +95,7 @@ def _propagate(blocks: npt.NDArray, dofs: npt.NDArray, determined: npt.NDArray[n
         determined |= newly
 
 
-def _share(index_map, flags: npt.NDArray[np.bool_]) -> npt.NDArray[np.bool_]:
+def share_flags(index_map, flags: npt.NDArray[np.bool_]) -> npt.NDArray[np.bool_]:
     """A dof flag (owned + ghost) set on any rank, set on every rank that sees the dof."""
     return sum_over_ranks(index_map, flags[:, None].astype(np.float64))[:, 0] > 0
 
@@ -145,7 +145,7 @@ def singular_dofs(imap, blocks: tuple[npt.NDArray, npt.NDArray, npt.NDArray], ac
         _propagate(blocks, dofs, determined, pending)
         if comm.size == 1 or not comm.allreduce(int(np.count_nonzero(determined & ~before))):
             break  # one rank: _propagate reached the fixed point
-        determined = _share(imap, determined)
+        determined = share_flags(imap, determined)
     undetermined = ~determined[: imap.size_local]
     n_und = comm.allreduce(int(np.count_nonzero(undetermined)))
     if n_und == 0:

@@ -36,7 +36,7 @@ from petsc4py import PETSc
 
 from fempm import petsc as fpetsc
 from fempm.kernels import consistent as kc
-from fempm.mass_span import check_nonsingular, mass_ratio_rhs
+from fempm.mass_span import check_nonsingular, mass_ratio_rhs, share_flags
 from fempm.transfer import SUPPORT_TOL
 
 
@@ -64,17 +64,6 @@ class _System:
     keep: npt.NDArray[np.bool_] | None = None  # this step's dofs solved for (supported and free)
     refresh: bool = True  # set the preconditioner up from the current values at the next solve
     fresh_iterations: int = 0  # KSP iterations with a fresh preconditioner
-
-
-def _share(index_map, flags: npt.NDArray[np.bool_]) -> npt.NDArray[np.bool_]:
-    """A dof flag set on any rank, set on every rank that sees the dof."""
-    if index_map.comm.size == 1:
-        return flags
-    vec = dolfinx.la.vector(index_map)
-    vec.array[:] = flags
-    vec.scatter_reverse(dolfinx.la.InsertMode.add)
-    vec.scatter_forward()
-    return vec.array > 0
 
 
 class ConsistentSystems:
@@ -146,11 +135,11 @@ class ConsistentSystems:
         cd = self.cell_dofs[: self.num_cells]
         touched = np.zeros(self.num_dofs, dtype=np.bool_)
         touched[cd[np.unique(particle_cells)].ravel()] = True
-        touched = _share(self.index_map, touched)
+        touched = share_flags(self.index_map, touched)
         cells = np.flatnonzero(touched[cd].any(axis=1)).astype(np.int32)
         dofs = np.zeros(self.num_dofs, dtype=np.bool_)
         dofs[cd[cells].ravel()] = True
-        dofs = _share(self.index_map, dofs)
+        dofs = share_flags(self.index_map, dofs)
         self.sub_map, self.sub_to_parent = create_sub_index_map(self.index_map, np.flatnonzero(dofs).astype(np.int32),
                                                                 False)
         n_sub = self.sub_map.size_local
