@@ -14,12 +14,39 @@ Scene options are the keyword arguments of the scene builders in :mod:`fempm.sce
 from __future__ import annotations
 
 import argparse
+import contextlib
 import dataclasses
 import sys
+import traceback
 from pathlib import Path
 
 
 def main(argv: list[str] | None = None) -> int:
+    """The command line; under MPI an exception on one rank ends every rank (:func:`_abort_on_error`)."""
+    with _abort_on_error():
+        return _main(argv)
+
+
+@contextlib.contextmanager
+def _abort_on_error():
+    """On more than one rank, an exception that reaches the command line on any rank prints
+    its traceback with the rank and aborts all ranks with exit code 1 (``MPI_Abort``): the
+    other ranks may be waiting in a collective call and would otherwise hang. Argument errors
+    (``SystemExit``) happen on every rank alike and exit normally."""
+    try:
+        yield
+    except (Exception, KeyboardInterrupt):
+        from mpi4py import MPI
+
+        comm = MPI.COMM_WORLD
+        if comm.size == 1:
+            raise
+        sys.stderr.write(f"fempm: rank {comm.rank} of {comm.size} failed; aborting all ranks\n{traceback.format_exc()}")
+        sys.stderr.flush()
+        comm.Abort(1)
+
+
+def _main(argv: list[str] | None) -> int:
     parser = argparse.ArgumentParser(prog="python -m fempm", description="fempm: MPM on DOLFINx meshes", allow_abbrev=False)
     sub = parser.add_subparsers(dest="command", required=True)
     study = sub.add_parser("study", help="run a study and write its tables and figures", allow_abbrev=False)
