@@ -139,8 +139,14 @@ def _scene_options(builder, rest: list[str]) -> dict:
         if value is None:
             raise SystemExit(f"fempm run: option {flag} needs a value")
         default = params[name]
-        if isinstance(default, (int, float)) and not isinstance(default, bool):
-            opts[name] = type(default)(value)
+        if isinstance(default, bool):
+            opts[name] = _boolean(flag, value)
+        elif isinstance(default, (int, float)):
+            kind = "an integer" if isinstance(default, int) else "a number"
+            try:
+                opts[name] = type(default)(value)
+            except ValueError:
+                raise SystemExit(f"fempm run: option {flag} expects {kind}, got {value!r}") from None
         elif default is None:  # an optional number (or a name)
             try:
                 opts[name] = float(value)
@@ -149,6 +155,14 @@ def _scene_options(builder, rest: list[str]) -> dict:
         else:
             opts[name] = value
     return opts
+
+
+def _boolean(flag: str, value: str) -> bool:
+    """``true/false``, ``yes/no``, ``on/off``, ``1/0`` (any case) as a boolean option."""
+    table = {"true": True, "yes": True, "on": True, "1": True, "false": False, "no": False, "off": False, "0": False}
+    if value.lower() not in table:
+        raise SystemExit(f"fempm run: option {flag} expects true or false, got {value!r}")
+    return table[value.lower()]
 
 
 def _health_options(rest: list[str]) -> tuple[dict, list[str]]:

@@ -94,7 +94,7 @@ class RunWriter:
             x = allp.pop("x")
             write_vtk_points(self.folder / "particles" / f"particles_{self.frame:05d}.vtk", x, allp)
             with open(self.folder / "particles" / "times.csv", "a") as fh:
-                fh.write(f"{self.frame},{t!r}\n")
+                fh.write(f"{self.frame},{float(t)!r}\n")  # a plain number, not np.float64(...)
             if self.png:
                 from fempm.plot import plot_particle_frame
 
