@@ -75,6 +75,9 @@ def fixed(V: dolfinx.fem.FunctionSpace, where: Callable[[npt.NDArray], npt.NDArr
 def slip(V: dolfinx.fem.FunctionSpace, where: Callable[[npt.NDArray], npt.NDArray], normal) -> Slip:
     """Zero normal velocity at the dofs where ``where(x)`` holds; ``normal`` any direction."""
     n = np.asarray(normal, dtype=np.float64)
+    d = V.mesh.geometry.dim
+    if n.shape != (d,) or not np.all(np.isfinite(n)) or not np.linalg.norm(n) > 0:
+        raise ValueError(f"slip needs a finite, non-zero normal with {d} components (got {normal!r})")
     n = n / np.linalg.norm(n)
     return Slip(locate_dofs(V, where), n)
 

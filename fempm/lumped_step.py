@@ -241,10 +241,7 @@ class LumpedPointStep:
         p.comm.Allreduce(MPI.IN_PLACE, top, op=MPI.MAX)  # one collective: the largest mass and the stable time
         top, stable = float(top[0]), -opts.cfl * float(top[1])
         stable *= self._stable_factor(nodal, dt is None)
-        if dt is None:
-            dt = min(stable, dt_max)
-        elif dt > stable / opts.cfl:
-            s._fail(f"time step {dt:.3g} exceeds the stability limit {stable / opts.cfl:.3g} (CFL > 1)")
+        dt = s._time_step(stable, dt, dt_max)
         active_min, weak_max = SUPPORT_TOL * top, opts.mass_cutoff * top
         v_old = self._grid_velocity(nodal[:, :1], nodal, 1, active_min, guess=s.grid_velocity)
         force, cf = nodal, 1 + d

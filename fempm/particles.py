@@ -26,7 +26,7 @@ _OUTSIDE = ("raise", "remove")
 
 
 def _check_positive(name: str, a: npt.NDArray, comm: MPI.Comm) -> None:
-    bad = np.flatnonzero(~(a > 0))  # catches NaN too
+    bad = np.flatnonzero(~((a > 0) & (a < np.inf)))  # catches NaN and inf too
     nbad = comm.allreduce(len(bad))
     if nbad:
         raise ValueError(

@@ -51,6 +51,8 @@ class Scene:
     health: Health = field(default_factory=Health)
 
     def __post_init__(self):
+        if not (0.0 < self.t_end < np.inf):
+            raise ValueError(f"t_end={self.t_end} must be a positive, finite time")
         if self.dt is not None and not (np.isfinite(self.dt) and self.dt > 0):
             raise ValueError(f"dt={self.dt} must be a positive number (or None for the CFL step)")
 

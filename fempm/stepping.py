@@ -215,7 +215,8 @@ class ExplicitSolver:
         for mat, idx in self._material_loop():
             c[idx] = mat.wave_speed(f["F"][idx], rho[idx])
         speed = c + np.linalg.norm(f["v"], axis=1)
-        local = np.min(self.h_cell[p.cells] / np.maximum(speed, 1e-300), initial=np.inf)
+        moving = ~(speed <= 0)  # particles at rest with no wave speed set no limit (NaN stays)
+        local = np.min(self.h_cell[p.cells][moving] / speed[moving], initial=np.inf)
         return self.options.cfl * p.comm.allreduce(local, op=MPI.MIN)
 
     def _compiled_step(self):
@@ -288,6 +289,27 @@ class ExplicitSolver:
             f += p2g(basis, fext)
         return f
 
+    def _time_step(self, stable: float, dt: float | None, dt_max: float) -> float:
+        """The step: ``dt`` if given (an error above the stability limit, CFL > 1), else the
+        ``stable`` one, at most ``dt_max``."""
+        if dt is None:
+            dt = min(stable, dt_max)
+            if not np.isfinite(dt):
+                raise ValueError("no stable time step: every particle is at rest and its law has wave speed 0; "
+                                 "give dt or dt_max")
+        elif dt > stable / self.options.cfl:
+            self._fail(f"time step {dt:.3g} exceeds the stability limit {stable / self.options.cfl:.3g} (CFL > 1)")
+        return dt
+
+    def _check_step_arguments(self, dt: float | None, dt_max: float) -> None:
+        """A given ``dt`` positive and finite, ``dt_max`` positive, particles on some rank."""
+        if dt is not None and not (0.0 < dt < np.inf):
+            raise ValueError(f"step: dt={dt} must be a positive, finite time step (or None for the stable one)")
+        if not dt_max > 0.0:
+            raise ValueError(f"step: dt_max={dt_max} must be positive")
+        if self.particles.num_global == 0:
+            raise ValueError("step: there are no particles (the particle set is empty on every rank)")
+
     def _count_terms(self) -> None:
         """Count the force terms assembled this step (:attr:`terms`)."""
         self.terms["internal"] += 1
@@ -297,6 +319,7 @@ class ExplicitSolver:
     def step(self, dt: float | None = None, *, dt_max: float = np.inf) -> float:
         """Advance one step; returns the ``dt`` used. ``dt`` defaults to the stable step
         (at most ``dt_max``); a given ``dt`` above the stability limit (CFL > 1) is an error."""
+        self._check_step_arguments(dt, dt_max)
         if self.compiled is not False and self._compiled_step() is not None:
             return self._lumped_step.step(dt, dt_max)
         opts = self.options
@@ -316,10 +339,7 @@ class ExplicitSolver:
             stable *= np.sqrt(MASS_RATIO_SAFETY * self.mass_ratio)
         elif opts.mass_mode == "fmpm" and not opts.lumped_forces:  # ||M_k^-1 m|| <= k (fempm.fmpm)
             stable /= np.sqrt(opts.mass_order)
-        if dt is None:
-            dt = min(stable, dt_max)
-        elif dt > stable / opts.cfl:
-            self._fail(f"time step {dt:.3g} exceeds the stability limit {stable / opts.cfl:.3g} (CFL > 1)")
+        dt = self._time_step(stable, dt, dt_max)
         m = mass_op.lumped_masses()
         support = mass_op.support_masses()
         weak = support <= opts.mass_cutoff * p.comm.allreduce(float(support.max(initial=0.0)), op=MPI.MAX)

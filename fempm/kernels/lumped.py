@@ -129,7 +129,8 @@ def _scatter_kernel(cell: str, with_mass: bool, with_momentum: bool, with_force:
             if with_dt:
                 mod = modulus[body[p]]
                 wave = np.sqrt(mod / (m / V)) if mod > 0.0 else c[p]
-                t = h[cp] / max(wave + np.sqrt(speed), 1e-300)
+                total = wave + np.sqrt(speed)
+                t = h[cp] / total if not total <= 0.0 else np.inf  # at rest without a wave speed: no limit; NaN stays
                 if not t >= best:  # NaN propagates
                     best = t
             for a in range(NK):

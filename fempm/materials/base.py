@@ -40,7 +40,7 @@ class IsotropicElastic:
     history: tuple[str, ...] = ()
 
     def __post_init__(self):
-        if self.E <= 0 or not -1.0 < self.nu < 0.5:
+        if not (0.0 < self.E < np.inf) or not -1.0 < self.nu < 0.5:  # NaN fails both
             raise ValueError(f"{type(self).__name__} needs E > 0 and -1 < nu < 0.5 (got E={self.E}, nu={self.nu})")
 
     @property
