@@ -212,15 +212,6 @@ class LumpedPointStep:
         f = p.fields
         return id(p.x), id(f["v"]), id(f["sigma"]), id(f["F"]), id(f["body"])
 
-    def _check_bodies(self) -> None:
-        """Every particle's body indexes a material (the compiled passes look its law up)."""
-        s = self.solver
-        body = s.particles.fields["body"]
-        bad = (body < 0) | (body >= len(s.materials))
-        if s.particles.comm.allreduce(int(np.count_nonzero(bad))):
-            raise ValueError(f"particle body index outside the {len(s.materials)} material(s) at particle(s) "
-                             f"{s._ids(bad)}")
-
     # -- the step -----------------------------------------------------------------------------
     def step(self, dt: float | None, dt_max: float) -> float:
         s = self.solver
@@ -229,7 +220,7 @@ class LumpedPointStep:
         d = self.d
         if p.comm.allreduce(self._state() != self._checked, op=MPI.LOR):  # arrays set from outside (any rank)
             s._check_finite()  # collective; the passes check their own results
-            self._check_bodies()
+            s._check_bodies()
         if self._since_sort >= SORT_EVERY:
             p.sort_by_cell()
             self._since_sort = 0

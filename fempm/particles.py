@@ -87,6 +87,14 @@ class Particles:
         if ids is None:
             ids = comm.exscan(n) or 0
             ids = np.arange(ids, ids + n, dtype=np.int64)
+        else:
+            ids = np.asarray(ids).reshape(-1)
+            if len(ids) != n or not np.issubdtype(ids.dtype, np.integer):
+                raise ValueError(f"ids must be {n} integers, one per particle (got {len(ids)} of type {ids.dtype})")
+            every = np.concatenate(comm.allgather(ids))  # once, at construction
+            values, counts = np.unique(every, return_counts=True)
+            if np.any(counts > 1):
+                raise ValueError(f"particle ids must be unique over all ranks; repeated: {values[counts > 1][:5].tolist()}")
         data = {"mass": mass, "volume": volume, "ids": np.asarray(ids, dtype=np.int64)}
         for k, v in (fields or {}).items():
             v = np.asarray(v)

@@ -301,6 +301,14 @@ class ExplicitSolver:
             self._fail(f"time step {dt:.3g} exceeds the stability limit {stable / self.options.cfl:.3g} (CFL > 1)")
         return dt
 
+    def _check_bodies(self) -> None:
+        """Every particle's body indexes a material (collective)."""
+        body = self.particles.fields["body"]
+        bad = (body < 0) | (body >= len(self.materials))
+        if self.particles.comm.allreduce(int(np.count_nonzero(bad))):
+            raise ValueError(f"particle body index outside the {len(self.materials)} material(s) at particle(s) "
+                             f"{self._ids(bad)}")
+
     def _check_step_arguments(self, dt: float | None, dt_max: float) -> None:
         """A given ``dt`` positive and finite, ``dt_max`` positive, particles on some rank."""
         if dt is not None and not (0.0 < dt < np.inf):
@@ -326,6 +334,7 @@ class ExplicitSolver:
         p = self.particles
         fld = p.fields
         self._check_finite()
+        self._check_bodies()
         basis = ParticleBasis(self.V, p, gradients=True, domain=opts.particle_domain)
         self.extended_steps += basis.extended
         mass_op = Projector(

@@ -86,3 +86,19 @@ def test_no_stable_step_without_wave_speed_and_motion(mesh):
 def test_scene_needs_a_positive_finite_end_time(t_end):
     with pytest.raises(ValueError, match="must be a positive, finite time"):
         vibrating_bar(cells=4, t_end=t_end, comm=comm)
+
+
+def test_duplicate_or_malformed_ids(mesh):
+    with pytest.raises(ValueError, match=r"particle ids must be unique over all ranks; repeated: \[7\]"):
+        fempm.Particles(mesh, [[0.2, 0.2], [0.7, 0.7]], 1.0, 1.0, ids=[7, 7])
+    with pytest.raises(ValueError, match="ids must be 2 integers"):
+        fempm.Particles(mesh, [[0.2, 0.2], [0.7, 0.7]], 1.0, 1.0, ids=[0.5, 1.5])
+
+
+@pytest.mark.parametrize("compiled", [False, True])
+def test_a_body_without_material_is_refused_by_both_steps(mesh, compiled):
+    solver = _solver(mesh)
+    solver.compiled = compiled
+    solver.particles.fields["body"][:] = 1  # one material only: it was stress-free in the generic step
+    with pytest.raises(ValueError, match=r"body index outside the 1 material\(s\)"):
+        solver.step()
