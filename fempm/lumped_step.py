@@ -60,6 +60,16 @@ def sum_ghosts(vec) -> None:
         vec.scatter_forward()
 
 
+def kept_nodal_array(index_map, k: int) -> tuple:
+    """(vector or None, array): a nodal (owned + ghost dofs, k) array kept for a run; in
+    parallel the array of a DOLFINx vector, so that the ghost updates need no copy."""
+    n = index_map.size_local + index_map.num_ghosts
+    if index_map.comm.size == 1 and index_map.num_ghosts == 0:
+        return None, np.empty((n, k))
+    vec = dolfinx.la.vector(index_map, bs=k)
+    return vec, vec.array.reshape(n, k)
+
+
 def _law(mat) -> tuple[int, float, float, float]:
     """(compiled law code, lambda, mu, P-wave modulus or 0) of a material."""
     from fempm.materials import LinearElastic, NeoHookean
@@ -106,12 +116,7 @@ class LumpedPointStep:
 
     # -- pieces -------------------------------------------------------------------------------
     def _nodal_array(self, k: int):
-        """A nodal (owned + ghost dofs, k) array kept for the run: in parallel the array of a
-        DOLFINx vector, so that the ghost sums need no copy."""
-        if self.index_map.comm.size == 1 and self.index_map.num_ghosts == 0:
-            return None, np.empty((self.num_dofs, k))
-        vec = dolfinx.la.vector(self.index_map, bs=k)
-        return vec, vec.array.reshape(self.num_dofs, k)
+        return kept_nodal_array(self.index_map, k)
 
     def _wave_speeds(self) -> npt.NDArray:
         """Wave speeds of the particles whose law has no P-wave modulus (empty if none has)."""

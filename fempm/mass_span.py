@@ -177,6 +177,30 @@ def _dense_null_count(imap, cells, dofs, blocks, undetermined) -> int:
     return int(np.count_nonzero(lam <= RANK_TOL * max(lam.max(initial=0.0), 1.0)))
 
 
+def mass_ratio_ksp(comm, iterations: int, rowsum: bool = True):
+    r"""The KSP of the estimate of :math:`\lambda_{min}(M_L^{-1} M_C)`: ``iterations`` CG steps
+    preconditioned by the row sums (the lumped mass; ``rowsum=False``: the diagonal) that
+    record their Lanczos coefficients (options prefix ``fempm_mass_ratio_``)."""
+    from fempm import petsc as fpetsc
+
+    ksp = fpetsc.create_ksp(comm, "fempm_mass_ratio_", {
+        "ksp_type": "cg", "pc_type": "jacobi", "ksp_rtol": 1e-14,
+        "pc_jacobi_type": "rowsum" if rowsum else "diagonal",
+        "ksp_max_it": iterations, "ksp_norm_type": "preconditioned"})
+    ksp.setComputeSingularValues(True)
+    return ksp
+
+
+def mass_ratio_estimate(ksp, A, b, x) -> float:
+    """The smallest Ritz value of the preconditioned ``A`` from the CG run of ``ksp``
+    (:func:`mass_ratio_ksp`) on the right-hand side ``b``, clipped to [0, 1] (``x`` is work)."""
+    ksp.setOperators(A)
+    x.set(0.0)
+    ksp.solve(b, x)
+    smax, smin = ksp.computeExtremeSingularValues()
+    return float(min(max(smin, 0.0), 1.0))
+
+
 def mass_ratio_rhs(V, owned_mask: npt.NDArray[np.bool_]) -> npt.NDArray:
     """A pseudo-random vector over the owned dofs where ``owned_mask`` holds, a hash of each
     dof's coordinates: the same value for the same dof whatever the partition (the

@@ -27,7 +27,6 @@ from __future__ import annotations
 import contextlib
 from dataclasses import dataclass
 
-import dolfinx.la
 import numpy as np
 import numpy.typing as npt
 from dolfinx.cpp.common import create_sub_index_map
@@ -36,7 +35,8 @@ from petsc4py import PETSc
 
 from fempm import petsc as fpetsc
 from fempm.kernels import consistent as kc
-from fempm.mass_span import check_nonsingular, mass_ratio_rhs, share_flags
+from fempm.lumped_step import kept_nodal_array
+from fempm.mass_span import check_nonsingular, mass_ratio_estimate, mass_ratio_ksp, mass_ratio_rhs, share_flags
 from fempm.transfer import SUPPORT_TOL
 
 
@@ -103,17 +103,14 @@ class ConsistentSystems:
         self._base_values_stale = True
         self._blocks: npt.NDArray | None = None
         self._count = np.zeros(0, dtype=np.int64)
-        if self.comm.size > 1:
-            vec = dolfinx.la.vector(self.index_map)
-            self._diagonal = (vec, vec.array)
-        else:
-            self._diagonal = (None, np.zeros(self.num_dofs))
+        vec, column = kept_nodal_array(self.index_map, 1)
+        self._diagonal = (vec, column[:, 0])
         self._structure: tuple | None = None  # (occupied, active, lump) of the last singularity test
         self.active = np.zeros(self.num_dofs, dtype=np.bool_)
         self.lump = np.zeros(self.num_dofs, dtype=np.bool_)
         self.iterations: list[int] = []
-        self.rebuilds = 0  # sparsity builds and singularity tests, for diagnostics
-        self.tests = 0
+        self.rebuilds = 0  # sparsity builds, for diagnostics
+        self.tests = 0  # singularity tests, for diagnostics
 
     # -- sparsity -----------------------------------------------------------------------------
     def work_arrays(self) -> tuple[npt.NDArray, npt.NDArray, npt.NDArray, tuple]:
@@ -265,23 +262,15 @@ class ConsistentSystems:
             self._set_values(s)
             self._base_values_stale = False
         if self._ratio_ksp is None:
-            self._ratio_ksp = fpetsc.create_ksp(self.comm, "fempm_mass_ratio_", {
-                "ksp_type": "cg", "pc_type": "jacobi", "ksp_rtol": 1e-14, "pc_jacobi_type": "rowsum",
-                "ksp_max_it": iterations, "ksp_norm_type": "preconditioned"})
-            self._ratio_ksp.setComputeSingularValues(True)
+            self._ratio_ksp = mass_ratio_ksp(self.comm, iterations)
             self._ratio_rhs = mass_ratio_rhs(V, np.ones(self.num_owned, dtype=np.bool_))
-        ksp = self._ratio_ksp
-        ksp.reset()  # the matrix may have new sizes
-        ksp.setOperators(s.matrix)
+        self._ratio_ksp.reset()  # the matrix may have new sizes
         keep = s.keep[self.owned_parent]
         s.x.set(1.0)
         s.matrix.mult(s.x, s.b)  # row sums: the lumped masses of the (lumped) matrix
         rows = s.b.array.copy()
         s.b.array[:] = np.where(keep, self._ratio_rhs[self.owned_parent] * np.abs(rows), 0.0)
-        s.x.set(0.0)
-        ksp.solve(s.b, s.x)
-        smax, smin = ksp.computeExtremeSingularValues()
-        return float(min(max(smin, 0.0), 1.0))
+        return mass_ratio_estimate(self._ratio_ksp, s.matrix, s.b, s.x)
 
     def destroy(self) -> None:
         for s in self._all():

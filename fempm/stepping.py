@@ -37,6 +37,7 @@ from fempm.basis import ParticleBasis, is_nonnegative
 from fempm.boundary import Fixed, Slip
 from fempm.domains import GIMP_NAMES, domain_geometry, make_domain
 from fempm.fmpm import parse_mass
+from fempm.geometry import CHUNK
 from fempm.loads import Loads, external_forces  # Loads: re-exported, scenes build it from here
 from fempm.materials.base import identity
 from fempm.particles import Particles
@@ -131,9 +132,9 @@ def cell_sizes(mesh) -> npt.NDArray:
     dofmap = np.asarray(dofmap)
     i, j = np.triu_indices(nv, 1)
     out = np.empty(len(dofmap))
-    for start in range(0, len(dofmap), 65536):  # chunks of cells bound the temporaries
-        xc = mesh.geometry.x[dofmap[start : start + 65536, :nv]]
-        out[start : start + 65536] = np.linalg.norm(xc[:, i] - xc[:, j], axis=2).min(axis=1)
+    for start in range(0, len(dofmap), CHUNK):  # chunks of cells bound the temporaries
+        xc = mesh.geometry.x[dofmap[start : start + CHUNK, :nv]]
+        out[start : start + CHUNK] = np.linalg.norm(xc[:, i] - xc[:, j], axis=2).min(axis=1)
     return out
 
 
@@ -145,10 +146,10 @@ class ExplicitSolver:
     (n, d, d), ``volume0`` (n,), ``body`` (n,) index into ``materials``, and the reference
     positions ``X0`` (n, d) (the positions when the solver is made, unless given).
 
-    ``compiled``: take the compiled lumped step (:mod:`fempm.lumped_step`: lumped mass, point
-    particles, a degree-1 space on an affine mesh) where it applies (None, the default), insist
-    on it (True: an error where it does not apply) or never (False: the generic step, which is
-    its reference).
+    ``compiled``: take the compiled step (:mod:`fempm.lumped_step`, :mod:`fempm.consistent_step`:
+    lumped or consistent mass, point particles, a degree-1 space on an affine mesh) where it
+    applies (None, the default), insist on it (True: an error where it does not apply) or never
+    (False: the generic step, which is its reference).
     """
 
     V: dolfinx.fem.FunctionSpace

@@ -292,23 +292,16 @@ class Projector:
         """
         if self.mass != "consistent":
             return 1.0
-        from fempm.mass_span import mass_ratio_rhs
+        from fempm.mass_span import mass_ratio_estimate, mass_ratio_ksp, mass_ratio_rhs
 
-        ksp = fpetsc.create_ksp(self.particles.comm, "fempm_mass_ratio_", {
-            "ksp_type": "cg", "pc_type": "jacobi", "ksp_rtol": 1e-14,
-            "pc_jacobi_type": "rowsum" if self.basis.nonnegative else "diagonal",
-            "ksp_max_it": iterations, "ksp_norm_type": "preconditioned"})
-        ksp.setComputeSingularValues(True)
-        ksp.setOperators(self.matrix)
+        ksp = mass_ratio_ksp(self.particles.comm, iterations, rowsum=self.basis.nonnegative)
         x, b = self.matrix.createVecs()
         act = self.active[: self.num_owned]
         b.array[:] = mass_ratio_rhs(self.V, act) * np.abs(self.row_mass[act])  # the same on any partition
-        x.set(0.0)
-        ksp.solve(b, x)
-        smax, smin = ksp.computeExtremeSingularValues()
+        ratio = mass_ratio_estimate(ksp, self.matrix, b, x)
         for obj in (ksp, x, b):
             obj.destroy()
-        return float(min(max(smin, 0.0), 1.0))
+        return ratio
 
     def support_masses(self) -> npt.NDArray:
         r"""How much particle mass each dof sees, :math:`\sum_p M_p |\langle N_i \rangle_p|` on

@@ -20,6 +20,7 @@ class NewtonianTait:
     kappa: float = 2.0e4
     gamma: float = 7.0
     viscosity: float = 1.0e-3
+    history: tuple[str, ...] = ()
 
     def __post_init__(self):
         for name, low in (("rho0", 0.0), ("kappa", 0.0), ("gamma", 1.0)):
@@ -28,7 +29,6 @@ class NewtonianTait:
                 raise ValueError(f"NewtonianTait needs {name} > {low:g} and finite (got {name}={value})")
         if not (0.0 <= self.viscosity < np.inf):
             raise ValueError(f"NewtonianTait needs a finite viscosity >= 0 (got viscosity={self.viscosity})")
-    history: tuple[str, ...] = ()
 
     def pressure(self, rho: npt.NDArray) -> npt.NDArray:
         return self.kappa * ((rho / self.rho0) ** self.gamma - 1.0)
