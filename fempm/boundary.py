@@ -32,8 +32,13 @@ class Slip:
     dofs: npt.NDArray[np.int32]
     normal: npt.NDArray  # (d,) or (len(dofs), d), unit
 
+    @property
+    def axis(self) -> int | None:
+        """The coordinate axis of a wall normal to it (then :meth:`apply` zeroes that component), else None."""
+        return _axis(self.normal)
+
     def apply(self, v: npt.NDArray) -> None:
-        axis = _axis(self.normal)
+        axis = self.axis
         if axis is not None:  # a wall normal to a coordinate axis: that component is 0
             v[self.dofs, axis] = 0.0
             return

@@ -5,10 +5,14 @@
     python -m fempm study convergence [--quick] [--problems NAME ...] [--out DIR]
     python -m fempm study stability [--quick] [--cases NAME ...] [--out DIR]
     python -m fempm study error-vs-time [--quick] [--problems NAME ...] [--out DIR]
-    python -m fempm run SCENE [--out DIR] [--option value ...]   (SCENE: bar, disks, cantilever, dam, block)
+    python -m fempm run SCENE [--out DIR] [--option value ...]
+    python -m fempm run --help          (the scenes, a line each)
+    python -m fempm --version
 
 Scene options are the keyword arguments of the scene builders in :mod:`fempm.scenes`
-(``python -m fempm run disks --help`` lists them); an unknown option is an error.
+(``python -m fempm run disks --help`` lists them). A usage error (an unknown scene or option,
+a value of the wrong type or out of range, an output folder that cannot be created) prints one
+line and exits with code 2; a run stopped by its health limits or a failed step exits with 3.
 """
 
 from __future__ import annotations
@@ -21,10 +25,21 @@ import traceback
 from pathlib import Path
 
 
+class UsageError(SystemExit):
+    """A mistake in the command line: its message on one line, exit code 2, no traceback."""
+
+
 def main(argv: list[str] | None = None) -> int:
     """The command line; under MPI an exception on one rank ends every rank (:func:`_abort_on_error`)."""
-    with _abort_on_error():
-        return _main(argv)
+    try:
+        with _abort_on_error():
+            return _main(argv)
+    except UsageError as e:
+        from mpi4py import MPI
+
+        if MPI.COMM_WORLD.rank == 0:
+            print(e, file=sys.stderr)
+        return 2
 
 
 @contextlib.contextmanager
@@ -47,7 +62,10 @@ def _abort_on_error():
 
 
 def _main(argv: list[str] | None) -> int:
+    from fempm import __version__
+
     parser = argparse.ArgumentParser(prog="python -m fempm", description="fempm: MPM on DOLFINx meshes", allow_abbrev=False)
+    parser.add_argument("--version", action="version", version=f"fempm {__version__}")
     sub = parser.add_subparsers(dest="command", required=True)
     study = sub.add_parser("study", help="run a study and write its tables and figures", allow_abbrev=False)
     study.add_argument("name", choices=["mapping", "particle-basis", "convergence", "stability", "error-vs-time"])
@@ -62,7 +80,7 @@ def _main(argv: list[str] | None) -> int:
                        help="mapping: particle domains point, gimp, cpdi1, cpdi2 (default point)")
     study.add_argument("--out", type=Path, default=None, help="output folder (default output/study-NAME)")
     runp = sub.add_parser("run", help="run a scene, writing outputs and a JSON summary", add_help=False, allow_abbrev=False)
-    runp.add_argument("scene")
+    runp.add_argument("scene", nargs="?")
     runp.add_argument("--out", type=Path, default=None, help="output folder (default output/SCENE)")
     runp.add_argument("-h", "--help", action="store_true")
     args, rest = parser.parse_known_args(argv)
@@ -131,13 +149,13 @@ def _scene_options(builder, rest: list[str]) -> dict:
     it = iter(rest)
     for flag in it:
         if not flag.startswith("--"):
-            raise SystemExit(f"fempm run: expected --option value, got {flag!r}")
+            raise UsageError(f"fempm run: expected --option value, got {flag!r}")
         name = flag[2:].replace("-", "_")
         if name not in params:
-            raise SystemExit(f"fempm run: unknown option --{flag[2:]}; options: {', '.join(sorted(params))}")
+            raise UsageError(f"fempm run: unknown option --{flag[2:]}; options: {', '.join(sorted(params))}")
         value = next(it, None)
         if value is None:
-            raise SystemExit(f"fempm run: option {flag} needs a value")
+            raise UsageError(f"fempm run: option {flag} needs a value")
         default = params[name]
         if isinstance(default, bool):
             opts[name] = _boolean(flag, value)
@@ -146,7 +164,7 @@ def _scene_options(builder, rest: list[str]) -> dict:
             try:
                 opts[name] = type(default)(value)
             except ValueError:
-                raise SystemExit(f"fempm run: option {flag} expects {kind}, got {value!r}") from None
+                raise UsageError(f"fempm run: option {flag} expects {kind}, got {value!r}") from None
         elif default is None:  # an optional number (or a name)
             try:
                 opts[name] = float(value)
@@ -161,7 +179,7 @@ def _boolean(flag: str, value: str) -> bool:
     """``true/false``, ``yes/no``, ``on/off``, ``1/0`` (any case) as a boolean option."""
     table = {"true": True, "yes": True, "on": True, "1": True, "false": False, "no": False, "off": False, "0": False}
     if value.lower() not in table:
-        raise SystemExit(f"fempm run: option {flag} expects true or false, got {value!r}")
+        raise UsageError(f"fempm run: option {flag} expects true or false, got {value!r}")
     return table[value.lower()]
 
 
@@ -180,15 +198,23 @@ def _health_options(rest: list[str]) -> tuple[dict, list[str]]:
             continue
         value = next(it, None)
         if value is None:
-            raise SystemExit(f"fempm run: option {flag} needs a value")
+            raise UsageError(f"fempm run: option {flag} needs a value")
         if name == "energy_tolerance" and value.lower() in ("none", "off"):
             health[name] = None
             continue
         try:
             health[name] = float(value)
         except ValueError:
-            raise SystemExit(f"fempm run: option {flag} expects a number, got {value!r}") from None
+            raise UsageError(f"fempm run: option {flag} expects a number, got {value!r}") from None
     return health, others
+
+
+def _summary(builder) -> str:
+    """The first paragraph of a scene's module docstring, on one line."""
+    import inspect
+
+    doc = inspect.getmodule(builder).__doc__ or ""
+    return " ".join(doc.strip().split("\n\n")[0].split())
 
 
 def _run(args, rest: list[str]) -> int:
@@ -196,14 +222,23 @@ def _run(args, rest: list[str]) -> int:
 
     from mpi4py import MPI
 
+    from fempm.io import OutputFolderError
     from fempm.scene import run
     from fempm.scenes import SCENES
     from fempm.health import Health
     from fempm.stepping import SimulationError
     from fempm.transfer import SingularMassError
 
+    if args.scene is None and args.help:
+        print("python -m fempm run SCENE [--out DIR] [--option value ...]; scenes:")
+        for name, builder in SCENES.items():
+            print(f"  {name:12s}{_summary(builder)}")
+        print("python -m fempm run SCENE --help lists the options of SCENE")
+        return 0
+    if args.scene is None:
+        raise UsageError(f"fempm run: give a scene: {', '.join(SCENES)} (python -m fempm run --help describes them)")
     if args.scene not in SCENES:
-        raise SystemExit(f"fempm run: unknown scene {args.scene!r}; scenes: {', '.join(SCENES)}")
+        raise UsageError(f"fempm run: unknown scene {args.scene!r}; scenes: {', '.join(SCENES)}")
     builder = SCENES[args.scene]
     if args.help:
         print(f"python -m fempm run {args.scene} [--out DIR] options (defaults):")
@@ -215,11 +250,16 @@ def _run(args, rest: list[str]) -> int:
             print(f"  --{k.replace('_', '-')} {v}")
         return 0
     health, rest = _health_options(rest)
-    scene = builder(**_scene_options(builder, rest))
-    scene.health = dataclasses.replace(scene.health, **health)
+    try:
+        scene = builder(**_scene_options(builder, rest))
+        scene.health = dataclasses.replace(scene.health, **health)
+    except (ValueError, TypeError) as e:  # the builders and Health check their arguments
+        raise UsageError(f"fempm run {args.scene}: {e}") from None
     out = args.out or Path("output") / args.scene
     try:
         run(scene, out)
+    except OutputFolderError as e:
+        raise UsageError(f"fempm run {args.scene}: {e}") from None
     except (SimulationError, SingularMassError) as e:
         if MPI.COMM_WORLD.rank == 0:
             print(f"\nfempm run {args.scene}: aborted: {e}\n(summary and the failing state in {out})", file=sys.stderr)

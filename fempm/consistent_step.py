@@ -44,6 +44,7 @@ class ConsistentPointStep(LumpedPointStep):
 
     def __init__(self, solver: ExplicitSolver):
         super().__init__(solver)
+        self.fused = False  # the grid update solves with the consistent matrix
         fixed = np.zeros(self.num_dofs, dtype=np.bool_)
         if solver._fixed_dofs is not None:
             fixed[solver._fixed_dofs] = True

@@ -42,6 +42,27 @@ def _pad3(a: npt.NDArray) -> npt.NDArray:
     return np.pad(a, ((0, 0), (0, 3 - a.shape[1]), (0, 3 - a.shape[2])))
 
 
+class OutputFolderError(OSError):
+    """The output folder cannot be created or written (raised on every rank alike)."""
+
+
+def make_folder(folder: Path, comm) -> None:
+    """Create ``folder`` (and ``folder/particles``) on rank 0; an :class:`OutputFolderError`
+    on every rank if that fails (collective: no rank is left waiting)."""
+    error = None
+    if comm.rank == 0:
+        try:
+            (folder / "particles").mkdir(parents=True, exist_ok=True)
+            probe = folder / ".fempm-write-test"
+            probe.touch()
+            probe.unlink()
+        except OSError as e:
+            error = f"cannot write the output folder {str(folder)!r}: {e.strerror or e}"
+    error = comm.bcast(error, root=0)
+    if error is not None:
+        raise OutputFolderError(error)
+
+
 class RunWriter:
     """Writes a run's outputs into ``folder`` as the run goes (nothing kept only in memory)."""
 
@@ -58,9 +79,7 @@ class RunWriter:
         self.frame = 0
         self._csv = None
         self._stress_vtx = None
-        if self.comm.rank == 0:
-            (self.folder / "particles").mkdir(parents=True, exist_ok=True)
-        self.comm.Barrier()
+        make_folder(self.folder, self.comm)
         self.grid_v = dolfinx.fem.Function(V, name="grid_velocity") if V is not None else None
         self._vtx = (
             dolfinx.io.VTXWriter(self.comm, self.folder / "grid_velocity.bp", [self.grid_v], engine="BP4")

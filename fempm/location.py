@@ -191,6 +191,19 @@ class CellLocator:
         X[hit_p] = Xc[hits]
         return cells, X
 
+    def vertex_star(self) -> tuple:
+        """(cell -> vertices (cells, vertices per cell), vertex -> cells offsets and cells, the
+        number of owned cells): what :meth:`locate_near` searches, built once."""
+        if self._star is None:
+            geo = self.geometry
+            top = self.mesh.topology
+            top.create_connectivity(geo.tdim, 0)
+            top.create_connectivity(0, geo.tdim)
+            c2v, v2c = top.connectivity(geo.tdim, 0), top.connectivity(0, geo.tdim)
+            self._star = (np.ascontiguousarray(c2v.array.reshape(-1, len(c2v.links(0)))), v2c.offsets, v2c.array,
+                          len(self._entities))
+        return self._star
+
     def locate_near(self, x: npt.NDArray, previous: npt.NDArray[np.int32]) -> tuple[npt.NDArray[np.int32], npt.NDArray]:
         """Like :meth:`locate` for points that left their ``previous`` owned cells: the cells
         sharing a vertex with the previous one are tested first (the lowest-numbered cell
@@ -199,15 +212,9 @@ class CellLocator:
         geo = self.geometry
         if not (geo.affine and shape_kernels.AVAILABLE) or len(x) == 0:
             return self.locate(x)
-        if self._star is None:
-            top = self.mesh.topology
-            top.create_connectivity(geo.tdim, 0)
-            top.create_connectivity(0, geo.tdim)
-            c2v, v2c = top.connectivity(geo.tdim, 0), top.connectivity(0, geo.tdim)
-            self._star = (c2v.array.reshape(-1, len(c2v.links(0))), v2c.offsets, v2c.array)
         cells, X = shape_kernels.near_pull_back(np.asarray(previous, dtype=np.int32), np.ascontiguousarray(x),
-                                                geo._x0, geo._K, *self._star, len(self._entities),
-                                                geo.cell_name in SIMPLICES, self.tol)
+                                                geo._x0, geo._K, *self.vertex_star(), geo.cell_name in SIMPLICES,
+                                                self.tol)
         miss = np.flatnonzero(cells < 0)
         if len(miss):
             cells[miss], X[miss] = self.locate(np.asarray(x)[miss])

@@ -11,8 +11,9 @@ the fly in each pass (:mod:`fempm.kernels.shape`):
 2. grid update: :math:`v = (mv)/m`, boundary conditions, :math:`v^+ = v + \Delta t f/m`;
 3. G2P: FLIP blend, :math:`L_p`, :math:`F_p`, :math:`J_p` and its checks, the stress of the
    compiled laws, the position, the finiteness check and the reference coordinates in the same
-   cell in one pass, state updated in place;
-4. relocation: the DOLFINx tree only for the particles that left their cell.
+   cell in one pass, state updated in place; a particle that left its cell is looked for in
+   the owned cells sharing a vertex with it in the same pass;
+4. relocation: the DOLFINx tree (and migration) only for the particles not found there.
 
 USF splits 1 (forces after the stress update) and MUSL adds a momentum re-map between the
 blend and the kinematics, as in the generic step. Laws other than :class:`~fempm.materials.NeoHookean`
@@ -29,6 +30,7 @@ import numpy as np
 import numpy.typing as npt
 from mpi4py import MPI
 
+from fempm.boundary import Fixed, Slip
 from fempm.kernels import lumped as kl
 from fempm.kernels.shape import AVAILABLE
 from fempm.loads import external_forces
@@ -37,6 +39,9 @@ from fempm.transfer import SUPPORT_TOL
 
 #: steps between two sorts of the particles by cell
 SORT_EVERY = 100
+#: a given dt at most this fraction of the bound of the stable time needs no exact check
+#: (the bound's own rounding)
+BOUND_SAFETY = 1.0 - 1e-12
 
 if TYPE_CHECKING:
     from fempm.stepping import ExplicitSolver
@@ -110,6 +115,9 @@ class LumpedPointStep:
         self.any_external = bool(np.any(self.law == 0))
         self.x0 = geo._x0
         self._since_sort = SORT_EVERY  # sort on the first step
+        # every boundary condition a zero component, held by `free`: one fused grid pass
+        self.fused = all(isinstance(bc, Fixed) or (isinstance(bc, Slip) and bc.axis is not None)
+                         for bc in solver.bcs)
         self._nodal = self._nodal_array(1 + 2 * d)  # [m | m v | f]
         self._nodal_d = self._nodal_array(d)  # USF's forces, MUSL's re-mapped momenta
         self._checked: tuple | None = None  # identities of the state arrays checked finite
@@ -143,9 +151,10 @@ class LumpedPointStep:
             return g, np.zeros((0, self.d))
         return np.zeros(self.d), np.ascontiguousarray(external_forces(loads, s.particles, t))
 
-    def _scatter(self, nodal, g, fext, cm: int, cv: int, cf: int, stable: bool = False):
+    def _scatter(self, nodal, g, fext, cm: int, cv: int, cf: int, stable: str = ""):
         """P2G of the chosen columns into the kept ``nodal`` (vector, array), summed over
-        ranks; with ``stable`` also this rank's stable time of the state (else inf)."""
+        ranks; with ``stable`` ("exact" or "bound") also this rank's stable time of the state
+        or a lower bound of it (:func:`fempm.kernels.lumped._scatter_kernel`; else inf)."""
         s = self.solver
         p = s.particles
         f = p.fields
@@ -153,14 +162,24 @@ class LumpedPointStep:
         out.fill(0.0)
         h, c = (s.h_cell, self._wave_speeds()) if stable else (np.zeros(0), np.zeros(0))
         local = self.kernels.scatter(p.cells, p.X, self.K, self.cell_dofs, p.mass, f["v"], p.volume, f["sigma"], g,
-                                     fext, out, cm, cv, cf, h, f["body"], self.modulus, c)
+                                     fext, out, cm, cv, cf, h, f["body"], self.modulus, c, bound=stable == "bound")
         sum_ghosts(vec)
         return out, local
 
+    def _stable_time(self) -> float:
+        r"""The stable time of the state, :math:`\min_p h_{c(p)} / (c_p + |v_p|)` over all ranks."""
+        s = self.solver
+        p = s.particles
+        f = p.fields
+        local = self.kernels.scatter(p.cells, p.X, self.K, self.cell_dofs, p.mass, f["v"], p.volume, f["sigma"],
+                                     np.zeros(self.d), np.zeros((0, self.d)), np.zeros((0, 0)), -1, -1, -1, s.h_cell,
+                                     f["body"], self.modulus, self._wave_speeds())
+        return -p.comm.allreduce(-local, op=MPI.MAX)
+
     def _g2p(self, v_new, v_old, dt, *, blend: bool, kinematics: bool, move: bool, remap=None):
         """One particle pass (:func:`fempm.kernels.lumped.kernels_for`); checks J (collective)
-        after a kinematics pass; returns (#non-finite particles, which left their cells (a
-        moving pass; else an empty mask))."""
+        after a kinematics pass; returns (#non-finite particles, which left their cells and
+        are not in an owned neighbour (a moving pass; else an empty mask))."""
         s = self.solver
         p = s.particles
         f = p.fields
@@ -171,7 +190,7 @@ class LumpedPointStep:
         counts = self.kernels.g2p_update(p.cells, p.X, self.K, self.cell_dofs, v_new, v_old, float(opts.flip),
                                          float(dt), blend, kinematics, move, opts.position == "particle", p.x, f["v"],
                                          f["F"], f["volume0"], p.volume, f["sigma"], f["body"], self.law, self.lam,
-                                         self.mu, L, self.x0, p.locator.tol, left, p.mass,
+                                         self.mu, L, self.x0, p.locator.tol, left, *p.locator.vertex_star(), p.mass,
                                          remap if remap is not None else np.zeros((0, self.d)))
         nonfinite_j, inverted, jmin, jmax, nonfinite = counts
         if kinematics:
@@ -211,6 +230,14 @@ class LumpedPointStep:
         self.solver._apply_bcs(v_new)
         return v_new
 
+    def _grid_update(self, nodal, cf: int, active_min: float, weak_max: float, dt: float) -> tuple:
+        """(v, v^+): :meth:`_grid_velocity` and :meth:`_advance` in one pass over the dofs, where
+        every boundary condition is a zero component (:attr:`fused`)."""
+        v_old, v_new = np.empty((self.num_dofs, self.d)), np.empty((self.num_dofs, self.d))
+        kl.grid_update(nodal, 1, cf, self.free, active_min, weak_max, float(dt), float(self.options.damping),
+                       v_old, v_new)
+        return v_old, v_new
+
     def _state(self) -> tuple:
         """Identities of the particle arrays the passes read and check."""
         p = self.solver.particles
@@ -232,19 +259,27 @@ class LumpedPointStep:
         self._since_sort += 1
         g, fext = self._external(s.t)
         usf = opts.scheme == "USF"
-        nodal, local = self._scatter(self._nodal, g, fext, 0, 1, -1 if usf else 1 + d, stable=True)
+        # a given dt is checked against a lower bound of the stable time, and against the time
+        # itself only where the bound does not show it stable
+        nodal, local = self._scatter(self._nodal, g, fext, 0, 1, -1 if usf else 1 + d,
+                                     stable="exact" if dt is None else "bound")
         top = np.array([nodal[: self.num_owned, 0].max(initial=0.0), -local])
         p.comm.Allreduce(MPI.IN_PLACE, top, op=MPI.MAX)  # one collective: the largest mass and the stable time
-        top, stable = float(top[0]), -opts.cfl * float(top[1])
-        stable *= self._stable_factor(nodal, dt is None)
-        dt = s._time_step(stable, dt, dt_max)
+        top, state = float(top[0]), -float(top[1])
+        factor = self._stable_factor(nodal, dt is None)
+        if dt is not None and not dt <= state * BOUND_SAFETY * factor:
+            state = self._stable_time()
+        dt = s._time_step(opts.cfl * state * factor, dt, dt_max)
         active_min, weak_max = SUPPORT_TOL * top, opts.mass_cutoff * top
-        v_old = self._grid_velocity(nodal[:, :1], nodal, 1, active_min, guess=s.grid_velocity)
-        force, cf = nodal, 1 + d
-        if usf:  # stress from the mapped velocity, then the forces
-            nonfinite = self._g2p(v_old, v_old, dt, blend=False, kinematics=True, move=False)[0]
-            force, cf = self._scatter(self._nodal_d, g, fext, -1, -1, 0)[0], 0
-        v_new = self._advance(nodal[:, :1], force, cf, active_min, weak_max, dt, v_old)
+        if self.fused and not usf:
+            v_old, v_new = self._grid_update(nodal, 1 + d, active_min, weak_max, dt)
+        else:
+            v_old = self._grid_velocity(nodal[:, :1], nodal, 1, active_min, guess=s.grid_velocity)
+            force, cf = nodal, 1 + d
+            if usf:  # stress from the mapped velocity, then the forces
+                nonfinite = self._g2p(v_old, v_old, dt, blend=False, kinematics=True, move=False)[0]
+                force, cf = self._scatter(self._nodal_d, g, fext, -1, -1, 0)[0], 0
+            v_new = self._advance(nodal[:, :1], force, cf, active_min, weak_max, dt, v_old)
         if opts.scheme == "MUSL":  # blend, re-map the momenta, then the kinematics and motion
             vec, mom = self._nodal_d
             mom.fill(0.0)

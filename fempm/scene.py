@@ -21,6 +21,14 @@ from fempm.stepping import ExplicitSolver, Loads, SimulationError, StepOptions
 from fempm.transfer import SingularMassError
 
 
+def check_counts(**counts: int) -> None:
+    """Scene builders' counts (cells, particles per cell, frames, ...) must be positive
+    integers: a ValueError naming the first that is not."""
+    for name, value in counts.items():
+        if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < 1:
+            raise ValueError(f"{name}={value!r} must be a positive integer")
+
+
 @dataclass
 class Scene:
     """Everything a run needs.
@@ -53,6 +61,8 @@ class Scene:
     def __post_init__(self):
         if not (0.0 < self.t_end < np.inf):
             raise ValueError(f"t_end={self.t_end} must be a positive, finite time")
+        if isinstance(self.frames, bool) or not isinstance(self.frames, (int, np.integer)) or self.frames < 0:
+            raise ValueError(f"frames={self.frames!r} must be a non-negative integer")
         if self.dt is not None and not (np.isfinite(self.dt) and self.dt > 0):
             raise ValueError(f"dt={self.dt} must be a positive number (or None for the CFL step)")
 

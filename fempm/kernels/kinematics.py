@@ -40,7 +40,7 @@ def linear_elastic_stress_numpy(F, lam, mu):
 try:
     from numba import njit
 
-    @njit(cache=True)
+    @njit(inline="always")
     def _det(A, p):  # pragma: no cover - compiled
         d = A.shape[1]
         if d == 1:
@@ -66,6 +66,7 @@ try:
     @njit(inline="always")
     def neo_hookean_at(F, p, d, J, lam, mu, sigma):  # pragma: no cover - compiled
         """sigma[p] of the neo-Hookean law from F[p] (d x d) with J = det F[p] > 0."""
+        inv = 1.0 / J
         vol = lam * np.log(J)
         for i in range(d):
             for j in range(d):
@@ -73,9 +74,9 @@ try:
                 for k in range(d):
                     b += F[p, i, k] * F[p, j, k]
                 if i == j:
-                    sigma[p, i, j] = (mu * (b - 1.0) + vol) / J
+                    sigma[p, i, j] = (mu * (b - 1.0) + vol) * inv
                 else:
-                    sigma[p, i, j] = mu * b / J
+                    sigma[p, i, j] = mu * b * inv
 
     @njit(inline="always")
     def linear_elastic_at(F, p, d, lam, mu, sigma):  # pragma: no cover - compiled

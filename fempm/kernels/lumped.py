@@ -46,7 +46,7 @@ if AVAILABLE:
     from numba import njit
 
     from fempm.kernels.kinematics import _det, linear_elastic_at, neo_hookean_at
-    from fempm.kernels.shape import inside_after_pull_back, shape
+    from fempm.kernels.shape import inside_after_pull_back, shape, star_search
 
     @njit(cache=True, error_model="numpy")
     def grid_velocity(mass, mom, cv, free, active_min, v):  # pragma: no cover
@@ -72,31 +72,72 @@ if AVAILABLE:
                     a = 0.0
                 v_new[i, j] = v_old[i, j] + dt * a
 
+    @njit(cache=True, error_model="numpy")
+    def grid_update(nodal, cv, cf, free, active_min, weak_max, dt, damping, v_old, v_new):  # pragma: no cover
+        """:func:`grid_velocity` then :func:`grid_advance` in one pass over the dofs, from one
+        nodal array with the mass in column 0, the momenta from column ``cv``, the forces from
+        ``cf`` (one division per dof: the momenta and forces are multiplied by :math:`1/m_i`)."""
+        nd, d = v_old.shape
+        for i in range(nd):
+            m = nodal[i, 0]
+            active = m > active_min
+            inv = 1.0 / m if active else 0.0
+            weak = m <= weak_max
+            for j in range(d):
+                on = active and free[i, j]
+                vo = nodal[i, cv + j] * inv if on else 0.0
+                a = nodal[i, cf + j] * inv if on else 0.0
+                a -= damping * vo
+                if weak:
+                    a = 0.0
+                v_old[i, j] = vo
+                v_new[i, j] = vo + dt * a
+
 
 @functools.cache
 def kernels_for(cell: str) -> SimpleNamespace:
-    """The particle passes ``scatter`` and ``g2p_update`` compiled for one cell type."""
-    D, NK, SIMPLEX = CELLS[cell]
+    """The particle passes ``scatter`` and ``g2p_update`` compiled for one cell type (for
+    triangles and quadrilaterals the scalar ones of :mod:`fempm.kernels.planar`)."""
+    from fempm.kernels import planar
 
-    def scatter(cells, X, K, cell_dofs, mass, v, volume, sigma, g, fext, out, cm, cv, cf, h, body, modulus, c):
-        """See :func:`_scatter_kernel`; the columns (negative: skipped) choose the compiled variant."""
-        kernel = _scatter_kernel(cell, cm >= 0, cv >= 0, cf >= 0, h.shape[0] > 0, fext.shape[0] > 0)
+    scatter_kernel, g2p_kernel = _scatter_kernel, _g2p_kernel
+    if cell in ("triangle", "quadrilateral"):
+        simplex = cell == "triangle"
+        scatter_kernel = functools.partial(_planar, planar.scatter_kernel, simplex)
+        g2p_kernel = functools.partial(_planar, planar.g2p_kernel, simplex)
+
+    def scatter(cells, X, K, cell_dofs, mass, v, volume, sigma, g, fext, out, cm, cv, cf, h, body, modulus, c,
+                bound=False):
+        """See :func:`_scatter_kernel`; the columns (negative: skipped) choose the compiled
+        variant; with cell sizes ``h`` the stable time (a lower bound of it with ``bound``)."""
+        kernel = scatter_kernel(cell, cm >= 0, cv >= 0, cf >= 0, h.shape[0] > 0, fext.shape[0] > 0, bool(bound))
         return kernel(cells, X, K, cell_dofs, mass, v, volume, sigma, g, fext, out, h, body, modulus, c)
 
     def g2p_update(cells, X, K, cell_dofs, v_new, v_old, flip, dt, blend, kinematics, move, *rest):
         """See :func:`_g2p_kernel`; the flags choose the compiled variant (a momentum array
         ``rest[-1]`` with a row per dof: the blend pass also re-maps the momenta, MUSL)."""
         remap = blend and rest[-1].shape[0] > 0
-        return _g2p_kernel(cell, bool(blend), bool(kinematics), bool(move), remap)(cells, X, K, cell_dofs, v_new,
+        return g2p_kernel(cell, bool(blend), bool(kinematics), bool(move), remap)(cells, X, K, cell_dofs, v_new,
                                                                                   v_old, flip, dt, *rest)
 
     return SimpleNamespace(scatter=scatter, g2p_update=g2p_update)
 
 
+def _planar(make, simplex: bool, cell: str, *flags):
+    """A kernel of :mod:`fempm.kernels.planar` in the place of a generic one of ``cell``."""
+    return make(simplex, *flags)
+
+
 @functools.cache
-def _scatter_kernel(cell: str, with_mass: bool, with_momentum: bool, with_force: bool, with_dt: bool, has_fext: bool):
-    """The P2G pass of :func:`kernels_for` with its terms fixed at compile time: the columns of
-    ``out`` are [mass | momentum (d) | force (d)], of the terms present."""
+def _scatter_kernel(cell: str, with_mass: bool, with_momentum: bool, with_force: bool, with_dt: bool, has_fext: bool,
+                    bound: bool = False):
+    r"""The P2G pass of :func:`kernels_for` with its terms fixed at compile time: the columns of
+    ``out`` are [mass | momentum (d) | force (d)], of the terms present.
+
+    ``with_dt``: also the stable time of the state, :math:`\min_p h_{c(p)} / (c_p + |v_p|)`;
+    with ``bound`` a lower bound of it without square roots per particle (a given step only
+    needs to be checked against it), from :math:`(c + |v|)^2 \le 2 (c^2 + |v|^2)`:
+    :math:`\big(2 \max_p (c_p^2 + |v_p|^2) / h_{c(p)}^2\big)^{-1/2}`."""
     D, NK, SIMPLEX = CELLS[cell]
     CV = 1 if with_mass else 0
     CF = CV + (D if with_momentum else 0)
@@ -110,7 +151,7 @@ def _scatter_kernel(cell: str, with_mass: bool, with_momentum: bool, with_force:
         mv = np.empty(D)
         fe = np.empty(D)
         sg = np.empty((D, D))
-        best = np.inf
+        best = 0.0 if bound else np.inf
         for p in range(len(cells)):
             cp = cells[p]
             shape(X, p, K, cp, SIMPLEX, D, NK, N, G)
@@ -126,7 +167,16 @@ def _scatter_kernel(cell: str, with_mass: bool, with_momentum: bool, with_force:
                         fe[j] += fext[p, j]
                     for e in range(D):
                         sg[j, e] = sigma[p, j, e]
-            if with_dt:
+            if with_dt and bound:
+                mod = modulus[body[p]]
+                hp = h[cp]
+                if mod > 0.0:
+                    r = (mod * V + m * speed) / (m * hp * hp)
+                else:
+                    r = (c[p] * c[p] + speed) / (hp * hp)
+                if not r <= best:  # NaN propagates
+                    best = r
+            elif with_dt:
                 mod = modulus[body[p]]
                 wave = np.sqrt(mod / (m / V)) if mod > 0.0 else c[p]
                 total = wave + np.sqrt(speed)
@@ -147,7 +197,7 @@ def _scatter_kernel(cell: str, with_mass: bool, with_momentum: bool, with_force:
                         for e in range(D):
                             s += sg[j, e] * G[a, e]
                         out[i, CF + j] += w * fe[j] - V * s
-        return best
+        return 1.0 / np.sqrt(2.0 * best) if bound else best
 
     return scatter
 
@@ -159,14 +209,17 @@ def _g2p_kernel(cell: str, blend: bool, kinematics: bool, move: bool, remap: boo
 
     @njit(cache=True, error_model="numpy")
     def g2p_update(cells, X, K, cell_dofs, v_new, v_old, flip, dt, by_particle,
-                   x, v, F, volume0, volume, sigma, body, law, lam, mu, L, x0, tol, left, mass, mom):  # pragma: no cover
+                   x, v, F, volume0, volume, sigma, body, law, lam, mu, L, x0, tol, left, c2v, v_offsets, v_cells,
+                   num_cells, mass, mom):  # pragma: no cover
         """One pass over the particles, in place. ``blend``: ``v`` <- the FLIP/PIC blend of
         ``v_new`` against ``v_old``. ``kinematics``: ``F``, ``volume`` and the compiled laws'
         ``sigma`` from :math:`L_p` of ``v_new`` (and :math:`L_p` into ``L`` when it has a row
         per particle). ``move``: ``x`` += dt times the grid velocity (or, ``by_particle``, the
         particle's), then ``X`` <- the reference coordinates in the same cell (origins ``x0``)
-        and ``left`` <- whether they lie outside it (beyond ``tol``). Returns (#non-finite J,
-        #J <= 0, min J, max J, #non-finite x or v)."""
+        and, where they lie outside it (beyond ``tol``), ``cells`` and ``X`` <- the first cell
+        of the vertex star (``c2v``, ``v_offsets``, ``v_cells``, ``num_cells``:
+        :func:`fempm.kernels.shape.star_search`) that contains the particle, else ``left`` <-
+        True. Returns (#non-finite J, #J <= 0, min J, max J, #non-finite x or v)."""
         n = len(cells)
         N = np.empty(NK)
         G = np.empty((NK, D))
@@ -239,7 +292,13 @@ def _g2p_kernel(cell: str, blend: bool, kinematics: bool, move: bool, remap: boo
                     ok = ok and np.isfinite(x[p, j]) and np.isfinite(v[p, j])
                 if not ok:
                     nonfinite += 1
-                left[p] = not inside_after_pull_back(x, p, x0, K, c, SIMPLEX, D, tol, X)
+                out = not inside_after_pull_back(x, p, x0, K, c, SIMPLEX, D, tol, X)
+                if out:  # the neighbours, while their geometry is in cache
+                    e = star_search(x, p, x0, K, c, c2v, v_offsets, v_cells, num_cells, SIMPLEX, D, tol, X)
+                    if e >= 0:
+                        cells[p] = e
+                        out = False
+                left[p] = out
         return nonfinite_j, inverted, jmin, jmax, nonfinite
 
     return g2p_update

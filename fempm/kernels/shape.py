@@ -98,24 +98,31 @@ if njit is not None:
             else:
                 inside[p] = inside_after_pull_back(x, p, x0, K, cells[p], simplex, K.shape[2], tol, X)
 
+    @njit(inline="always")
+    def star_search(x, p, x0, K, c0, c2v, v_offsets, v_cells, num_cells, simplex, t, tol, X):  # pragma: no cover
+        """The lowest-numbered cell below ``num_cells`` other than ``c0`` sharing a vertex with
+        it (cell -> vertices ``c2v``, vertex -> cells ``v_offsets``/``v_cells``) that contains
+        point ``x[p]`` within ``tol``, and ``X[p]`` its reference coordinates there; -1 (and
+        ``X[p]`` undefined) if none does."""
+        best = -1
+        for a in range(c2v.shape[1]):
+            v = c2v[c0, a]
+            for q in range(v_offsets[v], v_offsets[v + 1]):
+                e = v_cells[q]
+                if e >= num_cells or e == c0 or (best >= 0 and e >= best):
+                    continue
+                if inside_after_pull_back(x, p, x0, K, e, simplex, t, tol, X):
+                    best = e
+        if best >= 0:
+            inside_after_pull_back(x, p, x0, K, best, simplex, t, tol, X)
+        return best
+
     @njit(cache=True)
     def _near_pull_back(previous, x, x0, K, c2v, v_offsets, v_cells, num_cells, simplex, tol, cells,
                         X):  # pragma: no cover - compiled
         t = K.shape[1]
         for p in range(len(previous)):
-            c0 = previous[p]
-            best = -1
-            for a in range(c2v.shape[1]):
-                v = c2v[c0, a]
-                for q in range(v_offsets[v], v_offsets[v + 1]):
-                    e = v_cells[q]
-                    if e >= num_cells or e == c0 or (best >= 0 and e >= best):
-                        continue
-                    if inside_after_pull_back(x, p, x0, K, e, simplex, t, tol, X):
-                        best = e
-            cells[p] = best
-            if best >= 0:
-                inside_after_pull_back(x, p, x0, K, best, simplex, t, tol, X)
+            cells[p] = star_search(x, p, x0, K, previous[p], c2v, v_offsets, v_cells, num_cells, simplex, t, tol, X)
 
 
 #: cell type -> (dimension, vertices, simplex)

@@ -8,7 +8,7 @@ from mpi4py import MPI
 
 from fempm.boundary import fixed
 from fempm.materials import LinearElastic
-from fempm.scene import Scene
+from fempm.scene import Scene, check_counts
 from fempm.seeding import create_particles
 from fempm.stepping import StepOptions
 
@@ -24,6 +24,9 @@ def vibrating_bar(
     Exact: v_cm(t) = v0 / (beta L) cos(omega t), beta = (2 mode - 1) pi / (2 L), omega = beta c.
     The mesh extends 4 cells past the free end so the bar can stretch.
     """
+    check_counts(cells=cells, ppc=ppc, mode=mode, dim=dim)
+    if dim not in (1, 2):
+        raise ValueError(f"dim={dim} must be 1 or 2")
     h = L / cells
     if dim == 1:
         mesh = dm.create_interval(comm, cells + 4, [0.0, L + 4 * h])

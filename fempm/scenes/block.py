@@ -10,7 +10,7 @@ from fempm.boundary import fixed
 from fempm.domains import box_corners
 from fempm.materials import NeoHookean
 from fempm.particles import Particles
-from fempm.scene import Scene
+from fempm.scene import Scene, check_counts
 from fempm.stepping import Loads, StepOptions
 
 
@@ -29,6 +29,7 @@ def hanging_block(
     ``fields["lattice"]`` (i, j) for the neighbour-gap measure; with ``domain="cpdi2"`` each particle is its lattice
     square, ``fields["corners"]``.
     """
+    check_counts(cells=cells, ppc=ppc)
     h = 1.0 / cells
     box = [[-0.5, -4.0], [1.5, h]]
     if mesh == "structured":

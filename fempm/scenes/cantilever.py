@@ -8,7 +8,7 @@ from mpi4py import MPI
 
 from fempm.boundary import fixed
 from fempm.materials import LinearElastic, NeoHookean
-from fempm.scene import Scene
+from fempm.scene import Scene, check_counts
 from fempm.seeding import create_particles
 from fempm.stepping import Loads, StepOptions
 
@@ -54,6 +54,7 @@ def cantilever(
     rotation by :math:`\theta` strains by :math:`\cos\theta - 1`: about 25 % of the bending
     strain near the tip here).
     """
+    check_counts(cells=cells, ppc=ppc, degree=degree)
     if material not in ("neo-hookean", "linear"):
         raise ValueError(f"unknown option material={material!r}; expected neo-hookean or linear")
     hy = H / cells

@@ -24,7 +24,7 @@ from fempm.boundary import fixed
 from fempm.domains import domain_geometry
 from fempm.materials import LinearElastic
 from fempm.particles import Particles
-from fempm.scene import Scene
+from fempm.scene import Scene, check_counts
 from fempm.stepping import Loads, StepOptions
 
 CORNERS = np.array([[0.0, 0.0], [48.0, 44.0], [48.0, 60.0], [0.0, 44.0]])  # A, B, C, D
@@ -58,6 +58,7 @@ def cook_membrane(
     two particles per cell size and direction). ``damping``
     defaults to :math:`2\\omega_1` with :math:`\\omega_1` estimated from a cantilever of the
     panel's mean height; ``t_end`` to :math:`12 / \\omega_1`."""
+    check_counts(degree=degree)
     from fempm.meshes import unstructured_polygon
 
     mesh = unstructured_polygon(comm, CORNERS, h)

@@ -9,7 +9,7 @@ from mpi4py import MPI
 from fempm.boundary import slip
 from fempm.materials import NewtonianTait
 from fempm.health import Health
-from fempm.scene import Scene
+from fempm.scene import Scene, check_counts
 from fempm.seeding import create_particles
 from fempm.stepping import Loads, StepOptions
 
@@ -44,6 +44,7 @@ def dam_break(
     :math:`\rho = \rho_0 (1 + \rho_0 g (2a - y) / \kappa)^{1/\gamma}` and its stress
     :math:`-p I`. Reference: the surge front of Martin and Moyce (1952), ``MARTIN_MOYCE``.
     """
+    check_counts(cells=cells, ppc=ppc)
     h = a / cells
     nx, ny = int(round(box / h)), int(round(3 * a / h))
     mesh = dm.create_rectangle(comm, [[0.0, 0.0], [nx * h, ny * h]], [nx, ny], dm.CellType.quadrilateral)

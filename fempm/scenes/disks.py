@@ -7,7 +7,7 @@ import numpy as np
 from mpi4py import MPI
 
 from fempm.materials import LinearElastic
-from fempm.scene import Scene
+from fempm.scene import Scene, check_counts
 from fempm.seeding import create_particles
 from fempm.stepping import StepOptions
 
@@ -25,6 +25,7 @@ def two_disks(
     ``mesh``: "structured" (quadrilaterals, ``cells`` per side) or "unstructured"
     (triangles from ``meshes/unit_square_tri.msh``).
     """
+    check_counts(cells=cells, ppc=ppc)
     if mesh == "structured":
         m = dm.create_unit_square(comm, cells, cells, dm.CellType.quadrilateral)
     elif mesh == "unstructured":

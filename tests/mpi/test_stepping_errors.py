@@ -37,6 +37,19 @@ def test_time_step_above_stability_limit_is_refused():
         solver.step(10.0 * solver.stable_dt())
 
 
+def test_a_given_step_near_the_limit_is_checked_exactly():
+    """The compiled step checks a given dt against a lower bound of the stable time first
+    (at rest 1/sqrt(2) of it) and against the time itself only above the bound: a dt just
+    below the limit is taken, one just above is refused."""
+    solver = block_scene().solver()
+    limit = solver.stable_dt() / solver.options.cfl
+    solver.step(0.99 * limit)
+    assert solver._lumped_step is not None and solver.step_count == 1
+    limit = solver.stable_dt() / solver.options.cfl
+    with pytest.raises(SimulationError, match="exceeds the stability limit"):
+        solver.step(1.01 * limit)
+
+
 def test_inverted_deformation_is_reported():
     solver = block_scene().solver()
     solver.particles.fields["F"][:, 0, 0] = -1.0  # J < 0 already

@@ -36,3 +36,50 @@ def test_frame_times_are_plain_numbers(tmp_path):
     assert len(rows) >= 3
     times = [float(t) for _, t in rows]  # 'np.float64(...)' would not parse
     assert times[0] == 0.0 and times == sorted(times) and times[-1] > 0.4
+
+
+@pytest.mark.skipif(MPI.COMM_WORLD.size > 1, reason="command-line output on one rank")
+def test_version_and_the_list_of_scenes(capsys):
+    from fempm import __version__
+    from fempm.cli import main
+    from fempm.scenes import SCENES
+
+    with pytest.raises(SystemExit) as e:
+        main(["--version"])
+    assert e.value.code == 0 and capsys.readouterr().out.strip() == f"fempm {__version__}"
+    assert main(["run", "--help"]) == 0
+    lines = capsys.readouterr().out.splitlines()
+    for name in SCENES:  # one line each, with its description
+        (line,) = [x for x in lines if x.split()[:1] == [name]]
+        assert len(line.split()) > 4
+
+
+@pytest.mark.skipif(MPI.COMM_WORLD.size > 1, reason="command-line output on one rank")
+@pytest.mark.parametrize("argv, message", [
+    (["run"], "fempm run: give a scene"),
+    (["run", "nosuch"], "unknown scene 'nosuch'; scenes: bar, disks"),
+    (["run", "bar", "--bogus", "1"], "unknown option --bogus"),
+    (["run", "bar", "--cells", "abc"], "option --cells expects an integer, got 'abc'"),
+    (["run", "bar", "--cells", "0"], "cells"),
+    (["run", "bar", "--t-end", "-1"], "t_end"),
+    (["run", "bar", "--cfl", "-0.5"], "cfl"),
+    (["run", "bar", "--scheme", "XYZ"], "scheme"),
+    (["run", "bar", "--j-min", "x"], "option --j-min expects a number"),
+])
+def test_usage_errors_exit_2_with_one_line(argv, message, capsys):
+    from fempm.cli import main
+
+    assert main(argv) == 2
+    err = capsys.readouterr().err
+    assert message in err and len(err.strip().splitlines()) == 1 and "Traceback" not in err
+
+
+@pytest.mark.skipif(MPI.COMM_WORLD.size > 1, reason="command-line output on one rank")
+def test_an_unwritable_output_folder_is_a_usage_error(tmp_path, capsys):
+    from fempm.cli import main
+
+    blocker = tmp_path / "f"
+    blocker.write_text("a file")
+    assert main(["run", "bar", "--cells", "8", "--t-end", "0.1", "--out", str(blocker / "out")]) == 2
+    err = capsys.readouterr().err
+    assert f"cannot write the output folder '{blocker / 'out'}'" in err and "Not a directory" in err

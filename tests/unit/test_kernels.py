@@ -100,3 +100,73 @@ def test_closed_form_basis_and_pull_back_equal_basix(cell):
     X, inside = shape.affine_pull_back(p.cells, p.x + 2.0, geo._x0, geo._K, cell in ("interval", "triangle",
                                                                                      "tetrahedron"), 1e-10)
     assert not inside.any()
+
+
+def _pass_state(simplex: bool, seed: int):
+    """Random particles in random affine 2D cells, a random grid, two bodies (neo-Hookean and
+    linear elastic), for the particle passes of fempm.kernels.lumped."""
+    rng = np.random.default_rng(seed)
+    n, ncell, nd, k = 400, 60, 90, 3 if simplex else 4
+    cells = rng.integers(0, ncell, n).astype(np.int32)
+    X = rng.random((n, 2)) * (0.5 if simplex else 1.0)
+    K = rng.standard_normal((ncell, 2, 2)) * 3.0
+    x0 = rng.random((ncell, 2))
+    cell_dofs = rng.integers(0, nd, (ncell, k)).astype(np.int32)
+    F = np.eye(2) + 0.05 * rng.standard_normal((n, 2, 2))
+    c2v = rng.integers(0, 40, (ncell, k)).astype(np.int32)  # a random vertex star
+    order = np.argsort(c2v.ravel(), kind="stable")
+    v_offsets = np.searchsorted(c2v.ravel()[order], np.arange(41)).astype(np.int32)
+    star = (c2v, v_offsets, (order // k).astype(np.int32), ncell - 5)
+    return dict(star=star, cells=cells, X=X, K=K, x0=x0, cell_dofs=cell_dofs, F=F, v=rng.standard_normal((n, 2)),
+                x=x0[cells] + rng.random((n, 2)) * 0.1, v_new=rng.standard_normal((nd, 2)),
+                v_old=rng.standard_normal((nd, 2)), mass=rng.random(n) + 0.5, volume=rng.random(n) + 0.5,
+                volume0=rng.random(n) + 0.5, sigma=rng.standard_normal((n, 2, 2)),
+                body=rng.integers(0, 3, n).astype(np.int32), law=np.array([1, 2, 0]), lam=np.array([3.0, 2.0, 0.0]),
+                mu=np.array([1.0, 1.5, 0.0]), modulus=np.array([5.0, 0.0, 6.0]), c=rng.random(n),
+                h=rng.random(ncell) + 0.1, g=np.array([0.3, -9.8]), fext=rng.standard_normal((n, 2)))
+
+
+@pytest.mark.parametrize("cell", ["triangle", "quadrilateral"])
+def test_planar_kernels_equal_the_generic_ones_bit_for_bit(cell):
+    """fempm.kernels.planar (scalar 2D) against the dimension-generic passes of
+    fempm.kernels.lumped: identical results, not only to round-off, in variants that together
+    run every part (those of USL with its bound of the stable time, USF's two and MUSL's two)."""
+    import itertools
+
+    from fempm.kernels import lumped, planar
+
+    simplex = cell == "triangle"
+    for flags in [(True, True, True, True, True, True), (True, True, False, True, False, False),
+                  (False, False, True, False, True, False)]:
+        with_dt, has_fext = flags[3], flags[4]
+        results = []
+        for kernel in (lumped._scatter_kernel(cell, *flags), planar.scatter_kernel(simplex, *flags)):
+            s = _pass_state(simplex, 1)
+            out = np.zeros((90, 5))
+            t = kernel(s["cells"], s["X"], s["K"], s["cell_dofs"], s["mass"], s["v"], s["volume"], s["sigma"], s["g"],
+                       s["fext"] if has_fext else np.zeros((0, 2)), out, s["h"] if with_dt else np.zeros(0),
+                       s["body"], s["modulus"], s["c"])
+            results.append((out, t))
+        assert np.array_equal(results[0][0], results[1][0]) and results[0][1] == results[1][1], flags
+        if with_dt:
+            assert np.isfinite(results[0][1]) and results[0][1] > 0
+    for (blend, kinematics, move, remap), by_particle, keep_L in itertools.product(
+            [(True, True, True, False), (True, False, False, True), (False, True, True, False)], [False, True],
+            [False, True]):
+        results = []
+        for kernel in (lumped._g2p_kernel(cell, blend, kinematics, move, remap),
+                       planar.g2p_kernel(simplex, blend, kinematics, move, remap)):
+            s = _pass_state(simplex, 2)
+            n = len(s["cells"])
+            L = np.zeros((n if keep_L else 0, 2, 2))
+            left, mom = np.zeros(n, dtype=np.bool_), np.zeros((90 if remap else 0, 2))
+            counts = kernel(s["cells"], s["X"], s["K"], s["cell_dofs"], s["v_new"], s["v_old"], 0.9, 1e-2,
+                            by_particle, s["x"], s["v"], s["F"], s["volume0"], s["volume"], s["sigma"], s["body"],
+                            s["law"], s["lam"], s["mu"], L, s["x0"], 1e-10, left, *s["star"], s["mass"], mom)
+            results.append((counts, [s[k] for k in ("X", "x", "v", "F", "volume", "sigma", "cells")], L, left, mom))
+        (c0, a0, L0, l0, m0), (c1, a1, L1, l1, m1) = results
+        assert c0 == c1 and all(np.array_equal(a, b) for a, b in zip(a0, a1))
+        assert np.array_equal(L0, L1) and np.array_equal(l0, l1) and np.array_equal(m0, m1)
+        if move:  # some particles stay in their cells, some move to a neighbour, some are not found
+            moved = np.count_nonzero(a0[-1] != _pass_state(simplex, 2)["cells"])
+            assert 0 < np.count_nonzero(l0) and 0 < moved and np.count_nonzero(l0) + moved < len(l0)
