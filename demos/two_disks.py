@@ -7,7 +7,7 @@ conserved to round-off; we plot kinetic, strain and total energy against time.
 
 The default runs on the unstructured triangle mesh `meshes/unit_square_tri.msh` (h = 0.05);
 `--mesh structured` uses 20 x 20 quadrilaterals. Outputs: `energies.csv`, particle frames
-(`particles/*.vtk` for ParaView, `frames/*.png`), the grid velocity (`grid_velocity.bp`), `energies.png`,
+(`particles.pvd` for ParaView and pyvista, `frames/*.png`), the grid velocity (`grid_velocity.pvd`), `energies.png`,
 `disks.png` and `summary.json`.
 
 Run: `python demos/two_disks.py [--mesh structured] [--mass consistent] [--out output/disks]`

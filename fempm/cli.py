@@ -5,23 +5,24 @@
     python -m fempm study convergence [--quick] [--problems NAME ...] [--out DIR]
     python -m fempm study stability [--quick] [--cases NAME ...] [--out DIR]
     python -m fempm study error-vs-time [--quick] [--problems NAME ...] [--out DIR]
-    python -m fempm run SCENE [--out DIR] [--option value ...]
+    python -m fempm run SCENE [--out DIR] [--overwrite] [--checkpoint-every N] [--option value ...]
+    python -m fempm resume OUT [--t-end T] [--checkpoint-every N]
     python -m fempm run --help          (the scenes, a line each)
     python -m fempm --version
 
 Scene options are the keyword arguments of the scene builders in :mod:`fempm.scenes`
 (``python -m fempm run disks --help`` lists them). A usage error (an unknown scene or option,
 a value of the wrong type or out of range, an output folder that cannot be created) prints one
-line and exits with code 2; a run stopped by its health limits or a failed step exits with 3.
+line and exits with code 2; a run stopped by its health limits or a failed step exits with 3;
+a run stopped by SIGTERM or SIGINT writes a checkpoint and exits with 128 + the signal
+(``resume`` continues it, :mod:`fempm.checkpoint`).
 """
 
 from __future__ import annotations
 
 import argparse
-import contextlib
 import dataclasses
 import sys
-import traceback
 from pathlib import Path
 
 
@@ -30,9 +31,12 @@ class UsageError(SystemExit):
 
 
 def main(argv: list[str] | None = None) -> int:
-    """The command line; under MPI an exception on one rank ends every rank (:func:`_abort_on_error`)."""
+    """The command line; under MPI an exception on one rank ends every rank
+    (:func:`fempm.abort.abort_on_error`; usage errors, the same on every rank, exit with 2)."""
+    from fempm.abort import abort_on_error
+
     try:
-        with _abort_on_error():
+        with abort_on_error():
             return _main(argv)
     except UsageError as e:
         from mpi4py import MPI
@@ -40,25 +44,6 @@ def main(argv: list[str] | None = None) -> int:
         if MPI.COMM_WORLD.rank == 0:
             print(e, file=sys.stderr)
         return 2
-
-
-@contextlib.contextmanager
-def _abort_on_error():
-    """On more than one rank, an exception that reaches the command line on any rank prints
-    its traceback with the rank and aborts all ranks with exit code 1 (``MPI_Abort``): the
-    other ranks may be waiting in a collective call and would otherwise hang. Argument errors
-    (``SystemExit``) happen on every rank alike and exit normally."""
-    try:
-        yield
-    except (Exception, KeyboardInterrupt):
-        from mpi4py import MPI
-
-        comm = MPI.COMM_WORLD
-        if comm.size == 1:
-            raise
-        sys.stderr.write(f"fempm: rank {comm.rank} of {comm.size} failed; aborting all ranks\n{traceback.format_exc()}")
-        sys.stderr.flush()
-        comm.Abort(1)
 
 
 def _main(argv: list[str] | None) -> int:
@@ -83,6 +68,14 @@ def _main(argv: list[str] | None) -> int:
     runp.add_argument("scene", nargs="?")
     runp.add_argument("--out", type=Path, default=None, help="output folder (default output/SCENE)")
     runp.add_argument("-h", "--help", action="store_true")
+    runp.add_argument("--checkpoint-every", type=int, default=None, metavar="N",
+                      help="write the full state to OUT/checkpoint every N steps and at the end")
+    runp.add_argument("--overwrite", action="store_true", help="replace the outputs of an earlier run in OUT")
+    resume = sub.add_parser("resume", help="continue a run from the checkpoint in its output folder", allow_abbrev=False)
+    resume.add_argument("out", type=Path, help="the output folder of the run")
+    resume.add_argument("--t-end", type=float, default=None, help="run to this time (default: the run's own t_end)")
+    resume.add_argument("--checkpoint-every", type=int, default=None, metavar="N",
+                        help="checkpoint every N steps (default: as the run did)")
     args, rest = parser.parse_known_args(argv)
     if args.command != "run" and rest:
         parser.error(f"unrecognized arguments: {' '.join(rest)}")
@@ -91,6 +84,8 @@ def _main(argv: list[str] | None) -> int:
 
     if args.command == "run":
         return _run(args, rest)
+    if args.command == "resume":
+        return _resume(args)
 
     if args.command == "study" and args.name == "particle-basis":
         from mpi4py import MPI
@@ -220,14 +215,9 @@ def _summary(builder) -> str:
 def _run(args, rest: list[str]) -> int:
     import inspect
 
-    from mpi4py import MPI
 
-    from fempm.io import OutputFolderError
-    from fempm.scene import run
-    from fempm.scenes import SCENES
     from fempm.health import Health
-    from fempm.stepping import SimulationError
-    from fempm.transfer import SingularMassError
+    from fempm.scenes import SCENES
 
     if args.scene is None and args.help:
         print("python -m fempm run SCENE [--out DIR] [--option value ...]; scenes:")
@@ -241,7 +231,7 @@ def _run(args, rest: list[str]) -> int:
         raise UsageError(f"fempm run: unknown scene {args.scene!r}; scenes: {', '.join(SCENES)}")
     builder = SCENES[args.scene]
     if args.help:
-        print(f"python -m fempm run {args.scene} [--out DIR] options (defaults):")
+        print(f"python -m fempm run {args.scene} [--out DIR] [--overwrite] [--checkpoint-every N] options (defaults):")
         for k, v in inspect.signature(builder).parameters.items():
             if k != "comm":
                 print(f"  --{k.replace('_', '-')} {v.default}")
@@ -250,20 +240,81 @@ def _run(args, rest: list[str]) -> int:
             print(f"  --{k.replace('_', '-')} {v}")
         return 0
     health, rest = _health_options(rest)
+    options = _scene_options(builder, rest)
+    if args.checkpoint_every is not None and args.checkpoint_every < 1:
+        raise UsageError(f"fempm run: option --checkpoint-every expects a positive number of steps, got "
+                         f"{args.checkpoint_every}")
+    rebuild = {"scene": args.scene, "options": options, "health": health, "checkpoint_every": args.checkpoint_every}
+    scene = _build(rebuild)
+    return _execute(scene, args.out or Path("output") / args.scene, args.scene, checkpoint_every=args.checkpoint_every,
+                    rebuild=rebuild, overwrite=args.overwrite)
+
+
+def _build(rebuild: dict):
+    """The scene of a command line (name, options, health limits)."""
+    from fempm.scenes import SCENES
+
     try:
-        scene = builder(**_scene_options(builder, rest))
-        scene.health = dataclasses.replace(scene.health, **health)
+        scene = SCENES[rebuild["scene"]](**rebuild["options"])
+        scene.health = dataclasses.replace(scene.health, **rebuild["health"])
     except (ValueError, TypeError) as e:  # the builders and Health check their arguments
-        raise UsageError(f"fempm run {args.scene}: {e}") from None
-    out = args.out or Path("output") / args.scene
+        raise UsageError(f"fempm run {rebuild['scene']}: {e}") from None
+    return scene
+
+
+def _execute(scene, out: Path, name: str, **kwargs) -> int:
+    """Run (or continue) ``scene`` into ``out``; the exit code: 0 done, 3 stopped by a failed
+    step or a health limit, 128 + the signal when interrupted (after a checkpoint)."""
+    from mpi4py import MPI
+
+    from fempm.checkpoint import CheckpointError, RunInterrupted
+    from fempm.io import OutputFolderError
+    from fempm.scene import run
+    from fempm.stepping import SimulationError
+    from fempm.transfer import SingularMassError
+
+    rank0 = MPI.COMM_WORLD.rank == 0
     try:
-        run(scene, out)
-    except OutputFolderError as e:
-        raise UsageError(f"fempm run {args.scene}: {e}") from None
+        run(scene, out, **kwargs)
+    except (OutputFolderError, CheckpointError) as e:
+        raise UsageError(f"fempm {name}: {e}") from None
     except (SimulationError, SingularMassError) as e:
-        if MPI.COMM_WORLD.rank == 0:
-            print(f"\nfempm run {args.scene}: aborted: {e}\n(summary and the failing state in {out})", file=sys.stderr)
+        if rank0:
+            print(f"\nfempm run {name}: aborted: {e}\n(summary and the failing state in {out})", file=sys.stderr)
         return 3
-    if MPI.COMM_WORLD.rank == 0:
-        print(f"wrote {out}/summary.json, energies.csv, particles/, grid_velocity.bp, grid_stress.bp")
+    except RunInterrupted as e:
+        if rank0:
+            print(f"\nfempm run {name}: {e}; continue with: python -m fempm resume {out}", file=sys.stderr)
+        return 128 + e.signum
+    if rank0:
+        saved = ", checkpoint/" if kwargs.get("checkpoint_every") or kwargs.get("resume") else ""
+        print(f"wrote {out}/summary.json, energies.csv, particles/, particles.pvd, grid_velocity*.pvd, grid_stress*.pvd{saved}")
     return 0
+
+
+def _resume(args) -> int:
+    """``python -m fempm resume OUT``: rebuild the scene from the checkpoint's command line and
+    continue it (to ``--t-end`` if given)."""
+    from fempm.checkpoint import CheckpointError, manifest
+
+    try:
+        data = manifest(args.out)
+    except (CheckpointError, OSError, ValueError) as e:
+        raise UsageError(f"fempm resume: {e}") from None
+    rebuild = data.get("rebuild")
+    if not rebuild:
+        raise UsageError(f"fempm resume: the run in {str(args.out)!r} was started from Python; continue it with "
+                         "fempm.scene.run(scene, out, resume=True)")
+    scene = _build(rebuild)
+    if args.t_end is not None:
+        if not 0.0 < args.t_end < float("inf"):
+            raise UsageError(f"fempm resume: option --t-end expects a positive, finite time, got {args.t_end}")
+        scene.t_end = args.t_end
+    if scene.t_end <= data["t"]:
+        raise UsageError(f"fempm resume: the run is at t = {data['t']:.6g}, past t_end = {scene.t_end:g}: give a later "
+                         "--t-end")
+    every = args.checkpoint_every if args.checkpoint_every is not None else rebuild.get("checkpoint_every")
+    if every is not None and every < 1:
+        raise UsageError(f"fempm resume: option --checkpoint-every expects a positive number of steps, got {every}")
+    rebuild = {**rebuild, "checkpoint_every": every}
+    return _execute(scene, args.out, rebuild["scene"], checkpoint_every=every, resume=True, rebuild=rebuild)

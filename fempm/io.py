@@ -1,11 +1,12 @@
-"""Output as a run goes: energies CSV (flushed every row), particle frames as VTK PolyData
-(legacy binary, one file per frame, gathered on rank 0), grid velocity and stress with VTXWriter, and a
-JSON summary."""
+"""Output as a run goes: energies CSV (flushed every row), particle frames as VTK XML point
+clouds written by every rank in parallel (:mod:`fempm.vtu`), grid velocity and stress with
+VTK XML as well (:class:`GridSeries`), and a JSON summary."""
 
 from __future__ import annotations
 
 import csv
 import json
+import shutil
 from pathlib import Path
 
 import dolfinx.fem
@@ -14,25 +15,8 @@ import numpy as np
 import numpy.typing as npt
 from mpi4py import MPI
 
+from fempm import vtu
 from fempm.particles import Particles
-
-
-def write_vtk_points(path: Path, x: npt.NDArray, data: dict[str, npt.NDArray]) -> None:
-    """Legacy binary VTK PolyData: points (n, 3) with point data (scalars, vectors, tensors)."""
-    n = len(x)
-    with open(path, "wb") as f:
-        f.write(b"# vtk DataFile Version 3.0\nfempm particles\nBINARY\nDATASET POLYDATA\n")
-        f.write(f"POINTS {n} double\n".encode())
-        f.write(np.ascontiguousarray(x, dtype=">f8").tobytes())
-        f.write(f"\nVERTICES {n} {2 * n}\n".encode())
-        f.write(np.column_stack([np.ones(n), np.arange(n)]).astype(">i4").tobytes())
-        f.write(f"\nPOINT_DATA {n}\n".encode())
-        for name, a in data.items():
-            a = np.asarray(a, dtype=">f8").reshape(n, -1)
-            kind = {1: "SCALARS {} double 1\nLOOKUP_TABLE default", 3: "VECTORS {} double", 9: "TENSORS {} double"}[a.shape[1]]
-            f.write((kind.format(name) + "\n").encode())
-            f.write(a.tobytes())
-            f.write(b"\n")
 
 
 def _pad3(a: npt.NDArray) -> npt.NDArray:
@@ -46,12 +30,31 @@ class OutputFolderError(OSError):
     """The output folder cannot be created or written (raised on every rank alike)."""
 
 
-def make_folder(folder: Path, comm) -> None:
+#: what a run writes into its output folder (glob patterns)
+OUTPUTS = ("summary.json", "energies.csv", "particles", "particles.pvd", "frames", "grid_velocity*", "grid_stress*",
+           "checkpoint", "checkpoint.old", "checkpoint.tmp")
+
+
+def earlier_outputs(folder: Path) -> list[Path]:
+    """The outputs of an earlier run in ``folder`` (:data:`OUTPUTS`)."""
+    return sorted(q for pattern in OUTPUTS for q in Path(folder).glob(pattern)) if Path(folder).is_dir() else []
+
+
+def make_folder(folder: Path, comm, *, keep: bool = True, overwrite: bool = False) -> None:
     """Create ``folder`` (and ``folder/particles``) on rank 0; an :class:`OutputFolderError`
-    on every rank if that fails (collective: no rank is left waiting)."""
+    on every rank if that fails (collective: no rank is left waiting). Unless ``keep`` (a
+    continued run), the outputs of an earlier run there are an error, or removed with
+    ``overwrite`` (only those: :data:`OUTPUTS`)."""
     error = None
-    if comm.rank == 0:
+    earlier = [] if keep or comm.rank != 0 else earlier_outputs(folder)
+    if earlier and not overwrite:
+        error = (f"the output folder {str(folder)!r} holds the outputs of an earlier run "
+                 f"({', '.join(q.name for q in earlier[:4])}); give --overwrite (overwrite=True) to replace them, or "
+                 f"continue it: python -m fempm resume {folder}")
+    elif comm.rank == 0:
         try:
+            for q in earlier:
+                shutil.rmtree(q) if q.is_dir() else q.unlink()
             (folder / "particles").mkdir(parents=True, exist_ok=True)
             probe = folder / ".fempm-write-test"
             probe.touch()
@@ -63,11 +66,49 @@ def make_folder(folder: Path, comm) -> None:
         raise OutputFolderError(error)
 
 
+class GridSeries:
+    """A time series of one grid field in VTK XML (:class:`dolfinx.io.VTKFile`: a ``.pvd`` with
+    a ``.pvtu`` and a ``.vtu`` per rank and frame, read by ParaView and pyvista on a fresh
+    install). Fields of a Lagrange variant VTK cannot show point by point (Bernstein) are
+    interpolated into the standard Lagrange space of the same degree, which holds them exactly."""
+
+    def __init__(self, V: dolfinx.fem.FunctionSpace, path: Path):
+        el = V.element.basix_element
+        name = Path(path).stem.split("_part")[0]
+        shape = V.value_shape
+        self._source = None
+        if V.element.interpolation_ident:
+            self.u = dolfinx.fem.Function(V, name=name)
+        else:
+            out = dolfinx.fem.functionspace(V.mesh, ("Lagrange", el.degree, tuple(shape)))
+            self.u = dolfinx.fem.Function(out, name=name)
+            self._source = dolfinx.fem.Function(V)
+        self.file = dolfinx.io.VTKFile(V.mesh.comm, str(path), "w")
+
+    def write(self, values: npt.NDArray, t: float) -> None:
+        """Write the field with local dof ``values`` (owned and ghost) at time ``t``; collective."""
+        if self._source is None:
+            self.u.x.array[:] = values
+        else:
+            self._source.x.array[:] = values
+            self.u.interpolate(self._source)
+        self.file.write_function(self.u, float(t))
+
+    def close(self) -> None:
+        self.file.close()
+
+
 class RunWriter:
     """Writes a run's outputs into ``folder`` as the run goes (nothing kept only in memory)."""
 
     def __init__(self, folder: Path, particles: Particles, V: dolfinx.fem.FunctionSpace | None = None,
-                 *, png: bool = False):
+                 *, png: bool = False, resume: dict | None = None, overwrite: bool = True):
+        """``resume``: the :meth:`state` of the writer of the run being continued (from its
+        checkpoint): the energies and frames written after it are dropped, the frames go on
+        from its count, and the grid frames go into ``grid_velocity_partK.pvd`` (and
+        ``grid_stress_partK.pvd``) for the K-th continuation.
+        Otherwise the outputs of an earlier run in ``folder`` are removed with ``overwrite``,
+        else refused (:func:`make_folder`)."""
         self.folder = Path(folder)
         self.png = png
         x = particles.mesh.geometry.x
@@ -77,73 +118,103 @@ class RunWriter:
         self.bounds = np.array([lo, hi])
         self.comm = particles.comm
         self.frame = 0
+        self.rows = 0  # energies.csv rows written
+        self.part = 0  # continuations of the run
         self._csv = None
         self._stress_vtx = None
-        make_folder(self.folder, self.comm)
-        self.grid_v = dolfinx.fem.Function(V, name="grid_velocity") if V is not None else None
-        self._vtx = (
-            dolfinx.io.VTXWriter(self.comm, self.folder / "grid_velocity.bp", [self.grid_v], engine="BP4")
-            if V is not None
-            else None
-        )
+        make_folder(self.folder, self.comm, keep=resume is not None, overwrite=overwrite)
+        if resume is not None:
+            self.frame, self.rows, self.part = int(resume["frame"]), int(resume["rows"]), int(resume["part"]) + 1
+            if self.comm.rank == 0:
+                self._truncate()
+            self.comm.Barrier()
+        self._velocity = GridSeries(V, self.folder / self._grid_name("grid_velocity")) if V is not None else None
+        self._stress: GridSeries | None = None
+
+    def _grid_name(self, stem: str) -> str:
+        return f"{stem}.pvd" if self.part == 0 else f"{stem}_part{self.part}.pvd"
+
+    def _truncate(self) -> None:
+        """Drop what the continued run wrote after its checkpoint: energies.csv rows, frame
+        times and particle frames."""
+        energies = self.folder / "energies.csv"
+        if energies.exists():
+            lines = energies.read_text().splitlines(keepends=True)
+            energies.write_text("".join(lines[: 1 + self.rows]))
+        times = self.folder / "particles" / "times.csv"
+        if times.exists():
+            times.write_text("".join(times.read_text().splitlines(keepends=True)[: self.frame]))
+        for frame in (self.folder / "particles").glob("particles_*.*vtu"):
+            if int(frame.stem.split("_")[1]) >= self.frame:
+                frame.unlink()
+
+    def state(self) -> dict:
+        """What a continuation needs (:mod:`fempm.checkpoint`)."""
+        return {"frame": self.frame, "rows": self.rows, "part": self.part}
 
     def energies(self, row: dict) -> None:
+        self.rows += 1
         if self.comm.rank != 0:
             return
         if self._csv is None:
-            self._file = open(self.folder / "energies.csv", "w", newline="")
+            path = self.folder / "energies.csv"
+            append = self.rows > 0 and path.exists()
+            self._file = open(path, "a" if append else "w", newline="")
             self._csv = csv.DictWriter(self._file, fieldnames=list(row))
-            self._csv.writeheader()
+            if not append:
+                self._csv.writeheader()
         self._csv.writerow(row)
         self._file.flush()
 
     def particles(self, particles: Particles, t: float) -> None:
+        """A particle frame at time ``t``, written in parallel (:mod:`fempm.vtu`): each rank's
+        piece ``particles/particles_NNNNN_rRRRRR.vtu``, their index ``particles_NNNNN.pvtu``
+        and the time collection ``particles.pvd``; the frame's time in ``particles/times.csv``.
+        Point data: velocity, stress (9 components), J, id, body. Collective."""
         f = particles.fields
-        local = {
-            "x": _pad3(particles.x),
-            "velocity": _pad3(f["v"]),
-            "stress": _pad3(f["sigma"]).reshape(len(particles), 9),
-            "J": np.linalg.det(f["F"]),
-            "id": particles.ids.astype(float),
-            "body": f["body"].astype(float),
-        }
-        parts = self.comm.gather(local, root=0)
+        n = len(particles)
+        x = _pad3(particles.x)
+        data = {"velocity": _pad3(f["v"]), "stress": _pad3(f["sigma"]).reshape(n, 9), "J": np.linalg.det(f["F"]),
+                "id": particles.ids.astype(np.int64), "body": f["body"].astype(np.int32)}
+        folder, stem = self.folder / "particles", f"particles_{self.frame:05d}"
+        ranks = [r for r, c in enumerate(self.comm.allgather(n)) if c] or [0]  # ranks holding particles
+        if self.comm.rank in ranks:
+            vtu.write_piece(folder / f"{stem}_r{self.comm.rank:05d}.vtu", x, data)
         if self.comm.rank == 0:
-            allp = {k: np.concatenate([p[k] for p in parts]) for k in local}
-            x = allp.pop("x")
-            write_vtk_points(self.folder / "particles" / f"particles_{self.frame:05d}.vtk", x, allp)
-            with open(self.folder / "particles" / "times.csv", "a") as fh:
+            vtu.write_index(folder / f"{stem}.pvtu", [f"{stem}_r{r:05d}.vtu" for r in ranks], x, data)
+            with open(folder / "times.csv", "a") as fh:
                 fh.write(f"{self.frame},{float(t)!r}\n")  # a plain number, not np.float64(...)
-            if self.png:
+            times = [line.split(",") for line in (folder / "times.csv").read_text().splitlines()]
+            vtu.write_collection(self.folder / "particles.pvd",
+                                 [(float(tk), f"particles/particles_{int(k):05d}.pvtu") for k, tk in times])
+        if self.png:  # a picture of all particles: gathered
+            parts = self.comm.gather((x, np.linalg.norm(data["velocity"], axis=1)), root=0)
+            if self.comm.rank == 0:
                 from fempm.plot import plot_particle_frame
 
-                speed = np.linalg.norm(allp["velocity"], axis=1)
-                plot_particle_frame(x, speed, self.folder / "frames" / f"frame_{self.frame:05d}.png",
-                                    title=f"t = {t:.4g}", label="|velocity|", bounds=self.bounds)
+                plot_particle_frame(np.concatenate([q[0] for q in parts]), np.concatenate([q[1] for q in parts]),
+                                    self.folder / "frames" / f"frame_{self.frame:05d}.png", title=f"t = {t:.4g}",
+                                    label="|velocity|", bounds=self.bounds)
         self.frame += 1
 
     def grid(self, v: npt.NDArray, t: float, stress: dolfinx.fem.Function | None = None) -> None:
-        """Grid velocity (``grid_velocity.bp``) and, when given, grid stress (``grid_stress.bp``)
-        at time ``t`` (VTX, open in ParaView). Collective."""
-        if self._vtx is None:
+        """Grid velocity (``grid_velocity.pvd``) and, when given, grid stress
+        (``grid_stress.pvd``) at time ``t`` (:class:`GridSeries`). Collective."""
+        if self._velocity is None:
             return
-        self.grid_v.x.array[:] = v.ravel()
-        self._vtx.write(t)
+        self._velocity.write(v.ravel(), t)
         if stress is not None:
-            if self._stress_vtx is None:
-                self.grid_sigma = dolfinx.fem.Function(stress.function_space, name="grid_stress")
-                self._stress_vtx = dolfinx.io.VTXWriter(self.comm, self.folder / "grid_stress.bp", [self.grid_sigma],
-                                                        engine="BP4")
-            self.grid_sigma.x.array[:] = stress.x.array
-            self._stress_vtx.write(t)
+            if self._stress is None:
+                self._stress = GridSeries(stress.function_space, self.folder / self._grid_name("grid_stress"))
+            self._stress.write(stress.x.array, t)
 
     def summary(self, data: dict) -> None:
         if self.comm.rank == 0:
             (self.folder / "summary.json").write_text(json.dumps(data, indent=2, default=float))
 
     def close(self) -> None:
-        for vtx in (self._vtx, self._stress_vtx):
-            if vtx is not None:
-                vtx.close()
+        for series in (self._velocity, self._stress):
+            if series is not None:
+                series.close()
         if self.comm.rank == 0 and self._csv is not None:
             self._file.close()

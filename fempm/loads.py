@@ -64,7 +64,10 @@ def body_force_at(b, particles, t: float) -> npt.NDArray:
     """The body force per unit mass at the particles (n, d): ``b`` a constant (d,) or a callable
     ``(x, t)`` / ``(x, t, X)`` (see :class:`Loads`); a wrong shape is a ValueError."""
     if not callable(b):
-        return np.broadcast_to(np.asarray(b, float), particles.x.shape)
+        b = np.asarray(b, float)
+        if b.shape != (particles.gdim,):
+            raise ValueError(f"the body force has shape {b.shape}, expected ({particles.gdim},)")
+        return np.broadcast_to(b, particles.x.shape)
     if takes_reference_positions(b):
         acc = b(particles.x, t, particles.fields["X0"])
     else:
@@ -94,5 +97,9 @@ def external_forces(loads, particles, t: float) -> npt.NDArray:
     if loads.body_force is not None:
         f += p.mass[:, None] * body_force_at(loads.body_force, p, t)
     if loads.traction is not None:
-        f += np.asarray(loads.traction(t)) * surface_shares(p)[:, None]
+        traction = np.asarray(loads.traction(t), dtype=np.float64)
+        if traction.shape != f.shape:
+            raise ValueError(f"the traction returned shape {traction.shape} for {len(p)} particles in {p.gdim}D "
+                             f"(expected {f.shape})")
+        f += traction * surface_shares(p)[:, None]
     return f

@@ -180,6 +180,8 @@ class LumpedPointStep:
         """One particle pass (:func:`fempm.kernels.lumped.kernels_for`); checks J (collective)
         after a kinematics pass; returns (#non-finite particles, which left their cells and
         are not in an owned neighbour (a moving pass; else an empty mask))."""
+        from fempm.stepping import law_stress
+
         s = self.solver
         p = s.particles
         f = p.fields
@@ -205,7 +207,7 @@ class LumpedPointStep:
                 rho = p.mass / p.volume
                 for b, (mat, idx) in enumerate(s._material_loop()):
                     if self.law[b] == 0 and len(idx):
-                        f["sigma"][idx] = mat.stress(f["F"][idx], L[idx], f["sigma"][idx], dt, rho[idx])
+                        f["sigma"][idx] = law_stress(mat, f["F"][idx], L[idx], f["sigma"][idx], dt, rho[idx])
                         nonfinite += int(np.count_nonzero(~np.isfinite(f["sigma"][idx]).all(axis=(1, 2))))
         return nonfinite, left
 

@@ -76,6 +76,9 @@ class Particles:
             raise ValueError(f"positions must have {gdim} coordinates (extra columns must be 0)")
         x = np.ascontiguousarray(x[:, :gdim])
         n = len(x)
+        for name, a in (("mass", mass), ("volume", volume)):
+            if np.ndim(a) > 1 or (np.ndim(a) == 1 and np.size(a) != n):
+                raise ValueError(f"{name} has shape {np.shape(a)} for {n} particles: give one value or one per particle")
         mass = np.broadcast_to(np.asarray(mass, dtype=np.float64), (n,)).copy()
         volume = np.broadcast_to(np.asarray(volume, dtype=np.float64), (n,)).copy()
         comm = mesh.comm

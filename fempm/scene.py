@@ -4,6 +4,7 @@ declares and writes its outputs as it goes."""
 
 from __future__ import annotations
 
+import contextlib
 import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
@@ -13,6 +14,7 @@ import dolfinx.fem
 import dolfinx.mesh
 import numpy as np
 from mpi4py import MPI
+from tqdm import tqdm
 
 from fempm.health import Health, HealthMonitor
 from fempm.io import RunWriter
@@ -83,6 +85,9 @@ class Scene:
         return ExplicitSolver(V, self.particles, self.materials, bcs=bcs, loads=self.loads, options=self.options)
 
 
+#: more steps than this to the end time is a collapsed time step (a run that would not end)
+MAX_STEPS = 1e9
+
 #: the run summary's cost figures that demos report with their own results
 RUN_STATS = ("steps", "particles", "particle_steps_per_s", "terms_assembled")
 
@@ -99,61 +104,111 @@ def run(
     progress: bool = True,
     png: bool = False,
     callback: Callable[[ExplicitSolver], None] | None = None,
+    checkpoint_every: int | None = None,
+    resume: bool = False,
+    rebuild: dict | None = None,
+    overwrite: bool = True,
 ) -> dict:
     """Run ``scene`` to ``t_end``. Energies and momentum are recorded every step (returned in
     ``history`` and, with ``out``, written to ``energies.csv`` as the run goes, together with
-    particle VTK frames, the grid velocity and stress (VTX, the stress projected as a per-volume
+    particle VTK frames, the grid velocity and stress (VTK XML, the stress projected as a per-volume
     field, :meth:`ExplicitSolver.grid_stress`), ``summary.json`` and, with ``png``, a PNG of
     the particles per frame in ``frames/``). The scene's :class:`~fempm.health.Health` limits are
     checked every step; a run that crosses one (or fails otherwise: J <= 0, non-finite state,
     singular mass) still writes its summary (``status`` "aborted", ``health.error``) and a
-    particle frame of the failing state, then raises the error."""
-    solver = scene.solver()
+    particle frame of the failing state, then raises the error.
+
+    ``checkpoint_every``: with ``out``, write the full state to ``out/checkpoint/`` every that
+    many steps and at the end (:mod:`fempm.checkpoint`; a resumed run also writes one at its end). With ``out``, SIGTERM and SIGINT stop
+    the run at the next step boundary, after a checkpoint, its summary (``status``
+    "interrupted") and a particle frame; then :class:`fempm.checkpoint.RunInterrupted` is raised.
+    ``resume``: continue the run whose checkpoint is in ``out`` (``scene`` built as it was, with
+    the ``t_end`` to run to); on the same number of ranks the continuation is bit for bit the
+    uninterrupted run (lumped mass). ``rebuild``: how to build ``scene`` again (the command
+    line's scene name and options), kept in the checkpoint for ``python -m fempm resume``.
+    ``overwrite``: remove the outputs of an earlier run in ``out`` (else they are an error;
+    :func:`fempm.io.make_folder`)."""
+    from fempm import checkpoint
+
     comm = scene.mesh.comm
-    writer = RunWriter(Path(out), scene.particles, solver.V, png=png) if out is not None else None
-    history = [solver.energies()]
+    if (checkpoint_every is not None or resume) and out is None:
+        raise ValueError("checkpoints need an output folder (out)")
+    if checkpoint_every is not None and (isinstance(checkpoint_every, bool) or int(checkpoint_every) != checkpoint_every
+                                         or checkpoint_every < 1):
+        raise ValueError(f"checkpoint_every={checkpoint_every!r} must be a positive number of steps")
+    saved, arrays = checkpoint.restore_particles(Path(out), scene, comm) if resume else (None, {})
+    solver = scene.solver()
+    writer = (RunWriter(Path(out), scene.particles, solver.V, png=png, resume=saved["writer"] if saved else None,
+                        overwrite=overwrite) if out is not None else None)
     monitor = HealthMonitor(solver, scene.health)
+    history = [solver.energies()]
+    frame_interval = scene.t_end / max(scene.frames, 1)
     next_frame = 0.0
+    if saved is not None:
+        checkpoint.restore_solver(solver, monitor, saved, arrays)
+        history[0] = saved["writer"]["initial"]
+        next_frame, frame_interval = saved["writer"]["next_frame"], saved["writer"]["frame_interval"]
+        if solver.t >= scene.t_end:
+            raise ValueError(f"the run in {out} is already at t = {solver.t:.6g}: give a later t_end")
+
+    def save() -> Path:
+        state = {**writer.state(), "next_frame": next_frame, "frame_interval": frame_interval, "initial": history[0]}
+        return checkpoint.write(Path(out), scene, solver, monitor, state, rebuild)
+
+    steps0 = solver.step_count
     t0 = time.perf_counter()
-    last_print = t0
     failure: Exception | None = None
-    try:
-        while solver.t < scene.t_end:
-            if writer is not None and solver.t >= next_frame:
-                writer.particles(scene.particles, solver.t)
-                if solver.grid_velocity is not None:
-                    writer.grid(solver.grid_velocity, solver.t, stress=solver.grid_stress())
-                next_frame += scene.t_end / max(scene.frames, 1)
-            remaining = scene.t_end - solver.t
-            if scene.dt is None:
-                dt = solver.step(dt_max=remaining)
-            else:  # a last step shorter than 1e-9 dt is merged into the one before
-                dt = solver.step(remaining if remaining <= scene.dt * (1 + 1e-9) else scene.dt)
-            final = dt >= remaining
-            if final:  # the final step: end exactly at t_end
-                solver.t = scene.t_end
-            row = {"step": solver.step_count, "dt": dt, **solver.energies()}
-            history.append(row)
+    # the progress bar: rank 0, only on a terminal (tqdm's disable=None)
+    bar = tqdm(total=scene.t_end, initial=solver.t, disable=None if progress and comm.rank == 0 else True, unit="",
+               bar_format="{l_bar}{bar}| t = {n:.4g} / {total:g} [{elapsed}<{remaining}{postfix}]", leave=False)
+    with bar, checkpoint.stop_requests(comm) if out is not None else contextlib.nullcontext([0]) as stop:
+        try:
+            while solver.t < scene.t_end:
+                if writer is not None and solver.t >= next_frame:
+                    writer.particles(scene.particles, solver.t)
+                    if solver.grid_velocity is not None:
+                        writer.grid(solver.grid_velocity, solver.t, stress=solver.grid_stress())
+                    next_frame += frame_interval
+                remaining = scene.t_end - solver.t
+                if scene.dt is None:
+                    dt = solver.step(dt_max=remaining)
+                else:  # a last step shorter than 1e-9 dt is merged into the one before
+                    dt = solver.step(remaining if remaining <= scene.dt * (1 + 1e-9) else scene.dt)
+                final = dt >= remaining
+                if not final and remaining > MAX_STEPS * dt:  # e.g. velocities of 1e200: no progress
+                    solver._fail(f"time step collapse: dt = {dt:.3g} would need more than {MAX_STEPS:.0e} steps to "
+                                 f"reach t_end = {scene.t_end:g}")
+                if final:  # the final step: end exactly at t_end
+                    solver.t = scene.t_end
+                row = {"step": solver.step_count, "dt": dt, **solver.energies()}
+                history.append(row)
+                if writer is not None:
+                    writer.energies(row)
+                monitor.after_step(dt, row, final=final)
+                if callback is not None:
+                    callback(solver)
+                if (checkpoint_every is not None and solver.step_count % checkpoint_every == 0) or \
+                        ((checkpoint_every is not None or resume) and solver.t >= scene.t_end):
+                    save()  # every checkpoint_every steps, and at the end of a checkpointed or resumed run
+                if out is not None and (signum := checkpoint.requested(stop, comm)):
+                    raise checkpoint.RunInterrupted(signum, solver.t, save())
+                if not bar.disable:
+                    bar.set_postfix_str(f"step {solver.step_count}, dt = {dt:.3g}", refresh=False)
+                    bar.update(solver.t - bar.n)
+            monitor.outcome = "completed"
+        except (SimulationError, SingularMassError) as e:  # collective: every rank raises the same
+            monitor.outcome, monitor.error, failure = "aborted", str(e), e
+        except checkpoint.RunInterrupted as e:  # collective too: the flag is reduced over ranks
+            monitor.outcome, monitor.error, failure = "interrupted", str(e), e
+        finally:
             if writer is not None:
-                writer.energies(row)
-            monitor.after_step(dt, row, final=final)
-            if callback is not None:
-                callback(solver)
-            now = time.perf_counter()
-            if progress and comm.rank == 0 and now - last_print > 2.0:
-                frac = solver.t / scene.t_end
-                print(f"\r[{'#' * int(30 * frac):30s}] t = {solver.t:.4g} / {scene.t_end:g}  step {solver.step_count}  dt = {dt:.3g}",
-                      end="", flush=True)
-                last_print = now
-        monitor.outcome = "completed"
-    except (SimulationError, SingularMassError) as e:  # collective: every rank raises the same
-        monitor.outcome, monitor.error, failure = "aborted", str(e), e
-    finally:
-        if writer is not None:
-            try:
-                writer.particles(scene.particles, solver.t)  # the final (or failing) state
-            finally:
-                writer.close()
+                try:
+                    writer.particles(scene.particles, solver.t)  # the final (or failing) state
+                    if solver.grid_velocity is not None and not isinstance(failure, (SimulationError,
+                                                                                     SingularMassError)):
+                        writer.grid(solver.grid_velocity, solver.t, stress=solver.grid_stress())  # and the grid's
+                finally:
+                    writer.close()
     wall = comm.allreduce(time.perf_counter() - t0, op=MPI.MAX)
     nglob = scene.particles.num_global
     summary = {
@@ -163,7 +218,7 @@ def run(
         "steps": solver.step_count,
         "t_end": solver.t,
         "wall_time_s": wall,
-        "particle_steps_per_s": nglob * solver.step_count / wall if wall > 0 else 0.0,
+        "particle_steps_per_s": nglob * (solver.step_count - steps0) / wall if wall > 0 else 0.0,
         "terms_assembled": dict(solver.terms),
         "final": history[-1],
         "initial": history[0],
@@ -171,8 +226,8 @@ def run(
         "health": monitor.summary(),
     }
     if progress and comm.rank == 0 and failure is None:
-        print(f"\r{scene.name}: {solver.step_count} steps to t = {solver.t:.4g} in {wall:.2f} s "
-              f"({summary['particle_steps_per_s']:.3g} particle-steps/s)" + " " * 20)
+        print(f"{scene.name}: {solver.step_count} steps to t = {solver.t:.4g} in {wall:.2f} s "
+              f"({summary['particle_steps_per_s']:.3g} particle-steps/s)")
     if writer is not None:
         writer.summary(summary)
     if failure is not None:  # the summary and the frames are written: now stop

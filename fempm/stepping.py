@@ -138,6 +138,15 @@ def cell_sizes(mesh) -> npt.NDArray:
     return out
 
 
+def law_stress(mat, F: npt.NDArray, L: npt.NDArray, sigma: npt.NDArray, dt: float, rho: npt.NDArray) -> npt.NDArray:
+    """``mat.stress(F, L, sigma, dt, rho)``, checked to be one (d, d) stress per particle."""
+    new = np.asarray(mat.stress(F, L, sigma, dt, rho))
+    if new.shape != sigma.shape:
+        raise ValueError(f"{type(mat).__name__}.stress returned an array of shape {new.shape} for {len(F)} "
+                         f"particle(s); expected {sigma.shape}")
+    return new
+
+
 @dataclass
 class ExplicitSolver:
     """Explicit MPM on the vector P1 (or P2/Bernstein) space ``V`` of the particles' mesh.
@@ -266,7 +275,7 @@ class ExplicitSolver:
         p.volume = J * f["volume0"]
         rho = p.mass / p.volume
         for mat, idx in self._material_loop():
-            f["sigma"][idx] = mat.stress(F[idx], L[idx], f["sigma"][idx], dt, rho[idx])
+            f["sigma"][idx] = law_stress(mat, F[idx], L[idx], f["sigma"][idx], dt, rho[idx])
 
     def _ids(self, mask):
         ids = np.concatenate(self.particles.comm.allgather(self.particles.ids[mask][:5]))

@@ -151,7 +151,7 @@ def test_p2_scene_with_output_runs(tmp_path):
     if MPI.COMM_WORLD.rank == 0:
         import os
 
-        assert os.path.isdir(f"{out}/p2/grid_stress.bp") and os.path.isfile(f"{out}/p2/summary.json")
+        assert os.path.isfile(f"{out}/p2/grid_stress.pvd") and os.path.isfile(f"{out}/p2/summary.json")
     tri = dm.create_unit_square(MPI.COMM_WORLD, 4, 4)
     p = create_particles(tri, 9, density=1.0)
     p.fields["sigma"] = np.broadcast_to(np.diag([2.0, -1.0]), (len(p), 2, 2)).copy()

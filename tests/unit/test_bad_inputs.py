@@ -1,5 +1,7 @@
-"""Bad inputs to the materials, boundary conditions, particles, scenes and the step: a clear
-error naming the argument, not a silent NaN, an endless run or a step that goes backwards."""
+"""Bad inputs to the materials, boundary conditions, particles, loads, options, scenes, the step
+and the run, in one table: each gives a clear error of a given class whose message names the
+problem, never a silent NaN, an endless run, a step that goes backwards or a traceback from
+deep inside numpy. The command line's usage errors are in test_cli_options.py."""
 
 import dataclasses
 
@@ -11,94 +13,181 @@ from mpi4py import MPI
 
 import fempm
 from fempm.boundary import slip
+from fempm.checkpoint import CheckpointError
+from fempm.health import Health
+from fempm.io import OutputFolderError
+from fempm.location import OutsideMeshError
 from fempm.materials import LinearElastic, NeoHookean, NewtonianTait
-from fempm.scenes import vibrating_bar
-from fempm.stepping import ExplicitSolver, StepOptions
+from fempm.scene import Scene, run
+from fempm.scenes import two_disks, vibrating_bar
+from fempm.stepping import ExplicitSolver, Loads, SimulationError, StepOptions
 
 comm = MPI.COMM_SELF
+MESH = dm.create_unit_square(comm, 4, 4)
+TWO = [[0.2, 0.2], [0.7, 0.7]]
 
 
-@pytest.mark.parametrize("make, message", [
-    (lambda: NeoHookean(float("nan"), 0.3), "needs E > 0"),
-    (lambda: LinearElastic(float("inf"), 0.3), "needs E > 0"),
-    (lambda: NeoHookean(1.0, float("nan")), "-1 < nu < 0.5"),
-    (lambda: NewtonianTait(rho0=1.0, kappa=-5.0), "kappa > 0"),
-    (lambda: NewtonianTait(rho0=0.0), "rho0 > 0"),
-    (lambda: NewtonianTait(rho0=1.0, gamma=float("nan")), "gamma > 1"),
-    (lambda: NewtonianTait(rho0=1.0, viscosity=-1.0), "viscosity >= 0"),
-])
-def test_bad_material_constants(make, message):
-    with pytest.raises(ValueError, match=message):
-        make()
+def _space():
+    return dolfinx.fem.functionspace(MESH, ("Lagrange", 1, (2,)))
 
 
-@pytest.fixture(scope="module")
-def mesh():
-    return dm.create_unit_square(comm, 4, 4)
+def _solver(material=None, n=4, loads=None, compiled=None):
+    p = fempm.create_particles(MESH, n, density=1.0) if n else fempm.Particles(MESH, np.zeros((0, 2)), 1.0, 1.0)
+    s = ExplicitSolver(_space(), p, [material or NeoHookean(10.0, 0.3)], loads=loads or Loads(), options=StepOptions())
+    if compiled is not None:
+        s.compiled = compiled
+    return s
 
 
-@pytest.mark.parametrize("normal", [(0.0, 0.0), (np.nan, 1.0), (1.0, 0.0, 0.0)])
-def test_bad_slip_normals(mesh, normal):
-    V = dolfinx.fem.functionspace(mesh, ("Lagrange", 1, (2,)))
-    with pytest.raises(ValueError, match="slip needs a finite, non-zero normal with 2 components"):
-        slip(V, lambda x: x[0] < 1e-9, normal)
+@dataclasses.dataclass(frozen=True)
+class Dust(LinearElastic):
+    """A law with wave speed 0."""
+
+    def wave_speed(self, F, rho):
+        return np.zeros(len(F))
 
 
-@pytest.mark.parametrize("field, value", [("mass", np.inf), ("volume", np.inf), ("mass", np.nan)])
-def test_non_finite_mass_or_volume(mesh, field, value):
-    kw = {"mass": 1.0, "volume": 1.0, field: value}
-    with pytest.raises(ValueError, match=f"non-positive or non-finite {field}"):
-        fempm.Particles(mesh, [[0.5, 0.5]], kw["mass"], kw["volume"])
+@dataclasses.dataclass(frozen=True)
+class Flat(LinearElastic):
+    """A law whose stress has the wrong shape."""
+
+    def stress(self, F, L, sigma, dt, rho):
+        return np.zeros((len(F), 3, 3))
+
+    def wave_speed(self, F, rho):
+        return np.ones(len(F))
 
 
-def _solver(mesh, material=None, n=4):
-    p = fempm.create_particles(mesh, n, density=1.0) if n else fempm.Particles(mesh, np.zeros((0, 2)), 1.0, 1.0)
-    V = dolfinx.fem.functionspace(mesh, ("Lagrange", 1, (2,)))
-    return ExplicitSolver(V, p, [material or NeoHookean(10.0, 0.3)], options=StepOptions())
+def _wrong_body(compiled):
+    s = _solver(compiled=compiled)
+    s.particles.fields["body"][:] = 1  # one material only
+    s.step()
 
 
-@pytest.mark.parametrize("dt", [-1e-3, 0.0, np.nan, np.inf])
-def test_step_needs_a_positive_finite_dt(mesh, dt):
-    with pytest.raises(ValueError, match="must be a positive, finite time step"):
-        _solver(mesh).step(dt)
+def _fast(tmp_path):
+    scene = vibrating_bar(cells=4, t_end=1.0, comm=comm)
+    scene.particles.fields["v"][:] = 1e200
+    with np.errstate(over="ignore"):  # the kinetic energy overflows
+        run(scene, tmp_path, progress=False)
 
 
-def test_step_without_particles(mesh):
-    with pytest.raises(ValueError, match="there are no particles"):
-        _solver(mesh, n=0).step()
+def _inverted():
+    s = _solver()
+    s.particles.fields["F"][:, 0, :] *= -1.0
+    s.step()
 
 
-def test_no_stable_step_without_wave_speed_and_motion(mesh):
-    """A law with wave speed 0 and particles at rest: no time scale (it was dt = 5e298)."""
-
-    @dataclasses.dataclass(frozen=True)
-    class Dust(LinearElastic):
-        def wave_speed(self, F, rho):
-            return np.zeros(len(F))
-
-    solver = _solver(mesh, Dust(1.0, 0.0))
-    with pytest.raises(ValueError, match="no stable time step"):
-        solver.step()
-    assert solver.step(dt_max=1e-3) == 1e-3  # a bound makes it a step
+def _nan_velocity():
+    s = _solver()
+    s.particles.fields["v"][0, 0] = np.nan
+    s.step()
 
 
-@pytest.mark.parametrize("t_end", [0.0, -1.0, np.nan, np.inf])
-def test_scene_needs_a_positive_finite_end_time(t_end):
-    with pytest.raises(ValueError, match="must be a positive, finite time"):
-        vibrating_bar(cells=4, t_end=t_end, comm=comm)
+def _too_large_dt():
+    s = _solver()
+    s.step(10 * s.stable_dt())
 
 
-def test_duplicate_or_malformed_ids(mesh):
-    with pytest.raises(ValueError, match=r"particle ids must be unique over all ranks; repeated: \[7\]"):
-        fempm.Particles(mesh, [[0.2, 0.2], [0.7, 0.7]], 1.0, 1.0, ids=[7, 7])
-    with pytest.raises(ValueError, match="ids must be 2 integers"):
-        fempm.Particles(mesh, [[0.2, 0.2], [0.7, 0.7]], 1.0, 1.0, ids=[0.5, 1.5])
+def _earlier_run(tmp_path):
+    run(vibrating_bar(cells=4, t_end=0.2, comm=comm), tmp_path, progress=False)
+    run(vibrating_bar(cells=4, t_end=0.2, comm=comm), tmp_path, progress=False, overwrite=False)
 
 
-@pytest.mark.parametrize("compiled", [False, True])
-def test_a_body_without_material_is_refused_by_both_steps(mesh, compiled):
-    solver = _solver(mesh)
-    solver.compiled = compiled
-    solver.particles.fields["body"][:] = 1  # one material only: it was stress-free in the generic step
-    with pytest.raises(ValueError, match=r"body index outside the 1 material\(s\)"):
-        solver.step()
+CASES = [  # (name, action (given a temporary folder), error class, message)
+    ("E NaN", lambda _: NeoHookean(float("nan"), 0.3), ValueError, "needs E > 0"),
+    ("E inf", lambda _: LinearElastic(float("inf"), 0.3), ValueError, "needs E > 0"),
+    ("nu NaN", lambda _: NeoHookean(1.0, float("nan")), ValueError, "-1 < nu < 0.5"),
+    ("nu 0.5", lambda _: NeoHookean(1.0, 0.5), ValueError, "-1 < nu < 0.5"),
+    ("Tait kappa < 0", lambda _: NewtonianTait(rho0=1.0, kappa=-5.0), ValueError, "kappa > 0"),
+    ("Tait rho0 = 0", lambda _: NewtonianTait(rho0=0.0), ValueError, "rho0 > 0"),
+    ("Tait gamma NaN", lambda _: NewtonianTait(rho0=1.0, gamma=float("nan")), ValueError, "gamma > 1"),
+    ("Tait viscosity < 0", lambda _: NewtonianTait(rho0=1.0, viscosity=-1.0), ValueError, "viscosity >= 0"),
+    ("slip normal 0", lambda _: slip(_space(), lambda x: x[0] < 1e-9, (0.0, 0.0)), ValueError,
+     "slip needs a finite, non-zero normal with 2 components"),
+    ("slip normal NaN", lambda _: slip(_space(), lambda x: x[0] < 1e-9, (np.nan, 1.0)), ValueError,
+     "slip needs a finite, non-zero normal"),
+    ("slip normal 3D", lambda _: slip(_space(), lambda x: x[0] < 1e-9, (1.0, 0.0, 0.0)), ValueError,
+     "with 2 components"),
+    ("mass inf", lambda _: fempm.Particles(MESH, TWO, np.inf, 1.0), ValueError, "non-positive or non-finite mass"),
+    ("volume inf", lambda _: fempm.Particles(MESH, TWO, 1.0, np.inf), ValueError, "non-finite volume"),
+    ("mass NaN", lambda _: fempm.Particles(MESH, TWO, np.nan, 1.0), ValueError, "non-finite mass"),
+    ("mass 0", lambda _: fempm.Particles(MESH, TWO, 0.0, 1.0), ValueError, "non-positive or non-finite mass"),
+    ("mass of wrong length", lambda _: fempm.Particles(MESH, TWO, [1.0, 2.0, 3.0], 1.0), ValueError,
+     r"mass has shape \(3,\) for 2 particles"),
+    ("volume of wrong shape", lambda _: fempm.Particles(MESH, TWO, 1.0, np.ones((2, 2))), ValueError,
+     r"volume has shape \(2, 2\) for 2 particles"),
+    ("position NaN", lambda _: fempm.Particles(MESH, [[np.nan, 0.5]], 1.0, 1.0), ValueError,
+     "particle position.* not finite"),
+    ("position in 3D", lambda _: fempm.Particles(MESH, [[0.5, 0.5, 0.2]], 1.0, 1.0), ValueError,
+     "positions must have 2 coordinates"),
+    ("position outside", lambda _: fempm.Particles(MESH, [[1.5, 0.5]], 1.0, 1.0), OutsideMeshError, "outside"),
+    ("field of wrong length", lambda _: fempm.Particles(MESH, TWO, 1.0, 1.0, fields={"v": np.zeros((3, 2))}),
+     ValueError, "field 'v' has 3 rows for 2 particles"),
+    ("ids repeated", lambda _: fempm.Particles(MESH, TWO, 1.0, 1.0, ids=[7, 7]), ValueError,
+     r"particle ids must be unique over all ranks; repeated: \[7\]"),
+    ("ids not integers", lambda _: fempm.Particles(MESH, TWO, 1.0, 1.0, ids=[0.5, 1.5]), ValueError,
+     "ids must be 2 integers"),
+    ("dt < 0", lambda _: _solver().step(-1e-3), ValueError, "must be a positive, finite time step"),
+    ("dt = 0", lambda _: _solver().step(0.0), ValueError, "must be a positive, finite time step"),
+    ("dt NaN", lambda _: _solver().step(np.nan), ValueError, "must be a positive, finite time step"),
+    ("dt inf", lambda _: _solver().step(np.inf), ValueError, "must be a positive, finite time step"),
+    ("dt_max = 0", lambda _: _solver().step(dt_max=0.0), ValueError, "dt_max=0.0 must be positive"),
+    ("no particles", lambda _: _solver(n=0).step(), ValueError, "there are no particles"),
+    ("wave speed 0 at rest", lambda _: _solver(Dust(1.0, 0.0)).step(), ValueError, "no stable time step"),
+    ("body without material, generic step", lambda _: _wrong_body(False), ValueError,
+     r"body index outside the 1 material\(s\)"),
+    ("body without material, compiled step", lambda _: _wrong_body(True), ValueError,
+     r"body index outside the 1 material\(s\)"),
+    ("body force of wrong shape", lambda _: _solver(loads=Loads(body_force=(0.0, 0.0, -9.8))).step(), ValueError,
+     r"the body force has shape \(3,\), expected \(2,\)"),
+    ("body force function of wrong shape",
+     lambda _: _solver(loads=Loads(body_force=lambda x, t: np.zeros((1, 2)))).step(), ValueError,
+     "the body force returned shape"),
+    ("traction of wrong shape", lambda _: _solver(loads=Loads(traction=lambda t: np.zeros(2))).step(), ValueError,
+     "the traction returned shape"),
+    ("stress of wrong shape", lambda _: _solver(Flat(1.0, 0.3)).step(), ValueError,
+     r"Flat.stress returned an array of shape \(\d+, 3, 3\)"),
+    ("dt above the stability limit", lambda _: _too_large_dt(), SimulationError, "exceeds the stability limit"),
+    ("inverted F", lambda _: _inverted(), SimulationError, r"inverted deformation J <= 0 at particle\(s\)"),
+    ("NaN velocity", lambda _: _nan_velocity(), SimulationError, "non-finite state"),
+    ("v = 1e200", _fast, SimulationError, "time step collapse"),
+    ("scheme", lambda _: StepOptions(scheme="USX"), ValueError, "unknown option scheme='USX'"),
+    ("mass option", lambda _: StepOptions(mass="diag"), ValueError, "unknown option mass='diag'"),
+    ("CFL > 1", lambda _: StepOptions(cfl=1.5), ValueError, "CFL number above 1"),
+    ("flip > 1", lambda _: StepOptions(flip=1.5), ValueError, r"flip=1.5 must lie in \[0, 1\]"),
+    ("damping < 0", lambda _: StepOptions(damping=-1.0), ValueError, "damping=-1.0 must be >= 0"),
+    ("J bounds", lambda _: Health(j_min=2.0), ValueError, "J bounds"),
+    ("dt floor", lambda _: Health(dt_floor=1.0), ValueError, r"dt_floor=1.0 must lie in \[0, 1\)"),
+    ("t_end = 0", lambda _: vibrating_bar(cells=4, t_end=0.0, comm=comm), ValueError, "must be a positive, finite time"),
+    ("t_end < 0", lambda _: vibrating_bar(cells=4, t_end=-1.0, comm=comm), ValueError, "positive, finite time"),
+    ("t_end NaN", lambda _: vibrating_bar(cells=4, t_end=np.nan, comm=comm), ValueError, "positive, finite time"),
+    ("t_end inf", lambda _: vibrating_bar(cells=4, t_end=np.inf, comm=comm), ValueError, "positive, finite time"),
+    ("cells = 0", lambda _: two_disks(cells=0, comm=comm), ValueError, "cells=0 must be a positive integer"),
+    ("ppc 2.5", lambda _: vibrating_bar(ppc=2.5, comm=comm), ValueError, "ppc=2.5 must be a positive integer"),
+    ("dim 3", lambda _: vibrating_bar(dim=3, comm=comm), ValueError, "dim=3 must be 1 or 2"),
+    ("frames < 0", lambda _: Scene("s", MESH, fempm.Particles(MESH, TWO, 1.0, 1.0), [], t_end=1.0, frames=-1),
+     ValueError, "frames=-1 must be a non-negative integer"),
+    ("checkpoint_every 0", lambda d: run(vibrating_bar(cells=4, comm=comm), d, checkpoint_every=0), ValueError,
+     "checkpoint_every=0 must be a positive number of steps"),
+    ("checkpoint without a folder", lambda _: run(vibrating_bar(cells=4, comm=comm), checkpoint_every=5), ValueError,
+     "checkpoints need an output folder"),
+    ("resume without a checkpoint", lambda d: run(vibrating_bar(cells=4, comm=comm), d, resume=True),
+     CheckpointError, "no checkpoint in"),
+    ("an earlier run, no overwrite", _earlier_run, OutputFolderError, "holds the outputs of an earlier run"),
+]
+
+
+@pytest.mark.skipif(MPI.COMM_WORLD.size > 1, reason="serial inputs")
+@pytest.mark.parametrize("name, action, error, message", CASES, ids=[c[0] for c in CASES])
+def test_bad_input(name, action, error, message, tmp_path):
+    with pytest.raises(error, match=message):
+        action(tmp_path)
+
+
+def test_the_table_covers_enough_inputs():
+    assert len(CASES) >= 40 and len({c[0] for c in CASES}) == len(CASES)
+
+
+@pytest.mark.skipif(MPI.COMM_WORLD.size > 1, reason="serial inputs")
+def test_a_bound_given_to_a_law_without_wave_speed_makes_a_step():
+    assert _solver(Dust(1.0, 0.0)).step(dt_max=1e-3) == 1e-3

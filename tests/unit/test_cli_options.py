@@ -83,3 +83,18 @@ def test_an_unwritable_output_folder_is_a_usage_error(tmp_path, capsys):
     assert main(["run", "bar", "--cells", "8", "--t-end", "0.1", "--out", str(blocker / "out")]) == 2
     err = capsys.readouterr().err
     assert f"cannot write the output folder '{blocker / 'out'}'" in err and "Not a directory" in err
+
+
+@pytest.mark.skipif(MPI.COMM_WORLD.size > 1, reason="command-line output on one rank")
+def test_an_earlier_run_in_the_output_folder_needs_overwrite(tmp_path, capsys):
+    from fempm.cli import main
+
+    argv = ["run", "bar", "--cells", "8", "--t-end", "0.5", "--out", str(tmp_path)]
+    assert main(argv) == 0
+    capsys.readouterr()
+    assert main(argv) == 2
+    err = capsys.readouterr().err
+    assert "holds the outputs of an earlier run" in err and "--overwrite" in err and len(err.strip().splitlines()) == 1
+    (tmp_path / "notes.txt").write_text("mine")
+    assert main(argv + ["--overwrite"]) == 0
+    assert (tmp_path / "notes.txt").read_text() == "mine"  # only the run's own outputs are replaced

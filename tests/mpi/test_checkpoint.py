@@ -1,0 +1,142 @@
+"""Checkpoint and restart (fempm.checkpoint): a run interrupted at t = 1 and resumed to t = 2
+writes bit for bit what the uninterrupted run writes, on 1 and on 2 ranks; a checkpoint of
+one number of ranks resumes on another to round-off."""
+
+import json
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+from mpi4py import MPI
+
+from fempm.checkpoint import RunInterrupted, manifest
+from fempm.scene import run
+from fempm.scenes import two_disks
+
+comm = MPI.COMM_WORLD
+T_STOP, T_END = 1.0, 2.0
+
+
+def _folder(tmp_path, name: str) -> Path:
+    """One folder for all ranks (rank 0's pytest temporary folder)."""
+    return Path(comm.bcast(str(tmp_path / name) if comm.rank == 0 else None))
+
+
+def _disks(c=comm, t_end=T_END):
+    return two_disks(cells=10, ppc=4, t_end=t_end, frames=8, comm=c)
+
+
+def _interrupt_at(t_stop: float):
+    """A callback that sends SIGINT to this process at the first step past ``t_stop`` (every
+    rank reaches it at the same step)."""
+    def callback(solver):
+        if solver.t >= t_stop and not callback.sent:
+            callback.sent = True
+            os.kill(os.getpid(), signal.SIGINT)
+    callback.sent = False
+    return callback
+
+
+def _interrupted_then_resumed(out: Path, c=comm) -> dict:
+    with pytest.raises(RunInterrupted, match="interrupted by SIGINT") as e:
+        run(_disks(c), out, progress=False, checkpoint_every=1000, callback=_interrupt_at(T_STOP))
+    assert e.value.signum == signal.SIGINT
+    data = manifest(out)
+    assert T_STOP <= data["t"] < T_END and data["ranks"] == c.size
+    if c.rank == 0:
+        assert json.loads((out / "summary.json").read_text())["status"] == "interrupted"
+    return data
+
+
+def _final_frame(out: Path) -> list[bytes]:
+    """The files of the last particle frame (index and pieces)."""
+    last = sorted((out / "particles").glob("particles_*.pvtu"))[-1].stem
+    return [q.read_bytes() for q in sorted((out / "particles").glob(last + "*"))]
+
+
+def test_resumed_run_is_bit_identical_to_the_uninterrupted_one(tmp_path):
+    whole, parts = _folder(tmp_path, "whole"), _folder(tmp_path, "parts")
+    reference = run(_disks(), whole, progress=False)
+    stop = _interrupted_then_resumed(parts)
+    resumed = run(_disks(), parts, progress=False, resume=True)
+    assert resumed["status"] == "completed" and resumed["steps"] == reference["steps"] > stop["step_count"] > 20
+    assert len(resumed["history"]) - 1 == reference["steps"] - stop["step_count"]  # continued, not run again
+    assert resumed["t_end"] == reference["t_end"] == T_END
+    if comm.rank == 0:
+        for name in ("energies.csv", "particles/times.csv"):
+            assert (parts / name).read_text() == (whole / name).read_text(), name
+        assert _final_frame(parts) == _final_frame(whole)
+        assert sorted(p.name for p in (parts / "particles").glob("*vtu")) == \
+            sorted(p.name for p in (whole / "particles").glob("*vtu"))
+        assert (parts / "particles.pvd").read_text() == (whole / "particles.pvd").read_text()
+        assert (parts / "grid_velocity_part1.pvd").exists()  # the continuation's grid frames
+        assert resumed["final"] == reference["final"]
+
+
+def _positions(particles) -> np.ndarray:
+    ids = np.concatenate(particles.comm.allgather(particles.ids))
+    x = np.concatenate(particles.comm.allgather(particles.x))
+    v = np.concatenate(particles.comm.allgather(particles.fields["v"]))
+    order = np.argsort(ids)
+    return np.hstack([x[order], v[order]])
+
+
+@pytest.mark.skipif(comm.size != 2, reason="moves a checkpoint between 1 and 2 ranks")
+def test_checkpoints_resume_on_another_number_of_ranks(tmp_path):
+    """2 ranks -> 1 rank and 1 rank -> 2 ranks: final positions and velocities agree with the
+    uninterrupted 2-rank run to 1e-12."""
+    whole = _folder(tmp_path, "whole")
+    reference = _positions(run(_disks(), whole, progress=False)["solver"].particles)
+    two = _folder(tmp_path, "from-two")
+    _interrupted_then_resumed(two)
+    one = _folder(tmp_path, "from-one")
+    if comm.rank == 0:
+        solver = run(_disks(MPI.COMM_SELF), two, progress=False, resume=True)["solver"]
+        assert np.abs(_positions(solver.particles) - reference).max() < 1e-12
+        _interrupted_then_resumed(one, MPI.COMM_SELF)
+    comm.Barrier()
+    resumed = run(_disks(), one, progress=False, resume=True)
+    assert np.abs(_positions(resumed["solver"].particles) - reference).max() < 1e-12
+
+
+@pytest.mark.skipif(comm.size > 1, reason="starts its own processes")
+def test_command_line_checkpoint_resume_and_sigterm(tmp_path):
+    """`run --checkpoint-every`, `resume --t-end` beyond the end, SIGTERM stopping a run with
+    a checkpoint and exit code 143, and `resume` of a folder without a checkpoint."""
+    cmd = [sys.executable, "-m", "fempm"]
+    out = tmp_path / "disks"
+    r = subprocess.run(cmd + ["run", "disks", "--cells", "10", "--t-end", "0.5", "--checkpoint-every", "4", "--out",
+                              str(out)], capture_output=True, text=True, timeout=300)
+    assert r.returncode == 0, r.stderr
+    first = manifest(out)
+    assert first["t"] == 0.5 and first["rebuild"]["options"] == {"cells": 10, "t_end": 0.5}
+    r = subprocess.run(cmd + ["resume", str(out), "--t-end", "1.0"], capture_output=True, text=True, timeout=300)
+    assert r.returncode == 0, r.stderr
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["status"] == "completed" and summary["t_end"] == 1.0 and summary["steps"] > first["step_count"]
+    rows = (out / "energies.csv").read_text().splitlines()
+    assert len(rows) == 1 + summary["steps"] and [int(r.split(",")[0]) for r in rows[1:]] == \
+        list(range(1, summary["steps"] + 1))
+    r = subprocess.run(cmd + ["resume", str(tmp_path)], capture_output=True, text=True, timeout=300)
+    assert r.returncode == 2 and "no checkpoint in" in r.stderr and "Traceback" not in r.stderr
+    # SIGTERM: the run stops at a step boundary with a checkpoint, exit code 128 + 15
+    slow = tmp_path / "slow"
+    proc = subprocess.Popen(cmd + ["run", "disks", "--cells", "40", "--t-end", "50", "--out", str(slow)],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    deadline = time.monotonic() + 300
+    while proc.poll() is None and time.monotonic() < deadline:  # until it steps
+        rows = slow / "energies.csv"
+        if rows.exists() and len(rows.read_text().splitlines()) > 2:
+            break
+        time.sleep(0.2)
+    proc.send_signal(signal.SIGTERM)
+    _, err = proc.communicate(timeout=120)
+    assert proc.returncode == 143, err
+    assert "interrupted by SIGTERM" in err and f"python -m fempm resume {slow}" in err
+    assert json.loads((slow / "summary.json").read_text())["status"] == "interrupted"
+    assert 0.0 < manifest(slow)["t"] < 50.0
