@@ -48,6 +48,35 @@ if AVAILABLE:
     from fempm.kernels.kinematics import _det, linear_elastic_at, neo_hookean_at
     from fempm.kernels.shape import inside_after_pull_back, shape, star_search
 
+    @njit(inline="always")
+    def stable_time(best, bound, m, V, speed, mod, c, p, hp):  # pragma: no cover - compiled
+        """``best`` updated with particle ``p`` (mass ``m``, volume ``V``, squared speed ``speed``,
+        P-wave modulus ``mod`` of its body, else wave speed ``c[p]``, cell size ``hp``): the
+        minimum of :math:`h / (c + |v|)`, or with ``bound`` the maximum of
+        :math:`(c^2 + |v|^2) / h^2` (see :func:`_scatter_kernel`). NaN propagates; a particle at
+        rest without a wave speed sets no limit."""
+        if bound:
+            if mod > 0.0:
+                r = (mod * V + m * speed) / (m * hp * hp)
+            else:
+                r = (c[p] * c[p] + speed) / (hp * hp)
+            return r if not r <= best else best
+        wave = np.sqrt(mod / (m / V)) if mod > 0.0 else c[p]
+        total = wave + np.sqrt(speed)
+        t = hp / total if not total <= 0.0 else np.inf
+        return t if not t >= best else best
+
+    @njit(inline="always")
+    def count_j(J, nonfinite_j, inverted, jmin, jmax):  # pragma: no cover - compiled
+        """(J finite and positive, then the counts of non-finite and non-positive J and the range
+        of the finite J, updated with ``J``)."""
+        if not np.isfinite(J):
+            return False, nonfinite_j + 1, inverted, jmin, jmax
+        jmin, jmax = min(jmin, J), max(jmax, J)
+        if J <= 0.0:
+            return False, nonfinite_j, inverted + 1, jmin, jmax
+        return True, nonfinite_j, inverted, jmin, jmax
+
     @njit(cache=True, error_model="numpy")
     def grid_velocity(mass, mom, cv, free, active_min, v):  # pragma: no cover
         """``v`` (ndofs, d) = momentum ``mom[:, cv:cv+d]`` / ``mass[:, 0]`` on free dofs with
@@ -167,22 +196,8 @@ def _scatter_kernel(cell: str, with_mass: bool, with_momentum: bool, with_force:
                         fe[j] += fext[p, j]
                     for e in range(D):
                         sg[j, e] = sigma[p, j, e]
-            if with_dt and bound:
-                mod = modulus[body[p]]
-                hp = h[cp]
-                if mod > 0.0:
-                    r = (mod * V + m * speed) / (m * hp * hp)
-                else:
-                    r = (c[p] * c[p] + speed) / (hp * hp)
-                if not r <= best:  # NaN propagates
-                    best = r
-            elif with_dt:
-                mod = modulus[body[p]]
-                wave = np.sqrt(mod / (m / V)) if mod > 0.0 else c[p]
-                total = wave + np.sqrt(speed)
-                t = h[cp] / total if not total <= 0.0 else np.inf  # at rest without a wave speed: no limit; NaN stays
-                if not t >= best:  # NaN propagates
-                    best = t
+            if with_dt:
+                best = stable_time(best, bound, m, V, speed, modulus[body[p]], c, p, h[cp])
             for a in range(NK):
                 i = cell_dofs[cp, a]
                 w = N[a]
@@ -274,17 +289,11 @@ def _g2p_kernel(cell: str, blend: bool, kinematics: bool, move: bool, remap: boo
                             L[p, i, j] = Lp[i, j]
                 J = _det(F, p)
                 volume[p] = J * volume0[p]
-                if not np.isfinite(J):
-                    nonfinite_j += 1
-                else:
-                    jmin = min(jmin, J)
-                    jmax = max(jmax, J)
-                    if J <= 0.0:
-                        inverted += 1
-                    elif law[body[p]] == NEO_HOOKEAN:
-                        neo_hookean_at(F, p, D, J, lam[body[p]], mu[body[p]], sigma)
-                    elif law[body[p]] == LINEAR_ELASTIC:
-                        linear_elastic_at(F, p, D, lam[body[p]], mu[body[p]], sigma)
+                ok, nonfinite_j, inverted, jmin, jmax = count_j(J, nonfinite_j, inverted, jmin, jmax)
+                if ok and law[body[p]] == NEO_HOOKEAN:
+                    neo_hookean_at(F, p, D, J, lam[body[p]], mu[body[p]], sigma)
+                elif ok and law[body[p]] == LINEAR_ELASTIC:
+                    linear_elastic_at(F, p, D, lam[body[p]], mu[body[p]], sigma)
             if move:
                 ok = True
                 for j in range(D):  # the stress of the compiled laws is finite where J is
