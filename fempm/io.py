@@ -31,20 +31,20 @@ class OutputFolderError(OSError):
 
 
 #: what a run writes into its output folder (glob patterns)
-OUTPUTS = ("summary.json", "energies.csv", "particles", "particles.pvd", "frames", "grid_velocity*", "grid_stress*",
+OUTPUT_FILES = ("summary.json", "energies.csv", "particles", "particles.pvd", "frames", "grid_velocity*", "grid_stress*",
            "checkpoint", "checkpoint.old", "checkpoint.tmp")
 
 
 def earlier_outputs(folder: Path) -> list[Path]:
-    """The outputs of an earlier run in ``folder`` (:data:`OUTPUTS`)."""
-    return sorted(q for pattern in OUTPUTS for q in Path(folder).glob(pattern)) if Path(folder).is_dir() else []
+    """The outputs of an earlier run in ``folder`` (:data:`OUTPUT_FILES`)."""
+    return sorted(q for pattern in OUTPUT_FILES for q in Path(folder).glob(pattern)) if Path(folder).is_dir() else []
 
 
 def make_folder(folder: Path, comm, *, keep: bool = True, overwrite: bool = False) -> None:
     """Create ``folder`` (and ``folder/particles``) on rank 0; an :class:`OutputFolderError`
     on every rank if that fails (collective: no rank is left waiting). Unless ``keep`` (a
     continued run), the outputs of an earlier run there are an error, or removed with
-    ``overwrite`` (only those: :data:`OUTPUTS`)."""
+    ``overwrite`` (only those: :data:`OUTPUT_FILES`)."""
     error = None
     earlier = [] if keep or comm.rank != 0 else earlier_outputs(folder)
     if earlier and not overwrite:
@@ -128,7 +128,8 @@ class RunWriter:
             if self.comm.rank == 0:
                 self._truncate()
             self.comm.Barrier()
-        self._velocity = GridSeries(V, self.folder / self._grid_name("grid_velocity")) if V is not None else None
+        self.V = V
+        self._velocity: GridSeries | None = None  # made on first use: only the fields written
         self._stress: GridSeries | None = None
 
     def _grid_name(self, stem: str) -> str:
@@ -170,12 +171,16 @@ class RunWriter:
         """A particle frame at time ``t``, written in parallel (:mod:`fempm.vtu`): each rank's
         piece ``particles/particles_NNNNN_rRRRRR.vtu``, their index ``particles_NNNNN.pvtu``
         and the time collection ``particles.pvd``; the frame's time in ``particles/times.csv``.
-        Point data: velocity, stress (9 components), J, id, body. Collective."""
+        Point data: velocity, stress (9 components), J, id, body and every other scalar or vector
+        field (the laws' internal variables, ``volume0``, ``X0``). Collective."""
         f = particles.fields
         n = len(particles)
         x = _pad3(particles.x)
         data = {"velocity": _pad3(f["v"]), "stress": _pad3(f["sigma"]).reshape(n, 9), "J": np.linalg.det(f["F"]),
                 "id": particles.ids.astype(np.int64), "body": f["body"].astype(np.int32)}
+        for name, a in f.items():  # the laws' internal variables and other per-particle fields
+            if name not in ("v", "sigma", "F", "body") and a.ndim in (1, 2) and a.dtype == np.float64:
+                data[name] = a
         folder, stem = self.folder / "particles", f"particles_{self.frame:05d}"
         ranks = [r for r, c in enumerate(self.comm.allgather(n)) if c] or [0]  # ranks holding particles
         if self.comm.rank in ranks:
@@ -197,12 +202,15 @@ class RunWriter:
                                     label="|velocity|", bounds=self.bounds)
         self.frame += 1
 
-    def grid(self, v: npt.NDArray, t: float, stress: dolfinx.fem.Function | None = None) -> None:
-        """Grid velocity (``grid_velocity.pvd``) and, when given, grid stress
-        (``grid_stress.pvd``) at time ``t`` (:class:`GridSeries`). Collective."""
-        if self._velocity is None:
+    def grid(self, v: npt.NDArray | None, t: float, stress: dolfinx.fem.Function | None = None) -> None:
+        """Grid velocity (``grid_velocity.pvd``) and grid stress (``grid_stress.pvd``), those
+        given, at time ``t`` (:class:`GridSeries`). Collective."""
+        if self.V is None:
             return
-        self._velocity.write(v.ravel(), t)
+        if v is not None:
+            if self._velocity is None:
+                self._velocity = GridSeries(self.V, self.folder / self._grid_name("grid_velocity"))
+            self._velocity.write(v.ravel(), t)
         if stress is not None:
             if self._stress is None:
                 self._stress = GridSeries(stress.function_space, self.folder / self._grid_name("grid_stress"))

@@ -207,7 +207,7 @@ class LumpedPointStep:
                 rho = p.mass / p.volume
                 for b, (mat, idx) in enumerate(s._material_loop()):
                     if self.law[b] == 0 and len(idx):
-                        f["sigma"][idx] = law_stress(mat, f["F"][idx], L[idx], f["sigma"][idx], dt, rho[idx])
+                        f["sigma"][idx] = law_stress(mat, f["F"][idx], L[idx], f["sigma"][idx], dt, rho[idx], f, idx)
                         nonfinite += int(np.count_nonzero(~np.isfinite(f["sigma"][idx]).all(axis=(1, 2))))
         return nonfinite, left
 

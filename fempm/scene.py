@@ -31,6 +31,12 @@ def check_counts(**counts: int) -> None:
             raise ValueError(f"{name}={value!r} must be a positive integer")
 
 
+#: the frames a scene can ask for (:attr:`Scene.outputs`)
+OUTPUTS = ("particles", "grid_velocity", "grid_stress")
+
+#: more steps than this to the end time is a collapsed time step (a run that would not end)
+MAX_STEPS = 1e9
+
 @dataclass
 class Scene:
     """Everything a run needs.
@@ -42,7 +48,9 @@ class Scene:
     :meth:`ExplicitSolver.stable_dt` every step. ``variant``: the Lagrange variant of the
     velocity space (e.g. ``"bernstein"``, non-negative on simplices), default the DOLFINx one.
     ``health``: the limits that stop an unhealthy run (:class:`fempm.health.Health`: energy
-    growth beyond the work of the loads, J bounds, time-step floor).
+    growth beyond the work of the loads, J bounds, time-step floor). ``outputs``: the frames a
+    run with an output folder writes, of :data:`OUTPUTS` (the energies and the summary always);
+    what is not asked for is not computed (the grid stress is a projection per frame).
     """
 
     name: str
@@ -59,8 +67,12 @@ class Scene:
     dt: float | None = None
     variant: str | None = None
     health: Health = field(default_factory=Health)
+    outputs: tuple[str, ...] = ("particles", "grid_velocity", "grid_stress")
 
     def __post_init__(self):
+        unknown = set(self.outputs) - set(OUTPUTS)
+        if unknown:
+            raise ValueError(f"unknown output(s) {sorted(unknown)}; expected some of {OUTPUTS}")
         if not (0.0 < self.t_end < np.inf):
             raise ValueError(f"t_end={self.t_end} must be a positive, finite time")
         if isinstance(self.frames, bool) or not isinstance(self.frames, (int, np.integer)) or self.frames < 0:
@@ -85,9 +97,6 @@ class Scene:
         return ExplicitSolver(V, self.particles, self.materials, bcs=bcs, loads=self.loads, options=self.options)
 
 
-#: more steps than this to the end time is a collapsed time step (a run that would not end)
-MAX_STEPS = 1e9
-
 #: the run summary's cost figures that demos report with their own results
 RUN_STATS = ("steps", "particles", "particle_steps_per_s", "terms_assembled")
 
@@ -95,6 +104,18 @@ RUN_STATS = ("steps", "particles", "particle_steps_per_s", "terms_assembled")
 def run_stats(summary: dict) -> dict:
     """The :data:`RUN_STATS` entries of a :func:`run` summary."""
     return {k: summary[k] for k in RUN_STATS}
+
+
+def write_frame(writer: RunWriter, scene: Scene, solver: ExplicitSolver, *, grid: bool = True,
+                particles: bool = False) -> None:
+    """The frames the scene asks for at the solver's time (collective); ``particles`` writes the
+    particles' in any case (a run's final or failing state)."""
+    if particles or "particles" in scene.outputs:
+        writer.particles(scene.particles, solver.t)
+    if grid and ("grid_velocity" in scene.outputs or "grid_stress" in scene.outputs):
+        v = solver.grid_velocity if solver.grid_velocity is not None else solver.mapped_velocity()
+        writer.grid(v if "grid_velocity" in scene.outputs else None, solver.t,
+                    stress=solver.grid_stress() if "grid_stress" in scene.outputs else None)
 
 
 def run(
@@ -165,9 +186,7 @@ def run(
         try:
             while solver.t < scene.t_end:
                 if writer is not None and solver.t >= next_frame:
-                    writer.particles(scene.particles, solver.t)
-                    if solver.grid_velocity is not None:
-                        writer.grid(solver.grid_velocity, solver.t, stress=solver.grid_stress())
+                    write_frame(writer, scene, solver)
                     next_frame += frame_interval
                 remaining = scene.t_end - solver.t
                 if scene.dt is None:
@@ -202,11 +221,10 @@ def run(
             monitor.outcome, monitor.error, failure = "interrupted", str(e), e
         finally:
             if writer is not None:
-                try:
-                    writer.particles(scene.particles, solver.t)  # the final (or failing) state
-                    if solver.grid_velocity is not None and not isinstance(failure, (SimulationError,
-                                                                                     SingularMassError)):
-                        writer.grid(solver.grid_velocity, solver.t, stress=solver.grid_stress())  # and the grid's
+                try:  # the final state; of a failed run the particles' only
+                    failed = isinstance(failure, (SimulationError, SingularMassError))
+                    write_frame(writer, scene, solver, grid=not failed and solver.grid_velocity is not None,
+                                particles=True)
                 finally:
                     writer.close()
     wall = comm.allreduce(time.perf_counter() - t0, op=MPI.MAX)

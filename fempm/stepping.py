@@ -138,9 +138,19 @@ def cell_sizes(mesh) -> npt.NDArray:
     return out
 
 
-def law_stress(mat, F: npt.NDArray, L: npt.NDArray, sigma: npt.NDArray, dt: float, rho: npt.NDArray) -> npt.NDArray:
-    """``mat.stress(F, L, sigma, dt, rho)``, checked to be one (d, d) stress per particle."""
-    new = np.asarray(mat.stress(F, L, sigma, dt, rho))
+def law_stress(mat, F: npt.NDArray, L: npt.NDArray, sigma: npt.NDArray, dt: float, rho: npt.NDArray,
+               fields: dict, idx: npt.NDArray) -> npt.NDArray:
+    """``mat.stress(F, L, sigma, dt, rho)`` of the particles ``idx`` (and, for a law with
+    internal variables, their ``state`` from ``fields``, updated there), checked to be one
+    (d, d) stress per particle."""
+    history = getattr(mat, "history", ())
+    if history:
+        state = {h.name: fields[h.name][idx] for h in history}
+        new = np.asarray(mat.stress(F, L, sigma, dt, rho, state))
+        for h in history:
+            fields[h.name][idx] = state[h.name]
+    else:
+        new = np.asarray(mat.stress(F, L, sigma, dt, rho))
     if new.shape != sigma.shape:
         raise ValueError(f"{type(mat).__name__}.stress returned an array of shape {new.shape} for {len(F)} "
                          f"particle(s); expected {sigma.shape}")
@@ -182,6 +192,12 @@ class ExplicitSolver:
         f.setdefault("volume0", p.volume.copy())
         f.setdefault("body", np.zeros(n, dtype=np.int32))
         f.setdefault("X0", p.x.copy())  # reference positions (body forces b(X, t), error norms)
+        for mat in self.materials:  # the laws' internal variables (fempm.materials.base.Internal)
+            for h in getattr(mat, "history", ()):
+                expected = (n,) + h.allocate(1, d).shape[1:]
+                if np.shape(f.setdefault(h.name, h.allocate(n, d))) != expected:
+                    raise ValueError(f"internal variable {h.name!r} of {type(mat).__name__} has shape "
+                                     f"{np.shape(f[h.name])}; expected {expected}")
         self.h_cell = cell_sizes(p.mesh)
         self.terms: Counter = Counter()  # how often each force term was assembled
         self.grid_velocity: npt.NDArray | None = None  # last step's, also the CG warm start
@@ -250,6 +266,22 @@ class ExplicitSolver:
         for bc in self.bcs:
             bc.apply(v)
 
+    def _mass_operator(self, basis: ParticleBasis) -> Projector:
+        """The step's mass (lumped, consistent or FMPM) with its constraints, on ``basis``."""
+        opts = self.options
+        return Projector(
+            self.V, self.particles, mass=opts.mass_mode, fmpm_order=opts.mass_order, basis=basis,
+            petsc_options_prefix=opts.petsc_options_prefix,
+            exclude=self._fixed_dofs, exclude_components=self._slip_components, lump_below=opts.lump_below,
+        )
+
+    def mapped_velocity(self) -> npt.NDArray:
+        """The grid velocity of the present particle state, (owned + ghost dofs, d): P2G of the
+        momenta and the step's mass solve and constraints (the first stage of a step), nothing
+        advanced. The grid frame at t = 0 of :func:`fempm.scene.run`."""
+        basis = ParticleBasis(self.V, self.particles, gradients=False, domain=self.options.particle_domain)
+        return self._map_velocity(basis, self._mass_operator(basis), guess=None)[: basis.num_dofs_space]
+
     def _map_velocity(self, basis: ParticleBasis, mass_op: Projector, guess: npt.NDArray | None) -> npt.NDArray:
         """Grid velocity from the particle momenta (P2G + mass solve), constrained."""
         p = self.particles
@@ -275,7 +307,7 @@ class ExplicitSolver:
         p.volume = J * f["volume0"]
         rho = p.mass / p.volume
         for mat, idx in self._material_loop():
-            f["sigma"][idx] = law_stress(mat, F[idx], L[idx], f["sigma"][idx], dt, rho[idx])
+            f["sigma"][idx] = law_stress(mat, F[idx], L[idx], f["sigma"][idx], dt, rho[idx], f, idx)
 
     def _ids(self, mask):
         ids = np.concatenate(self.particles.comm.allgather(self.particles.ids[mask][:5]))
@@ -347,11 +379,7 @@ class ExplicitSolver:
         self._check_bodies()
         basis = ParticleBasis(self.V, p, gradients=True, domain=opts.particle_domain)
         self.extended_steps += basis.extended
-        mass_op = Projector(
-            self.V, p, mass=opts.mass_mode, fmpm_order=opts.mass_order, basis=basis,
-            petsc_options_prefix=opts.petsc_options_prefix,
-            exclude=self._fixed_dofs, exclude_components=self._slip_components, lump_below=opts.lump_below,
-        )
+        mass_op = self._mass_operator(basis)
         stable = self.stable_dt()
         if opts.mass == "consistent" and not opts.lumped_forces:  # omega_max^2 <= omega_L^2 / lambda_min
             self.mass_ratio = mass_op.mass_ratio_min(MASS_RATIO_ITERATIONS)
@@ -467,7 +495,12 @@ class ExplicitSolver:
         kin = 0.5 * np.sum(p.mass * np.einsum("nd,nd->n", f["v"], f["v"]))
         strain = 0.0
         for mat, idx in self._material_loop():
-            strain += np.sum(f["volume0"][idx] * mat.energy_density(f["F"][idx]))
+            if getattr(mat, "energy_from_stress", False):  # hypoelastic: the elastic energy of the stress
+                state = {h.name: f[h.name][idx] for h in mat.history}
+                w = mat.energy_density(f["F"][idx], f["sigma"][idx], state)
+            else:
+                w = mat.energy_density(f["F"][idx])
+            strain += np.sum(f["volume0"][idx] * w)
         mom = p.mass @ f["v"]
         kin, strain = p.comm.allreduce(kin), p.comm.allreduce(strain)
         mom = p.comm.allreduce(mom)

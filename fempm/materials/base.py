@@ -3,16 +3,35 @@
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Protocol
+from typing import ClassVar, Protocol
 
 import numpy as np
 import numpy.typing as npt
 
 
-class Material(Protocol):
-    """What the explicit solver needs from a constitutive law (arrays over particles)."""
+@dataclass(frozen=True)
+class Internal:
+    """An internal (history) variable of a law: the per-particle field ``name`` of ``shape``
+    per particle (-1 stands for the space dimension), starting at ``initial``. The solver
+    allocates it in ``particles.fields``, so that it moves with the particles between ranks and
+    goes into checkpoints and output frames."""
 
-    history: tuple[str, ...]
+    name: str
+    shape: tuple[int, ...] = ()
+    initial: float = 0.0
+
+    def allocate(self, n: int, d: int) -> npt.NDArray:
+        return np.full((n, *(d if k == -1 else k for k in self.shape)), float(self.initial))
+
+
+class Material(Protocol):
+    """What the explicit solver needs from a constitutive law (arrays over particles).
+
+    A law with internal variables declares them in ``history`` (:class:`Internal`); its
+    ``stress`` then takes a sixth argument ``state``, a dict of those variables of the
+    particles (``state[name]`` of shape (n, ...)), and stores their updates in it."""
+
+    history: tuple[Internal, ...]
 
     def stress(self, F: npt.NDArray, L: npt.NDArray, sigma: npt.NDArray, dt: float, rho: npt.NDArray) -> npt.NDArray:
         """Cauchy stress (n, d, d) after the step, from the deformation gradient ``F``, the
@@ -37,7 +56,7 @@ class IsotropicElastic:
 
     E: float
     nu: float = 0.0
-    history: tuple[str, ...] = ()
+    history: ClassVar[tuple[Internal, ...]] = ()  # a law's internal variables (none: elastic)
 
     def __post_init__(self):
         if not (0.0 < self.E < np.inf) or not -1.0 < self.nu < 0.5:  # NaN fails both
@@ -54,6 +73,10 @@ class IsotropicElastic:
 
 def identity(n: int, d: int) -> npt.NDArray:
     return np.broadcast_to(np.eye(d), (n, d, d)).copy()
+
+
+def skew(A: npt.NDArray) -> npt.NDArray:
+    return 0.5 * (A - np.swapaxes(A, 1, 2))
 
 
 def sym(A: npt.NDArray) -> npt.NDArray:

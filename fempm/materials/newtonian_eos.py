@@ -20,7 +20,7 @@ class NewtonianTait:
     kappa: float = 2.0e4
     gamma: float = 7.0
     viscosity: float = 1.0e-3
-    history: tuple[str, ...] = ()
+    history: tuple = ()
 
     def __post_init__(self):
         for name, low in (("rho0", 0.0), ("kappa", 0.0), ("gamma", 1.0)):

@@ -3,6 +3,7 @@ index and time collection) and the grid fields (VTK XML time series); the energi
 summary, also after a failed run; an earlier run's outputs refused or replaced."""
 
 import csv
+import dataclasses
 import json
 from pathlib import Path
 
@@ -61,8 +62,9 @@ def test_particle_frames_are_parallel_pieces_that_pyvista_reads(tmp_path):
 
 
 def test_grid_frames_include_the_final_state_and_pyvista_reads_them(tmp_path):
-    """grid_velocity.pvd and grid_stress.pvd: a frame per particle frame after the first step
-    and the final state, which is the solver's last grid velocity at the dofs."""
+    """grid_velocity.pvd and grid_stress.pvd: a frame per particle frame (at t = 0 the
+    velocity mapped from the particles) and the final state, which is the solver's last grid
+    velocity at the dofs."""
     out = _folder(tmp_path, "disks")
     result = run(two_disks(cells=10, t_end=0.3, frames=3), out, progress=False)
     solver = result["solver"]
@@ -78,9 +80,12 @@ def test_grid_frames_include_the_final_state_and_pyvista_reads_them(tmp_path):
         return
     for name in ("grid_velocity", "grid_stress"):
         reader = pv.PVDReader(out / f"{name}.pvd")
-        # every particle frame but t = 0 (no grid velocity before the first step), and the end
-        assert reader.time_values[-1] == 0.3 and len(reader.time_values) == 3
+        # at every particle frame (t = 0: the mapped velocity) and at the end
+        assert reader.time_values[0] == 0.0 and reader.time_values[-1] == 0.3 and len(reader.time_values) == 4
     reader = pv.PVDReader(out / "grid_velocity.pvd")
+    reader.set_active_time_value(0.0)  # mapped from the disks' initial velocities +-(0.1, 0.1)
+    first = reader.read().combine(merge_points=True).point_data["grid_velocity"][:, :2]
+    assert np.abs(np.abs(first).max(axis=0) - 0.1).max() < 1e-12
     reader.set_active_time_value(reader.time_values[-1])
     grid = reader.read().combine(merge_points=True)
     pts, vel = np.asarray(grid.points)[:, :2], grid.point_data["grid_velocity"][:, :2]
@@ -113,3 +118,20 @@ def test_an_earlier_run_is_refused_or_replaced(tmp_path):
     if comm.rank == 0:  # no frame of the earlier run is left
         assert len(list((out / "particles").glob("particles_*.pvtu"))) == 2
         assert len(list(csv.reader(open(out / "particles" / "times.csv")))) == 2
+
+
+def test_a_run_computes_only_the_outputs_its_scene_asks_for(tmp_path, monkeypatch):
+    from fempm.stepping import ExplicitSolver
+
+    projections = []
+    original = ExplicitSolver.grid_stress
+    monkeypatch.setattr(ExplicitSolver, "grid_stress", lambda self, *a, **k: projections.append(1) or original(self))
+    out = _folder(tmp_path, "velocity-only")
+    scene = dataclasses.replace(two_disks(cells=10, t_end=0.2, frames=4), outputs=("grid_velocity",))
+    run(scene, out, progress=False)
+    assert projections == []  # the grid stress is never projected
+    if comm.rank == 0:
+        assert (out / "grid_velocity.pvd").exists() and not (out / "grid_stress.pvd").exists()
+        assert len(list((out / "particles").glob("*.pvtu"))) == 1  # the final state only
+    with pytest.raises(ValueError, match=r"unknown output\(s\) \['stress'\]"):
+        dataclasses.replace(scene, outputs=("stress",))

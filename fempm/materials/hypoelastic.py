@@ -1,0 +1,85 @@
+r"""Hypoelastic-plastic laws: the shared elastic predictor, with the Jaumann rate.
+
+Over a step, with :math:`D = \mathrm{sym}\, L` and :math:`W = \mathrm{skew}\, L`,
+
+.. math::
+    \sigma^{rot} = \sigma + \Delta t\,(W\sigma - \sigma W), \qquad
+    \sigma^{tr} = \sigma^{rot} + \Delta t\,(\lambda\, \mathrm{tr} D\, I + 2\mu D),
+
+then the law's return mapping brings :math:`\sigma^{tr}` back onto its yield surface. The
+Jaumann rate makes the update objective (a superposed rigid rotation rotates the stress);
+the rotation term is first order in :math:`\Delta t` (the usual explicit MPM choice, as in
+Uintah and CB-Geo). In 2D the state is plane strain: :math:`D_{zz} = 0`, and the out-of-plane
+stress :math:`\sigma_{zz}`, which the yield functions need, is kept as the internal variable
+``sigma_zz``. All arithmetic runs on 3 x 3 stresses, vectorized over particles.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import ClassVar
+
+import numpy as np
+import numpy.typing as npt
+
+from fempm.materials.base import Internal, IsotropicElastic, skew, sym
+
+#: the out-of-plane stress of a plane-strain state
+SIGMA_ZZ = Internal("sigma_zz")
+
+
+def to3(sigma: npt.NDArray, zz: npt.NDArray | None) -> npt.NDArray:
+    """(n, d, d) stresses (d = 2, 3) as (n, 3, 3), with ``zz`` the out-of-plane stress in 2D."""
+    n, d = len(sigma), sigma.shape[1]
+    if d == 3:
+        return np.array(sigma, dtype=float)
+    out = np.zeros((n, 3, 3))
+    out[:, :2, :2] = sigma
+    out[:, 2, 2] = zz
+    return out
+
+
+@dataclass(frozen=True)
+class HypoelasticPlastic(IsotropicElastic):
+    """Elastic predictor (Jaumann rate, plane strain in 2D) for the return mappings of
+    :class:`fempm.materials.VonMises` and :class:`fempm.materials.DruckerPrager`."""
+
+    energy_from_stress: ClassVar[bool] = True  # the stored energy is the elastic part, from the stress
+
+    def trial(self, L: npt.NDArray, sigma: npt.NDArray, dt: float, state: dict) -> npt.NDArray:
+        """The trial stresses (n, 3, 3) of a step with velocity gradients ``L``."""
+        n, d = L.shape[0], L.shape[1]
+        if d not in (2, 3):
+            raise ValueError(f"{type(self).__name__} needs a 2D (plane strain) or 3D space, not {d}D")
+        L3 = np.zeros((n, 3, 3))
+        L3[:, :d, :d] = L
+        S = to3(sigma, state.get("sigma_zz"))
+        D, W = sym(L3), skew(L3)
+        lam, mu = self.lame
+        S = S + dt * (W @ S - S @ W)
+        S += dt * 2 * mu * D
+        S[:, range(3), range(3)] += (dt * lam * np.trace(D, axis1=1, axis2=2))[:, None]
+        return S
+
+    def finish(self, S: npt.NDArray, d: int, state: dict) -> npt.NDArray:
+        """The (n, d, d) stresses of returned (n, 3, 3) ones; the out-of-plane stress into ``state``."""
+        if d == 2:
+            state["sigma_zz"] = S[:, 2, 2].copy()
+        return np.ascontiguousarray(S[:, :d, :d])
+
+    def compliance_energy(self, S: npt.NDArray) -> npt.NDArray:
+        r""":math:`\frac12 \sigma : C^{-1} : \sigma` (n,) of (n, 3, 3) stresses."""
+        lam, mu = self.lame
+        K = lam + 2 * mu / 3
+        p = np.trace(S, axis1=1, axis2=2) / 3
+        dev = S - p[:, None, None] * np.eye(3)
+        return 0.5 * p**2 / K + np.einsum("nij,nij->n", dev, dev) / (4 * mu)
+
+    def energy_density(self, F: npt.NDArray, sigma: npt.NDArray | None = None,
+                       state: dict | None = None) -> npt.NDArray:
+        r"""The stored elastic energy per reference volume, :math:`J\, \frac12 \sigma : C^{-1} : \sigma`
+        (the plastic work is dissipated); 0 without the stresses."""
+        if sigma is None:
+            return np.zeros(len(F))
+        S = to3(sigma, (state or {}).get("sigma_zz", np.zeros(len(F))))
+        return np.linalg.det(F) * self.compliance_energy(S)

@@ -1,0 +1,64 @@
+r"""Von Mises (J2) plasticity with linear isotropic hardening, hypoelastic (Jaumann rate,
+:mod:`fempm.materials.hypoelastic`), plane strain in 2D.
+
+Yield function :math:`f = q - (\sigma_y + H \bar\varepsilon_p)` with
+:math:`q = \sqrt{\tfrac32 s : s}`, :math:`s = \sigma - \tfrac13 \mathrm{tr}\,\sigma\, I`.
+Radial return: where the trial stress has :math:`f^{tr} > 0`,
+
+.. math::
+    \Delta\gamma = \frac{f^{tr}}{3\mu + H}, \qquad
+    s = \Big(1 - \frac{3\mu\,\Delta\gamma}{q^{tr}}\Big) s^{tr}, \qquad
+    \bar\varepsilon_p \leftarrow \bar\varepsilon_p + \Delta\gamma,
+
+the pressure unchanged: the closest point of the yield surface to the trial stress in the
+energy norm, on the surface exactly (:math:`q = \sigma_y + H \bar\varepsilon_p`). Internal
+variables: ``eps_p`` (equivalent plastic strain) and, in 2D, ``sigma_zz``.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import ClassVar
+
+import numpy as np
+import numpy.typing as npt
+
+from fempm.materials.base import Internal
+from fempm.materials.hypoelastic import SIGMA_ZZ, HypoelasticPlastic
+
+
+@dataclass(frozen=True)
+class VonMises(HypoelasticPlastic):
+    """``VonMises(E, nu, yield_stress, hardening=0.0)``: J2 plasticity (see the module)."""
+
+    yield_stress: float = np.inf
+    hardening: float = 0.0
+    history: ClassVar[tuple[Internal, ...]] = (Internal("eps_p"), SIGMA_ZZ)
+
+    def __post_init__(self):
+        super().__post_init__()
+        if not 0.0 < self.yield_stress <= np.inf:
+            raise ValueError(f"VonMises needs yield_stress > 0 (got {self.yield_stress})")
+        if not 0.0 <= self.hardening < np.inf:
+            raise ValueError(f"VonMises needs a finite hardening >= 0 (got {self.hardening})")
+
+    def yield_function(self, S: npt.NDArray, eps_p: npt.NDArray) -> npt.NDArray:
+        """:math:`f` (n,) of (n, 3, 3) stresses."""
+        dev = S - (np.trace(S, axis1=1, axis2=2) / 3)[:, None, None] * np.eye(3)
+        return np.sqrt(1.5 * np.einsum("nij,nij->n", dev, dev)) - (self.yield_stress + self.hardening * eps_p)
+
+    def return_map(self, S: npt.NDArray, eps_p: npt.NDArray) -> tuple[npt.NDArray, npt.NDArray]:
+        """(returned stresses, equivalent plastic strains) of trial (n, 3, 3) stresses."""
+        mu = self.lame[1]
+        p = np.trace(S, axis1=1, axis2=2) / 3
+        dev = S - p[:, None, None] * np.eye(3)
+        q = np.sqrt(1.5 * np.einsum("nij,nij->n", dev, dev))
+        f = q - (self.yield_stress + self.hardening * eps_p)
+        plastic = f > 0
+        dgamma = np.where(plastic, f, 0.0) / (3 * mu + self.hardening)
+        scale = np.where(plastic, 1.0 - 3 * mu * dgamma / np.where(plastic, q, 1.0), 1.0)
+        return dev * scale[:, None, None] + p[:, None, None] * np.eye(3), eps_p + dgamma
+
+    def stress(self, F, L, sigma, dt, rho, state) -> npt.NDArray:
+        S, state["eps_p"] = self.return_map(self.trial(L, sigma, dt, state), state["eps_p"])
+        return self.finish(S, L.shape[1], state)
