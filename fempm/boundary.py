@@ -47,6 +47,37 @@ class Slip:
         v[self.dofs] -= vn[:, None] * n
 
 
+@dataclass(frozen=True)
+class Friction:
+    r"""A rigid wall with Coulomb friction (coefficient ``mu``) at ``dofs``, outward ``normal``
+    (unit, (d,)). Where the grid velocity moves into the wall (:math:`v_n = v \cdot n > 0`),
+    its normal part is removed and the tangential part reduced by the friction that normal
+    impulse can carry,
+
+    .. math::
+        v_t \leftarrow v_t \max\Big(0,\ 1 - \mu rac{v_n}{|v_t|}\Big),
+
+    (sticking where that reaches 0); where it leaves the wall the velocity is free (Bardenhagen,
+    Brackbill and Sulsky, Comput. Methods Appl. Mech. Engrg. 187, 2000). Applied to the updated
+    grid velocity of every step: over a step the wall takes the normal momentum
+    :math:`m_i v_n` and at most :math:`\mu m_i v_n` of the tangential one."""
+
+    dofs: npt.NDArray[np.int32]
+    normal: npt.NDArray
+    mu: float
+
+    def apply(self, v: npt.NDArray) -> None:
+        n = self.normal
+        vd = v[self.dofs]
+        vn = vd @ n
+        vt = vd - vn[:, None] * n
+        speed = np.linalg.norm(vt, axis=1)
+        into = vn > 0
+        keep = np.where(speed > 0, np.maximum(0.0, 1.0 - self.mu * np.maximum(vn, 0.0) / np.where(speed > 0, speed,
+                                                                                                  1.0)), 0.0)
+        v[self.dofs] = np.where(into[:, None], vt * keep[:, None], vd)
+
+
 def _axis(normal: npt.NDArray) -> int | None:
     """The axis of a single unit normal along a coordinate axis, else None."""
     n = np.asarray(normal)
@@ -77,14 +108,26 @@ def fixed(V: dolfinx.fem.FunctionSpace, where: Callable[[npt.NDArray], npt.NDArr
     return Fixed(locate_dofs(V, where))
 
 
+def _unit_normal(normal, d: int, what: str) -> npt.NDArray:
+    n = np.asarray(normal, dtype=np.float64)
+    if n.shape != (d,) or not np.all(np.isfinite(n)) or not np.linalg.norm(n) > 0:
+        raise ValueError(f"{what} needs a finite, non-zero normal with {d} components (got {normal!r})")
+    return n / np.linalg.norm(n)
+
+
 def slip(V: dolfinx.fem.FunctionSpace, where: Callable[[npt.NDArray], npt.NDArray], normal) -> Slip:
     """Zero normal velocity at the dofs where ``where(x)`` holds; ``normal`` any direction."""
-    n = np.asarray(normal, dtype=np.float64)
-    d = V.mesh.geometry.dim
-    if n.shape != (d,) or not np.all(np.isfinite(n)) or not np.linalg.norm(n) > 0:
-        raise ValueError(f"slip needs a finite, non-zero normal with {d} components (got {normal!r})")
-    n = n / np.linalg.norm(n)
-    return Slip(locate_dofs(V, where), n)
+    return Slip(locate_dofs(V, where), _unit_normal(normal, V.mesh.geometry.dim, "slip"))
+
+
+def friction(V: dolfinx.fem.FunctionSpace, where: Callable[[npt.NDArray], npt.NDArray], normal,
+             mu: float) -> Friction:
+    """A wall with Coulomb friction ``mu`` >= 0 at the dofs where ``where(x)`` holds, ``normal``
+    pointing out of the body into the wall (:class:`Friction`; ``mu = 0``: a slip wall that
+    lets the body leave it)."""
+    if not 0.0 <= mu < np.inf:
+        raise ValueError(f"friction needs a finite coefficient mu >= 0 (got {mu!r})")
+    return Friction(locate_dofs(V, where), _unit_normal(normal, V.mesh.geometry.dim, "friction"), float(mu))
 
 
 def fixed_on_facets(V: dolfinx.fem.FunctionSpace, facet_tags: dolfinx.mesh.MeshTags, tag: int) -> Fixed:

@@ -1,0 +1,58 @@
+"""Coulomb friction on a grid boundary (fempm.boundary.friction): a block sliding on a rough
+floor under gravity decelerates at mu g, then sticks; with mu = 0 it keeps its speed."""
+
+import dolfinx.fem
+import dolfinx.mesh as dm
+import numpy as np
+import pytest
+from mpi4py import MPI
+
+import fempm
+from fempm.boundary import friction, slip
+from fempm.materials import LinearElastic
+from fempm.stepping import ExplicitSolver, Loads, StepOptions
+
+comm = MPI.COMM_WORLD
+G, V0 = 10.0, 1.0
+
+
+def _slide(mu: float, t_end: float):
+    """(times, mean horizontal velocity) of a block on the floor y = 0, started at V0."""
+    mesh = dm.create_rectangle(comm, [[0.0, 0.0], [2.0, 0.5]], [32, 8], dm.CellType.quadrilateral)
+    p = fempm.create_particles(mesh, 4, density=1.0, cells=lambda x: (x[0] > 0.25) & (x[0] < 0.75) & (x[1] < 0.25))
+    p.fields["v"] = np.tile([V0, 0.0], (len(p), 1))
+    V = dolfinx.fem.functionspace(mesh, ("Lagrange", 1, (2,)))
+    floor = friction(V, lambda x: np.isclose(x[1], 0.0), (0.0, -1.0), mu)
+    solver = ExplicitSolver(V, p, [LinearElastic(2.0e4, 0.3)], bcs=[floor], loads=Loads(body_force=(0.0, -G)),
+                            options=StepOptions(scheme="MUSL", cfl=0.4))
+    times, speeds = [], []
+    while solver.t < t_end:
+        solver.step()
+        m = comm.allreduce(float(p.mass.sum()))
+        times.append(solver.t)
+        speeds.append(comm.allreduce(float(p.mass @ p.fields["v"][:, 0])) / m)
+    return np.array(times), np.array(speeds)
+
+
+def test_a_sliding_block_decelerates_at_mu_g_and_sticks():
+    mu = 0.3
+    t, v = _slide(mu, 0.5)
+    sliding = (t > 0.05) & (t < 0.25)
+    slope = np.polyfit(t[sliding], v[sliding], 1)[0]
+    assert slope == pytest.approx(-mu * G, rel=0.03)  # measured -3.02
+    assert np.abs(v[t > 0.42]).max() < 0.03  # it stopped near t = V0 / (mu g) = 1/3 and stays
+
+
+def test_without_friction_the_block_keeps_its_speed():
+    t, v = _slide(0.0, 0.15)
+    assert np.abs(v - V0).max() < 1e-3
+
+
+def test_friction_needs_a_coefficient():
+    mesh = dm.create_unit_square(MPI.COMM_SELF, 2, 2)
+    V = dolfinx.fem.functionspace(mesh, ("Lagrange", 1, (2,)))
+    with pytest.raises(ValueError, match="mu >= 0"):
+        friction(V, lambda x: x[1] < 1e-9, (0.0, -1.0), -0.1)
+    with pytest.raises(ValueError, match="friction needs a finite, non-zero normal"):
+        friction(V, lambda x: x[1] < 1e-9, (0.0, 0.0), 0.3)
+    assert slip(V, lambda x: x[1] < 1e-9, (0.0, 2.0)).normal[1] == 1.0
