@@ -51,6 +51,8 @@ class Scene:
     growth beyond the work of the loads, J bounds, time-step floor). ``outputs``: the frames a
     run with an output folder writes, of :data:`OUTPUTS` (the energies and the summary always);
     what is not asked for is not computed (the grid stress is a projection per frame).
+    ``results``: the scene's own measures of the final state, ``results(scene, solver) -> dict``
+    (collective), added to the run's summary.
     """
 
     name: str
@@ -68,6 +70,7 @@ class Scene:
     variant: str | None = None
     health: Health = field(default_factory=Health)
     outputs: tuple[str, ...] = ("particles", "grid_velocity", "grid_stress")
+    results: Callable[[Scene, ExplicitSolver], dict] | None = None
 
     def __post_init__(self):
         unknown = set(self.outputs) - set(OUTPUTS)
@@ -243,6 +246,8 @@ def run(
         "status": monitor.outcome,
         "health": monitor.summary(),
     }
+    if scene.results is not None and not isinstance(failure, (SimulationError, SingularMassError)):
+        summary.update(scene.results(scene, solver))
     if progress and comm.rank == 0 and failure is None:
         print(f"{scene.name}: {solver.step_count} steps to t = {solver.t:.4g} in {wall:.2f} s "
               f"({summary['particle_steps_per_s']:.3g} particle-steps/s)")

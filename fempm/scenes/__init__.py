@@ -4,15 +4,17 @@
 from fempm.scenes.bar import vibrating_bar
 from fempm.scenes.block import hanging_block, largest_neighbour_gap
 from fempm.scenes.cantilever import cantilever, cantilever_reference, cantilever_tip
+from fempm.scenes.column import column_collapse, deposit
 from fempm.scenes.cook import cook_membrane
 from fempm.scenes.dam import MARTIN_MOYCE, dam_break, surge_front
 from fempm.scenes.disks import two_disks
 
 SCENES = {"bar": vibrating_bar, "disks": two_disks, "cantilever": cantilever, "dam": dam_break, "block": hanging_block,
-          "cook": cook_membrane}
+          "cook": cook_membrane, "column": column_collapse}
 
 __all__ = [
-    "MARTIN_MOYCE", "SCENES", "cantilever", "cantilever_reference", "cantilever_tip", "cook_membrane", "dam_break",
+    "MARTIN_MOYCE", "SCENES", "cantilever", "cantilever_reference", "cantilever_tip", "column_collapse", "cook_membrane",
+    "dam_break", "deposit",
     "hanging_block",
     "largest_neighbour_gap", "surge_front", "two_disks", "vibrating_bar",
 ]

@@ -44,3 +44,14 @@ def test_two_disks_demo_writes_outputs(tmp_path):
     assert len(rows) == res["steps"] + 1 and rows[0].startswith("step,dt,t,kinetic,strain,total")
     assert (out / "energies.png").stat().st_size > 10_000 and (out / "summary.json").exists()
     assert (out / "grid_velocity.pvd").is_file() and (out / "grid_stress.pvd").is_file()
+
+
+def test_column_collapse_demo_writes_its_table_and_figure(tmp_path):
+    demo = load("column_collapse")
+    res = demo.main(["--cells", "4", "--aspects", "0.5", "2", "--out", str(tmp_path)])
+    rows = res["rows"]
+    assert [r["aspect"] for r in rows] == [0.5, 2.0]
+    assert rows[1]["runout"] > 2 * rows[0]["runout"] > 0 and all(r["kinetic_fraction"] < 1e-2 for r in rows)
+    assert len(res["exponents"]) == 1 and res["exponents"][0] > 0.5  # the runout grows faster than a^0.5
+    assert "| 2 |" in (tmp_path / "column_collapse.md").read_text()
+    assert (tmp_path / "column_collapse.png").stat().st_size > 10_000

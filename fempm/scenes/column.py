@@ -1,0 +1,83 @@
+r"""Granular column collapse: a column of cohesionless sand released on a rough floor, plane
+strain (:class:`fempm.materials.DruckerPrager`).
+
+The column, ``width`` :math:`L_0` wide and :math:`H_0 = a L_0` high (aspect ratio ``aspect``
+:math:`a`), stands against a smooth wall (slip, the symmetry plane of a column twice as wide)
+on a floor with Coulomb friction (``floor_friction``, :func:`fempm.boundary.friction`). It
+starts at rest under its geostatic stress, :math:`\sigma_{yy} = -\rho g (H_0 - y)`,
+:math:`\sigma_{xx} = \sigma_{zz} = K_0 \sigma_{yy}` with Jaky's :math:`K_0 = 1 - \sin\phi`,
+and collapses under gravity. The results (:func:`deposit`) are the runout
+:math:`(L_\infty - L_0)/L_0` and the final height :math:`H_\infty / L_0` of the deposit (its
+extent and height: the outermost particles plus half a particle spacing), and the kinetic
+energy left at the end as a fraction of the potential energy released (the deposit is at rest
+when it is small).
+"""
+
+from __future__ import annotations
+
+import dolfinx.mesh as dm
+import numpy as np
+from mpi4py import MPI
+
+from fempm.boundary import friction, slip
+from fempm.materials import DruckerPrager
+from fempm.scene import Scene, check_counts
+from fempm.seeding import create_particles
+from fempm.stepping import Loads, StepOptions
+
+
+def deposit(scene: Scene, solver) -> dict:
+    """The collapse's results (collective): ``runout`` :math:`(L_\\infty - L_0)/L_0`,
+    ``final_height`` :math:`H_\\infty/L_0`, ``kinetic_fraction`` (kinetic energy over the
+    potential energy released)."""
+    p, prm = scene.particles, scene.params
+    comm = p.comm
+    half = prm["spacing"] / 2
+    front = comm.allreduce(float(p.x[:, 0].max(initial=-np.inf)), op=MPI.MAX) + half
+    top = comm.allreduce(float(p.x[:, 1].max(initial=-np.inf)), op=MPI.MAX) + half
+    released = comm.allreduce(float(p.mass @ (p.fields["X0"][:, 1] - p.x[:, 1]))) * prm["g"]
+    kinetic = solver.energies()["kinetic"]
+    L0 = prm["width"]
+    return {"runout": (front - L0) / L0, "final_height": top / L0,
+            "kinetic_fraction": kinetic / released if released > 0 else np.inf}
+
+
+def column_collapse(
+    aspect: float = 1.0, width: float = 0.2, cells: int = 16, ppc: int = 2, rho: float = 2000.0, E: float = 5.0e6,
+    nu: float = 0.3, friction_angle: float = 30.0, dilation_angle: float = 0.0, cohesion: float = 0.0,
+    floor_friction: float = 0.5, g: float = 9.81, t_end: float | None = None, scheme: str = "MUSL",
+    flip: float = 0.99, cfl: float = 0.4, frames: int = 20, comm: MPI.Comm = MPI.COMM_WORLD,
+) -> Scene:
+    """The column collapse (see the module): ``cells`` square cells across the column width,
+    ``ppc`` x ``ppc`` particles per cell; the mesh reaches ``2 + 3 a`` column widths along the
+    floor and ``1.05 a`` up. ``t_end`` defaults to :math:`6\\sqrt{H_0/g}` (the collapse ends
+    after about :math:`3\\sqrt{H_0/g}`)."""
+    check_counts(cells=cells, ppc=ppc)
+    if not 0.0 < aspect < np.inf or not 0.0 < width < np.inf:
+        raise ValueError(f"column_collapse needs a positive aspect and width (got aspect={aspect}, width={width})")
+    if not 0.0 <= floor_friction < np.inf:
+        raise ValueError(f"floor_friction={floor_friction} must be >= 0")
+    h = width / cells
+    H0 = aspect * width
+    nx, ny = int(np.ceil((2.0 + 3.0 * aspect) * cells)), int(np.ceil(1.05 * aspect * cells)) + 1
+    mesh = dm.create_rectangle(comm, [[0.0, 0.0], [nx * h, ny * h]], [nx, ny], dm.CellType.quadrilateral)
+    p = create_particles(mesh, ppc**2, density=rho, cells=lambda x: (x[0] < width) & (x[1] < H0))
+    sand = DruckerPrager(E, nu, friction_angle=friction_angle, dilation_angle=dilation_angle, cohesion=cohesion)
+    K0 = 1.0 - np.sin(np.radians(friction_angle))
+    syy = -rho * g * (H0 - p.x[:, 1])
+    sigma = np.zeros((len(p), 2, 2))
+    sigma[:, 0, 0], sigma[:, 1, 1] = K0 * syy, syy
+    p.fields["sigma"] = sigma
+    p.fields["sigma_zz"] = K0 * syy
+    if t_end is None:
+        t_end = 6.0 * np.sqrt(H0 / g)
+    params = dict(aspect=aspect, width=width, height=H0, cells=cells, ppc=ppc, rho=rho, E=E, nu=nu,
+                  friction_angle=friction_angle, dilation_angle=dilation_angle, cohesion=cohesion,
+                  floor_friction=floor_friction, g=g, K0=K0, spacing=h / ppc, scheme=scheme, flip=flip, cfl=cfl)
+    return Scene(
+        name="column_collapse", mesh=mesh, particles=p, materials=[sand], t_end=t_end,
+        bcs=lambda V: [slip(V, lambda x: np.isclose(x[0], 0.0), (-1.0, 0.0)),
+                       friction(V, lambda x: np.isclose(x[1], 0.0), (0.0, -1.0), floor_friction)],
+        loads=Loads(body_force=(0.0, -g)), options=StepOptions(scheme=scheme, flip=flip, cfl=cfl),
+        frames=frames, params=params, results=deposit,
+    )
