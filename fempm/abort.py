@@ -19,7 +19,11 @@ from __future__ import annotations
 
 import contextlib
 import sys
+import time
 import traceback
+
+#: seconds between the failing rank's message and MPI_Abort
+GRACE = 1.0
 
 
 @contextlib.contextmanager
@@ -37,4 +41,5 @@ def abort_on_error(comm=None):
             raise
         sys.stderr.write(f"fempm: rank {comm.rank} of {comm.size} failed; aborting all ranks\n{traceback.format_exc()}")
         sys.stderr.flush()
+        time.sleep(GRACE)  # mpiexec forwards the message before MPI_Abort ends the job (else it may be lost)
         comm.Abort(1)

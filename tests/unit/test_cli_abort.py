@@ -83,4 +83,5 @@ def test_a_material_raising_on_one_rank_ends_both_ranks(tmp_path):
                        timeout=120)
     assert time.perf_counter() - start < 60
     assert r.returncode != 0
-    assert "rank 0 of 2 failed; aborting all ranks" in r.stderr and "the law failed on rank 0" in r.stderr
+    assert "rank 0 of 2 failed; aborting all ranks" in r.stderr and "the law failed on rank 0" in r.stderr, \
+        (r.returncode, r.stdout[-2000:], r.stderr[-2000:])
