@@ -48,6 +48,19 @@ class Slip:
 
 
 @dataclass(frozen=True)
+class Prescribed:
+    """Grid velocity components held at given values at ``dofs`` (a moving rigid plate):
+    ``velocity`` (d,), NaN entries leave that component free."""
+
+    dofs: npt.NDArray[np.int32]
+    velocity: npt.NDArray
+
+    def apply(self, v: npt.NDArray) -> None:
+        held = np.flatnonzero(np.isfinite(self.velocity))
+        v[np.ix_(self.dofs, held)] = self.velocity[held]
+
+
+@dataclass(frozen=True)
 class Friction:
     r"""A rigid wall with Coulomb friction (coefficient ``mu``) at ``dofs``, outward ``normal``
     (unit, (d,)). Where the grid velocity moves into the wall (:math:`v_n = v \cdot n > 0`),
@@ -118,6 +131,17 @@ def _unit_normal(normal, d: int, what: str) -> npt.NDArray:
 def slip(V: dolfinx.fem.FunctionSpace, where: Callable[[npt.NDArray], npt.NDArray], normal) -> Slip:
     """Zero normal velocity at the dofs where ``where(x)`` holds; ``normal`` any direction."""
     return Slip(locate_dofs(V, where), _unit_normal(normal, V.mesh.geometry.dim, "slip"))
+
+
+def prescribed(V: dolfinx.fem.FunctionSpace, where: Callable[[npt.NDArray], npt.NDArray], velocity) -> Prescribed:
+    """The grid velocity held at ``velocity`` (d,) at the dofs where ``where(x)`` holds; NaN
+    components stay free (``(nan, -0.1)``: a smooth plate moving down at 0.1)."""
+    u = np.asarray(velocity, dtype=np.float64)
+    d = V.mesh.geometry.dim
+    if u.shape != (d,) or np.any(np.isinf(u)) or np.all(np.isnan(u)):
+        raise ValueError(f"prescribed needs a velocity with {d} components, finite or NaN (free), not all NaN "
+                         f"(got {velocity!r})")
+    return Prescribed(locate_dofs(V, where), u)
 
 
 def friction(V: dolfinx.fem.FunctionSpace, where: Callable[[npt.NDArray], npt.NDArray], normal,

@@ -12,7 +12,7 @@ import pytest
 from mpi4py import MPI
 
 import fempm
-from fempm.boundary import slip
+from fempm.boundary import friction, prescribed, slip
 from fempm.checkpoint import CheckpointError
 from fempm.health import Health
 from fempm.io import OutputFolderError
@@ -108,6 +108,10 @@ CASES = [  # (name, action (given a temporary folder), error class, message)
      "slip needs a finite, non-zero normal"),
     ("slip normal 3D", lambda _: slip(_space(), lambda x: x[0] < 1e-9, (1.0, 0.0, 0.0)), ValueError,
      "with 2 components"),
+    ("prescribed velocity all free", lambda _: prescribed(_space(), lambda x: x[1] > 1 - 1e-9, (np.nan, np.nan)),
+     ValueError, "prescribed needs a velocity with 2 components, finite or NaN"),
+    ("friction coefficient < 0", lambda _: friction(_space(), lambda x: x[1] < 1e-9, (0.0, -1.0), -0.2), ValueError,
+     "mu >= 0"),
     ("mass inf", lambda _: fempm.Particles(MESH, TWO, np.inf, 1.0), ValueError, "non-positive or non-finite mass"),
     ("volume inf", lambda _: fempm.Particles(MESH, TWO, 1.0, np.inf), ValueError, "non-finite volume"),
     ("mass NaN", lambda _: fempm.Particles(MESH, TWO, np.nan, 1.0), ValueError, "non-finite mass"),
