@@ -72,7 +72,7 @@ def main(argv: list[str] | None = None) -> dict:
             import matplotlib.pyplot as plt
 
             fig, (left, right) = plt.subplots(1, 2, figsize=(11, 4), gridspec_kw={"width_ratios": [2, 1]})
-            for aspect, x in deposits:
+            for aspect, x in sorted(deposits, key=lambda d: -d[0]):  # the tall ones first, under the others
                 left.scatter(x[:, 0], x[:, 1], s=1, label=f"a = {aspect:g}")
             left.set(xlabel="$x/L_0$", ylabel="$y/L_0$", title="final deposits", aspect="equal")
             left.legend(markerscale=8)
