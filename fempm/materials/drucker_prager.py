@@ -34,7 +34,7 @@ import numpy as np
 import numpy.typing as npt
 
 from fempm.materials.base import Internal
-from fempm.materials.hypoelastic import SIGMA_ZZ, HypoelasticPlastic
+from fempm.materials.hypoelastic import SIGMA_ZZ, HypoelasticPlastic, split
 
 
 def cone(angle_deg: float, d: int) -> tuple[float, float]:
@@ -81,18 +81,16 @@ class DruckerPrager(HypoelasticPlastic):
     def yield_function(self, S: npt.NDArray, d: int) -> npt.NDArray:
         """:math:`f` (n,) of (n, 3, 3) stresses."""
         eta, k, _, _ = self.parameters(d)
-        p = np.trace(S, axis1=1, axis2=2) / 3
-        dev = S - p[:, None, None] * np.eye(3)
-        return np.sqrt(0.5 * np.einsum("nij,nij->n", dev, dev)) + eta * p - k
+        p, _, ss = split(S)
+        return np.sqrt(0.5 * ss) + eta * p - k
 
     def return_map(self, S: npt.NDArray, eps_p: npt.NDArray, d: int) -> tuple[npt.NDArray, npt.NDArray]:
         """(returned stresses, equivalent plastic strains) of trial (n, 3, 3) stresses."""
         lam, G = self.lame
         K = lam + 2 * G / 3
         eta, k, eta_bar, p_t = self.parameters(d)
-        p = np.trace(S, axis1=1, axis2=2) / 3
-        dev = S - p[:, None, None] * np.eye(3)
-        root = np.sqrt(0.5 * np.einsum("nij,nij->n", dev, dev))
+        p, dev, ss = split(S)
+        root = np.sqrt(0.5 * ss)
         f = root + eta * p - k
         plastic = f > 0
         dgamma = np.where(plastic, f, 0.0) / (G + K * eta * eta_bar)

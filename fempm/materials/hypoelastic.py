@@ -39,6 +39,14 @@ def to3(sigma: npt.NDArray, zz: npt.NDArray | None) -> npt.NDArray:
     return out
 
 
+def split(S: npt.NDArray) -> tuple[npt.NDArray, npt.NDArray, npt.NDArray]:
+    r"""(:math:`p = \tfrac13 \mathrm{tr}\, S`, the deviator :math:`s = S - p I`, :math:`s : s`)
+    of (n, 3, 3) stresses."""
+    p = np.trace(S, axis1=1, axis2=2) / 3
+    dev = S - p[:, None, None] * np.eye(3)
+    return p, dev, np.einsum("nij,nij->n", dev, dev)
+
+
 @dataclass(frozen=True)
 class HypoelasticPlastic(IsotropicElastic):
     """Elastic predictor (Jaumann rate, plane strain in 2D) for the return mappings of
@@ -71,9 +79,8 @@ class HypoelasticPlastic(IsotropicElastic):
         r""":math:`\frac12 \sigma : C^{-1} : \sigma` (n,) of (n, 3, 3) stresses."""
         lam, mu = self.lame
         K = lam + 2 * mu / 3
-        p = np.trace(S, axis1=1, axis2=2) / 3
-        dev = S - p[:, None, None] * np.eye(3)
-        return 0.5 * p**2 / K + np.einsum("nij,nij->n", dev, dev) / (4 * mu)
+        p, _, ss = split(S)
+        return 0.5 * p**2 / K + ss / (4 * mu)
 
     def energy_density(self, F: npt.NDArray, sigma: npt.NDArray | None = None,
                        state: dict | None = None) -> npt.NDArray:

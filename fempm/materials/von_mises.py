@@ -24,7 +24,7 @@ import numpy as np
 import numpy.typing as npt
 
 from fempm.materials.base import Internal
-from fempm.materials.hypoelastic import SIGMA_ZZ, HypoelasticPlastic
+from fempm.materials.hypoelastic import SIGMA_ZZ, HypoelasticPlastic, split
 
 
 @dataclass(frozen=True)
@@ -44,15 +44,13 @@ class VonMises(HypoelasticPlastic):
 
     def yield_function(self, S: npt.NDArray, eps_p: npt.NDArray) -> npt.NDArray:
         """:math:`f` (n,) of (n, 3, 3) stresses."""
-        dev = S - (np.trace(S, axis1=1, axis2=2) / 3)[:, None, None] * np.eye(3)
-        return np.sqrt(1.5 * np.einsum("nij,nij->n", dev, dev)) - (self.yield_stress + self.hardening * eps_p)
+        return np.sqrt(1.5 * split(S)[2]) - (self.yield_stress + self.hardening * eps_p)
 
     def return_map(self, S: npt.NDArray, eps_p: npt.NDArray) -> tuple[npt.NDArray, npt.NDArray]:
         """(returned stresses, equivalent plastic strains) of trial (n, 3, 3) stresses."""
         mu = self.lame[1]
-        p = np.trace(S, axis1=1, axis2=2) / 3
-        dev = S - p[:, None, None] * np.eye(3)
-        q = np.sqrt(1.5 * np.einsum("nij,nij->n", dev, dev))
+        p, dev, ss = split(S)
+        q = np.sqrt(1.5 * ss)
         f = q - (self.yield_stress + self.hardening * eps_p)
         plastic = f > 0
         dgamma = np.where(plastic, f, 0.0) / (3 * mu + self.hardening)
