@@ -85,10 +85,9 @@ class Friction:
         vn = vd @ n
         vt = vd - vn[:, None] * n
         speed = np.linalg.norm(vt, axis=1)
-        into = vn > 0
-        keep = np.where(speed > 0, np.maximum(0.0, 1.0 - self.mu * np.maximum(vn, 0.0) / np.where(speed > 0, speed,
-                                                                                                  1.0)), 0.0)
-        v[self.dofs] = np.where(into[:, None], vt * keep[:, None], vd)
+        sliding = speed > 0
+        keep = np.where(sliding, np.maximum(0.0, 1.0 - self.mu * vn / np.where(sliding, speed, 1.0)), 0.0)
+        v[self.dofs] = np.where((vn > 0)[:, None], vt * keep[:, None], vd)  # only where it moves into the wall
 
 
 def _axis(normal: npt.NDArray) -> int | None:

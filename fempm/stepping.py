@@ -138,6 +138,11 @@ def cell_sizes(mesh) -> npt.NDArray:
     return out
 
 
+def law_state(mat, fields: dict, idx: npt.NDArray) -> dict:
+    """The internal variables of law ``mat`` at the particles ``idx`` (copies), by name."""
+    return {h.name: fields[h.name][idx] for h in getattr(mat, "history", ())}
+
+
 def law_stress(mat, F: npt.NDArray, L: npt.NDArray, sigma: npt.NDArray, dt: float, rho: npt.NDArray,
                fields: dict, idx: npt.NDArray) -> npt.NDArray:
     """``mat.stress(F, L, sigma, dt, rho)`` of the particles ``idx`` (and, for a law with
@@ -145,7 +150,7 @@ def law_stress(mat, F: npt.NDArray, L: npt.NDArray, sigma: npt.NDArray, dt: floa
     (d, d) stress per particle."""
     history = getattr(mat, "history", ())
     if history:
-        state = {h.name: fields[h.name][idx] for h in history}
+        state = law_state(mat, fields, idx)
         new = np.asarray(mat.stress(F, L, sigma, dt, rho, state))
         for h in history:
             fields[h.name][idx] = state[h.name]
@@ -194,7 +199,7 @@ class ExplicitSolver:
         f.setdefault("X0", p.x.copy())  # reference positions (body forces b(X, t), error norms)
         for mat in self.materials:  # the laws' internal variables (fempm.materials.base.Internal)
             for h in getattr(mat, "history", ()):
-                expected = (n,) + h.allocate(1, d).shape[1:]
+                expected = (n, *h.shape_for(d))
                 if np.shape(f.setdefault(h.name, h.allocate(n, d))) != expected:
                     raise ValueError(f"internal variable {h.name!r} of {type(mat).__name__} has shape "
                                      f"{np.shape(f[h.name])}; expected {expected}")
@@ -496,8 +501,7 @@ class ExplicitSolver:
         strain = 0.0
         for mat, idx in self._material_loop():
             if getattr(mat, "energy_from_stress", False):  # hypoelastic: the elastic energy of the stress
-                state = {h.name: f[h.name][idx] for h in mat.history}
-                w = mat.energy_density(f["F"][idx], f["sigma"][idx], state)
+                w = mat.energy_density(f["F"][idx], f["sigma"][idx], law_state(mat, f, idx))
             else:
                 w = mat.energy_density(f["F"][idx])
             strain += np.sum(f["volume0"][idx] * w)

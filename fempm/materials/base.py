@@ -20,8 +20,12 @@ class Internal:
     shape: tuple[int, ...] = ()
     initial: float = 0.0
 
+    def shape_for(self, d: int) -> tuple[int, ...]:
+        """The per-particle shape in ``d`` dimensions."""
+        return tuple(d if k == -1 else k for k in self.shape)
+
     def allocate(self, n: int, d: int) -> npt.NDArray:
-        return np.full((n, *(d if k == -1 else k for k in self.shape)), float(self.initial))
+        return np.full((n, *self.shape_for(d)), float(self.initial))
 
 
 class Material(Protocol):
