@@ -120,6 +120,7 @@ class RunWriter:
         self.frame = 0
         self.rows = 0  # energies.csv rows written
         self.part = 0  # continuations of the run
+        self._times: list[tuple[int, float]] = []  # (frame, time) of the frames written (rank 0)
         self._csv = None
         self._stress_vtx = None
         make_folder(self.folder, self.comm, keep=resume is not None, overwrite=overwrite)
@@ -138,13 +139,12 @@ class RunWriter:
     def _truncate(self) -> None:
         """Drop what the continued run wrote after its checkpoint: energies.csv rows, frame
         times and particle frames."""
-        energies = self.folder / "energies.csv"
-        if energies.exists():
-            lines = energies.read_text().splitlines(keepends=True)
-            energies.write_text("".join(lines[: 1 + self.rows]))
         times = self.folder / "particles" / "times.csv"
+        for path, keep in ((self.folder / "energies.csv", 1 + self.rows), (times, self.frame)):
+            if path.exists():
+                path.write_text("".join(path.read_text().splitlines(keepends=True)[:keep]))
         if times.exists():
-            times.write_text("".join(times.read_text().splitlines(keepends=True)[: self.frame]))
+            self._times = [(int(k), float(tk)) for k, tk in (line.split(",") for line in times.read_text().splitlines())]
         for frame in (self.folder / "particles").glob("particles_*.*vtu"):
             if int(frame.stem.split("_")[1]) >= self.frame:
                 frame.unlink()
@@ -189,9 +189,9 @@ class RunWriter:
             vtu.write_index(folder / f"{stem}.pvtu", [f"{stem}_r{r:05d}.vtu" for r in ranks], x, data)
             with open(folder / "times.csv", "a") as fh:
                 fh.write(f"{self.frame},{float(t)!r}\n")  # a plain number, not np.float64(...)
-            times = [line.split(",") for line in (folder / "times.csv").read_text().splitlines()]
+            self._times.append((self.frame, float(t)))
             vtu.write_collection(self.folder / "particles.pvd",
-                                 [(float(tk), f"particles/particles_{int(k):05d}.pvtu") for k, tk in times])
+                                 [(tk, f"particles/particles_{k:05d}.pvtu") for k, tk in self._times])
         if self.png:  # a picture of all particles: gathered
             parts = self.comm.gather((x, np.linalg.norm(data["velocity"], axis=1)), root=0)
             if self.comm.rank == 0:

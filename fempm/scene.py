@@ -69,7 +69,7 @@ class Scene:
     dt: float | None = None
     variant: str | None = None
     health: Health = field(default_factory=Health)
-    outputs: tuple[str, ...] = ("particles", "grid_velocity", "grid_stress")
+    outputs: tuple[str, ...] = OUTPUTS
     results: Callable[[Scene, ExplicitSolver], dict] | None = None
 
     def __post_init__(self):
@@ -223,9 +223,9 @@ def run(
         except checkpoint.RunInterrupted as e:  # collective too: the flag is reduced over ranks
             monitor.outcome, monitor.error, failure = "interrupted", str(e), e
         finally:
+            failed = isinstance(failure, (SimulationError, SingularMassError))  # a state that may not be finite
             if writer is not None:
                 try:  # the final state; of a failed run the particles' only
-                    failed = isinstance(failure, (SimulationError, SingularMassError))
                     write_frame(writer, scene, solver, grid=not failed and solver.grid_velocity is not None,
                                 particles=True)
                 finally:
@@ -246,7 +246,7 @@ def run(
         "status": monitor.outcome,
         "health": monitor.summary(),
     }
-    if scene.results is not None and not isinstance(failure, (SimulationError, SingularMassError)):
+    if scene.results is not None and not failed:
         summary.update(scene.results(scene, solver))
     if progress and comm.rank == 0 and failure is None:
         print(f"{scene.name}: {solver.step_count} steps to t = {solver.t:.4g} in {wall:.2f} s "
