@@ -241,13 +241,16 @@ def _run(args, rest: list[str]) -> int:
         return 0
     health, rest = _health_options(rest)
     options = _scene_options(builder, rest)
-    if args.checkpoint_every is not None and args.checkpoint_every < 1:
-        raise UsageError(f"fempm run: option --checkpoint-every expects a positive number of steps, got "
-                         f"{args.checkpoint_every}")
+    _check_every(args.checkpoint_every, "run")
     rebuild = {"scene": args.scene, "options": options, "health": health, "checkpoint_every": args.checkpoint_every}
     scene = _build(rebuild)
     return _execute(scene, args.out or Path("output") / args.scene, args.scene, checkpoint_every=args.checkpoint_every,
                     rebuild=rebuild, overwrite=args.overwrite)
+
+
+def _check_every(every: int | None, command: str) -> None:
+    if every is not None and every < 1:
+        raise UsageError(f"fempm {command}: option --checkpoint-every expects a positive number of steps, got {every}")
 
 
 def _build(rebuild: dict):
@@ -314,7 +317,6 @@ def _resume(args) -> int:
         raise UsageError(f"fempm resume: the run is at t = {data['t']:.6g}, past t_end = {scene.t_end:g}: give a later "
                          "--t-end")
     every = args.checkpoint_every if args.checkpoint_every is not None else rebuild.get("checkpoint_every")
-    if every is not None and every < 1:
-        raise UsageError(f"fempm resume: option --checkpoint-every expects a positive number of steps, got {every}")
+    _check_every(every, "resume")
     rebuild = {**rebuild, "checkpoint_every": every}
     return _execute(scene, args.out, rebuild["scene"], checkpoint_every=every, resume=True, rebuild=rebuild)
