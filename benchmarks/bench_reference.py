@@ -1,6 +1,6 @@
 """fempm against the reference MPM kernels (numba, Taichi CPU) on the reference problem, in one run.
 
-    python benchmarks/bench_reference.py [--sizes 1e5 1e6] [--ranks 1 2] [--meshes quad tri]
+    python benchmarks/bench_reference.py [--sizes 1e5 1e6] [--ranks 1 2] [--meshes quad tri] [--partition particles]
                                          [--masses lumped consistent] [--check] [--json FILE]
                                          [--reference DIR]
 
@@ -9,7 +9,9 @@ jittered particles per grid cell, v = 0.5 sin(4 pi x_(k+1)), compressible neo-Ho
 (mu = lambda = 400), gravity, USL, FLIP, lumped mass with a nodal-mass cut-off of 1 % of a
 particle's mass, the normal velocity zero on the outer 3 node layers, dt = 0.1 dx / 40. fempm
 runs it on structured quadrilaterals (``quad``, the reference grid) and on gmsh triangles of the
-same size (``tri``), under ``mpiexec -n R``; the references run with R threads.
+same size (``tri``), under ``mpiexec -n R``; the references run with R threads. On several
+ranks the mesh is distributed by particles (:func:`fempm.partition.particle_balanced`; DOLFINx's
+own partition, by cells, with ``--partition cells``).
 
 Each configuration runs in its own process (a worker: this script with ``--worker``): 3 warm-up
 steps, then 7 batches of at least 0.4 s; the median time per step (maximum over ranks) gives
@@ -62,8 +64,10 @@ def _peak_kb() -> int:
     return _status_kb("VmHWM") or resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
 
 
-def build(n_target: int, mesh_kind: str, mass: str, reference: Path):
-    """The reference problem as a fempm solver; returns (solver, dt, particles, rss after mesh)."""
+def build(n_target: int, mesh_kind: str, mass: str, reference: Path, partition: str = "particles"):
+    """The reference problem as a fempm solver; returns (solver, dt, particles, rss after mesh).
+    ``partition``: on several ranks, the mesh distributed by particles
+    (:func:`fempm.partition.particle_balanced`) or as DOLFINx partitions it (``cells``)."""
     import dolfinx.mesh as dm
     import numpy as np
     from mpi4py import MPI
@@ -82,6 +86,10 @@ def build(n_target: int, mesh_kind: str, mass: str, reference: Path):
         mesh = dm.create_unit_square(comm, n_cells, n_cells, dm.CellType.quadrilateral)
     else:
         mesh = triangle_mesh(comm, dx)
+    if comm.size > 1 and partition == "particles":
+        from fempm.partition import particle_balanced
+
+        mesh = particle_balanced(mesh, x if comm.rank == 0 else np.zeros((0, 2)))
     rss0 = _rss_kb()
     vol = dx**2 / PPC
     mine = x if comm.rank == 0 else np.zeros((0, 2))
@@ -127,7 +135,7 @@ def worker(args) -> None:
     from mpi4py import MPI
 
     comm = MPI.COMM_WORLD
-    solver, dt, p, rss0 = build(int(float(args.n)), args.mesh, args.mass, Path(args.reference))
+    solver, dt, p, rss0 = build(int(float(args.n)), args.mesh, args.mass, Path(args.reference), args.partition)
     N = p.num_global
     if args.check_steps:
         for _ in range(args.check_steps):
@@ -164,10 +172,10 @@ def _last_json(text: str) -> dict:
     raise RuntimeError(f"no result line in:\n{text[-2000:]}")
 
 
-def run_fempm(n: float, mesh: str, mass: str, ranks: int, reference: Path, extra=()) -> dict:
+def run_fempm(n: float, mesh: str, mass: str, ranks: int, reference: Path, extra=(), partition="particles") -> dict:
     py, mpiexec = sys.executable, str(Path(sys.executable).with_name("mpiexec"))
     cmd = [mpiexec, "-n", str(ranks), py, __file__, "--worker", "--n", str(n), "--mesh", mesh, "--mass", mass,
-           "--reference", str(reference), *extra]
+           "--reference", str(reference), "--partition", partition, *extra]
     env = {**os.environ, "OMP_NUM_THREADS": "1", "OPENBLAS_NUM_THREADS": "1", "NUMBA_NUM_THREADS": "1"}
     r = subprocess.run(cmd, capture_output=True, text=True, env=env)
     if r.returncode:
@@ -217,6 +225,8 @@ def main(argv=None) -> None:
     ap.add_argument("--check", action="store_true", help="compare positions after 300 steps with the numba kernel first")
     ap.add_argument("--json", type=Path, help="write the figures to this file")
     ap.add_argument("--reference", type=Path, default=DEFAULT_REFERENCE, help="the reference-mpm folder")
+    ap.add_argument("--partition", default="particles", choices=["particles", "cells"],
+                    help="on several ranks: the mesh distributed by particles (fempm.partition) or by cells (DOLFINx)")
     # worker mode (one configuration under mpiexec)
     ap.add_argument("--worker", action="store_true", help=argparse.SUPPRESS)
     ap.add_argument("--n", default="1e4", help=argparse.SUPPRESS)
@@ -248,7 +258,7 @@ def main(argv=None) -> None:
                                     "t_step_s": res["t_step_median_s"]})
             for mesh in a.meshes:
                 for mass in a.masses:
-                    res = run_fempm(n, mesh, mass, r, a.reference)
+                    res = run_fempm(n, mesh, mass, r, a.reference, partition=a.partition)
                     res["vs"] = {impl: res["pps"] / ref["pps_median"] for impl, ref in refs.items()}
                     out["rows"].append(res)
                     print(json.dumps(res), flush=True)

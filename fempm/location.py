@@ -70,9 +70,16 @@ class CellLocator:
         self._entities = np.arange(nlocal, dtype=np.int32)
         self._tree = None
         self._star: tuple | None = None
+        self._vertex_ranks: tuple | None = None
         self._global_tree = None
         self._midpoint_tree = None
         self._cell_bins = None
+
+    @property
+    def num_cells(self) -> int:
+        """The number of cells searched: the owned ones (and the ghosts for a locator with
+        ``ghosts``), numbered from 0."""
+        return len(self._entities)
 
     @property
     def tree(self):
@@ -204,26 +211,61 @@ class CellLocator:
                           len(self._entities))
         return self._star
 
-    def locate_near(self, x: npt.NDArray, previous: npt.NDArray[np.int32]) -> tuple[npt.NDArray[np.int32], npt.NDArray]:
+    def vertex_ranks(self) -> tuple[npt.NDArray[np.int64], npt.NDArray[np.int32]]:
+        """For each local vertex, the other ranks that hold it (owner and ghosting ranks as far
+        as this rank knows them: an owned vertex's ghosting ranks, a ghost vertex's owner), as
+        CSR (offsets, ranks); made once."""
+        if self._vertex_ranks is None:
+            vmap = self.mesh.topology.index_map(0)
+            n, ng = vmap.size_local, vmap.num_ghosts
+            dest = vmap.index_to_dest_ranks(0)  # the argument: a message tag
+            index = np.concatenate([np.repeat(np.arange(len(dest.offsets) - 1), np.diff(dest.offsets)),
+                                    np.arange(n, n + ng)])
+            ranks = np.concatenate([np.asarray(dest.array), np.asarray(vmap.owners)]).astype(np.int64)
+            pairs = np.unique(index * self.mesh.comm.size + ranks)
+            offsets = np.searchsorted(pairs // self.mesh.comm.size, np.arange(n + ng + 1)).astype(np.int64)
+            self._vertex_ranks = (offsets, (pairs % self.mesh.comm.size).astype(np.int32))
+        return self._vertex_ranks
+
+    def locate_at_vertices(self, x: npt.NDArray, global_vertices: npt.NDArray[np.int64]) -> tuple[npt.NDArray[np.int32], npt.NDArray]:
+        """The lowest-numbered searched cell holding one of the vertices ``global_vertices``
+        (n, k; global numbers, those not held here ignored) that contains each point of ``x``
+        (-1: none), and the reference coordinates there: where a particle that left a cell with
+        these vertices on another rank can be (affine cells, compiled)."""
+        geo = self.geometry
+        c2v, v_offsets, v_cells, owned = self.vertex_star()
+        vmap = self.mesh.topology.index_map(0)
+        local = vmap.global_to_local(np.ascontiguousarray(global_vertices, dtype=np.int64).ravel())
+        local = np.asarray(local, dtype=np.int32).reshape(global_vertices.shape)
+        return shape_kernels.vertex_star_pull_back(x, local, geo._x0, geo._K, v_offsets, v_cells, owned,
+                                                   geo.cell_name in SIMPLICES, self.tol)
+
+    def locate_near(self, x: npt.NDArray, previous: npt.NDArray[np.int32], *,
+                    ghosts: bool = False) -> tuple[npt.NDArray[np.int32], npt.NDArray]:
         """Like :meth:`locate` for points that left their ``previous`` owned cells: the cells
         sharing a vertex with the previous one are tested first (the lowest-numbered cell
         containing the point wins; affine cells, compiled), the tree searches only for the
-        points not found there."""
+        points not found there. ``ghosts``: the ghost cells among those neighbours are tested
+        too (after the owned ones: they are numbered after them), so that a particle moving to
+        another rank's cell in the ghost layer is sent there without a tree search
+        (:func:`fempm.migration.migrate`); its cell is then at or above the owned count."""
         geo = self.geometry
         if not (geo.affine and shape_kernels.AVAILABLE) or len(x) == 0:
             return self.locate(x)
+        c2v, v_offsets, v_cells, owned = self.vertex_star()
         cells, X = shape_kernels.near_pull_back(np.asarray(previous, dtype=np.int32), np.ascontiguousarray(x),
-                                                geo._x0, geo._K, *self.vertex_star(), geo.cell_name in SIMPLICES,
-                                                self.tol)
+                                                geo._x0, geo._K, c2v, v_offsets, v_cells,
+                                                len(c2v) if ghosts else owned, geo.cell_name in SIMPLICES, self.tol)
         miss = np.flatnonzero(cells < 0)
-        if len(miss):
+        if len(miss) and not ghosts:
             cells[miss], X[miss] = self.locate(np.asarray(x)[miss])
         return cells, X
 
     def relocate(
-        self, x: npt.NDArray, cells: npt.NDArray[np.int32]
+        self, x: npt.NDArray, cells: npt.NDArray[np.int32], *, ghosts: bool = False
     ) -> tuple[npt.NDArray[np.int32], npt.NDArray]:
-        """Like :meth:`locate`, testing each point's previous owned cell first."""
+        """Like :meth:`locate`, testing each point's previous owned cell first (``ghosts``: as
+        in :meth:`locate_near`)."""
         cells = np.asarray(cells, dtype=np.int32)
         X = np.full((len(x), self.geometry.tdim), np.nan)
         new_cells = np.full(len(x), -1, dtype=np.int32)
@@ -241,7 +283,7 @@ class CellLocator:
         moved = np.flatnonzero(new_cells < 0)
         if moved.size:
             had = moved[cells[moved] >= 0]
-            new_cells[had], X[had] = self.locate_near(np.asarray(x)[had], cells[had])
+            new_cells[had], X[had] = self.locate_near(np.asarray(x)[had], cells[had], ghosts=ghosts)
             fresh = moved[cells[moved] < 0]
             new_cells[fresh], X[fresh] = self.locate(np.asarray(x)[fresh])
         return new_cells, X

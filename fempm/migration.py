@@ -14,6 +14,7 @@ from dataclasses import dataclass
 import numpy as np
 import numpy.typing as npt
 
+from fempm.kernels.shape import AVAILABLE
 from fempm.location import CellLocator, lowest_finding_rank
 
 
@@ -124,14 +125,105 @@ def replace_rows(arrays: dict[str, npt.NDArray], holes: npt.NDArray, arrivals: d
     return out
 
 
-def migrate(locator: CellLocator, arrays: dict[str, npt.NDArray], leaving: npt.NDArray) -> tuple[dict, npt.NDArray]:
+def _to_ghost_owners(locator: CellLocator, sub: dict[str, npt.NDArray], ghosted: npt.NDArray) -> dict:
+    """Send the rows ``ghosted`` of ``sub`` (their ``cells`` are ghost cells here) to the ranks
+    that own those cells, as (global cell, rows) in one ``alltoall``; returns the rows received
+    here, their ``cells`` made local (owned cells are numbered as their global range)."""
+    comm = locator.mesh.comm
+    imap = locator.mesh.topology.index_map(locator.geometry.tdim)
+    owned = imap.size_local
+    ghost = sub["cells"][ghosted] - owned
+    dest = np.asarray(imap.owners)[ghost]
+    order = np.argsort(dest, kind="stable")
+    rows = ghosted[order]
+    gcell = np.asarray(imap.ghosts)[ghost[order]]
+    bounds = np.searchsorted(dest[order], np.arange(comm.size + 1))
+    out = [(gcell[bounds[r]:bounds[r + 1]], _take(sub, rows[bounds[r]:bounds[r + 1]])) for r in range(comm.size)]
+    received = comm.alltoall(out)
+    start = imap.local_range[0]
+    parts = [d for _, d in received]
+    merged = _concat(parts, sub)
+    merged["cells"] = (np.concatenate([g for g, _ in received] + [np.zeros(0, np.int64)]) - start).astype(np.int32)
+    return merged
+
+
+def _to_vertex_sharers(locator: CellLocator, sub: dict[str, npt.NDArray], rows: npt.NDArray,
+                       previous: npt.NDArray[np.int32]) -> tuple[dict, npt.NDArray]:
+    """Offer the rows ``rows`` of ``sub`` (found in no local cell near their ``previous`` cells)
+    to the other ranks holding a vertex of their previous cell, which search the owned cells
+    around those vertices (:meth:`CellLocator.locate_at_vertices`); the lowest finding rank
+    takes the row. Returns (the rows received here, the rows of ``rows`` that no rank found).
+    Collective."""
+    comm = locator.mesh.comm
+    size = comm.size
+    c2v = locator.vertex_star()[0]
+    offsets, ranks = locator.vertex_ranks()
+    verts = c2v[previous]  # (m, k) local vertices
+    m = len(rows)
+    pairs = [np.zeros(0, dtype=np.int64)]
+    for a in range(verts.shape[1]):  # over the vertices of a cell, not over particles
+        v = verts[:, a]
+        count = offsets[v + 1] - offsets[v]
+        first = np.repeat(offsets[v] - (np.cumsum(count) - count), count)
+        r = ranks[first + np.arange(count.sum())]
+        pairs.append(np.repeat(np.arange(m, dtype=np.int64), count) * size + r)
+    pairs = np.unique(np.concatenate(pairs))  # sorted by particle, then rank
+    pidx, dest = pairs // size, pairs % size
+    other = dest != comm.rank
+    pidx, dest = pidx[other], dest[other]
+    order = np.argsort(dest, kind="stable")
+    pidx, dest = pidx[order], dest[order]
+    bounds = np.searchsorted(dest, np.arange(size + 1))
+    sent = [pidx[bounds[r]:bounds[r + 1]] for r in range(size)]
+    vmap = locator.mesh.topology.index_map(0)
+    gverts = np.asarray(vmap.local_to_global(verts.ravel().astype(np.int32)), dtype=np.int64).reshape(verts.shape)
+    x = sub["x"][rows]
+    received = comm.alltoall([(np.ascontiguousarray(x[i]), gverts[i]) for i in sent])
+    found = [locator.locate_at_vertices(px, gv) for px, gv in received]
+    owner = lowest_finding_rank(sent, comm.alltoall([c >= 0 for c, _ in found]), m)
+    claims = []
+    for r in range(size):
+        pos = np.flatnonzero(owner[sent[r]] == r)
+        claims.append((pos, _take(sub, rows[sent[r][pos]])))
+    parts = []
+    for s, (pos, d) in enumerate(comm.alltoall(claims)):
+        d["cells"], d["X"] = found[s][0][pos], found[s][1][pos]
+        parts.append(d)
+    return _concat(parts, sub), rows[owner == size]
+
+
+def migrate(locator: CellLocator, arrays: dict[str, npt.NDArray], leaving: npt.NDArray,
+            previous: npt.NDArray[np.int32] | None = None) -> tuple[dict, npt.NDArray]:
     """Send the particles ``leaving`` (indices, ascending; their cells are not owned here) to
     the ranks that own their cells and take in the particles the other ranks send here, in
     place (:func:`replace_rows`). ``arrays`` holds ``x``, ``cells``, ``X`` and the particle
-    data, one row per particle. Returns (the arrays, the positions of the leaving particles
-    that no rank holds). Collective."""
+    data, one row per particle. Without searching a tree:
+
+    - a leaving particle whose cell is a ghost cell here (``cells`` at or above the number of
+      owned cells: found by :meth:`CellLocator.locate_near` with ``ghosts``) goes straight to
+      the cell's owner, with its reference coordinates;
+    - one found nowhere here (``cells < 0``) with a ``previous`` cell (one per leaving
+      particle, -1: none) is offered to the ranks sharing a vertex of that cell
+      (:func:`_to_vertex_sharers`).
+
+    The rest are searched for by :func:`distribute`, whose bounding-box trees are built only
+    when some rank has such a particle. Returns (the arrays, the positions of the leaving
+    particles that no rank holds). Collective."""
+    comm = locator.mesh.comm
     sub = _take(arrays, leaving)
-    x, cells, X = sub.pop("x"), sub.pop("cells"), sub.pop("X")
-    d = distribute(locator, x, sub, cells=cells, X=X)  # none is found here: the result is the arrivals
-    arrivals = {"x": d.x, "cells": d.cells, "X": d.X, **d.data}
-    return replace_rows(arrays, leaving, arrivals), d.outside
+    parts = [_to_ghost_owners(locator, sub, np.flatnonzero(sub["cells"] >= 0))]
+    lost = np.flatnonzero(sub["cells"] < 0)
+    if previous is not None and locator.geometry.affine and AVAILABLE:
+        near = previous[lost] >= 0
+        taken, missed = _to_vertex_sharers(locator, sub, lost[near], previous[lost[near]])
+        parts.append(taken)
+        lost = np.sort(np.concatenate([lost[~near], missed]))
+    outside = sub["x"][:0]
+    if comm.allreduce(len(lost)):
+        rest = _take(sub, lost)
+        x = rest.pop("x")
+        del rest["cells"], rest["X"]
+        d = distribute(locator, x, rest)  # those found here (far from their cells) come back too
+        parts.append({"x": d.x, "cells": d.cells, "X": d.X, **d.data})
+        outside = d.outside
+    return replace_rows(arrays, leaving, _concat(parts, sub)), outside

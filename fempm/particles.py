@@ -199,21 +199,26 @@ class Particles:
         left their cells, when the caller has already updated ``X`` of all the others (the
         compiled step does, in closed form); only those are searched for.
         """
+        ghosts = self.comm.size > 1  # leavers found in a ghost cell go straight to its owner
         if left is None:
-            cells, X = self.locator.relocate(self.x, self.cells)
+            previous = self.cells
+            cells, X = self.locator.relocate(self.x, self.cells, ghosts=ghosts)
         else:
             cells, X = self.cells, self.X
+            previous = cells.copy() if ghosts else None
             idx = np.flatnonzero(left)
             if len(idx):
-                cells[idx], X[idx] = self.locator.locate_near(self.x[idx], cells[idx])
-        lost = int(np.count_nonzero(cells < 0))
+                cells[idx], X[idx] = self.locator.locate_near(self.x[idx], cells[idx], ghosts=ghosts)
+        leaving = (cells < 0) | (cells >= self.locator.num_cells) if ghosts else cells < 0
+        lost = int(np.count_nonzero(leaving))
         if (lost if self.comm.size == 1 else self.comm.allreduce(lost)) == 0:
             self.cells, self.X = cells, X
             return
         if outside not in _OUTSIDE:  # before anything moves
             raise ValueError(f"unknown option outside={outside!r}; expected one of {_OUTSIDE}")
         arrays = {"x": self.x, "cells": cells, "X": X, **self._arrays()}
-        arrays, gone = migrate(self.locator, arrays, np.flatnonzero(cells < 0))  # in place, O(leavers)
+        rows = np.flatnonzero(leaving)
+        arrays, gone = migrate(self.locator, arrays, rows, previous[rows] if ghosts else None)  # in place, O(leavers)
         self._check_outside(gone, outside)
         self._set_arrays(arrays)
 

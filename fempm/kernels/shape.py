@@ -118,6 +118,26 @@ if njit is not None:
         return best
 
     @njit(cache=True)
+    def _vertex_star_pull_back(x, verts, x0, K, v_offsets, v_cells, num_cells, simplex, tol, cells,
+                               X):  # pragma: no cover - compiled
+        t = K.shape[1]
+        for p in range(len(x)):
+            best = -1
+            for a in range(verts.shape[1]):
+                v = verts[p, a]
+                if v < 0:
+                    continue
+                for q in range(v_offsets[v], v_offsets[v + 1]):
+                    e = v_cells[q]
+                    if e >= num_cells or (best >= 0 and e >= best):
+                        continue
+                    if inside_after_pull_back(x, p, x0, K, e, simplex, t, tol, X):
+                        best = e
+            if best >= 0:
+                inside_after_pull_back(x, p, x0, K, best, simplex, t, tol, X)
+            cells[p] = best
+
+    @njit(cache=True)
     def _near_pull_back(previous, x, x0, K, c2v, v_offsets, v_cells, num_cells, simplex, tol, cells,
                         X):  # pragma: no cover - compiled
         t = K.shape[1]
@@ -187,3 +207,16 @@ def near_pull_back(previous: npt.NDArray[np.int32], x: npt.NDArray, x0: npt.NDAr
 
 #: whether the closed-form kernels of this module are available (numba installed and selected)
 AVAILABLE = COMPILED and njit is not None
+
+
+def vertex_star_pull_back(x: npt.NDArray, verts: npt.NDArray[np.int32], x0: npt.NDArray, K: npt.NDArray,
+                          v_offsets: npt.NDArray[np.int32], v_cells: npt.NDArray[np.int32], num_cells: int,
+                          simplex: bool, tol: float) -> tuple[npt.NDArray[np.int32], npt.NDArray]:
+    """For points ``x`` and vertices ``verts`` (n, k; -1: none): the lowest-numbered cell below
+    ``num_cells`` holding one of the point's vertices (vertex -> cells ``v_offsets``/``v_cells``)
+    that contains the point within ``tol`` (-1: none), and the reference coordinates there
+    (affine geometry)."""
+    cells, X = np.empty(len(x), dtype=np.int32), np.full((len(x), K.shape[1]), np.nan)
+    _vertex_star_pull_back(np.ascontiguousarray(x), np.ascontiguousarray(verts, dtype=np.int32), x0, K, v_offsets,
+                           v_cells, int(num_cells), bool(simplex), float(tol), cells, X)
+    return cells, X

@@ -103,9 +103,13 @@ def test_relocate_moves_particles_between_cells_and_ranks(name):
 def test_particles_moving_to_neighbouring_cells_are_found_without_the_tree(name):
     """A small motion: every particle that leaves its cell is found in the cells sharing a
     vertex with it (CellLocator.locate_near), in the cell and at the reference point the tree
-    search finds; on one rank the tree, freed after the particles were placed, is not rebuilt."""
+    search finds; the tree, freed after the particles were placed, is not rebuilt: on several
+    ranks the particles that move into another rank's cell find it among the ghost cells and
+    go straight to its owner."""
     mesh = make_mesh(name)
     p = fempm.create_particles(mesh, 2 ** mesh.topology.dim, jitter=0.5, seed=2)
+    n0 = p.num_global
+    ids0 = np.sort(np.concatenate(comm.allgather(p.ids)))
     p.locator.release_tree()
     from fempm.stepping import cell_sizes
 
@@ -116,13 +120,21 @@ def test_particles_moving_to_neighbouring_cells_are_found_without_the_tree(name)
     geom = p.locator.geometry
     left = ~geom.contains(geom.pull_back(p.cells, p.x), 1e-10)
     assert comm.allreduce(int(np.count_nonzero(left))) > 0  # some did leave their cells
+    if comm.size > 1:  # how many move to another rank's cell
+        owners = np.asarray(mesh.topology.index_map(mesh.topology.dim).owners)
+        cells, _ = p.locator.locate_near(p.x[left], p.cells[left], ghosts=True)
+        crossing = comm.allreduce(int(np.count_nonzero(cells >= geom.num_owned)))
+        assert np.all(np.isin(owners[cells[cells >= geom.num_owned] - geom.num_owned], np.arange(comm.size)))
+        assert crossing > 0 or mesh.topology.dim == 1  # one rank boundary point in 1D: maybe none cross
     p.relocate()
-    if comm.size == 1:
-        assert p.locator._tree is None
-        cells, X = p.locator.locate(p.x)  # the tree search, for reference
-        same = cells == p.cells
-        assert np.count_nonzero(~same) <= 0.01 * len(same)
-        np.testing.assert_allclose(X[same], p.X[same], rtol=0.0, atol=1e-14)
-        # elsewhere a point on a face shared by both cells
-        assert np.all(geom.contains(geom.pull_back(p.cells[~same], p.x[~same]), 1e-9))
+    assert p.locator._tree is None
+    assert p.num_global == n0
+    np.testing.assert_array_equal(np.sort(np.concatenate(comm.allgather(p.ids))), ids0)
+    assert np.all((p.cells >= 0) & (p.cells < geom.num_owned))
+    cells, X = p.locator.locate(p.x)  # the tree search, for reference
+    same = cells == p.cells
+    assert np.count_nonzero(~same) <= 0.01 * len(same)
+    np.testing.assert_allclose(X[same], p.X[same], rtol=0.0, atol=1e-14)
+    # elsewhere a point on a face shared by both cells
+    assert np.all(geom.contains(geom.pull_back(p.cells[~same], p.x[~same]), 1e-9))
     np.testing.assert_allclose(geom.push_forward(p.cells, p.X), p.x, atol=1e-12)
