@@ -239,9 +239,17 @@ class ConsistentSystems:
                     s.x.array[:] = np.where(keep, guess[sel, c], 0.0)
                 with fpetsc.temporary_options(self.prefix, KSP_OPTIONS) if s.refresh else contextlib.nullcontext():
                     s.ksp.solve(s.b, s.x)  # a fresh set-up reads the sub-block options (bjacobi)
-                reason = s.ksp.getConvergedReason()
+                    reason = s.ksp.getConvergedReason()
+                    if reason == PETSc.KSP.ConvergedReason.DIVERGED_DTOL and guess is not None:
+                        # the warm start's residual is far above the right-hand side (forces
+                        # near equilibrium, a body at rest): start from zero
+                        s.ksp.setInitialGuessNonzero(False)
+                        s.ksp.solve(s.b, s.x)
+                        reason = s.ksp.getConvergedReason()
                 if reason < 0:
-                    raise RuntimeError(
+                    from fempm.stepping import SimulationError
+
+                    raise SimulationError(
                         f"consistent mass solve: KSP did not converge ({fpetsc.converged_reason_name(reason)}, "
                         f"{s.ksp.getIterationNumber()} iterations); the particle mass matrix may be singular")
                 self.iterations.append(s.ksp.getIterationNumber())

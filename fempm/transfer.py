@@ -368,6 +368,10 @@ class Projector:
                     x.array[:] = guess[:n][act, c]
                 ksp.solve(rhs, x)
                 reason = ksp.getConvergedReason()
+                if reason == PETSc.KSP.ConvergedReason.DIVERGED_DTOL and guess is not None:
+                    ksp.setInitialGuessNonzero(False)  # a warm start far worse than zero (forces near balance)
+                    ksp.solve(rhs, x)
+                    reason = ksp.getConvergedReason()
                 if reason < 0:
                     raise RuntimeError(
                         f"consistent projection: KSP did not converge ({fpetsc.converged_reason_name(reason)}, "

@@ -26,6 +26,30 @@ from fempm.seeding import create_particles
 from fempm.stepping import Loads, StepOptions
 
 
+#: the experimental runout laws :math:`(L_\infty - L_0)/L_0 = c_1 a` for :math:`a < a_1` and
+#: :math:`c_2 a^{2/3}` for :math:`a > a_2` of quasi-two-dimensional columns in channels: Lube,
+#: Huppert, Sparks and Freundt (2005), Phys. Rev. E 72, 041301, and Lajeunesse, Monnier and
+#: Homsy (2005), Phys. Fluids 17, 103302, with the coefficients and ranges as Lagrée, Staron
+#: and Popinet (2011), J. Fluid Mech. 686, 378-408, eqs. (3.1)-(3.2), quote them
+#: (name -> (c1, a1, c2, a2))
+RUNOUT_LAWS = {"Lube et al. 2005": (1.2, 1.8, 1.9, 2.8), "Lajeunesse et al. 2005": (1.8, 3.0, 2.3, 3.0)}
+
+
+def published_runout(aspect: float) -> dict[str, tuple[float, float]]:
+    """The runout of each law of :data:`RUNOUT_LAWS` at aspect ratio ``aspect``, as a range
+    (low, high): one value inside a law's ranges, the two branches between them."""
+    out = {}
+    for name, (c1, a1, c2, a2) in RUNOUT_LAWS.items():
+        linear, power = c1 * aspect, c2 * aspect ** (2.0 / 3.0)
+        if aspect <= a1 and aspect < a2:
+            out[name] = (linear, linear)
+        elif aspect >= a2 and aspect > a1:
+            out[name] = (power, power)
+        else:  # between the ranges (or at a common bound): both branches
+            out[name] = (min(linear, power), max(linear, power))
+    return out
+
+
 def deposit(scene: Scene, solver) -> dict:
     """The collapse's results (collective): ``runout`` :math:`(L_\\infty - L_0)/L_0`,
     ``final_height`` :math:`H_\\infty/L_0`, ``kinetic_fraction`` (kinetic energy over the

@@ -17,6 +17,10 @@ each the maximum over time):
   at most :data:`FIT_SIZES`), with a verdict, and the reasons of the failed runs;
 * ``DIR/convergence_<problem>.png``, the :math:`L^2` error against :math:`h` per problem.
 
+The problems are the smooth exact and manufactured motions of :mod:`fempm.manufactured` and,
+with plasticity, the elastic-plastic impact of :mod:`fempm.plastic_impact` (two waves, a jump
+in velocity at each: the displacement error converges at most like :math:`h`).
+
 A run that fails or stops converging stays a row of the table.
 """
 
@@ -31,6 +35,7 @@ import numpy as np
 from mpi4py import MPI
 
 from fempm import manufactured as mf
+from fempm.plastic_impact import plastic_impact
 
 COLUMNS = ["problem", "mesh", "degree", "variant", "mass", "domain", "scheme", "cells", "h", "dt", "steps",
            "error_max", "error_rms", "error_l2", "wall_s", "status"]
@@ -122,6 +127,10 @@ PROBLEMS: dict[str, ProblemSpec] = {
                                    + [Config(mass="consistent", domain=d, scheme="MUSL") for d in ("point", "cpdi2")]
                                    + [Config("unstructured", domain=d, scheme="MUSL") for d in ("point", "cpdi1", "cpdi2")]),
                              (Config(domain="cpdi1", scheme="MUSL"), Config(domain="cpdi2", scheme="MUSL")), 0.1),
+    "plastic_impact": ProblemSpec(plastic_impact, (16, 32, 64, 128), (16, 32, 64), 0.2,
+                                  tuple(Config(mass=m, domain=d) for m in ("lumped", "consistent") for d in ("point", "cpdi1"))
+                                  + (Config(scheme="MUSL"), Config("triangles")),
+                                  (Config(), Config(mass="consistent"))),
 }
 
 

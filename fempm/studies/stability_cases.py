@@ -18,7 +18,13 @@ with each option of :func:`options_for`.
   (or contraction) :math:`v = a (x - x_c)` whose free motion reaches :math:`J = 20`
   (:math:`0.05`) at :math:`t_{end}`;
 * ``cfl``: the disks at CFL numbers 0.1 ... 1.0 (the options);
-* ``long-run``: a small 1D vibrating bar for :math:`10^5` steps (3000 quick).
+* ``long-run``: a small 1D vibrating bar for :math:`10^5` steps (3000 quick);
+* ``plastic-impact``: the disks as von Mises (J2) solids, yield stress 1/50 of Young's
+  modulus, at 0.2 m/s (the elastic impact stress :math:`\rho c v \approx 0.23 E` is 12 times
+  the yield stress): the energy goes into plastic work;
+* ``column-collapse``: a granular column (:func:`fempm.scenes.column_collapse`, Drucker-Prager,
+  aspect ratio 2, 8 cells across; 4 cells and half the time quick) collapsing under gravity
+  onto a rough floor.
 """
 
 from __future__ import annotations
@@ -29,10 +35,11 @@ import dolfinx.mesh as dm
 import numpy as np
 from mpi4py import MPI
 
-from fempm.materials import LinearElastic, NeoHookean
+from fempm.materials import LinearElastic, NeoHookean, VonMises
 from fempm.particles import Particles
 from fempm.scene import Scene
 from fempm.scenes.bar import vibrating_bar
+from fempm.scenes.column import column_collapse
 from fempm.scenes.disks import two_disks
 from fempm.seeding import create_particles
 
@@ -158,6 +165,23 @@ def long_run(quick: bool, comm=MPI.COMM_WORLD) -> Scene:
     return scene
 
 
+def plastic_impact(quick: bool, comm=MPI.COMM_WORLD) -> Scene:
+    """The disks (E = 1000, nu = 0.3, rho = 1000) as von Mises solids with yield stress 20, at
+    0.2 m/s, until after they have come to rest against each other."""
+    scene = _disks(quick, comm, speed=0.2)
+    scene.materials = [VonMises(1000.0, 0.3, yield_stress=20.0)]
+    scene.t_end = 1.6  # 0.8 s after contact: before the splash along the contact line reaches the walls
+    return scene
+
+
+def column(quick: bool, comm=MPI.COMM_WORLD) -> Scene:
+    """The granular column of aspect ratio 2 on 8 cells across (4 quick), for the time of
+    its collapse (half of it quick)."""
+    scene = column_collapse(aspect=2.0, cells=4 if quick else 8, frames=0, comm=comm)
+    scene.t_end *= 0.25 if quick else 0.5
+    return scene
+
+
 CASES: dict[str, Callable] = {
     "nu=0.49": nearly_incompressible(0.49),
     "nu=0.499": nearly_incompressible(0.499),
@@ -173,4 +197,6 @@ CASES: dict[str, Callable] = {
     "compress-J=0.05": homogeneous(0.05),
     "cfl": cfl_case,
     "long-run": long_run,
+    "plastic-impact": plastic_impact,
+    "column-collapse": column,
 }

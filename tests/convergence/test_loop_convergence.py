@@ -85,3 +85,17 @@ def test_vortex_errors_decrease_and_failures_say_why(study):
     assert status == ["SimulationError", "ok"]
     bad = next(r for r in rows if r["problem"] == "vortex_A1" and r["domain"] == "cpdi2" and r["cells"] == 24)
     assert "inverted particle domain" in bad["reason"] and bad["steps"] > 0
+
+
+def test_plastic_impact_converges(study):
+    """The J2 strip hitting a wall (fempm.plastic_impact): the two-wave exact solution is
+    approached under refinement, lumped and consistent, at about h^(1/2) (the velocity jumps
+    at both fronts)."""
+    _, rows, _ = study
+    for mass in ("lumped", "consistent"):
+        rs = sorted((r for r in rows if r["problem"] == "plastic_impact" and r["mass"] == mass), key=lambda r: r["cells"])
+        assert [r["cells"] for r in rs] == [16, 32, 64] and all(r["status"] == "ok" for r in rs)
+        e = [r["error_l2"] for r in rs]
+        assert e[2] < e[1] < e[0] < 2e-5, (mass, e)
+        rate = np.polyfit(np.log([r["h"] for r in rs]), np.log(e), 1)[0]
+        assert 0.3 < rate < 1.5, (mass, rate)

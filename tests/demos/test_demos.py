@@ -53,5 +53,7 @@ def test_column_collapse_demo_writes_its_table_and_figure(tmp_path):
     assert [r["aspect"] for r in rows] == [0.5, 2.0]
     assert rows[1]["runout"] > 2 * rows[0]["runout"] > 0 and all(r["kinetic_fraction"] < 1e-2 for r in rows)
     assert len(res["exponents"]) == 1 and res["exponents"][0] > 0.5  # the runout grows faster than a^0.5
-    assert "| 2 |" in (tmp_path / "column_collapse.md").read_text()
+    md = (tmp_path / "column_collapse.md").read_text()
+    assert "| Lube et al. 2005 | Lajeunesse et al. 2005 |" in md
+    assert f"| 2 | {rows[1]['runout']:.3f} | 2.40-3.02 | 3.60 |" in md  # both branches of Lube's law at a = 2
     assert (tmp_path / "column_collapse.png").stat().st_size > 10_000

@@ -30,3 +30,17 @@ def test_the_command_line_writes_runout_and_final_height(tmp_path):
     summary = json.loads(Path(tmp_path / "summary.json").read_text())
     assert summary["params"]["aspect"] == 0.5 and 0.0 < summary["runout"] < 1.0
     assert summary["final_height"] == pytest.approx(0.5, abs=0.05)  # a short column keeps its top
+
+
+def test_published_runout_laws():
+    """The experimental laws of fempm.scenes.column.RUNOUT_LAWS: one branch inside a law's
+    range, both between them."""
+    from fempm.scenes.column import published_runout
+
+    lube, laj = "Lube et al. 2005", "Lajeunesse et al. 2005"
+    assert published_runout(1.0) == {lube: (1.2, 1.2), laj: (1.8, 1.8)}
+    at2 = published_runout(2.0)
+    assert at2[lube] == pytest.approx((2.4, 1.9 * 2 ** (2 / 3)), rel=1e-14)
+    assert at2[laj] == pytest.approx((3.6, 3.6))
+    assert published_runout(4.0)[lube] == pytest.approx((1.9 * 4 ** (2 / 3),) * 2, rel=1e-14)
+    assert published_runout(4.0)[laj] == pytest.approx((2.3 * 4 ** (2 / 3),) * 2, rel=1e-14)
