@@ -135,3 +135,37 @@ def test_compiled_consistent_step_keeps_its_systems_and_rebuilds_them_as_particl
     assert systems.rebuilds > 1
     assert systems.tests >= systems.rebuilds
     assert 0 < max(systems.iterations) < 40  # CG + incomplete Cholesky
+
+
+@pytest.mark.parametrize("compiled", [False, True])
+def test_a_warm_start_far_worse_than_zero_restarts_the_mass_solve(compiled):
+    """Forces near balance (a right-hand side 1e-12 of the last solution): PETSc stops the
+    warm-started CG at once (its residual is above divtol times the right-hand side); the solve
+    starts again from zero and gives the zero-guess solution."""
+    solver = make_solver("triangle", StepOptions(mass="consistent"), compiled=compiled)
+    solver.step()
+    n = solver.V.dofmap.index_map.size_local
+    d = solver.V.mesh.geometry.dim
+    rng = np.random.default_rng(1)
+    if compiled:
+        systems = solver._lumped_step.systems
+        num = systems.num_dofs
+        rhs = np.zeros((num, 1 + d))
+        rhs[:n, 1:] = 1e-12 * rng.standard_normal((n, d))
+        guess = np.ones((num, d))
+        cold, warm = np.zeros((num, d)), np.zeros((num, d))
+        systems.solve(rhs, 1, cold)
+        systems.solve(rhs, 1, warm, guess)
+    else:
+        from fempm.basis import ParticleBasis
+
+        proj = solver._mass_operator(ParticleBasis(solver.V, solver.particles, gradients=False))
+        m = proj.num_owned + solver.V.dofmap.index_map.num_ghosts
+        b = np.zeros((m, d))
+        b[:n] = 1e-12 * rng.standard_normal((n, d))
+        cold = proj.solve(b)
+        warm = proj.solve(b, guess=np.ones_like(cold))
+    scale = comm.allreduce(float(np.abs(cold).max(initial=0.0)), op=MPI.MAX)
+    assert scale > 0.0
+    err = comm.allreduce(float(np.abs(warm - cold).max(initial=0.0)), op=MPI.MAX)
+    assert err <= 1e-6 * scale
