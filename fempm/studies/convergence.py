@@ -130,7 +130,7 @@ PROBLEMS: dict[str, ProblemSpec] = {
     "plastic_impact": ProblemSpec(plastic_impact, (16, 32, 64, 128), (16, 32, 64), 0.2,
                                   tuple(Config(mass=m, domain=d) for m in ("lumped", "consistent") for d in ("point", "cpdi1"))
                                   + (Config(scheme="MUSL"), Config("triangles")),
-                                  (Config(), Config(mass="consistent"))),
+                                  (Config(), Config(mass="consistent")), 0.1),
 }
 
 
