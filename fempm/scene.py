@@ -16,6 +16,7 @@ import numpy as np
 from mpi4py import MPI
 from tqdm import tqdm
 
+from fempm.contact import Contact
 from fempm.health import Health, HealthMonitor
 from fempm.io import RunWriter
 from fempm.particles import Particles
@@ -52,7 +53,10 @@ class Scene:
     run with an output folder writes, of :data:`OUTPUTS` (the energies and the summary always);
     what is not asked for is not computed (the grid stress is a projection per frame).
     ``results``: the scene's own measures of the final state, ``results(scene, solver) -> dict``
-    (collective), added to the run's summary.
+    (collective), added to the run's summary. ``contact``: one velocity field per particle
+    group with frictional contact (:class:`fempm.contact.Contact`); None: one field.
+    ``watch``: called with the solver after every step (collective), for the scene's own
+    histories (a continued run calls it from the checkpoint on).
     """
 
     name: str
@@ -71,6 +75,8 @@ class Scene:
     health: Health = field(default_factory=Health)
     outputs: tuple[str, ...] = OUTPUTS
     results: Callable[[Scene, ExplicitSolver], dict] | None = None
+    contact: Contact | None = None
+    watch: Callable[[ExplicitSolver], None] | None = None
 
     def __post_init__(self):
         unknown = set(self.outputs) - set(OUTPUTS)
@@ -97,7 +103,8 @@ class Scene:
     def solver(self) -> ExplicitSolver:
         V = self.space()
         bcs = list(self.bcs(V)) if self.bcs is not None else []
-        return ExplicitSolver(V, self.particles, self.materials, bcs=bcs, loads=self.loads, options=self.options)
+        return ExplicitSolver(V, self.particles, self.materials, bcs=bcs, loads=self.loads, options=self.options,
+                              contact=self.contact)
 
 
 #: the run summary's cost figures that demos report with their own results
@@ -207,6 +214,8 @@ def run(
                 if writer is not None:
                     writer.energies(row)
                 monitor.after_step(dt, row, final=final)
+                if scene.watch is not None:
+                    scene.watch(solver)
                 if callback is not None:
                     callback(solver)
                 if (checkpoint_every is not None and solver.step_count % checkpoint_every == 0) or \

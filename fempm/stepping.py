@@ -36,6 +36,8 @@ from fempm import kernels
 from fempm.basis import ParticleBasis, is_nonnegative
 from fempm.boundary import Fixed, Slip
 from fempm.domains import GIMP_NAMES, domain_geometry, make_domain
+from fempm.contact import Contact, contact_step
+from fempm.contact import check_options as check_contact_options
 from fempm.fmpm import parse_mass
 from fempm.geometry import CHUNK
 from fempm.loads import Loads, external_forces  # Loads: re-exported, scenes build it from here
@@ -173,7 +175,9 @@ class ExplicitSolver:
     ``compiled``: take the compiled step (:mod:`fempm.lumped_step`, :mod:`fempm.consistent_step`:
     lumped or consistent mass, point particles, a degree-1 space on an affine mesh) where it
     applies (None, the default), insist on it (True: an error where it does not apply) or never
-    (False: the generic step, which is its reference).
+    (False: the generic step, which is its reference). ``contact``: a
+    :class:`fempm.contact.Contact`, one velocity field per particle group with frictional
+    contact between them (the generic step; None: one field for all).
     """
 
     V: dolfinx.fem.FunctionSpace
@@ -185,6 +189,7 @@ class ExplicitSolver:
     t: float = 0.0
     step_count: int = 0
     compiled: bool | None = None
+    contact: Contact | None = None
 
     def __post_init__(self):
         p = self.particles
@@ -375,6 +380,11 @@ class ExplicitSolver:
         """Advance one step; returns the ``dt`` used. ``dt`` defaults to the stable step
         (at most ``dt_max``); a given ``dt`` above the stability limit (CFL > 1) is an error."""
         self._check_step_arguments(dt, dt_max)
+        if self.contact is not None:  # one velocity field per body (fempm.contact)
+            check_contact_options(self.options)
+            if self.compiled:
+                raise ValueError("compiled=True: the compiled step has one velocity field; contact takes the generic step")
+            return contact_step(self, dt, dt_max)
         if self.compiled is not False and self._compiled_step() is not None:
             return self._lumped_step.step(dt, dt_max)
         opts = self.options

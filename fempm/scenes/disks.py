@@ -7,6 +7,7 @@ import numpy as np
 from mpi4py import MPI
 
 from fempm.materials import LinearElastic
+from fempm.contact import Contact
 from fempm.scene import Scene, check_counts
 from fempm.seeding import create_particles
 from fempm.stepping import StepOptions
@@ -15,13 +16,15 @@ from fempm.stepping import StepOptions
 def two_disks(
     mesh: str = "structured", cells: int = 20, ppc: int = 4, scheme: str = "MUSL", flip: float = 1.0,
     mass: str = "lumped", cfl: float = 0.4, t_end: float = 3.0, E: float = 1000.0, nu: float = 0.3,
-    rho: float = 1000.0, speed: float = 0.1, radius: float = 0.2, frames: int = 30,
-    comm: MPI.Comm = MPI.COMM_WORLD,
+    rho: float = 1000.0, speed: float = 0.1, radius: float = 0.2, frames: int = 30, contact: bool = False,
+    friction: float = 0.0, comm: MPI.Comm = MPI.COMM_WORLD,
 ) -> Scene:
     """Two elastic disks (Sulsky, Chen and Schreyer 1994) on the unit square, plane strain.
 
     Disks of radius 0.2 at (0.2, 0.2) and (0.8, 0.8) moving at +-(0.1, 0.1); contact through
-    the single-valued grid velocity; no boundary conditions (the disks never reach the walls).
+    the single-valued grid velocity, or with ``contact`` one velocity field per disk
+    (``fields["disk"]``, :class:`fempm.contact.Contact` with Coulomb ``friction``); no boundary
+    conditions (the disks never reach the walls).
     ``mesh``: "structured" (quadrilaterals, ``cells`` per side) or "unstructured"
     (triangles from ``meshes/unit_square_tri.msh``).
     """
@@ -42,8 +45,11 @@ def two_disks(
     p = create_particles(m, ppc, density=rho, where=in_disks)
     lower = np.hypot(*(p.x - centres[0]).T) < radius
     p.fields["v"] = np.where(lower[:, None], speed, -speed) * np.ones((len(p), 2))
-    params = dict(mesh=mesh, cells=cells, ppc=ppc, scheme=scheme, flip=flip, mass=mass, cfl=cfl, E=E, nu=nu, rho=rho)
+    p.fields["disk"] = (~lower).astype(np.int32)
+    params = dict(mesh=mesh, cells=cells, ppc=ppc, scheme=scheme, flip=flip, mass=mass, cfl=cfl, E=E, nu=nu, rho=rho,
+                  contact=contact, friction=friction)
     return Scene(
         name="two_disks", mesh=m, particles=p, materials=[LinearElastic(E, nu)], t_end=t_end, frames=frames,
         options=StepOptions(scheme=scheme, flip=flip, mass=mass, cfl=cfl), params=params,
+        contact=Contact(friction=friction, field="disk") if contact else None,
     )

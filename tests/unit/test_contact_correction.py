@@ -1,0 +1,60 @@
+"""The nodal contact correction (fempm.contact.correct): momentum conserved to round-off, no
+approach left, Coulomb's stick and slip, separation free."""
+
+import numpy as np
+import pytest
+
+from fempm.contact import Contact, correct
+
+
+def _two_groups(n=500, d=2, seed=0):
+    rng = np.random.default_rng(seed)
+    m = rng.uniform(0.1, 2.0, (2, n))
+    m[rng.random((2, n)) < 0.2] = 0.0  # some nodes hold one group only
+    v = rng.standard_normal((2, n, d))
+    v[m == 0.0] = 0.0
+    grad = rng.standard_normal((2, n, d))
+    return m, v, grad
+
+
+@pytest.mark.parametrize("friction", [0.0, 0.3, 1e6])
+@pytest.mark.parametrize("d", [2, 3])
+def test_momentum_is_conserved_and_no_group_approaches_after_the_correction(friction, d):
+    m, v, grad = _two_groups(d=d)
+    before = np.einsum("gn,gnd->nd", m, v)
+    contact = correct(m, v, grad, friction)
+    assert contact.sum() > 100 and np.all(contact == (m > 0).all(axis=0))
+    after = np.einsum("gn,gnd->nd", m, v)
+    np.testing.assert_allclose(after, before, rtol=0, atol=1e-14 * np.abs(before).max())
+    total = m.sum(axis=0)
+    vcm = after / np.where(total > 0, total, 1.0)[:, None]
+    for g in range(2):
+        n = 2 * grad[g] - grad.sum(axis=0)
+        n /= np.linalg.norm(n, axis=1)[:, None]
+        wn = np.einsum("nd,nd->n", v[g] - vcm, n)
+        assert np.all(wn[contact] <= 1e-13)
+
+
+def test_stick_slip_and_separation():
+    """One node, group 0 (mass 1) moving at (1, 0.5) into group 1 (mass 3, at rest) whose
+    outward normal is -x: the normal relative velocity goes; the tangential one stays without
+    friction, is reduced by mu times the normal one, or stops (stick) when mu is large; moving
+    apart, nothing changes."""
+    m = np.array([[1.0], [3.0]])
+    grad = np.array([[[1.0, 0.0]], [[-1.0, 0.0]]])  # out of group 0: +x
+    vcm = np.array([0.25, 0.125])
+    for mu, expect0 in [(0.0, [0.25, 0.5]), (0.2, [0.25, 0.5 - 0.2 * 0.75]), (1.0, vcm)]:
+        v = np.array([[[1.0, 0.5]], [[0.0, 0.0]]])
+        correct(m, v, grad, mu)
+        np.testing.assert_allclose(v[0, 0], expect0, rtol=1e-14)
+        np.testing.assert_allclose(m[0, 0] * v[0, 0] + m[1, 0] * v[1, 0], [1.0, 0.5], rtol=1e-14)
+    v = np.array([[[-1.0, 0.5]], [[0.0, 0.0]]])  # separating
+    correct(m, v, grad, 0.5)
+    np.testing.assert_array_equal(v, [[[-1.0, 0.5]], [[0.0, 0.0]]])
+
+
+def test_bad_options():
+    with pytest.raises(ValueError, match="friction"):
+        Contact(friction=-0.1)
+    with pytest.raises(ValueError, match="mass_cutoff"):
+        Contact(mass_cutoff=1.0)
