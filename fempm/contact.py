@@ -52,7 +52,6 @@ import numpy as np
 import numpy.typing as npt
 from mpi4py import MPI
 
-from fempm.basis import ParticleBasis
 from fempm.loads import external_forces
 from fempm.transfer import SUPPORT_TOL, p2g, p2g_gradients
 
@@ -115,10 +114,7 @@ def contact_step(solver: ExplicitSolver, dt: float | None, dt_max: float) -> flo
     p = solver.particles
     fld = p.fields
     comm = p.comm
-    solver._check_finite()
-    solver._check_bodies()
-    basis = ParticleBasis(solver.V, p, gradients=True, domain=opts.particle_domain)
-    solver.extended_steps += basis.extended
+    basis = solver._open_step()
     dt = solver._time_step(solver.stable_dt(), dt, dt_max)
     if contact.field not in fld:
         raise ValueError(f"contact: the particles have no field {contact.field!r} naming their groups")

@@ -390,10 +390,7 @@ class ExplicitSolver:
         opts = self.options
         p = self.particles
         fld = p.fields
-        self._check_finite()
-        self._check_bodies()
-        basis = ParticleBasis(self.V, p, gradients=True, domain=opts.particle_domain)
-        self.extended_steps += basis.extended
+        basis = self._open_step()
         mass_op = self._mass_operator(basis)
         stable = self.stable_dt()
         if opts.mass == "consistent" and not opts.lumped_forces:  # omega_max^2 <= omega_L^2 / lambda_min
@@ -436,6 +433,14 @@ class ExplicitSolver:
         p.relocate()
         self.grid_velocity = v_new[: basis.num_dofs_space]
         return dt
+
+    def _open_step(self) -> ParticleBasis:
+        """The checks that open a generic step, and its particle basis (values and gradients)."""
+        self._check_finite()
+        self._check_bodies()
+        basis = ParticleBasis(self.V, self.particles, gradients=True, domain=self.options.particle_domain)
+        self.extended_steps += basis.extended
+        return basis
 
     def _move_corners(self, basis: ParticleBasis, v: npt.NDArray, dt: float) -> None:
         r"""CPDI2: corners :math:`y_c^+ = y_c + \Delta t \sum_i N_i(y_c) v_i^+`; the particle
