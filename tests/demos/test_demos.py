@@ -57,3 +57,12 @@ def test_column_collapse_demo_writes_its_table_and_figure(tmp_path):
     assert "| Lube et al. 2005 | Lajeunesse et al. 2005 |" in md
     assert f"| 2 | {rows[1]['runout']:.3f} | 2.40-3.02 | 3.60 |" in md  # both branches of Lube's law at a = 2
     assert (tmp_path / "column_collapse.png").stat().st_size > 10_000
+
+
+def test_disks_contact_demo_separates_the_disks(tmp_path):
+    demo = load("disks_contact")
+    res = demo.main(["--cells", "10", "--out", str(tmp_path)])
+    for name in ("one field", "contact"):
+        assert res[name]["momentum"] < 1e-12 and res[name]["energy_ratio"] < 1.0
+    assert res["contact"]["shared_cells"] == 0
+    assert (tmp_path / "disks_contact.png").stat().st_size > 10_000
