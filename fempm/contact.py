@@ -136,32 +136,33 @@ def contact_step(solver: ExplicitSolver, dt: float | None, dt_max: float) -> flo
     total = m.sum(axis=0)
     top = comm.allreduce(float(total[: basis.index_map.size_local].max(initial=0.0)), op=MPI.MAX)
     has = m > SUPPORT_TOL * top
+    m_has = np.where(has, m, 0.0)
     inv = np.where(has, 1.0 / np.where(has, m, 1.0), 0.0)[:, :, None]
     # per group: a node with a sliver of one body's mass keeps its mapped velocity (a_g = f_g / m_g
     # there is large where the other body's mass keeps the node from counting as weak)
     weak = m <= max(opts.mass_cutoff, contact.mass_cutoff) * top
 
-    def velocities(momenta: npt.NDArray, in_contact: bool) -> npt.NDArray:
-        v = momenta * inv
-        if in_contact:
-            correct(np.where(has, m, 0.0), v, grad, contact.friction)
+    def constrain(v: npt.NDArray) -> npt.NDArray:
+        """Each group's grid conditions and ghost values, in place."""
         for g in range(G):
             solver._apply_bcs(v[g])
             v[g] = basis.update_ghosts(v[g])
         return v
 
+    def mapped() -> npt.NDArray:
+        """Each group's velocity from its particles' momenta."""
+        return constrain(np.stack([p2g(basis, (p.mass * k)[:, None] * fld["v"]) for k in masks]) * inv)
+
     # the mapped velocities are not corrected: the FLIP increment v_new - v_old then carries the
     # whole contact impulse of the step to the particles
-    v_old = velocities(np.stack([p2g(basis, (p.mass * k)[:, None] * fld["v"]) for k in masks]), False)
+    v_old = mapped()
     a = force * inv
     if opts.damping > 0.0:
         a -= opts.damping * v_old
     a[weak] = 0.0
     v_new = v_old + dt * a
-    correct(np.where(has, m, 0.0), v_new, grad, contact.friction)
-    for g in range(G):
-        solver._apply_bcs(v_new[g])
-        v_new[g] = basis.update_ghosts(v_new[g])
+    correct(m_has, v_new, grad, contact.friction)
+    constrain(v_new)
     vp = np.empty_like(fld["v"])
     vp_grid = np.empty_like(fld["v"])
     L = np.empty((len(p), d, d))
@@ -170,7 +171,7 @@ def contact_step(solver: ExplicitSolver, dt: float | None, dt_max: float) -> flo
         vp[k], vp_grid[k], L[k] = blended[k], at_grid[k], grads[k]
     fld["v"] = vp
     if opts.scheme == "MUSL":
-        v_new = velocities(np.stack([p2g(basis, (p.mass * k)[:, None] * fld["v"]) for k in masks]), False)
+        v_new = mapped()
         for g, k in enumerate(masks):
             at_grid, grads = solver._interpolate(basis, v_new[g])
             vp_grid[k], L[k] = at_grid[k], grads[k]
@@ -180,7 +181,7 @@ def contact_step(solver: ExplicitSolver, dt: float | None, dt_max: float) -> flo
     solver.t += dt
     solver.step_count += 1
     p.relocate()
-    mom = np.einsum("gn,gnd->nd", m * has, v_new)
+    mom = np.einsum("gn,gnd->nd", m_has, v_new)
     solver.grid_velocity = (mom / np.where(total > 0, total, 1.0)[:, None])[: basis.num_dofs_space]
     return dt
 

@@ -232,20 +232,13 @@ class ConsistentSystems:
             most = 0
             for c in own.components:
                 s.b.array[:] = np.where(keep, rhs[sel, col + c], 0.0)
-                s.ksp.setInitialGuessNonzero(guess is not None)
                 if guess is None:
                     s.x.set(0.0)
                 else:
                     s.x.array[:] = np.where(keep, guess[sel, c], 0.0)
                 with fpetsc.temporary_options(self.prefix, KSP_OPTIONS) if s.refresh else contextlib.nullcontext():
-                    s.ksp.solve(s.b, s.x)  # a fresh set-up reads the sub-block options (bjacobi)
-                    reason = s.ksp.getConvergedReason()
-                    if reason == PETSc.KSP.ConvergedReason.DIVERGED_DTOL and guess is not None:
-                        # the warm start's residual is far above the right-hand side (forces
-                        # near equilibrium, a body at rest): start from zero
-                        s.ksp.setInitialGuessNonzero(False)
-                        s.ksp.solve(s.b, s.x)
-                        reason = s.ksp.getConvergedReason()
+                    # a fresh set-up reads the sub-block options (bjacobi)
+                    reason = fpetsc.solve_from(s.ksp, s.b, s.x, guess is not None)
                 if reason < 0:
                     from fempm.stepping import SimulationError
 

@@ -200,15 +200,16 @@ class Particles:
         compiled step does, in closed form); only those are searched for.
         """
         ghosts = self.comm.size > 1  # leavers found in a ghost cell go straight to its owner
+        searched = None  # the particles searched for (all, when None)
         if left is None:
-            previous = self.cells
+            previous = self.cells  # relocate returns new arrays
             cells, X = self.locator.relocate(self.x, self.cells, ghosts=ghosts)
         else:
             cells, X = self.cells, self.X
-            previous = cells.copy() if ghosts else None
-            idx = np.flatnonzero(left)
-            if len(idx):
-                cells[idx], X[idx] = self.locator.locate_near(self.x[idx], cells[idx], ghosts=ghosts)
+            searched = np.flatnonzero(left)
+            previous = cells[searched]  # their cells before the search (a copy; every leaver is one of them)
+            if len(searched):
+                cells[searched], X[searched] = self.locator.locate_near(self.x[searched], previous, ghosts=ghosts)
         leaving = (cells < 0) | (cells >= self.locator.num_cells) if ghosts else cells < 0
         lost = int(np.count_nonzero(leaving))
         if (lost if self.comm.size == 1 else self.comm.allreduce(lost)) == 0:
@@ -218,7 +219,9 @@ class Particles:
             raise ValueError(f"unknown option outside={outside!r}; expected one of {_OUTSIDE}")
         arrays = {"x": self.x, "cells": cells, "X": X, **self._arrays()}
         rows = np.flatnonzero(leaving)
-        arrays, gone = migrate(self.locator, arrays, rows, previous[rows] if ghosts else None)  # in place, O(leavers)
+        if ghosts:
+            previous = previous[rows if searched is None else np.searchsorted(searched, rows)]
+        arrays, gone = migrate(self.locator, arrays, rows, previous if ghosts else None)  # in place, O(leavers)
         self._check_outside(gone, outside)
         self._set_arrays(arrays)
 

@@ -96,6 +96,20 @@ def create_ksp(comm, prefix: str, options: dict[str, Any] | None = None) -> PETS
     return ksp
 
 
+def solve_from(ksp: PETSc.KSP, b: PETSc.Vec, x: PETSc.Vec, warm: bool) -> int:
+    """``ksp.solve(b, x)`` from the guess in ``x`` (``warm``) or from zero; returns the converged
+    reason. A warm start that PETSc stops at once as diverging (``DIVERGED_DTOL``: its residual is
+    far above ``b``, as for forces near equilibrium) is solved again from zero."""
+    ksp.setInitialGuessNonzero(warm)
+    ksp.solve(b, x)
+    reason = ksp.getConvergedReason()
+    if warm and reason == PETSc.KSP.ConvergedReason.DIVERGED_DTOL:
+        ksp.setInitialGuessNonzero(False)
+        ksp.solve(b, x)
+        reason = ksp.getConvergedReason()
+    return reason
+
+
 def converged_reason_name(reason: int) -> str:
     names = {v: k for k, v in vars(PETSc.KSP.ConvergedReason).items() if isinstance(v, int)}
     return names.get(reason, str(reason))

@@ -360,18 +360,12 @@ class Projector:
             self.iterations = []
             for c in range(k):
                 act, ksp, x, rhs = self._systems[c] if c < len(self._systems) else (base, self.ksp, self._x, self._b)
-                ksp.setInitialGuessNonzero(guess is not None)
                 rhs.array[:] = b[:n][act, c]
                 if guess is None:
                     x.set(0.0)
                 else:
                     x.array[:] = guess[:n][act, c]
-                ksp.solve(rhs, x)
-                reason = ksp.getConvergedReason()
-                if reason == PETSc.KSP.ConvergedReason.DIVERGED_DTOL and guess is not None:
-                    ksp.setInitialGuessNonzero(False)  # a warm start far worse than zero (forces near balance)
-                    ksp.solve(rhs, x)
-                    reason = ksp.getConvergedReason()
+                reason = fpetsc.solve_from(ksp, rhs, x, guess is not None)
                 if reason < 0:
                     raise RuntimeError(
                         f"consistent projection: KSP did not converge ({fpetsc.converged_reason_name(reason)}, "
