@@ -48,13 +48,14 @@ if TYPE_CHECKING:
 
 
 def supported(solver: ExplicitSolver) -> bool:
-    """Whether ``solver``'s options, space and mesh take a compiled step (lumped, or consistent:
-    :mod:`fempm.consistent_step`)."""
+    """Whether ``solver``'s options, space, mesh and walls take a compiled step (lumped, or
+    consistent: :mod:`fempm.consistent_step`; not with a wall that checks contact by position)."""
     opts, V = solver.options, solver.V
     el = V.element.basix_element
     geo = solver.particles.locator.geometry
     return (AVAILABLE and opts.mass_mode in ("lumped", "consistent") and getattr(opts.particle_domain, "name", "") == "point"
-            and el.degree == 1 and V.dofmap.index_map_bs == solver.particles.gdim and geo.affine)
+            and el.degree == 1 and V.dofmap.index_map_bs == solver.particles.gdim and geo.affine
+            and not solver.needs_positions)
 
 
 def sum_ghosts(vec) -> None:

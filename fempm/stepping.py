@@ -43,7 +43,7 @@ from fempm.geometry import CHUNK
 from fempm.loads import Loads, external_forces  # Loads: re-exported, scenes build it from here
 from fempm.materials.base import identity
 from fempm.particles import Particles
-from fempm.transfer import Projector, p2g, p2g_gradients, sum_over_ranks
+from fempm.transfer import Projector, nodal_centroids, p2g, p2g_gradients, sum_over_ranks
 
 Scheme = Literal["USL", "USF", "MUSL"]
 
@@ -219,6 +219,9 @@ class ExplicitSolver:
         self._fixed_dofs = np.unique(np.concatenate(fixed)) if fixed else None
         self._slip_components = self._axis_slip_dofs()
         self._lumped_step = None
+        #: some wall checks contact by position (the step then maps the nodal centres of mass)
+        self.needs_positions = any(getattr(bc, "needs_positions", False) for bc in self.bcs)
+        self._centroids: npt.NDArray | None = None
 
     # -- helpers ------------------------------------------------------------------------------
     def _axis_slip_dofs(self) -> list[npt.NDArray[np.int32]] | None:
@@ -272,17 +275,31 @@ class ExplicitSolver:
             self._lumped_step = kind(self)
         return self._lumped_step
 
-    def _apply_bcs(self, v: npt.NDArray) -> None:
+    def _apply_bcs(self, v: npt.NDArray, centroids: npt.NDArray | None = None) -> None:
+        """The grid conditions on ``v``, in place; walls that check contact by position
+        (:attr:`fempm.boundary.Friction.needs_positions`) take ``centroids``, default the
+        step's nodal centres of mass (:meth:`_locate_body`)."""
         for bc in self.bcs:
-            bc.apply(v)
+            if getattr(bc, "needs_positions", False):
+                bc.apply(v, self._centroids if centroids is None else centroids)
+            else:
+                bc.apply(v)
 
-    def _mass_operator(self, basis: ParticleBasis) -> Projector:
-        """The step's mass (lumped, consistent or FMPM) with its constraints, on ``basis``."""
+    def _locate_body(self, basis: ParticleBasis) -> None:
+        """The nodal centres of mass of the step, for the walls that need them (else nothing)."""
+        if self.needs_positions:
+            p = self.particles
+            self._centroids = nodal_centroids(basis, p.mass, p.x)
+
+    def _mass_operator(self, basis: ParticleBasis, weights: npt.NDArray | None = None) -> Projector:
+        """The step's mass (lumped, consistent or FMPM) with its constraints, on ``basis``;
+        ``weights``: per-particle masses in place of the particles' (one body's mass)."""
         opts = self.options
         return Projector(
             self.V, self.particles, mass=opts.mass_mode, fmpm_order=opts.mass_order, basis=basis,
             petsc_options_prefix=opts.petsc_options_prefix,
             exclude=self._fixed_dofs, exclude_components=self._slip_components, lump_below=opts.lump_below,
+            weights=weights,
         )
 
     def mapped_velocity(self) -> npt.NDArray:
@@ -290,6 +307,7 @@ class ExplicitSolver:
         momenta and the step's mass solve and constraints (the first stage of a step), nothing
         advanced. The grid frame at t = 0 of :func:`fempm.scene.run`."""
         basis = ParticleBasis(self.V, self.particles, gradients=False, domain=self.options.particle_domain)
+        self._locate_body(basis)
         return self._map_velocity(basis, self._mass_operator(basis), guess=None)[: basis.num_dofs_space]
 
     def _map_velocity(self, basis: ParticleBasis, mass_op: Projector, guess: npt.NDArray | None) -> npt.NDArray:
@@ -392,24 +410,14 @@ class ExplicitSolver:
         fld = p.fields
         basis = self._open_step()
         mass_op = self._mass_operator(basis)
-        stable = self.stable_dt()
-        if opts.mass == "consistent" and not opts.lumped_forces:  # omega_max^2 <= omega_L^2 / lambda_min
-            self.mass_ratio = mass_op.mass_ratio_min(MASS_RATIO_ITERATIONS)
-            stable *= np.sqrt(MASS_RATIO_SAFETY * self.mass_ratio)
-        elif opts.mass_mode == "fmpm" and not opts.lumped_forces:  # ||M_k^-1 m|| <= k (fempm.fmpm)
-            stable /= np.sqrt(opts.mass_order)
-        dt = self._time_step(stable, dt, dt_max)
-        m = mass_op.lumped_masses()
+        dt = self._time_step(self._stable_with([mass_op]), dt, dt_max)
         support = mass_op.support_masses()
         weak = support <= opts.mass_cutoff * p.comm.allreduce(float(support.max(initial=0.0)), op=MPI.MAX)
         v_old = self._map_velocity(basis, mass_op, guess=self.grid_velocity)
         if opts.scheme == "USF":
             self._update_stress(self._velocity_gradient(basis, v_old), dt)
         f_grid = self._forces(basis, self.t)
-        if opts.mass_mode != "lumped" and opts.lumped_forces:
-            a = np.where(mass_op.active[:, None], f_grid / np.where(m > 0, m, 1.0)[:, None], 0.0)
-        else:
-            a = mass_op.solve(f_grid)
+        a = self._accelerations(mass_op, f_grid)
         if opts.damping > 0.0:
             a -= opts.damping * v_old[: len(a)]
         a[weak] = 0.0  # nodes with a tiny share of mass keep their mapped velocity, no force update
@@ -434,12 +442,35 @@ class ExplicitSolver:
         self.grid_velocity = v_new[: basis.num_dofs_space]
         return dt
 
+    def _stable_with(self, mass_ops: Sequence[Projector]) -> float:
+        r"""The stable step of the state with these mass operators: :meth:`stable_dt` (lumped),
+        times :math:`\sqrt{0.8\, \lambda_{min}}` (the smallest over the operators) with consistent
+        mass, over :math:`\sqrt{k}` with FMPM(k) (:math:`\|M_k^{-1} m\| \le k`, :mod:`fempm.fmpm`);
+        with lumped forces the lumped step."""
+        opts = self.options
+        stable = self.stable_dt()
+        if opts.mass == "consistent" and not opts.lumped_forces:  # omega_max^2 <= omega_L^2 / lambda_min
+            self.mass_ratio = min((op.mass_ratio_min(MASS_RATIO_ITERATIONS) for op in mass_ops), default=1.0)
+            stable *= np.sqrt(MASS_RATIO_SAFETY * self.mass_ratio)
+        elif opts.mass_mode == "fmpm" and not opts.lumped_forces:
+            stable /= np.sqrt(opts.mass_order)
+        return stable
+
+    def _accelerations(self, mass_op: Projector, f_grid: npt.NDArray) -> npt.NDArray:
+        """Nodal accelerations from the forces: the mass solve, or with ``lumped_forces`` the
+        lumped division on the operator's active dofs."""
+        if self.options.mass_mode != "lumped" and self.options.lumped_forces:
+            m = mass_op.lumped_masses()
+            return np.where(mass_op.active[:, None], f_grid / np.where(m > 0, m, 1.0)[:, None], 0.0)
+        return mass_op.solve(f_grid)
+
     def _open_step(self) -> ParticleBasis:
         """The checks that open a generic step, and its particle basis (values and gradients)."""
         self._check_finite()
         self._check_bodies()
         basis = ParticleBasis(self.V, self.particles, gradients=True, domain=self.options.particle_domain)
         self.extended_steps += basis.extended
+        self._locate_body(basis)
         return basis
 
     def _move_corners(self, basis: ParticleBasis, v: npt.NDArray, dt: float) -> None:

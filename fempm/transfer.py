@@ -66,6 +66,16 @@ def p2g(basis: ParticleBasis, weights: npt.NDArray, *, values: npt.NDArray | Non
     return sum_over_ranks(basis.index_map, basis.scatter(weights, values=values))
 
 
+def nodal_centroids(basis: ParticleBasis, mass: npt.NDArray, x: npt.NDArray) -> npt.NDArray:
+    r"""The centre of mass of the particles as each node sees it,
+    :math:`\bar x_i = \sum_p M_p N_{ip} x_p / \sum_p M_p N_{ip}` (owned + ghost dofs, d); NaN
+    at nodes without mass."""
+    mx = p2g(basis, np.hstack([mass[:, None], mass[:, None] * x]))
+    m = mx[:, :1]
+    with np.errstate(invalid="ignore", divide="ignore"):
+        return np.where(m > 0.0, mx[:, 1:] / m, np.nan)
+
+
 def p2g_gradients(basis: ParticleBasis, vectors: npt.NDArray) -> npt.NDArray:
     r""":math:`\sum_p w_p \cdot \nabla N_i(x_p)` for per-particle tensors ``vectors`` (n, k, d):
     row ``a`` of the result is :math:`\sum_p \sum_b w_{p,a b}\, G[p, i, b]` (e.g. the internal
@@ -108,7 +118,7 @@ def cell_blocks(basis: ParticleBasis, weights: npt.NDArray) -> tuple[npt.NDArray
 
 def consistent_mass_matrix(
     basis: ParticleBasis, particles: Particles, lump: npt.NDArray[np.bool_] | None = None, weight: str = "mass",
-    blocks: tuple[npt.NDArray, npt.NDArray, npt.NDArray] | None = None,
+    blocks: tuple[npt.NDArray, npt.NDArray, npt.NDArray] | None = None, weights: npt.NDArray | None = None,
 ) -> PETSc.Mat:
     r"""PETSc matrix :math:`m_{ij} = \sum_p M_p N_i(x_p) N_j(x_p)` (one row per scalar dof).
 
@@ -126,9 +136,10 @@ def consistent_mass_matrix(
     rows and columns of those dofs: every :math:`m_{ij}`, :math:`i \ne j`, with :math:`i` or
     :math:`j` lumped moves to :math:`m_{ii}`. Row sums (the lumped masses, hence the
     conservation of mass and momentum) and symmetry are kept. ``weight="volume"`` weights by
-    :math:`V_p` instead of :math:`M_p` (per-volume fields).
+    :math:`V_p` instead of :math:`M_p` (per-volume fields); ``weights`` replaces either (one
+    body's masses, zero for the others: that body's own matrix).
     """
-    M = particle_weights(particles, weight)
+    M = particle_weights(particles, weight) if weights is None else weights
     if basis.cells is None:  # averaged basis: a particle's dofs span several cells
         S = basis.values
         dofs, values = basis.dofs, M[:, None, None] * S[:, :, None] * S[:, None, :]
@@ -175,7 +186,9 @@ class Projector:
 
     ``weight``: "mass" (default) fits :math:`\min_F \sum_p M_p (\langle F \rangle_p - f_p)^2`,
     for per-mass (intensive) fields such as velocity; "volume" weights by :math:`V_p`, for
-    per-volume fields such as stress. This is seed 001's density-ratio kernel: dividing a
+    per-volume fields such as stress; ``weights`` (one per particle) replaces either, e.g. the
+    masses of one body and zeros for the others, which gives that body's own mass (the
+    per-body fields of :mod:`fempm.contact`). This is seed 001's density-ratio kernel: dividing a
     per-volume :math:`\sigma_p` by :math:`\rho_p = M_p / V_p`, mapping it with the mass
     weights and multiplying the grid value by :math:`m_i / V_i` gives, for the lumped map,
     :math:`\sigma_i = \sum_p \beta_{pi} \sigma_p = \sum_p V_p v_{ip} \sigma_p / V_i` with
@@ -209,8 +222,9 @@ class Projector:
         domain=None,
         weight: str = "mass",
         fmpm_order: int | None = None,
+        weights: npt.NDArray | None = None,
     ):
-        self.weights = particle_weights(particles, weight)
+        self.weights = particle_weights(particles, weight) if weights is None else np.asarray(weights, dtype=np.float64)
         self.weight = weight
         mass, self.fmpm_order = parse_mass(mass, fmpm_order)
         self.label = mass_label(mass, self.fmpm_order)
@@ -249,8 +263,9 @@ class Projector:
                 blocks = cell_blocks(self.basis, self.weights)
             from fempm.mass_span import check_nonsingular
 
-            check_nonsingular(imap, particles.num_global, self.active, lump, blocks)
-            A = consistent_mass_matrix(self.basis, particles, lump, weight, blocks)
+            weighted = particles.num_global if weights is None else comm.allreduce(int(np.count_nonzero(self.weights)))
+            check_nonsingular(imap, weighted, self.active, lump, blocks)
+            A = consistent_mass_matrix(self.basis, particles, lump, weight, blocks, self.weights)
             iset = fpetsc.owned_index_set(imap, self.active[: self.num_owned])
             self.matrix = A.createSubMatrix(iset, iset)
             self.ksp = fpetsc.create_ksp(comm, petsc_options_prefix, petsc_options)
@@ -314,7 +329,7 @@ class Projector:
     def lumped_masses(self) -> npt.NDArray:
         """Lumped nodal masses on owned + ghost dofs (computed once)."""
         if self.lumped is None:
-            self.lumped = lumped_mass(self.basis, self.particles, self.weight)
+            self.lumped = p2g(self.basis, self.weights)[:, 0]
         return self.lumped
 
     def grid_total(self, u: dolfinx.fem.Function) -> npt.NDArray:

@@ -8,14 +8,15 @@ from fempm.scenes.column import column_collapse, deposit
 from fempm.scenes.cook import cook_membrane
 from fempm.scenes.dam import MARTIN_MOYCE, dam_break, surge_front
 from fempm.scenes.disks import two_disks
+from fempm.scenes.impact import disk_impact
 from fempm.scenes.incline import incline
 
 SCENES = {"bar": vibrating_bar, "disks": two_disks, "cantilever": cantilever, "dam": dam_break, "block": hanging_block,
-          "cook": cook_membrane, "column": column_collapse, "incline": incline}
+          "cook": cook_membrane, "column": column_collapse, "incline": incline, "impact": disk_impact}
 
 __all__ = [
     "MARTIN_MOYCE", "SCENES", "cantilever", "cantilever_reference", "cantilever_tip", "column_collapse", "cook_membrane",
-    "dam_break", "deposit",
+    "dam_break", "deposit", "disk_impact",
     "hanging_block", "incline",
     "largest_neighbour_gap", "surge_front", "two_disks", "vibrating_bar",
 ]

@@ -24,7 +24,16 @@ with each option of :func:`options_for`.
   the yield stress): the energy goes into plastic work;
 * ``column-collapse``: a granular column (:func:`fempm.scenes.column_collapse`, Drucker-Prager,
   aspect ratio 2, 8 cells across; 4 cells and half the time quick) collapsing under gravity
-  onto a rough floor.
+  onto a rough floor;
+* ``contact-disks``: the disks with one velocity field per disk and frictionless contact
+  (:class:`fempm.contact.Contact`);
+* ``contact-impact``: a disk fired at 10 m/s (0.86 times the wave speed) onto a plate with
+  contact (:func:`fempm.scenes.disk_impact`, 20 cells; 16 quick);
+* ``contact-rolling``: a disk rolling down a 30 degree incline, a rigid plane in frictional
+  contact (mu = 0.3; :func:`fempm.scenes.incline`, 8 cells across the radius; 4 quick).
+
+Contact takes USL or MUSL and every domain but CPDI2: its USF rows are aborted with the
+ValueError that says so.
 """
 
 from __future__ import annotations
@@ -41,6 +50,8 @@ from fempm.scene import Scene
 from fempm.scenes.bar import vibrating_bar
 from fempm.scenes.column import column_collapse
 from fempm.scenes.disks import two_disks
+from fempm.scenes.impact import disk_impact
+from fempm.scenes.incline import incline
 from fempm.seeding import create_particles
 
 
@@ -182,6 +193,26 @@ def column(quick: bool, comm=MPI.COMM_WORLD) -> Scene:
     return scene
 
 
+def contact_disks(quick: bool, comm=MPI.COMM_WORLD) -> Scene:
+    """The disks with contact (one field per disk, no friction)."""
+    return _disks(quick, comm, contact=True)
+
+
+def contact_impact(quick: bool, comm=MPI.COMM_WORLD) -> Scene:
+    """The disk onto the plate at 10 m/s with contact, 20 cells (16 quick)."""
+    return disk_impact(cells=16 if quick else 20, frames=0, comm=comm)
+
+
+def contact_rolling(quick: bool, comm=MPI.COMM_WORLD) -> Scene:
+    """The disk rolling down a rigid plane at 30 degrees, mu = 0.3, 8 cells across the radius
+    with 4 x 4 particles per cell (quick: 4 cells, 2 x 2 particles, a quarter of the time)."""
+    scene = incline("disk", 30.0, 0.3, cells=4 if quick else 8, ppc=2 if quick else 4, plane="rigid", frames=0,
+                    comm=comm)
+    if quick:
+        scene.t_end *= 0.25
+    return scene
+
+
 CASES: dict[str, Callable] = {
     "nu=0.49": nearly_incompressible(0.49),
     "nu=0.499": nearly_incompressible(0.499),
@@ -199,4 +230,7 @@ CASES: dict[str, Callable] = {
     "long-run": long_run,
     "plastic-impact": plastic_impact,
     "column-collapse": column,
+    "contact-disks": contact_disks,
+    "contact-impact": contact_impact,
+    "contact-rolling": contact_rolling,
 }

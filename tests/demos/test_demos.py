@@ -3,6 +3,7 @@
 import importlib.util
 from pathlib import Path
 
+import numpy as np
 import pytest
 from mpi4py import MPI
 
@@ -66,3 +67,18 @@ def test_disks_contact_demo_separates_the_disks(tmp_path):
         assert res[name]["momentum"] < 1e-12 and res[name]["energy_ratio"] < 1.0
     assert res["contact"]["shared_cells"] == 0
     assert (tmp_path / "disks_contact.png").stat().st_size > 10_000
+
+
+def test_incline_demo_writes_its_table(tmp_path):
+    """Two cases at 2 cells for a short time: the table has a row per case and resolution, and
+    the sliding block's acceleration is the analytic one."""
+    demo = load("incline")
+    rows = demo.main(["--cells", "2", "--cases", "block mu=0.2", "disk mu=0.3", "--t-end", "0.2",
+                      "--out", str(tmp_path)])
+    assert [(r["case"], r["cells"]) for r in rows] == [("block mu=0.2", 2), ("disk mu=0.3", 2)]
+    assert rows[0]["error_percent"] == pytest.approx(0.0, abs=2.0)
+    assert rows[1]["ppc"] == 4 and np.isfinite(rows[1]["acceleration"])
+    table = (tmp_path / "incline.md").read_text()
+    assert table.count("\n| ") == 3 and "disk mu=0.3" in table
+    with pytest.raises(ValueError, match="unknown case"):
+        demo.main(["--cases", "sphere", "--out", str(tmp_path)])

@@ -56,3 +56,31 @@ def test_friction_needs_a_coefficient():
     with pytest.raises(ValueError, match="friction needs a finite, non-zero normal"):
         friction(V, lambda x: x[1] < 1e-9, (0.0, 0.0), 0.3)
     assert slip(V, lambda x: x[1] < 1e-9, (0.0, 2.0)).normal[1] == 1.0
+    with pytest.raises(ValueError, match="gap > 0"):
+        friction(V, lambda x: x[1] < 1e-9, (0.0, -1.0), 0.3, gap=0.0)
+
+
+def test_a_wall_with_a_gap_holds_only_the_nodes_the_body_touches():
+    """Floor y = 0 of a 4 x 4 unit square (h = 1/4), mu = 0.5, gap 0.1: the body moves at
+    (1, -0.4) everywhere; a node whose nodal centre of mass lies 0.05 above the floor is held
+    (no normal velocity, the tangential one cut by mu 0.4), one at 0.15 is not; a node without
+    mass (NaN) is not either, and without the gap every node is held. The wall needs the
+    centres of mass once it has a gap."""
+    mesh = dm.create_unit_square(MPI.COMM_SELF, 4, 4, dm.CellType.quadrilateral)
+    V = dolfinx.fem.functionspace(mesh, ("Lagrange", 1, (2,)))
+    wall = friction(V, lambda x: np.isclose(x[1], 0.0), (0.0, -1.0), 0.5, gap=0.1)
+    assert wall.needs_positions and len(wall.dofs) == 5 and np.allclose(wall.points[:, 1], 0.0)
+    centroids = np.full((V.dofmap.index_map.size_local, 2), np.nan)
+    height = np.array([0.05, 0.15, 0.05, np.nan, 0.0999])
+    centroids[wall.dofs] = np.column_stack([wall.points[:, 0] + 0.3, height])  # a tangential offset does not count
+    v = np.tile([1.0, -0.4], (len(centroids), 1))
+    wall.apply(v, centroids)
+    held = np.array([True, False, True, False, True])
+    np.testing.assert_allclose(v[wall.dofs[held]], [[0.8, 0.0]] * 3, rtol=1e-15)
+    np.testing.assert_array_equal(v[wall.dofs[~held]], [[1.0, -0.4]] * 2)
+    plain = friction(V, lambda x: np.isclose(x[1], 0.0), (0.0, -1.0), 0.5)
+    v = np.tile([1.0, -0.4], (len(centroids), 1))
+    plain.apply(v)
+    np.testing.assert_allclose(v[plain.dofs], [[0.8, 0.0]] * 5, rtol=1e-15)
+    with pytest.raises(ValueError, match="nodal centres of mass"):
+        wall.apply(v)

@@ -71,3 +71,11 @@ def test_catalogue_findings(study):
             assert r["energy_ratio"] < (0.35 if r["case"] == "column-collapse" else 0.75), r
     assert get["column-collapse", base]["outcome"] == "stable"
     assert get["plastic-impact", stability.label({"scheme": "MUSL"})]["outcome"] == "stable"
+    # contact: the disks and the impact are stable with lumped and consistent mass, the impact
+    # keeps J above 0.4 (one field crushes the interface), USF is refused by name
+    for case in ("contact-disks", "contact-impact"):
+        for opts in ({}, {"mass": "consistent"}, {"domain": "gimp"}):
+            assert get[case, stability.label(opts)]["outcome"] == "stable", (case, opts)
+        assert "USL and MUSL" in get[case, stability.label({"scheme": "USF"})]["reason"]
+    assert get["contact-impact", base]["j_min"] > 0.4
+    assert get["contact-rolling", stability.label({"scheme": "MUSL"})]["outcome"] == "stable"

@@ -53,8 +53,48 @@ def test_stick_slip_and_separation():
     np.testing.assert_array_equal(v, [[[-1.0, 0.5]], [[0.0, 0.0]]])
 
 
+def test_a_rigid_group_keeps_its_velocity_and_its_normal_and_the_others_take_its_velocity():
+    """Group 1 rigid (moving at (0.5, 0) with a normal +y out of it; its mass does not count)
+    under group 0 falling at (2, -1) onto it, whose own mass gradient leans (a corner): the
+    normal is the rigid body's, so the fall stops, the tangential velocity relative to the
+    rigid body is cut by mu times the fall or sticks to it; the rigid velocity is unchanged."""
+    m = np.array([[1.0], [1e-3]])
+    grad = np.array([[[0.7, -0.7]], [[0.0, 1.0]]])
+    for mu, expect0 in [(0.0, [2.0, 0.0]), (0.5, [2.0 - 0.5, 0.0]), (2.0, [0.5, 0.0])]:
+        v = np.array([[[2.0, -1.0]], [[0.5, 0.0]]])
+        correct(m, v, grad, mu, rigid=np.array([False, True]))
+        np.testing.assert_allclose(v[0, 0], expect0, rtol=1e-14, atol=1e-15)
+        np.testing.assert_array_equal(v[1, 0], [0.5, 0.0])
+    v = np.array([[[2.0, 1.0]], [[0.5, 0.0]]])  # leaving the rigid body
+    correct(m, v, grad, 0.5, rigid=np.array([False, True]))
+    np.testing.assert_array_equal(v, [[[2.0, 1.0]], [[0.5, 0.0]]])
+
+
+def test_the_position_check_corrects_only_groups_that_touch():
+    """Three nodes where group 0 moves at +x into group 1 at rest (normal +x out of group 0):
+    the groups' nodal centres of mass are 0.5, 1.0 and 1.5 apart along the normal; with a gap of
+    1.0 only the first is in contact, and a step of dt = 0.25 at the approach speed 1 (relative
+    to group 1, whose mass counts: the node's centre-of-mass speed is 0.5) brings the second
+    within it too. Without a gap all three are corrected."""
+    m = np.ones((2, 3))
+    grad = np.array([[[1.0, 0.0]] * 3, [[-1.0, 0.0]] * 3])
+    x0 = np.zeros((3, 2))
+    x1 = np.array([[0.5, 0.3], [1.0, -0.2], [1.5, 0.0]])  # offsets along the tangent do not count
+    moments = np.stack([x0, x1])  # unit masses: the moments are the centres of mass
+    for gap, dt, touching in [(None, 0.0, [1, 1, 1]), (1.0, 0.0, [1, 0, 0]), (1.0, 0.25, [1, 1, 0])]:
+        v = np.zeros((2, 3, 2))
+        v[0, :, 0] = 1.0
+        correct(m, v, grad, 0.0, moments=moments, gap=gap, dt=dt)
+        np.testing.assert_array_equal(v[0, :, 0] == 0.5, np.array(touching, bool))  # corrected: both at v_cm
+        np.testing.assert_allclose(v[0, :, 0] + v[1, :, 0], 1.0, rtol=1e-15)  # momentum kept either way
+
+
 def test_bad_options():
     with pytest.raises(ValueError, match="friction"):
         Contact(friction=-0.1)
     with pytest.raises(ValueError, match="mass_cutoff"):
         Contact(mass_cutoff=1.0)
+    with pytest.raises(ValueError, match="rigid"):
+        Contact(rigid=(-1,))
+    with pytest.raises(ValueError, match="gap"):
+        Contact(gap=0.0)
