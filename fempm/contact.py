@@ -31,7 +31,8 @@ round-off. The correction is applied to the updated velocities, not to the mappe
 with MUSL, to the re-mapped ones): the FLIP increment :math:`v^g_{new} - v^g_{old}` then
 carries the whole contact impulse to the particles, and each particle takes its own group's
 field in G2P.
-Every particle domain but CPDI2, USL and MUSL, any number of ranks (the nodal sums are summed
+Every particle domain (a CPDI2 particle's corners move with its own group's field, a rigid
+body's with its velocity), USL and MUSL, any number of ranks (the nodal sums are summed
 over ranks as in the single-field step, and the correction is node-local), lumped or
 consistent mass (and FMPM). With consistent mass each group has its own mass matrix
 :math:`M^g_{ij} = \sum_{p \in g} M_p N_{ip} N_{jp}` and its velocity and acceleration are
@@ -271,7 +272,14 @@ def contact_step(solver: ExplicitSolver, dt: float | None, dt_max: float) -> flo
             at_grid, grads = solver._interpolate(basis, v_new[g])
             vp_grid[k], L[k] = at_grid[k], grads[k]
     solver._update_stress(L, dt)
-    p.x = p.x + dt * (fld["v"] if opts.position == "particle" else vp_grid)
+    if opts.domain == "cpdi2":  # each body's corners move with its own field, rigid ones rigidly
+        corner_velocity = np.repeat(fld["v"][:, None, :], fld["corners"].shape[1], axis=1)
+        for g in deformable:
+            k = masks[g]
+            corner_velocity[k] = basis.gather_samples(v_new[g])[k]
+        solver._move_corners(basis, None, dt, corner_velocity)
+    else:
+        p.x = p.x + dt * (fld["v"] if opts.position == "particle" else vp_grid)
     solver._check_finite()
     solver.t += dt
     solver.step_count += 1
@@ -282,8 +290,6 @@ def contact_step(solver: ExplicitSolver, dt: float | None, dt_max: float) -> flo
 
 
 def check_options(options) -> None:
-    """What :func:`contact_step` supports: USL or MUSL, any domain but CPDI2."""
+    """What :func:`contact_step` supports: USL or MUSL."""
     if options.scheme == "USF":
         raise ValueError("contact supports the schemes USL and MUSL (got USF)")
-    if options.domain == "cpdi2":
-        raise ValueError("contact does not support domain='cpdi2' (its corners move with one grid field)")

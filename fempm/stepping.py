@@ -473,13 +473,17 @@ class ExplicitSolver:
         self._locate_body(basis)
         return basis
 
-    def _move_corners(self, basis: ParticleBasis, v: npt.NDArray, dt: float) -> None:
+    def _move_corners(self, basis: ParticleBasis, v: npt.NDArray | None, dt: float,
+                      corner_velocity: npt.NDArray | None = None) -> None:
         r"""CPDI2: corners :math:`y_c^+ = y_c + \Delta t \sum_i N_i(y_c) v_i^+`; the particle
         moves to its domain's centroid and takes its volume (for simplices the centroid moves by
         :math:`\Delta t \sum_i \langle N_i \rangle_p v_i^+` and :math:`|\Omega_p| = J_p V_p^0`,
-        since :math:`L_p` is the gradient of the corner velocities' linear interpolant)."""
+        since :math:`L_p` is the gradient of the corner velocities' linear interpolant).
+        ``corner_velocity`` (n, corners, d): the corners' velocities instead of the grid
+        velocity ``v`` at them (contact: each body's own field)."""
         p = self.particles
-        corners = p.fields["corners"] + dt * basis.gather_samples(v)
+        velocity = basis.gather_samples(v) if corner_velocity is None else corner_velocity
+        corners = p.fields["corners"] + dt * velocity
         try:
             _, _, volume, centroid = domain_geometry(corners, p.comm)  # collective error
         except ValueError as e:

@@ -32,7 +32,7 @@ with each option of :func:`options_for`.
 * ``contact-rolling``: a disk rolling down a 30 degree incline, a rigid plane in frictional
   contact (mu = 0.3; :func:`fempm.scenes.incline`, 8 cells across the radius; 4 quick).
 
-Contact takes USL or MUSL and every domain but CPDI2: its USF rows are aborted with the
+Contact takes USL or MUSL (and every domain): its USF rows are aborted with the
 ValueError that says so.
 """
 
