@@ -139,7 +139,8 @@ def _scene_options(builder, rest: list[str]) -> dict:
     """``--name value`` pairs typed after the builder's defaults; unknown names are errors."""
     import inspect
 
-    params = {k: v.default for k, v in inspect.signature(builder).parameters.items() if k != "comm"}
+    signature = inspect.signature(builder).parameters
+    params = {k: v.default for k, v in signature.items() if k != "comm"}
     opts = {}
     it = iter(rest)
     for flag in it:
@@ -160,10 +161,13 @@ def _scene_options(builder, rest: list[str]) -> dict:
                 opts[name] = type(default)(value)
             except ValueError:
                 raise UsageError(f"fempm run: option {flag} expects {kind}, got {value!r}") from None
-        elif default is None:  # an optional number (or a name)
+        elif default is None:  # an optional number, an integer where annotated so (or a name)
+            kinds = [k.strip() for k in str(signature[name].annotation).split("|")]
             try:
-                opts[name] = float(value)
+                opts[name] = int(value) if "int" in kinds else float(value)
             except ValueError:
+                if "int" in kinds:
+                    raise UsageError(f"fempm run: option {flag} expects an integer, got {value!r}") from None
                 opts[name] = value
         else:
             opts[name] = value

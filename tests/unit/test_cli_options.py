@@ -27,6 +27,16 @@ def test_bad_option_values_name_the_option(argv, message):
         _scene_options(bar, argv)
 
 
+def test_optional_options_take_their_annotated_type():
+    """``ppc: int | None``, ``gap: float | None``, ``t_end: float | None`` of the incline."""
+    from fempm.scenes import incline
+
+    opts = _scene_options(incline, ["--ppc", "3", "--gap", "0.7", "--t-end", "1"])
+    assert opts == {"ppc": 3, "gap": 0.7, "t_end": 1.0} and type(opts["ppc"]) is int
+    with pytest.raises(SystemExit, match="option --ppc expects an integer, got '2.5'"):
+        _scene_options(incline, ["--ppc", "2.5"])
+
+
 @pytest.mark.skipif(MPI.COMM_WORLD.size > 1, reason="one output folder per rank otherwise")
 def test_frame_times_are_plain_numbers(tmp_path):
     scene = bar(cells=8, t_end=0.5, comm=MPI.COMM_SELF)
