@@ -1,8 +1,9 @@
 r"""A block sliding or a disk rolling down a frictional incline (plane strain, elastic).
 
 The incline is the grid boundary :math:`y = 0` with Coulomb friction ``friction`` :math:`\mu`
-(:func:`fempm.boundary.friction`), in the frame of the slope: :math:`x` runs down it and gravity
-is :math:`g (\sin\theta, -\cos\theta)` for the slope angle :math:`\theta` (``angle``, degrees),
+(:func:`fempm.boundary.friction`), or a rigid body in frictional contact (``plane="rigid"``),
+in the frame of the slope: :math:`x` runs down it and gravity is
+:math:`g (\sin\theta, -\cos\theta)` for the slope angle :math:`\theta` (``angle``, degrees),
 which is the inclined plane itself, rotated. The body is elastic and objective under the
 disk's large rotation: hypoelastic with the Jaumann rate (:class:`fempm.materials.VonMises`
 without a yield stress), whose strain energy comes from the stress, so that a body starting
@@ -27,9 +28,9 @@ its staircase of particles rolls with errors up to 4 % at 16 cells). A block jus
 friction angle needs PIC blended in (``flip=0.5``): with pure FLIP the elastic ringing of the
 start unloads the nodes at its uphill end and it creeps (mu = 0.6: 0.8 m/s^2 at 8 cells).
 
-Measured (``python demos/incline.py``, 30 degrees, MUSL; docs/incline.md): see the table there;
-every case within 2 % at 8 and 16 cells but the disk at mu = 0.2, 4 % above the rolling
-threshold (-1.5 % and -2.0 %).
+Measured (``python demos/incline.py``, 30 degrees, MUSL; docs/incline/incline.md and
+docs/contact.md): every case within 2 % at 8 and 16 cells but the disk at mu = 0.2, 4 % above
+the rolling threshold (-1.5 % and -2.0 %).
 
 The results (:func:`slope_acceleration`): ``acceleration``, the along-slope acceleration of the
 body's centre of mass once it moves (:math:`2 c_2` of the least-squares fit

@@ -63,7 +63,7 @@ def test_a_disk_rolls_or_slides_with_the_analytic_acceleration(mu, plane):
 def _disk_steps(c, plane):
     scene = incline("disk", 30.0, 0.3, cells=4, plane=plane, frames=0, comm=c)
     solver = scene.solver()
-    for _ in range(150):
+    for _ in range(60):
         solver.step()
     p = scene.particles
     ids = np.concatenate(c.allgather(p.ids))
