@@ -18,7 +18,7 @@ with each option of :func:`options_for`.
   (or contraction) :math:`v = a (x - x_c)` whose free motion reaches :math:`J = 20`
   (:math:`0.05`) at :math:`t_{end}`;
 * ``cfl``: the disks at CFL numbers 0.1 ... 1.0 (the options);
-* ``long-run``: a small 1D vibrating bar for :math:`10^5` steps (3000 quick);
+* ``long-run``: a small 1D vibrating bar for :math:`10^5` steps (1000 quick);
 * ``plastic-impact``: the disks as von Mises (J2) solids, yield stress 1/50 of Young's
   modulus, at 0.2 m/s (the elastic impact stress :math:`\rho c v \approx 0.23 E` is 12 times
   the yield stress): the energy goes into plastic work;
@@ -167,9 +167,9 @@ def cfl_case(quick: bool, comm=MPI.COMM_WORLD) -> Scene:
 
 
 def long_run(quick: bool, comm=MPI.COMM_WORLD) -> Scene:
-    """The vibrating bar on 8 cells with a fixed step: 1e5 steps (3000 quick)."""
+    """The vibrating bar on 8 cells with a fixed step: 1e5 steps (1000 quick)."""
     scene = vibrating_bar(cells=8, comm=comm)
-    steps = 3_000 if quick else 100_000
+    steps = 1_000 if quick else 100_000
     c = np.sqrt(scene.params["E"] / scene.params["rho"])
     scene.dt = 0.4 * (scene.params["L"] / 8) / (c + scene.params["v0"])
     scene.t_end = steps * scene.dt
