@@ -29,18 +29,9 @@ import fempm  # noqa: F401
 import numpy as np
 from mpi4py import MPI
 
+from fempm.contact import shared_cells
 from fempm.scene import run
 from fempm.scenes import two_disks
-
-
-def shared_cells(scene) -> int:
-    """The number of cells holding particles of both disks (collective)."""
-    p = scene.particles
-    imap = p.mesh.topology.index_map(p.mesh.topology.dim)
-    cells = np.asarray(imap.local_to_global(p.cells.astype(np.int32)))
-    disk = p.fields["disk"]
-    both = [np.unique(np.concatenate(p.comm.allgather(cells[disk == k]))) for k in (0, 1)]
-    return int(np.intersect1d(*both).size)
 
 
 def main(argv: list[str] | None = None) -> dict:
@@ -61,7 +52,7 @@ def main(argv: list[str] | None = None) -> dict:
         momentum = max(np.hypot(r["momentum_x"], r["momentum_y"]) for r in h)
         rows["contact" if contact else "one field"] = {
             "t": [r["t"] for r in h], "total": [r["total"] for r in h], "kinetic": [r["kinetic"] for r in h],
-            "energy_ratio": h[-1]["total"] / h[0]["total"], "momentum": momentum, "shared_cells": shared_cells(scene),
+            "energy_ratio": h[-1]["total"] / h[0]["total"], "momentum": momentum, "shared_cells": shared_cells(scene.particles, "disk"),
             "steps": summary["steps"],
         }
     if comm.rank == 0:

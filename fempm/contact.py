@@ -83,7 +83,7 @@ import numpy.typing as npt
 from mpi4py import MPI
 
 from fempm.loads import external_forces
-from fempm.transfer import SUPPORT_TOL, p2g, p2g_gradients
+from fempm.transfer import SUPPORT_TOL, mass_centres, p2g, p2g_gradients
 
 if TYPE_CHECKING:
     from fempm.stepping import ExplicitSolver
@@ -143,9 +143,8 @@ def correct(m: npt.NDArray, v: npt.NDArray, grad: npt.NDArray, friction: float,
         rm = np.where(rigid[:, None], m, 0.0)
         on = rm.max(axis=0) > 0.0
         top_all = rm.argmax(axis=0)
-        top = top_all[on]
-        vcm[on] = v[top, on]
-        rigid_normal = -grad[top, on]  # into the rigid body: its own surface, not a deformable corner
+        vcm[on] = v[top_all[on], on]
+        rigid_normal = -grad[top_all[on], on]  # into the rigid body: its own surface, not a deformable corner
     all_grad = grad.sum(axis=0)
     for g in np.flatnonzero(~rigid):  # a loop over the groups (a few), not over nodes
         normal = 2.0 * grad[g] - all_grad  # grad m_g - sum of the others: out of group g
@@ -177,6 +176,14 @@ def correct(m: npt.NDArray, v: npt.NDArray, grad: npt.NDArray, friction: float,
         new[s] -= wn[s, None] * n[s] + friction * wn[s, None] * wt[s] / twt[s, None]
         v[g, at] = new
     return contact
+
+
+def shared_cells(particles, field: str) -> int:
+    """The number of cells holding particles of two or more groups of ``fields[field]`` (bodies
+    that have not come apart; collective: each particle lives on the rank owning its cell)."""
+    pairs = np.unique(np.stack([particles.cells, np.asarray(particles.fields[field])]), axis=1)
+    _, groups = np.unique(pairs[0], return_counts=True)
+    return particles.comm.allreduce(int(np.count_nonzero(groups > 1)))
 
 
 def contact_step(solver: ExplicitSolver, dt: float | None, dt_max: float) -> float:
@@ -227,8 +234,7 @@ def contact_step(solver: ExplicitSolver, dt: float | None, dt_max: float) -> flo
     if solver.needs_positions or contact.gap is not None:  # each group's first mass moment
         moments = np.stack([p2g(basis, (p.mass * k)[:, None] * p.x) for k in masks])
         if solver.needs_positions:
-            with np.errstate(invalid="ignore", divide="ignore"):
-                centroids = list(np.where(m[:, :, None] > 0.0, moments / m[:, :, None], np.nan))
+            centroids = list(mass_centres(m, moments))
 
     def constrain(v: npt.NDArray) -> npt.NDArray:
         """Each deformable group's grid conditions, and the ghost values, in place."""

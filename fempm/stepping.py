@@ -409,6 +409,7 @@ class ExplicitSolver:
         p = self.particles
         fld = p.fields
         basis = self._open_step()
+        self._locate_body(basis)  # (the contact step maps each body's own)
         mass_op = self._mass_operator(basis)
         dt = self._time_step(self._stable_with([mass_op]), dt, dt_max)
         support = mass_op.support_masses()
@@ -470,7 +471,6 @@ class ExplicitSolver:
         self._check_bodies()
         basis = ParticleBasis(self.V, self.particles, gradients=True, domain=self.options.particle_domain)
         self.extended_steps += basis.extended
-        self._locate_body(basis)
         return basis
 
     def _move_corners(self, basis: ParticleBasis, v: npt.NDArray | None, dt: float,

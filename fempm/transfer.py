@@ -71,9 +71,14 @@ def nodal_centroids(basis: ParticleBasis, mass: npt.NDArray, x: npt.NDArray) -> 
     :math:`\bar x_i = \sum_p M_p N_{ip} x_p / \sum_p M_p N_{ip}` (owned + ghost dofs, d); NaN
     at nodes without mass."""
     mx = p2g(basis, np.hstack([mass[:, None], mass[:, None] * x]))
-    m = mx[:, :1]
+    return mass_centres(mx[:, 0], mx[:, 1:])
+
+
+def mass_centres(m: npt.NDArray, moments: npt.NDArray) -> npt.NDArray:
+    """Nodal masses (..., n) and first mass moments (..., n, d) -> centres of mass (..., n, d),
+    NaN where the mass is 0."""
     with np.errstate(invalid="ignore", divide="ignore"):
-        return np.where(m > 0.0, mx[:, 1:] / m, np.nan)
+        return np.where(m[..., None] > 0.0, moments / m[..., None], np.nan)
 
 
 def p2g_gradients(basis: ParticleBasis, vectors: npt.NDArray) -> npt.NDArray:

@@ -30,7 +30,7 @@ import numpy as np
 from mpi4py import MPI
 
 from fempm.boundary import slip
-from fempm.contact import Contact
+from fempm.contact import Contact, shared_cells
 from fempm.materials import NeoHookean
 from fempm.scene import Scene, check_counts
 from fempm.seeding import create_particles
@@ -102,9 +102,8 @@ def disk_impact(
         k = p.fields["impactor"] == 1
         sums = np.array([p.mass[k] @ p.fields["v"][k, 1], p.mass[k].sum()])
         p.comm.Allreduce(MPI.IN_PLACE, sums, op=MPI.SUM)
-        cells = [np.unique(p.cells[k]), np.unique(p.cells[~k])]  # local cells: each rank owns its own
-        shared = p.comm.allreduce(len(np.intersect1d(*cells)))
-        return {"penetration": overlap.deepest, "rebound": float(sums[0] / sums[1]), "shared_cells": shared}
+        return {"penetration": overlap.deepest, "rebound": float(sums[0] / sums[1]),
+                "shared_cells": shared_cells(p, "impactor")}
 
     params = dict(cells=cells, ppc=ppc, speed=speed, radius=radius, E=E, nu=nu, rho=rho, contact=contact,
                   friction=friction, gap=gap, scheme=scheme, flip=flip, cfl=cfl)

@@ -111,8 +111,9 @@ def incline(
     2 % only at that spacing). ``t_end`` defaults to the time the body takes to travel three sizes at
     :math:`g \\sin\\theta` (at least 0.2 s). ``plane``: ``grid``, the frictional grid boundary
     :math:`y = 0` holding the nodes the body touches (its nodal centre of mass within ``gap``
-    cells of the plane; 0, the block's default: every node moving into it; 0.5 the disk's), or ``rigid``, a rigid layer of particles
-    two cells thick under :math:`y = 0` in frictional contact with the body
+    cells of the plane; 0, the block's default: every node moving into it; 0.5 the disk's),
+    or ``rigid``, a rigid layer of particles two cells thick under :math:`y = 0` in frictional
+    contact with the body
     (:class:`fempm.contact.Contact` with ``rigid=(1,)``, the gap measured from the layer's own
     nodal centre of mass, which lies :func:`_depth` cells under its surface)."""
     if body not in BODIES:
@@ -168,7 +169,8 @@ def incline(
     def walls(V):
         if plane == "rigid":
             return []
-        return [friction_wall(V, lambda x: np.isclose(x[1], 0.0), (0.0, -1.0), friction, gap=gap * h or None)]
+        return [friction_wall(V, lambda x: np.isclose(x[1], 0.0), (0.0, -1.0), friction,
+                              gap=gap * h if gap > 0 else None)]
 
     return Scene(
         name="incline", mesh=mesh, particles=p, materials=[VonMises(E, nu)], t_end=t_end, bcs=walls,

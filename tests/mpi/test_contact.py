@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 from mpi4py import MPI
 
-from fempm.contact import Contact
+from fempm.contact import Contact, shared_cells
 from fempm.domains import box_corners
 from fempm.materials import LinearElastic
 from fempm.scenes.disks import two_disks
@@ -114,8 +114,18 @@ def test_disks_with_particle_domains_separate(domain):
     v = [comm.allreduce(p.mass[g == k] @ p.fields["v"][g == k]) for k in (0, 1)]
     assert v[0] @ [1, 1] < -0.15 * 125 and v[1] @ [1, 1] > 0.15 * 125  # apart (each disk ~126 kg)
     assert summary["health"]["momentum_drift"] < 1e-13
-    shared = len(np.intersect1d(np.unique(p.cells[g == 0]), np.unique(p.cells[g == 1])))
-    assert comm.allreduce(shared) == 0
+    assert shared_cells(p, "disk") == 0
+
+
+def test_shared_cells_counts_the_cells_holding_two_groups():
+    """Apart, the disks share no cell; the particle of the lower disk nearest (0.21, 0.23),
+    relabelled as the upper disk, shares exactly its own (full) cell with it."""
+    p = two_disks(cells=10, frames=0, comm=comm).particles
+    assert shared_cells(p, "disk") == 0
+    r = np.linalg.norm(p.x - [0.21, 0.23], axis=1)  # one nearest particle, inside a full cell
+    nearest = comm.allreduce(float(r.min(initial=np.inf)), op=MPI.MIN)
+    p.fields["disk"][r == nearest] = 1
+    assert shared_cells(p, "disk") == 1
 
 
 def test_contact_refuses_what_it_does_not_support():
