@@ -5,7 +5,7 @@ PY      := $(VENV)/bin/python
 MPIEXEC := $(VENV)/bin/mpiexec
 NPROCS  ?= 2
 
-.PHONY: venv demo test test-serial test-mpi study bench clean
+.PHONY: venv demo test study bench clean
 
 venv:
 	@bash scripts/bootstrap
