@@ -62,9 +62,13 @@ def run_both(cell, options, steps=15, **kw):
 
 
 def assert_close(ref, got, tol=1e-11):
+    """Equal to round-off. The time steps to 1e-12: with consistent mass each carries the
+    Lanczos estimate of lambda_min(M_L^-1 M_C) from 30 CG steps, whose sums run in another
+    order in the compiled step (on 3 ranks some differed by more than 1e-13 relative; the end
+    times of 20 steps by 2.5e-14)."""
     (s_ref, dt_ref, j_ref, t_ref), (s_got, dt_got, j_got, t_got) = ref, got
-    assert np.allclose(dt_got, dt_ref, rtol=1e-13, atol=0.0)
-    assert np.allclose(j_got, j_ref, rtol=1e-12, atol=0.0) and abs(t_got - t_ref) <= 1e-13 * t_ref
+    assert np.allclose(dt_got, dt_ref, rtol=1e-12, atol=0.0)
+    assert np.allclose(j_got, j_ref, rtol=1e-12, atol=0.0) and abs(t_got - t_ref) <= 1e-12 * t_ref
     for a, b in zip(s_ref, s_got):
         scale = comm.allreduce(float(np.abs(a).max(initial=0.0)), op=MPI.MAX)
         err = comm.allreduce(float(np.abs(a - b).max(initial=0.0)), op=MPI.MAX)
