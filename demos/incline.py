@@ -48,6 +48,8 @@ CASES = {
     "disk mu=0": dict(body="disk", friction=0.0),
     "disk mu=0.1": dict(body="disk", friction=0.1),
     "disk mu=0.2": dict(body="disk", friction=0.2),
+    "disk mu=0.22": dict(body="disk", friction=0.22),
+    "disk mu=0.25": dict(body="disk", friction=0.25),
     "disk mu=0.3": dict(body="disk", friction=0.3),
     "disk mu=1": dict(body="disk", friction=1.0),
     "rigid plane, block mu=0.2": dict(body="block", friction=0.2, plane="rigid"),

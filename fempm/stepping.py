@@ -221,7 +221,6 @@ class ExplicitSolver:
         self._lumped_step = None
         #: some wall checks contact by position (the step then maps the nodal centres of mass)
         self.needs_positions = any(getattr(bc, "needs_positions", False) for bc in self.bcs)
-        self._centroids: npt.NDArray | None = None
 
     # -- helpers ------------------------------------------------------------------------------
     def _axis_slip_dofs(self) -> list[npt.NDArray[np.int32]] | None:
@@ -277,19 +276,20 @@ class ExplicitSolver:
 
     def _apply_bcs(self, v: npt.NDArray, centroids: npt.NDArray | None = None) -> None:
         """The grid conditions on ``v``, in place; walls that check contact by position
-        (:attr:`fempm.boundary.Friction.needs_positions`) take ``centroids``, default the
-        step's nodal centres of mass (:meth:`_locate_body`)."""
+        (:attr:`fempm.boundary.Friction.needs_positions`) take ``centroids``, the step's nodal
+        centres of mass (:meth:`_locate_body`)."""
         for bc in self.bcs:
             if getattr(bc, "needs_positions", False):
-                bc.apply(v, self._centroids if centroids is None else centroids)
+                bc.apply(v, centroids)
             else:
                 bc.apply(v)
 
-    def _locate_body(self, basis: ParticleBasis) -> None:
-        """The nodal centres of mass of the step, for the walls that need them (else nothing)."""
-        if self.needs_positions:
-            p = self.particles
-            self._centroids = nodal_centroids(basis, p.mass, p.x)
+    def _locate_body(self, basis: ParticleBasis) -> npt.NDArray | None:
+        """The nodal centres of mass of the step for the walls that need them, else None."""
+        if not self.needs_positions:
+            return None
+        p = self.particles
+        return nodal_centroids(basis, p.mass, p.x)
 
     def _mass_operator(self, basis: ParticleBasis, weights: npt.NDArray | None = None) -> Projector:
         """The step's mass (lumped, consistent or FMPM) with its constraints, on ``basis``;
@@ -307,14 +307,16 @@ class ExplicitSolver:
         momenta and the step's mass solve and constraints (the first stage of a step), nothing
         advanced. The grid frame at t = 0 of :func:`fempm.scene.run`."""
         basis = ParticleBasis(self.V, self.particles, gradients=False, domain=self.options.particle_domain)
-        self._locate_body(basis)
-        return self._map_velocity(basis, self._mass_operator(basis), guess=None)[: basis.num_dofs_space]
+        centroids = self._locate_body(basis)
+        return self._map_velocity(basis, self._mass_operator(basis), None, centroids)[: basis.num_dofs_space]
 
-    def _map_velocity(self, basis: ParticleBasis, mass_op: Projector, guess: npt.NDArray | None) -> npt.NDArray:
-        """Grid velocity from the particle momenta (P2G + mass solve), constrained."""
+    def _map_velocity(self, basis: ParticleBasis, mass_op: Projector, guess: npt.NDArray | None,
+                      centroids: npt.NDArray | None = None) -> npt.NDArray:
+        """Grid velocity from the particle momenta (P2G + mass solve), constrained (``centroids``:
+        the nodal centres of mass for the walls that need them)."""
         p = self.particles
         v = mass_op.solve(p2g(basis, p.mass[:, None] * p.fields["v"]), guess=guess)
-        self._apply_bcs(v)
+        self._apply_bcs(v, centroids)
         return basis.update_ghosts(v)  # extra ghosts (remote domain samples) take their owners' values
 
     def _update_stress(self, L: npt.NDArray, dt: float) -> None:
@@ -409,12 +411,12 @@ class ExplicitSolver:
         p = self.particles
         fld = p.fields
         basis = self._open_step()
-        self._locate_body(basis)  # (the contact step maps each body's own)
+        centroids = self._locate_body(basis)  # (the contact step maps each body's own)
         mass_op = self._mass_operator(basis)
         dt = self._time_step(self._stable_with([mass_op]), dt, dt_max)
         support = mass_op.support_masses()
         weak = support <= opts.mass_cutoff * p.comm.allreduce(float(support.max(initial=0.0)), op=MPI.MAX)
-        v_old = self._map_velocity(basis, mass_op, guess=self.grid_velocity)
+        v_old = self._map_velocity(basis, mass_op, self.grid_velocity, centroids)
         if opts.scheme == "USF":
             self._update_stress(self._velocity_gradient(basis, v_old), dt)
         f_grid = self._forces(basis, self.t)
@@ -423,12 +425,12 @@ class ExplicitSolver:
             a -= opts.damping * v_old[: len(a)]
         a[weak] = 0.0  # nodes with a tiny share of mass keep their mapped velocity, no force update
         v_new = v_old + dt * a
-        self._apply_bcs(v_new)
+        self._apply_bcs(v_new, centroids)
         v_new = basis.update_ghosts(v_new)
         # G2P
         fld["v"], vp_grid, L = self._g2p(basis, v_new, v_old, fld["v"], opts.flip)
         if opts.scheme == "MUSL":
-            v_new = self._map_velocity(basis, mass_op, guess=None)
+            v_new = self._map_velocity(basis, mass_op, None, centroids)
             vp_grid, L = self._interpolate(basis, v_new)
         if opts.scheme != "USF":
             self._update_stress(L, dt)
