@@ -84,7 +84,8 @@ class Friction:
     a curved body only approaches: a rolling disk then meets a wall across the
     :math:`\sim\sqrt{8 R h}` of nodes its bottom cells touch, which stops its rotation.
     ``points`` are the dofs' coordinates (``gap`` needs them). A wall with a gap needs the
-    nodal centres of mass (:attr:`needs_positions`): the solver passes them to :meth:`apply`."""
+    nodal centres of mass (:attr:`needs_positions`): the solver (the generic or the compiled
+    step) maps them each step and passes them to :meth:`apply`."""
 
     dofs: npt.NDArray[np.int32]
     normal: npt.NDArray

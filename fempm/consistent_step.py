@@ -92,14 +92,14 @@ class ConsistentPointStep(LumpedPointStep):
             u[:] = arr
         return u
 
-    def _grid_velocity(self, mass, mom, cv: int, active_min: float, guess=None) -> npt.NDArray:
+    def _grid_velocity(self, mass, mom, cv: int, active_min: float, guess=None, centroids=None) -> npt.NDArray:
         v = np.zeros((self.num_dofs, self.d))
         self.systems.solve(mom, cv, v, guess)
-        self.solver._apply_bcs(v)
+        self.solver._apply_bcs(v, centroids)
         return self._ghosts(v)
 
     def _advance(self, mass, force, cf: int, active_min: float, weak_max: float, dt: float,
-                 v_old: npt.NDArray) -> npt.NDArray:
+                 v_old: npt.NDArray, centroids=None) -> npt.NDArray:
         s = self.solver
         opts = s.options
         sy = self.systems
@@ -115,5 +115,5 @@ class ConsistentPointStep(LumpedPointStep):
             a -= opts.damping * v_old
         a[mass[:, 0] <= weak_max] = 0.0
         v_new = v_old + dt * a
-        s._apply_bcs(v_new)
+        s._apply_bcs(v_new, centroids)
         return self._ghosts(v_new)

@@ -35,7 +35,7 @@ from fempm.kernels import lumped as kl
 from fempm.kernels.shape import AVAILABLE
 from fempm.loads import external_forces
 from fempm.materials.base import IsotropicElastic
-from fempm.transfer import SUPPORT_TOL
+from fempm.transfer import SUPPORT_TOL, mass_centres
 
 #: steps between two sorts of the particles by cell
 SORT_EVERY = 100
@@ -48,14 +48,13 @@ if TYPE_CHECKING:
 
 
 def supported(solver: ExplicitSolver) -> bool:
-    """Whether ``solver``'s options, space, mesh and walls take a compiled step (lumped, or
-    consistent: :mod:`fempm.consistent_step`; not with a wall that checks contact by position)."""
+    """Whether ``solver``'s options, space and mesh take a compiled step (lumped, or
+    consistent: :mod:`fempm.consistent_step`)."""
     opts, V = solver.options, solver.V
     el = V.element.basix_element
     geo = solver.particles.locator.geometry
     return (AVAILABLE and opts.mass_mode in ("lumped", "consistent") and getattr(opts.particle_domain, "name", "") == "point"
-            and el.degree == 1 and V.dofmap.index_map_bs == solver.particles.gdim and geo.affine
-            and not solver.needs_positions)
+            and el.degree == 1 and V.dofmap.index_map_bs == solver.particles.gdim and geo.affine)
 
 
 def sum_ghosts(vec) -> None:
@@ -121,6 +120,8 @@ class LumpedPointStep:
                          for bc in solver.bcs)
         self._nodal = self._nodal_array(1 + 2 * d)  # [m | m v | f]
         self._nodal_d = self._nodal_array(d)  # USF's forces, MUSL's re-mapped momenta
+        # walls that check contact by position: the first mass moments sum_p M_p N_ip x_p
+        self._moments = self._nodal_array(d) if solver.needs_positions else None
         self._checked: tuple | None = None  # identities of the state arrays checked finite
 
     # -- pieces -------------------------------------------------------------------------------
@@ -166,6 +167,20 @@ class LumpedPointStep:
                                      fext, out, cm, cv, cf, h, f["body"], self.modulus, c, bound=stable == "bound")
         sum_ghosts(vec)
         return out, local
+
+    def _centroids(self, nodal) -> npt.NDArray | None:
+        r"""The nodal centres of mass :math:`\sum_p M_p N_{ip} x_p / m_i` (one more particle
+        pass) when a wall checks contact by position, else None."""
+        if self._moments is None:
+            return None
+        p = self.solver.particles
+        f = p.fields
+        vec, out = self._moments
+        out.fill(0.0)
+        self.kernels.scatter(p.cells, p.X, self.K, self.cell_dofs, p.mass, p.x, p.volume, f["sigma"], np.zeros(self.d),
+                             np.zeros((0, self.d)), out, -1, 0, -1, np.zeros(0), f["body"], self.modulus, np.zeros(0))
+        sum_ghosts(vec)
+        return mass_centres(nodal[:, 0], out)
 
     def _stable_time(self) -> float:
         r"""The stable time of the state, :math:`\min_p h_{c(p)} / (c_p + |v_p|)` over all ranks."""
@@ -217,20 +232,21 @@ class LumpedPointStep:
         """Called after P2G: what the stable time of the state is multiplied by (1: lumped)."""
         return 1.0
 
-    def _grid_velocity(self, mass, mom, cv: int, active_min: float, guess=None) -> npt.NDArray:
-        """Grid velocity from the nodal momenta ``mom[:, cv:cv+d]``, constrained."""
+    def _grid_velocity(self, mass, mom, cv: int, active_min: float, guess=None, centroids=None) -> npt.NDArray:
+        """Grid velocity from the nodal momenta ``mom[:, cv:cv+d]``, constrained (``centroids``:
+        the nodal centres of mass for the walls that need them)."""
         v = np.empty((self.num_dofs, self.d))
         kl.grid_velocity(mass, mom, cv, self.free, active_min, v)
-        self.solver._apply_bcs(v)
+        self.solver._apply_bcs(v, centroids)
         return v
 
     def _advance(self, mass, force, cf: int, active_min: float, weak_max: float, dt: float,
-                 v_old: npt.NDArray) -> npt.NDArray:
+                 v_old: npt.NDArray, centroids=None) -> npt.NDArray:
         r""":math:`v^+ = v + \Delta t\, a` from the nodal forces ``force[:, cf:cf+d]``, constrained."""
         v_new = np.empty((self.num_dofs, self.d))
         kl.grid_advance(mass, force[:, cf:cf + self.d], self.free, active_min, weak_max, float(dt),
                         float(self.solver.options.damping), v_old, v_new)
-        self.solver._apply_bcs(v_new)
+        self.solver._apply_bcs(v_new, centroids)
         return v_new
 
     def _grid_update(self, nodal, cf: int, active_min: float, weak_max: float, dt: float) -> tuple:
@@ -274,21 +290,22 @@ class LumpedPointStep:
             state = self._stable_time()
         dt = s._time_step(opts.cfl * state * factor, dt, dt_max)
         active_min, weak_max = SUPPORT_TOL * top, opts.mass_cutoff * top
+        centroids = self._centroids(nodal)
         if self.fused and not usf:
             v_old, v_new = self._grid_update(nodal, 1 + d, active_min, weak_max, dt)
         else:
-            v_old = self._grid_velocity(nodal[:, :1], nodal, 1, active_min, guess=s.grid_velocity)
+            v_old = self._grid_velocity(nodal[:, :1], nodal, 1, active_min, s.grid_velocity, centroids)
             force, cf = nodal, 1 + d
             if usf:  # stress from the mapped velocity, then the forces
                 nonfinite = self._g2p(v_old, v_old, dt, blend=False, kinematics=True, move=False)[0]
                 force, cf = self._scatter(self._nodal_d, g, fext, -1, -1, 0)[0], 0
-            v_new = self._advance(nodal[:, :1], force, cf, active_min, weak_max, dt, v_old)
+            v_new = self._advance(nodal[:, :1], force, cf, active_min, weak_max, dt, v_old, centroids)
         if opts.scheme == "MUSL":  # blend, re-map the momenta, then the kinematics and motion
             vec, mom = self._nodal_d
             mom.fill(0.0)
             self._g2p(v_new, v_old, dt, blend=True, kinematics=False, move=False, remap=mom)
             sum_ghosts(vec)
-            v_new = self._grid_velocity(nodal[:, :1], mom, 0, active_min)
+            v_new = self._grid_velocity(nodal[:, :1], mom, 0, active_min, None, centroids)
             nonfinite, left = self._g2p(v_new, v_new, dt, blend=False, kinematics=True, move=True)
         elif usf:
             more, left = self._g2p(v_new, v_old, dt, blend=True, kinematics=False, move=True)
