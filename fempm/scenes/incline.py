@@ -32,7 +32,7 @@ Measured (``python demos/incline.py``, 30 degrees, MUSL; docs/incline/incline.md
 docs/contact.md): every case within 2 % at 8 and 16 cells but the disk near its rolling
 threshold. There the node ahead of the contact point carries the disk's weight, up to a cell
 ahead of its centre, and brakes the rotation: the disk slides at mu = 0.2 (-1.5 % and -2.0 %)
-and rolls only from mu = 0.25-0.3 at 8 cells and 0.2-0.22 at 16.
+and rolls only from mu = 0.25-0.3 at 8 cells and 0.2-0.22 at 16 and 32.
 
 The results (:func:`slope_acceleration`): ``acceleration``, the along-slope acceleration of the
 body's centre of mass once it moves (:math:`2 c_2` of the least-squares fit
