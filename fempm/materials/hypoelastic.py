@@ -22,21 +22,11 @@ from typing import ClassVar
 import numpy as np
 import numpy.typing as npt
 
-from fempm.materials.base import Internal, IsotropicElastic, skew, sym
+from fempm.kernels.plasticity import jaumann_trial, to3
+from fempm.materials.base import Internal, IsotropicElastic
 
 #: the out-of-plane stress of a plane-strain state
 SIGMA_ZZ = Internal("sigma_zz")
-
-
-def to3(sigma: npt.NDArray, zz: npt.NDArray | None) -> npt.NDArray:
-    """(n, d, d) stresses (d = 2, 3) as (n, 3, 3), with ``zz`` the out-of-plane stress in 2D."""
-    n, d = len(sigma), sigma.shape[1]
-    if d == 3:
-        return np.array(sigma, dtype=float)
-    out = np.zeros((n, 3, 3))
-    out[:, :2, :2] = sigma
-    out[:, 2, 2] = zz
-    return out
 
 
 def split(S: npt.NDArray) -> tuple[npt.NDArray, npt.NDArray, npt.NDArray]:
@@ -55,19 +45,12 @@ class HypoelasticPlastic(IsotropicElastic):
     energy_from_stress: ClassVar[bool] = True  # the stored energy is the elastic part, from the stress
 
     def trial(self, L: npt.NDArray, sigma: npt.NDArray, dt: float, state: dict) -> npt.NDArray:
-        """The trial stresses (n, 3, 3) of a step with velocity gradients ``L``."""
-        n, d = L.shape[0], L.shape[1]
+        """The trial stresses (n, 3, 3) of a step with velocity gradients ``L``
+        (:func:`fempm.kernels.plasticity.jaumann_trial`, compiled)."""
+        d = L.shape[1]
         if d not in (2, 3):
             raise ValueError(f"{type(self).__name__} needs a 2D (plane strain) or 3D space, not {d}D")
-        L3 = np.zeros((n, 3, 3))
-        L3[:, :d, :d] = L
-        S = to3(sigma, state.get("sigma_zz"))
-        D, W = sym(L3), skew(L3)
-        lam, mu = self.lame
-        S = S + dt * (W @ S - S @ W)
-        S += dt * 2 * mu * D
-        S[:, range(3), range(3)] += (dt * lam * np.trace(D, axis1=1, axis2=2))[:, None]
-        return S
+        return jaumann_trial(L, sigma, state.get("sigma_zz"), dt, *self.lame)
 
     def finish(self, S: npt.NDArray, d: int, state: dict) -> npt.NDArray:
         """The (n, d, d) stresses of returned (n, 3, 3) ones; the out-of-plane stress into ``state``."""

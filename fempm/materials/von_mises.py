@@ -23,6 +23,7 @@ from typing import ClassVar
 import numpy as np
 import numpy.typing as npt
 
+from fempm.kernels.plasticity import von_mises_return
 from fempm.materials.base import Internal
 from fempm.materials.hypoelastic import SIGMA_ZZ, HypoelasticPlastic, split
 
@@ -47,15 +48,9 @@ class VonMises(HypoelasticPlastic):
         return np.sqrt(1.5 * split(S)[2]) - (self.yield_stress + self.hardening * eps_p)
 
     def return_map(self, S: npt.NDArray, eps_p: npt.NDArray) -> tuple[npt.NDArray, npt.NDArray]:
-        """(returned stresses, equivalent plastic strains) of trial (n, 3, 3) stresses."""
-        mu = self.lame[1]
-        p, dev, ss = split(S)
-        q = np.sqrt(1.5 * ss)
-        f = q - (self.yield_stress + self.hardening * eps_p)
-        plastic = f > 0
-        dgamma = np.where(plastic, f, 0.0) / (3 * mu + self.hardening)
-        scale = np.where(plastic, 1.0 - 3 * mu * dgamma / np.where(plastic, q, 1.0), 1.0)
-        return dev * scale[:, None, None] + p[:, None, None] * np.eye(3), eps_p + dgamma
+        """(returned stresses, equivalent plastic strains) of trial (n, 3, 3) stresses
+        (:func:`fempm.kernels.plasticity.von_mises_return`, compiled)."""
+        return von_mises_return(S, eps_p, self.yield_stress, self.hardening, self.lame[1])
 
     def stress(self, F, L, sigma, dt, rho, state) -> npt.NDArray:
         S, state["eps_p"] = self.return_map(self.trial(L, sigma, dt, state), state["eps_p"])

@@ -170,3 +170,29 @@ def test_planar_kernels_equal_the_generic_ones_bit_for_bit(cell):
         if move:  # some particles stay in their cells, some move to a neighbour, some are not found
             moved = np.count_nonzero(a0[-1] != _pass_state(simplex, 2)["cells"])
             assert 0 < np.count_nonzero(l0) and 0 < moved and np.count_nonzero(l0) + moved < len(l0)
+
+
+@pytest.mark.parametrize("d", [2, 3])
+def test_plasticity_kernels_equal_their_references(d):
+    """The Jaumann predictor and the J2 radial return, compiled against numpy, with about half
+    the particles yielding."""
+    from fempm.kernels import plasticity as k
+
+    rng = np.random.default_rng(10 + d)
+    n = 400
+    L = rng.standard_normal((n, d, d))
+    sigma = rng.standard_normal((n, d, d))
+    sigma = sigma + np.swapaxes(sigma, 1, 2)
+    zz = rng.standard_normal(n) if d == 2 else None
+    ref = k.jaumann_trial_numpy(L, sigma, zz, 0.05, 3.0, 2.0)
+    got = k.jaumann_trial_numba(L, sigma, zz, 0.05, 3.0, 2.0)
+    assert np.abs(ref - got).max() < 1e-14 * np.abs(ref).max()
+    eps = rng.random(n)
+    dev = ref - np.trace(ref, axis1=1, axis2=2)[:, None, None] / 3 * np.eye(3)
+    q = np.sqrt(1.5 * np.einsum("nij,nij->n", dev, dev))
+    sy = float(np.median(q)) - 0.5 * float(np.median(eps))  # yield stress + H eps_p near the median q
+    (S_ref, e_ref), (S_got, e_got) = (f(ref, eps, sy, 0.5, 2.0) for f in (k.von_mises_return_numpy,
+                                                                          k.von_mises_return_numba))
+    yielded = e_ref > eps
+    assert 0.3 < yielded.mean() < 0.7
+    assert np.abs(S_ref - S_got).max() < 1e-14 * np.abs(S_ref).max() and np.abs(e_ref - e_got).max() < 1e-15

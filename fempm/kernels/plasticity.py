@@ -1,0 +1,135 @@
+r"""The hypoelastic predictor and the J2 return mapping, per particle.
+
+* :func:`jaumann_trial`: with :math:`D = \mathrm{sym}\, L`, :math:`W = \mathrm{skew}\, L` (as
+  3 x 3, plane strain in 2D with the out-of-plane stress ``zz``),
+
+  .. math::
+      \sigma^{tr} = \sigma + \Delta t\,(W\sigma - \sigma W) + \Delta t\,(\lambda\, \mathrm{tr} D\, I + 2\mu D)
+
+  (:class:`fempm.materials.hypoelastic.HypoelasticPlastic`);
+* :func:`von_mises_return`: the radial return of :class:`fempm.materials.VonMises`,
+  :math:`s = (1 - 3\mu\Delta\gamma / q^{tr})\, s^{tr}` with
+  :math:`\Delta\gamma = \max(0, f^{tr}) / (3\mu + H)`, the pressure unchanged.
+
+The numpy functions (``*_numpy``) define what they compute; the compiled ones agree with them
+to round-off (``tests/unit/test_kernels.py``). Both return new arrays.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import numpy.typing as npt
+
+from fempm.kernels.choice import pick
+
+
+def to3(sigma: npt.NDArray, zz: npt.NDArray | None) -> npt.NDArray:
+    """(n, d, d) stresses as (n, 3, 3), with ``zz`` the out-of-plane stress in 2D."""
+    n, d = len(sigma), sigma.shape[1]
+    if d == 3:
+        return np.array(sigma, dtype=float)
+    out = np.zeros((n, 3, 3))
+    out[:, :2, :2] = sigma
+    out[:, 2, 2] = zz
+    return out
+
+
+def jaumann_trial_numpy(L, sigma, zz, dt, lam, mu):
+    n, d = L.shape[0], L.shape[1]
+    L3 = np.zeros((n, 3, 3))
+    L3[:, :d, :d] = L
+    S = to3(sigma, zz)
+    D = 0.5 * (L3 + np.swapaxes(L3, 1, 2))
+    W = 0.5 * (L3 - np.swapaxes(L3, 1, 2))
+    S = S + dt * (W @ S - S @ W)
+    S += dt * 2 * mu * D
+    S[:, range(3), range(3)] += (dt * lam * np.trace(D, axis1=1, axis2=2))[:, None]
+    return S
+
+
+def von_mises_return_numpy(S, eps_p, yield_stress, hardening, mu):
+    p = np.trace(S, axis1=1, axis2=2) / 3
+    dev = S - p[:, None, None] * np.eye(3)
+    q = np.sqrt(1.5 * np.einsum("nij,nij->n", dev, dev))
+    f = q - (yield_stress + hardening * eps_p)
+    plastic = f > 0
+    dgamma = np.where(plastic, f, 0.0) / (3 * mu + hardening)
+    scale = np.where(plastic, 1.0 - 3 * mu * dgamma / np.where(plastic, q, 1.0), 1.0)
+    return dev * scale[:, None, None] + p[:, None, None] * np.eye(3), eps_p + dgamma
+
+
+try:
+    from numba import njit
+
+    @njit(cache=True)
+    def _jaumann_trial(L, sigma, zz, dt, lam, mu, S):  # pragma: no cover - compiled
+        n, d = L.shape[0], L.shape[1]
+        s0 = np.zeros((3, 3))
+        Lp = np.zeros((3, 3))
+        for p in range(n):
+            for i in range(d):
+                for j in range(d):
+                    s0[i, j] = sigma[p, i, j]
+                    Lp[i, j] = L[p, i, j]
+            if d == 2:
+                s0[2, 2] = zz[p]
+            tr = Lp[0, 0] + Lp[1, 1] + Lp[2, 2]
+            for i in range(3):
+                for j in range(3):
+                    rot = 0.0
+                    for k in range(3):
+                        rot += 0.5 * (Lp[i, k] - Lp[k, i]) * s0[k, j] - s0[i, k] * 0.5 * (Lp[k, j] - Lp[j, k])
+                    v = s0[i, j] + dt * rot
+                    v += dt * 2 * mu * 0.5 * (Lp[i, j] + Lp[j, i])
+                    if i == j:
+                        v += dt * lam * tr
+                    S[p, i, j] = v
+
+    @njit(cache=True)
+    def _von_mises_return(S, eps_p, yield_stress, hardening, mu, out, eps_out):  # pragma: no cover - compiled
+        for p in range(S.shape[0]):
+            pr = (S[p, 0, 0] + S[p, 1, 1] + S[p, 2, 2]) / 3
+            ss = 0.0
+            for i in range(3):
+                for j in range(3):
+                    dv = S[p, i, j] - pr if i == j else S[p, i, j]
+                    ss += dv * dv
+            q = np.sqrt(1.5 * ss)
+            f = q - (yield_stress + hardening * eps_p[p])
+            dgamma = 0.0
+            scale = 1.0
+            if f > 0:
+                dgamma = f / (3 * mu + hardening)
+                scale = 1.0 - 3 * mu * dgamma / q
+            eps_out[p] = eps_p[p] + dgamma
+            for i in range(3):
+                for j in range(3):
+                    dv = S[p, i, j] - pr if i == j else S[p, i, j]
+                    out[p, i, j] = dv * scale + pr if i == j else dv * scale
+
+    def jaumann_trial_numba(L, sigma, zz, dt, lam, mu):
+        n, d = L.shape[0], L.shape[1]
+        S = np.empty((n, 3, 3))
+        zz = np.zeros(n) if zz is None or d == 3 else np.ascontiguousarray(zz, dtype=np.float64)
+        _jaumann_trial(np.ascontiguousarray(L), np.ascontiguousarray(sigma), zz, float(dt), float(lam), float(mu), S)
+        return S
+
+    def von_mises_return_numba(S, eps_p, yield_stress, hardening, mu):
+        out, eps_out = np.empty_like(S), np.empty(len(S))
+        _von_mises_return(np.ascontiguousarray(S), np.ascontiguousarray(eps_p, dtype=np.float64),
+                          float(yield_stress), float(hardening), float(mu), out, eps_out)
+        return out, eps_out
+except ImportError:  # pragma: no cover
+    jaumann_trial_numba, von_mises_return_numba = jaumann_trial_numpy, von_mises_return_numpy
+
+
+def jaumann_trial(L: npt.NDArray, sigma: npt.NDArray, zz: npt.NDArray | None, dt: float, lam: float,
+                  mu: float) -> npt.NDArray:
+    """The trial stresses (n, 3, 3) of (n, d, d) velocity gradients and stresses (d = 2, 3)."""
+    return pick(jaumann_trial_numba, jaumann_trial_numpy)(L, sigma, zz, dt, lam, mu)
+
+
+def von_mises_return(S: npt.NDArray, eps_p: npt.NDArray, yield_stress: float, hardening: float,
+                     mu: float) -> tuple[npt.NDArray, npt.NDArray]:
+    """(returned (n, 3, 3) stresses, equivalent plastic strains) of trial stresses."""
+    return pick(von_mises_return_numba, von_mises_return_numpy)(S, eps_p, yield_stress, hardening, mu)
