@@ -18,7 +18,8 @@ the fly in each pass (:mod:`fempm.kernels.shape`):
 USF splits 1 (forces after the stress update) and MUSL adds a momentum re-map between the
 blend and the kinematics, as in the generic step. Laws other than :class:`~fempm.materials.NeoHookean`
 and :class:`~fempm.materials.LinearElastic` keep their own ``stress`` (given :math:`L_p`) and
-``wave_speed``.
+``wave_speed``, called after the pass (:class:`~fempm.materials.VonMises` runs the compiled
+kernels of :mod:`fempm.kernels.plasticity` there).
 """
 
 from __future__ import annotations
