@@ -11,6 +11,9 @@ r"""The hypoelastic predictor and the J2 return mapping, per particle.
   :math:`s = (1 - 3\mu\Delta\gamma / q^{tr})\, s^{tr}` with
   :math:`\Delta\gamma = \max(0, f^{tr}) / (3\mu + H)`, the pressure unchanged.
 
+* :func:`drucker_prager_return`: the return of :class:`fempm.materials.DruckerPrager` onto its
+  cone (or its apex), then the tension cut-off :math:`p \le p_t` along the hydrostatic axis.
+
 The numpy functions (``*_numpy``) define what they compute; the compiled ones agree with them
 to round-off (``tests/unit/test_kernels.py``). Both return new arrays.
 """
@@ -56,6 +59,25 @@ def von_mises_return_numpy(S, eps_p, yield_stress, hardening, mu):
     dgamma = np.where(plastic, f, 0.0) / (3 * mu + hardening)
     scale = np.where(plastic, 1.0 - 3 * mu * dgamma / np.where(plastic, q, 1.0), 1.0)
     return dev * scale[:, None, None] + p[:, None, None] * np.eye(3), eps_p + dgamma
+
+
+def drucker_prager_return_numpy(S, eps_p, eta, k, eta_bar, p_t, G, K):
+    p = np.trace(S, axis1=1, axis2=2) / 3
+    dev = S - p[:, None, None] * np.eye(3)
+    root = np.sqrt(0.5 * np.einsum("nij,nij->n", dev, dev))
+    f = root + eta * p - k
+    plastic = f > 0
+    dgamma = np.where(plastic, f, 0.0) / (G + K * eta * eta_bar)
+    new_root = root - G * dgamma
+    apex = plastic & (new_root < 0)
+    cone_ = plastic & ~apex
+    scale = np.where(cone_, new_root / np.where(cone_, root, 1.0), 1.0)
+    scale[apex] = 0.0
+    p = np.where(cone_, p - K * eta_bar * dgamma, p)
+    p[apex] = k / eta if eta > 0 else p[apex]
+    deps = np.where(cone_, dgamma, 0.0) / np.sqrt(3.0) + np.where(apex, root, 0.0) / (G * np.sqrt(3.0))
+    p = np.minimum(p, p_t)  # the tension cut-off, along the hydrostatic axis
+    return dev * scale[:, None, None] + p[:, None, None] * np.eye(3), eps_p + deps
 
 
 try:
@@ -107,6 +129,45 @@ try:
                     dv = S[p, i, j] - pr if i == j else S[p, i, j]
                     out[p, i, j] = dv * scale + pr if i == j else dv * scale
 
+    @njit(cache=True)
+    def _drucker_prager_return(S, eps_p, eta, k, eta_bar, p_t, G, K, out, eps_out):  # pragma: no cover - compiled
+        sqrt3 = np.sqrt(3.0)
+        for p in range(S.shape[0]):
+            pr = (S[p, 0, 0] + S[p, 1, 1] + S[p, 2, 2]) / 3
+            ss = 0.0
+            for i in range(3):
+                for j in range(3):
+                    dv = S[p, i, j] - pr if i == j else S[p, i, j]
+                    ss += dv * dv
+            root = np.sqrt(0.5 * ss)
+            f = root + eta * pr - k
+            scale = 1.0
+            deps = 0.0
+            if f > 0:
+                dgamma = f / (G + K * eta * eta_bar)
+                new_root = root - G * dgamma
+                if new_root < 0:  # past the apex
+                    scale = 0.0
+                    if eta > 0:
+                        pr = k / eta
+                    deps = root / (G * sqrt3)
+                else:
+                    scale = new_root / root
+                    pr = pr - K * eta_bar * dgamma
+                    deps = dgamma / sqrt3
+            pr = min(pr, p_t)
+            eps_out[p] = eps_p[p] + deps
+            for i in range(3):
+                for j in range(3):
+                    dv = S[p, i, j] - (S[p, 0, 0] + S[p, 1, 1] + S[p, 2, 2]) / 3 if i == j else S[p, i, j]
+                    out[p, i, j] = dv * scale + pr if i == j else dv * scale
+
+    def drucker_prager_return_numba(S, eps_p, eta, k, eta_bar, p_t, G, K):
+        out, eps_out = np.empty_like(S), np.empty(len(S))
+        _drucker_prager_return(np.ascontiguousarray(S), np.ascontiguousarray(eps_p, dtype=np.float64), float(eta),
+                               float(k), float(eta_bar), float(p_t), float(G), float(K), out, eps_out)
+        return out, eps_out
+
     def jaumann_trial_numba(L, sigma, zz, dt, lam, mu):
         n, d = L.shape[0], L.shape[1]
         S = np.empty((n, 3, 3))
@@ -121,6 +182,7 @@ try:
         return out, eps_out
 except ImportError:  # pragma: no cover
     jaumann_trial_numba, von_mises_return_numba = jaumann_trial_numpy, von_mises_return_numpy
+    drucker_prager_return_numba = drucker_prager_return_numpy
 
 
 def jaumann_trial(L: npt.NDArray, sigma: npt.NDArray, zz: npt.NDArray | None, dt: float, lam: float,
@@ -133,3 +195,10 @@ def von_mises_return(S: npt.NDArray, eps_p: npt.NDArray, yield_stress: float, ha
                      mu: float) -> tuple[npt.NDArray, npt.NDArray]:
     """(returned (n, 3, 3) stresses, equivalent plastic strains) of trial stresses."""
     return pick(von_mises_return_numba, von_mises_return_numpy)(S, eps_p, yield_stress, hardening, mu)
+
+
+def drucker_prager_return(S: npt.NDArray, eps_p: npt.NDArray, eta: float, k: float, eta_bar: float, p_t: float,
+                          G: float, K: float) -> tuple[npt.NDArray, npt.NDArray]:
+    """(returned (n, 3, 3) stresses, equivalent plastic strains) of trial stresses; ``eta``,
+    ``k`` = xi c, ``eta_bar``, ``p_t`` of :meth:`fempm.materials.DruckerPrager.parameters`."""
+    return pick(drucker_prager_return_numba, drucker_prager_return_numpy)(S, eps_p, eta, k, eta_bar, p_t, G, K)

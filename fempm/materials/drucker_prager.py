@@ -33,6 +33,7 @@ from typing import ClassVar
 import numpy as np
 import numpy.typing as npt
 
+from fempm.kernels.plasticity import drucker_prager_return
 from fempm.materials.base import Internal
 from fempm.materials.hypoelastic import SIGMA_ZZ, HypoelasticPlastic, split
 
@@ -85,25 +86,10 @@ class DruckerPrager(HypoelasticPlastic):
         return np.sqrt(0.5 * ss) + eta * p - k
 
     def return_map(self, S: npt.NDArray, eps_p: npt.NDArray, d: int) -> tuple[npt.NDArray, npt.NDArray]:
-        """(returned stresses, equivalent plastic strains) of trial (n, 3, 3) stresses."""
+        """(returned stresses, equivalent plastic strains) of trial (n, 3, 3) stresses
+        (:func:`fempm.kernels.plasticity.drucker_prager_return`, compiled)."""
         lam, G = self.lame
-        K = lam + 2 * G / 3
-        eta, k, eta_bar, p_t = self.parameters(d)
-        p, dev, ss = split(S)
-        root = np.sqrt(0.5 * ss)
-        f = root + eta * p - k
-        plastic = f > 0
-        dgamma = np.where(plastic, f, 0.0) / (G + K * eta * eta_bar)
-        new_root = root - G * dgamma
-        apex = plastic & (new_root < 0)
-        cone_ = plastic & ~apex
-        scale = np.where(cone_, new_root / np.where(cone_, root, 1.0), 1.0)
-        scale[apex] = 0.0
-        p = np.where(cone_, p - K * eta_bar * dgamma, p)
-        p[apex] = k / eta if eta > 0 else p[apex]
-        deps = np.where(cone_, dgamma, 0.0) / np.sqrt(3.0) + np.where(apex, root, 0.0) / (G * np.sqrt(3.0))
-        p = np.minimum(p, p_t)  # the tension cut-off, along the hydrostatic axis
-        return dev * scale[:, None, None] + p[:, None, None] * np.eye(3), eps_p + deps
+        return drucker_prager_return(S, eps_p, *self.parameters(d), G, lam + 2 * G / 3)
 
     def stress(self, F, L, sigma, dt, rho, state) -> npt.NDArray:
         d = L.shape[1]

@@ -196,3 +196,28 @@ def test_plasticity_kernels_equal_their_references(d):
     yielded = e_ref > eps
     assert 0.3 < yielded.mean() < 0.7
     assert np.abs(S_ref - S_got).max() < 1e-14 * np.abs(S_ref).max() and np.abs(e_ref - e_got).max() < 1e-15
+
+
+def test_drucker_prager_kernel_equals_its_reference():
+    """Trial stresses that stay elastic, return to the cone, pass the apex or the tension
+    cut-off: the compiled return equals numpy's."""
+    from fempm.kernels import plasticity as k
+    from fempm.materials import DruckerPrager
+
+    rng = np.random.default_rng(5)
+    n = 800
+    A = rng.standard_normal((n, 3, 3))
+    S = (A + np.swapaxes(A, 1, 2)) + rng.uniform(-4.0, 3.0, n)[:, None, None] * np.eye(3)
+    eps = rng.random(n)
+    law = DruckerPrager(10.0, 0.3, friction_angle=30.0, dilation_angle=10.0, cohesion=1.0, tension=0.5)
+    lam, G = law.lame
+    args = (*law.parameters(3), G, lam + 2 * G / 3)
+    (S_ref, e_ref), (S_got, e_got) = (f(S, eps, *args) for f in (k.drucker_prager_return_numpy,
+                                                                  k.drucker_prager_return_numba))
+    assert np.abs(S_ref - S_got).max() < 1e-14 * np.abs(S_ref).max() and np.abs(e_ref - e_got).max() < 1e-15
+    p_ref = np.trace(S_ref, axis1=1, axis2=2) / 3
+    no_deviator = np.abs(S_ref - p_ref[:, None, None] * np.eye(3)).max(axis=(1, 2)) < 1e-12
+    plastic = e_ref > eps
+    assert 0.1 < plastic.mean() < 0.9
+    assert (plastic & no_deviator).any() and (plastic & ~no_deviator).any()  # the apex and the cone
+    assert np.isclose(p_ref, 0.5).any()  # the tension cut-off
