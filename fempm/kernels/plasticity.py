@@ -107,15 +107,29 @@ try:
                         v += dt * lam * tr
                     S[p, i, j] = v
 
+    @njit(inline="always")
+    def _invariants(S, p):  # pragma: no cover - compiled
+        """(pressure, s : s) of the stress S[p] (3 x 3)."""
+        pr = (S[p, 0, 0] + S[p, 1, 1] + S[p, 2, 2]) / 3
+        ss = 0.0
+        for i in range(3):
+            for j in range(3):
+                dv = S[p, i, j] - pr if i == j else S[p, i, j]
+                ss += dv * dv
+        return pr, ss
+
+    @njit(inline="always")
+    def _returned(S, p, pr, scale, pr_new, out):  # pragma: no cover - compiled
+        """out[p] = scale * dev(S[p]) + pr_new I, with pr the pressure of S[p]."""
+        for i in range(3):
+            for j in range(3):
+                dv = S[p, i, j] - pr if i == j else S[p, i, j]
+                out[p, i, j] = dv * scale + pr_new if i == j else dv * scale
+
     @njit(cache=True)
     def _von_mises_return(S, eps_p, yield_stress, hardening, mu, out, eps_out):  # pragma: no cover - compiled
         for p in range(S.shape[0]):
-            pr = (S[p, 0, 0] + S[p, 1, 1] + S[p, 2, 2]) / 3
-            ss = 0.0
-            for i in range(3):
-                for j in range(3):
-                    dv = S[p, i, j] - pr if i == j else S[p, i, j]
-                    ss += dv * dv
+            pr, ss = _invariants(S, p)
             q = np.sqrt(1.5 * ss)
             f = q - (yield_stress + hardening * eps_p[p])
             dgamma = 0.0
@@ -124,43 +138,32 @@ try:
                 dgamma = f / (3 * mu + hardening)
                 scale = 1.0 - 3 * mu * dgamma / q
             eps_out[p] = eps_p[p] + dgamma
-            for i in range(3):
-                for j in range(3):
-                    dv = S[p, i, j] - pr if i == j else S[p, i, j]
-                    out[p, i, j] = dv * scale + pr if i == j else dv * scale
+            _returned(S, p, pr, scale, pr, out)
 
     @njit(cache=True)
     def _drucker_prager_return(S, eps_p, eta, k, eta_bar, p_t, G, K, out, eps_out):  # pragma: no cover - compiled
         sqrt3 = np.sqrt(3.0)
         for p in range(S.shape[0]):
-            pr = (S[p, 0, 0] + S[p, 1, 1] + S[p, 2, 2]) / 3
-            ss = 0.0
-            for i in range(3):
-                for j in range(3):
-                    dv = S[p, i, j] - pr if i == j else S[p, i, j]
-                    ss += dv * dv
+            pr, ss = _invariants(S, p)
             root = np.sqrt(0.5 * ss)
             f = root + eta * pr - k
             scale = 1.0
             deps = 0.0
+            pr_new = pr
             if f > 0:
                 dgamma = f / (G + K * eta * eta_bar)
                 new_root = root - G * dgamma
                 if new_root < 0:  # past the apex
                     scale = 0.0
                     if eta > 0:
-                        pr = k / eta
+                        pr_new = k / eta
                     deps = root / (G * sqrt3)
                 else:
                     scale = new_root / root
-                    pr = pr - K * eta_bar * dgamma
+                    pr_new = pr - K * eta_bar * dgamma
                     deps = dgamma / sqrt3
-            pr = min(pr, p_t)
             eps_out[p] = eps_p[p] + deps
-            for i in range(3):
-                for j in range(3):
-                    dv = S[p, i, j] - (S[p, 0, 0] + S[p, 1, 1] + S[p, 2, 2]) / 3 if i == j else S[p, i, j]
-                    out[p, i, j] = dv * scale + pr if i == j else dv * scale
+            _returned(S, p, pr, scale, min(pr_new, p_t), out)
 
     def drucker_prager_return_numba(S, eps_p, eta, k, eta_bar, p_t, G, K):
         out, eps_out = np.empty_like(S), np.empty(len(S))
