@@ -283,7 +283,7 @@ def contact_step(solver: ExplicitSolver, dt: float | None, dt_max: float) -> flo
         for g in deformable:
             k = masks[g]
             corner_velocity[k] = basis.gather_samples(v_new[g])[k]
-        solver._move_corners(basis, None, dt, corner_velocity)
+        solver._move_corners(basis, corner_velocity, dt)
     else:
         p.x = p.x + dt * (fld["v"] if opts.position == "particle" else vp_grid)
     solver._check_finite()

@@ -435,7 +435,7 @@ class ExplicitSolver:
         if opts.scheme != "USF":
             self._update_stress(L, dt)
         if opts.domain == "cpdi2":
-            self._move_corners(basis, v_new, dt)
+            self._move_corners(basis, basis.gather_samples(v_new), dt)
         else:
             p.x = p.x + dt * (fld["v"] if self.options.position == "particle" else vp_grid)
         self._check_finite()
@@ -475,17 +475,16 @@ class ExplicitSolver:
         self.extended_steps += basis.extended
         return basis
 
-    def _move_corners(self, basis: ParticleBasis, v: npt.NDArray | None, dt: float,
-                      corner_velocity: npt.NDArray | None = None) -> None:
-        r"""CPDI2: corners :math:`y_c^+ = y_c + \Delta t \sum_i N_i(y_c) v_i^+`; the particle
-        moves to its domain's centroid and takes its volume (for simplices the centroid moves by
-        :math:`\Delta t \sum_i \langle N_i \rangle_p v_i^+` and :math:`|\Omega_p| = J_p V_p^0`,
-        since :math:`L_p` is the gradient of the corner velocities' linear interpolant).
-        ``corner_velocity`` (n, corners, d): the corners' velocities instead of the grid
-        velocity ``v`` at them (contact: each body's own field)."""
+    def _move_corners(self, basis: ParticleBasis, corner_velocity: npt.NDArray, dt: float) -> None:
+        r"""CPDI2: corners :math:`y_c^+ = y_c + \Delta t\, u_c` with the corners' velocities
+        ``corner_velocity`` (n, corners, d), the grid velocity at them,
+        :math:`u_c = \sum_i N_i(y_c) v_i^+` (``basis.gather_samples``; with contact each body's
+        own field); the particle moves to its domain's centroid and takes its volume (for
+        simplices the centroid moves by :math:`\Delta t \sum_i \langle N_i \rangle_p v_i^+` and
+        :math:`|\Omega_p| = J_p V_p^0`, since :math:`L_p` is the gradient of the corner
+        velocities' linear interpolant)."""
         p = self.particles
-        velocity = basis.gather_samples(v) if corner_velocity is None else corner_velocity
-        corners = p.fields["corners"] + dt * velocity
+        corners = p.fields["corners"] + dt * corner_velocity
         try:
             _, _, volume, centroid = domain_geometry(corners, p.comm)  # collective error
         except ValueError as e:
