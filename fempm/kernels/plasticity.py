@@ -37,6 +37,14 @@ def to3(sigma: npt.NDArray, zz: npt.NDArray | None) -> npt.NDArray:
     return out
 
 
+def split(S: npt.NDArray) -> tuple[npt.NDArray, npt.NDArray, npt.NDArray]:
+    r"""(:math:`p = \tfrac13 \mathrm{tr}\, S`, the deviator :math:`s = S - p I`, :math:`s : s`)
+    of (n, 3, 3) stresses."""
+    p = np.trace(S, axis1=1, axis2=2) / 3
+    dev = S - p[:, None, None] * np.eye(3)
+    return p, dev, np.einsum("nij,nij->n", dev, dev)
+
+
 def jaumann_trial_numpy(L, sigma, zz, dt, lam, mu):
     n, d = L.shape[0], L.shape[1]
     L3 = np.zeros((n, 3, 3))
@@ -51,9 +59,8 @@ def jaumann_trial_numpy(L, sigma, zz, dt, lam, mu):
 
 
 def von_mises_return_numpy(S, eps_p, yield_stress, hardening, mu):
-    p = np.trace(S, axis1=1, axis2=2) / 3
-    dev = S - p[:, None, None] * np.eye(3)
-    q = np.sqrt(1.5 * np.einsum("nij,nij->n", dev, dev))
+    p, dev, ss = split(S)
+    q = np.sqrt(1.5 * ss)
     f = q - (yield_stress + hardening * eps_p)
     plastic = f > 0
     dgamma = np.where(plastic, f, 0.0) / (3 * mu + hardening)
@@ -62,9 +69,8 @@ def von_mises_return_numpy(S, eps_p, yield_stress, hardening, mu):
 
 
 def drucker_prager_return_numpy(S, eps_p, eta, k, eta_bar, p_t, G, K):
-    p = np.trace(S, axis1=1, axis2=2) / 3
-    dev = S - p[:, None, None] * np.eye(3)
-    root = np.sqrt(0.5 * np.einsum("nij,nij->n", dev, dev))
+    p, dev, ss = split(S)
+    root = np.sqrt(0.5 * ss)
     f = root + eta * p - k
     plastic = f > 0
     dgamma = np.where(plastic, f, 0.0) / (G + K * eta * eta_bar)

@@ -22,19 +22,11 @@ from typing import ClassVar
 import numpy as np
 import numpy.typing as npt
 
-from fempm.kernels.plasticity import jaumann_trial, to3
+from fempm.kernels.plasticity import jaumann_trial, split, to3
 from fempm.materials.base import Internal, IsotropicElastic
 
 #: the out-of-plane stress of a plane-strain state
 SIGMA_ZZ = Internal("sigma_zz")
-
-
-def split(S: npt.NDArray) -> tuple[npt.NDArray, npt.NDArray, npt.NDArray]:
-    r"""(:math:`p = \tfrac13 \mathrm{tr}\, S`, the deviator :math:`s = S - p I`, :math:`s : s`)
-    of (n, 3, 3) stresses."""
-    p = np.trace(S, axis1=1, axis2=2) / 3
-    dev = S - p[:, None, None] * np.eye(3)
-    return p, dev, np.einsum("nij,nij->n", dev, dev)
 
 
 @dataclass(frozen=True)
