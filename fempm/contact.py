@@ -82,6 +82,7 @@ import numpy as np
 import numpy.typing as npt
 from mpi4py import MPI
 
+from fempm.boundary import NodalCentres
 from fempm.loads import external_forces
 from fempm.transfer import SUPPORT_TOL, mass_centres, p2g, p2g_gradients
 
@@ -234,7 +235,7 @@ def contact_step(solver: ExplicitSolver, dt: float | None, dt_max: float) -> flo
     if solver.needs_positions or contact.gap is not None:  # each group's first mass moment
         moments = np.stack([p2g(basis, (p.mass * k)[:, None] * p.x) for k in masks])
         if solver.needs_positions:
-            centroids = list(mass_centres(m, moments))
+            centroids = [NodalCentres(c, mg) for c, mg in zip(mass_centres(m, moments), m)]
 
     def constrain(v: npt.NDArray) -> npt.NDArray:
         """Each deformable group's grid conditions, and the ghost values, in place."""

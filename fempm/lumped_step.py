@@ -31,7 +31,7 @@ import numpy as np
 import numpy.typing as npt
 from mpi4py import MPI
 
-from fempm.boundary import Fixed, Slip
+from fempm.boundary import Fixed, NodalCentres, Slip
 from fempm.kernels import lumped as kl
 from fempm.kernels.shape import AVAILABLE
 from fempm.loads import external_forces
@@ -169,9 +169,9 @@ class LumpedPointStep:
         sum_ghosts(vec)
         return out, local
 
-    def _centroids(self, nodal) -> npt.NDArray | None:
+    def _centroids(self, nodal) -> NodalCentres | None:
         r"""The nodal centres of mass :math:`\sum_p M_p N_{ip} x_p / m_i` (one more particle
-        pass) when a wall checks contact by position, else None."""
+        pass) and masses when a wall checks contact by position, else None."""
         if self._moments is None:
             return None
         p = self.solver.particles
@@ -181,7 +181,7 @@ class LumpedPointStep:
         self.kernels.scatter(p.cells, p.X, self.K, self.cell_dofs, p.mass, p.x, p.volume, f["sigma"], np.zeros(self.d),
                              np.zeros((0, self.d)), out, -1, 0, -1, np.zeros(0), f["body"], self.modulus, np.zeros(0))
         sum_ghosts(vec)
-        return mass_centres(nodal[:, 0], out)
+        return NodalCentres(mass_centres(nodal[:, 0], out), nodal[:, 0])
 
     def _stable_time(self) -> float:
         r"""The stable time of the state, :math:`\min_p h_{c(p)} / (c_p + |v_p|)` over all ranks."""

@@ -34,7 +34,7 @@ from mpi4py import MPI
 
 from fempm import kernels
 from fempm.basis import ParticleBasis, is_nonnegative
-from fempm.boundary import Fixed, Slip
+from fempm.boundary import Fixed, NodalCentres, Slip
 from fempm.domains import GIMP_NAMES, domain_geometry, make_domain
 from fempm.contact import Contact, contact_step
 from fempm.contact import check_options as check_contact_options
@@ -274,18 +274,18 @@ class ExplicitSolver:
             self._lumped_step = kind(self)
         return self._lumped_step
 
-    def _apply_bcs(self, v: npt.NDArray, centroids: npt.NDArray | None = None) -> None:
+    def _apply_bcs(self, v: npt.NDArray, centroids: NodalCentres | None = None) -> None:
         """The grid conditions on ``v``, in place; walls that check contact by position
         (:attr:`fempm.boundary.Friction.needs_positions`) take ``centroids``, the step's nodal
-        centres of mass (:meth:`_locate_body`)."""
+        centres of mass and masses (:meth:`_wall_centroids`)."""
         for bc in self.bcs:
             if getattr(bc, "needs_positions", False):
                 bc.apply(v, centroids)
             else:
                 bc.apply(v)
 
-    def _locate_body(self, basis: ParticleBasis) -> npt.NDArray | None:
-        """The nodal centres of mass of the step for the walls that need them, else None."""
+    def _wall_centroids(self, basis: ParticleBasis) -> NodalCentres | None:
+        """The nodal centres of mass and masses of the step for the walls that need them, else None."""
         if not self.needs_positions:
             return None
         p = self.particles
@@ -307,11 +307,11 @@ class ExplicitSolver:
         momenta and the step's mass solve and constraints (the first stage of a step), nothing
         advanced. The grid frame at t = 0 of :func:`fempm.scene.run`."""
         basis = ParticleBasis(self.V, self.particles, gradients=False, domain=self.options.particle_domain)
-        centroids = self._locate_body(basis)
+        centroids = self._wall_centroids(basis)
         return self._map_velocity(basis, self._mass_operator(basis), None, centroids)[: basis.num_dofs_space]
 
     def _map_velocity(self, basis: ParticleBasis, mass_op: Projector, guess: npt.NDArray | None,
-                      centroids: npt.NDArray | None = None) -> npt.NDArray:
+                      centroids: NodalCentres | None = None) -> npt.NDArray:
         """Grid velocity from the particle momenta (P2G + mass solve), constrained (``centroids``:
         the nodal centres of mass for the walls that need them)."""
         p = self.particles
@@ -411,7 +411,7 @@ class ExplicitSolver:
         p = self.particles
         fld = p.fields
         basis = self._open_step()
-        centroids = self._locate_body(basis)  # (the contact step maps each body's own)
+        centroids = self._wall_centroids(basis)  # (the contact step maps each body's own)
         mass_op = self._mass_operator(basis)
         dt = self._time_step(self._stable_with([mass_op]), dt, dt_max)
         support = mass_op.support_masses()

@@ -32,6 +32,7 @@ from petsc4py import PETSc
 
 from fempm import petsc as fpetsc
 from fempm.basis import ParticleBasis
+from fempm.boundary import NodalCentres
 from fempm.fmpm import fmpm_solve, mass_label, parse_mass
 from fempm.location import as_points3
 from fempm.particles import Particles
@@ -66,12 +67,12 @@ def p2g(basis: ParticleBasis, weights: npt.NDArray, *, values: npt.NDArray | Non
     return sum_over_ranks(basis.index_map, basis.scatter(weights, values=values))
 
 
-def nodal_centroids(basis: ParticleBasis, mass: npt.NDArray, x: npt.NDArray) -> npt.NDArray:
+def nodal_centroids(basis: ParticleBasis, mass: npt.NDArray, x: npt.NDArray) -> NodalCentres:
     r"""The centre of mass of the particles as each node sees it,
-    :math:`\bar x_i = \sum_p M_p N_{ip} x_p / \sum_p M_p N_{ip}` (owned + ghost dofs, d); NaN
-    at nodes without mass."""
+    :math:`\bar x_i = \sum_p M_p N_{ip} x_p / \sum_p M_p N_{ip}` (owned + ghost dofs, d; NaN
+    at nodes without mass), with the nodal masses :math:`\sum_p M_p N_{ip}`."""
     mx = p2g(basis, np.hstack([mass[:, None], mass[:, None] * x]))
-    return mass_centres(mx[:, 0], mx[:, 1:])
+    return NodalCentres(mass_centres(mx[:, 0], mx[:, 1:]), mx[:, 0])
 
 
 def mass_centres(m: npt.NDArray, moments: npt.NDArray) -> npt.NDArray:

@@ -8,7 +8,7 @@ import pytest
 from mpi4py import MPI
 
 import fempm
-from fempm.boundary import friction, slip
+from fempm.boundary import NodalCentres, friction, slip
 from fempm.materials import LinearElastic
 from fempm.stepping import ExplicitSolver, Loads, StepOptions
 
@@ -62,24 +62,39 @@ def test_friction_needs_a_coefficient():
 
 def test_a_wall_with_a_gap_holds_only_the_nodes_the_body_touches():
     """Floor y = 0 of a 4 x 4 unit square (h = 1/4), mu = 0.5, gap 0.1: the body moves at
-    (1, -0.4) everywhere; a node whose nodal centre of mass lies 0.05 above the floor is held
-    (no normal velocity, the tangential one cut by mu 0.4), one at 0.15 is not; a node without
-    mass (NaN) is not either, and without the gap every node is held. The wall needs the
+    (1, -0.4) everywhere. Nodal centres of mass 0.05, 0.15, 0.05, 0.0999 above the floor and
+    none at x = 0, 1/4, 1/2, 3/4, 1: the nodes at 0, 1/2 and 3/4 touch it (a tangential offset
+    of the centre does not count), in two patches. Each patch's wall takes the normal momentum
+    of its nodes, shared by mass times depth: the single node at 0 stops (its tangential speed
+    cut by mu 0.4); at 1/2 (mass 2, depth 0.05) and 3/4 (mass 1, depth 1e-4) the momentum
+    1.2 goes almost all to 1/2, which leaves the wall, with friction mu times each node's share.
+    The other nodes keep their velocity; without the gap every node is held. The wall needs the
     centres of mass once it has a gap."""
     mesh = dm.create_unit_square(MPI.COMM_SELF, 4, 4, dm.CellType.quadrilateral)
     V = dolfinx.fem.functionspace(mesh, ("Lagrange", 1, (2,)))
     wall = friction(V, lambda x: np.isclose(x[1], 0.0), (0.0, -1.0), 0.5, gap=0.1)
     assert wall.needs_positions and len(wall.dofs) == 5 and np.allclose(wall.points[:, 1], 0.0)
-    centroids = np.full((V.dofmap.index_map.size_local, 2), np.nan)
-    height = np.array([0.05, 0.15, 0.05, np.nan, 0.0999])
-    centroids[wall.dofs] = np.column_stack([wall.points[:, 0] + 0.3, height])  # a tangential offset does not count
-    v = np.tile([1.0, -0.4], (len(centroids), 1))
-    wall.apply(v, centroids)
-    held = np.array([True, False, True, False, True])
-    np.testing.assert_allclose(v[wall.dofs[held]], [[0.8, 0.0]] * 3, rtol=1e-15)
-    np.testing.assert_array_equal(v[wall.dofs[~held]], [[1.0, -0.4]] * 2)
+    at = np.rint(wall.points[:, 0] * 4).astype(int)  # each wall dof's position along the floor
+    n = V.dofmap.index_map.size_local
+    centre, mass = np.full((n, 2), np.nan), np.ones(n)
+    centre[wall.dofs] = np.column_stack([wall.points[:, 0] + 0.3, np.array([0.05, 0.15, 0.05, 0.0999, np.nan])[at]])
+    mass[wall.dofs] = np.array([1.0, 1.0, 2.0, 1.0, 0.0])[at]
+    v = np.tile([1.0, -0.4], (n, 1))
+    wall.apply(v, NodalCentres(centre, mass))
+    got = np.empty((5, 2))
+    got[at] = v[wall.dofs]
+    share = 1.2 * np.array([0.05, 1e-4]) / (2 * 0.05 + 1e-4)  # the normal velocity each node gives up
+    expected = [[0.8, 0.0], [1.0, -0.4], [1.0 - 0.5 * share[0], share[0] - 0.4], [1.0 - 0.5 * share[1], share[1] - 0.4],
+                [1.0, -0.4]]
+    np.testing.assert_allclose(got, expected, rtol=1e-14)
+    normal = np.array([2.0, 1.0]) @ (got[2:4, 1] - (-0.4))  # the momentum the patch took, normal and tangential
+    tangential = np.array([2.0, 1.0]) @ (1.0 - got[2:4, 0])
+    assert abs(normal - 1.2) < 1e-14 and abs(tangential - 0.5 * 1.2) < 1e-14
+    v = np.tile([1.0, 0.4], (n, 1))  # leaving the floor everywhere: nothing held
+    wall.apply(v, NodalCentres(centre, mass))
+    np.testing.assert_array_equal(v, np.tile([1.0, 0.4], (n, 1)))
     plain = friction(V, lambda x: np.isclose(x[1], 0.0), (0.0, -1.0), 0.5)
-    v = np.tile([1.0, -0.4], (len(centroids), 1))
+    v = np.tile([1.0, -0.4], (n, 1))
     plain.apply(v)
     np.testing.assert_allclose(v[plain.dofs], [[0.8, 0.0]] * 5, rtol=1e-15)
     with pytest.raises(ValueError, match="nodal centres of mass"):
