@@ -2,7 +2,7 @@
 
     python benchmarks/bench_reference.py [--sizes 1e5 1e6] [--ranks 1 2] [--meshes quad tri] [--partition particles]
                                          [--masses lumped consistent] [--check] [--json FILE]
-                                         [--reference DIR]
+                                         [--reference DIR] [--rounds K]
 
 The problem (``reference-mpm/README.md``): a centred block of side 0.5 in the unit square, 2x2
 jittered particles per grid cell, v = 0.5 sin(4 pi x_(k+1)), compressible neo-Hookean
@@ -18,7 +18,9 @@ steps, then 7 batches of at least 0.4 s; the median time per step (maximum over 
 particle-steps per second. Peak memory per particle: the growth of the peak resident set from
 after the mesh is built to the end of the run, summed over ranks, over the number of particles.
 ``--check`` first runs 300 steps at 1e4 particles in fempm and in the numba kernel and compares
-the positions (same physics before comparing speed).
+the positions (same physics before comparing speed). ``--rounds K`` runs every configuration K
+times in rounds (the references, then fempm, K times over) and reports medians: this machine's
+speed drifts by 20-50 % within minutes, so a ratio is taken within a round, then its median.
 """
 
 from __future__ import annotations
@@ -215,6 +217,40 @@ def check_physics(reference: Path, steps: int = 300, n: float = 1e4) -> dict:
             "median_displacement": float(np.median(disp))}
 
 
+def measure(n: float, ranks: int, a) -> list[dict]:
+    """The rows of one size and rank count: ``a.rounds`` rounds, each running every reference and
+    every fempm configuration once, one after the other. A row's step time is the median over
+    the rounds; its ratios to the references are the medians of the ratios within a round (runs
+    close in time, on a machine whose speed drifts), with their range over the rounds."""
+    per_round = []
+    for k in range(a.rounds):
+        refs = {impl: run_reference(impl, n, ranks, a.reference) for impl in a.references}
+        rows = [{"impl": impl, "n": res["n"], "ranks": ranks, "pps": res["pps_median"],
+                 "t_step_s": res["t_step_median_s"]} for impl, res in refs.items()]
+        for mesh in a.meshes:
+            for mass in a.masses:
+                res = run_fempm(n, mesh, mass, ranks, a.reference, partition=a.partition)
+                res["vs"] = {impl: res["pps"] / ref["pps_median"] for impl, ref in refs.items()}
+                rows.append(res)
+                print(json.dumps({**res, "round": k + 1}), flush=True)
+        per_round.append(rows)
+    if a.rounds == 1:
+        return per_round[0]
+    merged = []
+    for i, first in enumerate(per_round[0]):
+        runs = [rows[i] for rows in per_round]
+        t = statistics.median(row["t_step_s"] for row in runs)
+        row = {**first, "t_step_s": t, "pps": first["n"] / t, "rounds": runs}
+        if "peak_kb_per_particle" in first:
+            row["peak_kb_per_particle"] = max(run["peak_kb_per_particle"] for run in runs)
+        if "vs" in first:
+            row["vs"] = {impl: statistics.median(run["vs"][impl] for run in runs) for impl in first["vs"]}
+            row["vs_range"] = {impl: [min(run["vs"][impl] for run in runs), max(run["vs"][impl] for run in runs)]
+                               for impl in first["vs"]}
+        merged.append(row)
+    return merged
+
+
 def main(argv=None) -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--sizes", type=float, nargs="+", default=[1e5, 1e6])
@@ -223,6 +259,8 @@ def main(argv=None) -> None:
     ap.add_argument("--masses", nargs="+", default=["lumped", "consistent"], choices=["lumped", "consistent"])
     ap.add_argument("--references", nargs="*", default=["numba", "taichi"], choices=["numba", "taichi"])
     ap.add_argument("--check", action="store_true", help="compare positions after 300 steps with the numba kernel first")
+    ap.add_argument("--rounds", type=int, default=1,
+                    help="run every configuration this many times, in rounds; medians, and ratios within a round")
     ap.add_argument("--json", type=Path, help="write the figures to this file")
     ap.add_argument("--reference", type=Path, default=DEFAULT_REFERENCE, help="the reference-mpm folder")
     ap.add_argument("--partition", default="particles", choices=["particles", "cells"],
@@ -252,23 +290,21 @@ def main(argv=None) -> None:
               f"{c['median_diff']:.2e}, max {c['max_diff']:.2e}; median displacement {c['median_displacement']:.2e}")
     for n in a.sizes:
         for r in a.ranks:
-            refs = {impl: run_reference(impl, n, r, a.reference) for impl in a.references}
-            for impl, res in refs.items():
-                out["rows"].append({"impl": impl, "n": res["n"], "ranks": r, "pps": res["pps_median"],
-                                    "t_step_s": res["t_step_median_s"]})
-            for mesh in a.meshes:
-                for mass in a.masses:
-                    res = run_fempm(n, mesh, mass, r, a.reference, partition=a.partition)
-                    res["vs"] = {impl: res["pps"] / ref["pps_median"] for impl, ref in refs.items()}
-                    out["rows"].append(res)
-                    print(json.dumps(res), flush=True)
+            out["rows"] += measure(n, r, a)
     print("\n| implementation | particles | ranks/threads | particle-steps/s | step [s] | vs numba | vs Taichi | kB/particle |")
     print("|---|---|---|---|---|---|---|---|")
     for row in out["rows"]:
-        vs = row.get("vs", {})
+        vs, spread = row.get("vs", {}), row.get("vs_range", {})
+
+        def ratio(impl):
+            lo, hi = spread.get(impl, (None, None))
+            return f"{vs.get(impl, float('nan')):.2f}" + (f" ({lo:.2f}-{hi:.2f})" if lo is not None else "")
+
         print(f"| {row['impl']} | {row['n']} | {row['ranks']} | {row['pps']:.3g} | {row['t_step_s']:.4g} | "
-              f"{vs.get('numba', float('nan')):.2f} | {vs.get('taichi', float('nan')):.2f} | "
-              f"{row.get('peak_kb_per_particle', float('nan')):.2f} |")
+              f"{ratio('numba')} | {ratio('taichi')} | {row.get('peak_kb_per_particle', float('nan')):.2f} |")
+    if a.rounds > 1:
+        print(f"({a.rounds} rounds: medians; the ratios are medians of the ratios within a round, their range in "
+              "brackets; kB/particle the largest)")
     for n in a.sizes:
         for r in a.ranks:
             for mesh in a.meshes:
