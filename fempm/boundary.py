@@ -119,7 +119,9 @@ class WallGraph:
         sums = np.zeros((len(nodes), values.shape[1]))
         np.add.at(sums, label, vals)
         here = np.flatnonzero(touching)
-        out[here] = sums[label[np.searchsorted(nodes, self.global_index[here])]]
+        pos = np.minimum(np.searchsorted(nodes, self.global_index[here]), len(nodes) - 1)
+        found = nodes[pos] == self.global_index[here]  # a ghost touches where its owner does
+        out[here[found]] = sums[label[pos[found]]]
         return out
 
 

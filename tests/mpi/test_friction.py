@@ -99,3 +99,34 @@ def test_a_wall_with_a_gap_holds_only_the_nodes_the_body_touches():
     np.testing.assert_allclose(v[plain.dofs], [[0.8, 0.0]] * 5, rtol=1e-15)
     with pytest.raises(ValueError, match="nodal centres of mass"):
         wall.apply(v)
+
+
+def test_a_wall_shares_its_normal_momentum_per_patch_over_ranks():
+    """The floor of an 8 x 8 unit square distributed over the ranks, gap 0.1: the nodes at
+    x <= 1/2 and at x = 1 touch it (two patches), those between do not. Every wall node,
+    owned or ghost, on every rank gives up the share of its patch's normal momentum that its
+    mass times depth sets, as computed here from the whole floor."""
+    mesh = dm.create_unit_square(comm, 8, 8, dm.CellType.quadrilateral)
+    V = dolfinx.fem.functionspace(mesh, ("Lagrange", 1, (2,)))
+    wall = friction(V, lambda x: np.isclose(x[1], 0.0), (0.0, -1.0), 0.3, gap=0.1)
+    n = V.dofmap.index_map.size_local + V.dofmap.index_map.num_ghosts
+
+    def height(x):
+        return np.where((x <= 0.5 + 1e-9) | (x >= 1.0 - 1e-9), 0.02 + 0.05 * x**2, 0.2)
+
+    xs = V.tabulate_dof_coordinates()[:, 0]
+    centre = np.column_stack([xs, height(xs)])
+    mass = 1.0 + xs
+    v = np.tile([0.5, -0.4], (n, 1))
+    wall.apply(v, NodalCentres(centre, mass))
+    floor = np.arange(9) / 8.0
+    depth = 0.1 - height(floor)
+    m = 1.0 + floor
+    dvn = np.zeros(9)
+    for patch in (floor <= 0.5, floor >= 1.0):
+        dvn[patch] = (m[patch] @ np.full(patch.sum(), 0.4)) * depth[patch] / (m[patch] @ depth[patch])
+    at = np.rint(xs[wall.dofs] * 8).astype(int)
+    got = v[wall.dofs]
+    np.testing.assert_allclose(got[:, 1], -0.4 + dvn[at], rtol=0, atol=1e-14)
+    np.testing.assert_allclose(got[:, 0], 0.5 * np.maximum(0.0, 1.0 - 0.3 * dvn[at] / 0.5), rtol=0, atol=1e-14)
+    assert comm.allreduce(len(wall.dofs)) >= 9 and dvn[5:8].max() == 0.0 and dvn[8] > 0
