@@ -3,6 +3,10 @@ r"""Grid boundary conditions on the velocity dofs of a blocked (vector) space.
 * :class:`Fixed`: :math:`v_i = 0` on the dofs.
 * :class:`Slip`: no flow through a wall of unit normal :math:`n` (any direction):
   :math:`v_i \leftarrow v_i - (v_i \cdot n)\, n`.
+* :class:`Prescribed`: velocity components held at given values (a moving rigid plate).
+* :class:`Friction`: a rigid wall with Coulomb friction; with a ``gap`` it holds only the nodes
+  a body touches and shares the normal momentum it takes over each patch of them by depth
+  (:class:`WallGraph`, :class:`NodalCentres`).
 
 Dofs are located with DOLFINx (``locate_dofs_geometrical`` or, from gmsh facet tags,
 ``locate_dofs_topological``); they are block indices of the vector space.
