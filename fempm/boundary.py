@@ -209,23 +209,23 @@ class Friction:
         vd = v[self.dofs]
         vn = vd @ n
         vt = vd - vn[:, None] * n
+        if self.gap is None:  # each node moving into the wall gives up its normal velocity
+            held, dvn = vn > 0, vn
+        else:  # the touching nodes share the normal momentum of their patch by depth
+            if centroids is None:
+                raise ValueError("a friction wall with a gap needs the nodal centres of mass and masses")
+            depth = self.gap - (self.points - centroids.centre[self.dofs]) @ n  # NaN where no mass
+            held = depth > 0
+            depth = np.where(held, depth, 0.0)
+            m = centroids.mass[self.dofs]
+            share = np.stack([np.where(held & (vn > 0), m * vn, 0.0), m * depth], axis=1)
+            P, W = self.graph.patch_sums(held, share).T  # over each touching node's patch
+            dvn = np.where(W > 0, P * depth / np.where(W > 0, W, 1.0), 0.0)
+        # Coulomb: at most mu dvn of the tangential velocity (0 where it sticks)
         speed = np.linalg.norm(vt, axis=1)
         sliding = speed > 0
-        if self.gap is None:
-            keep = np.where(sliding, np.maximum(0.0, 1.0 - self.mu * vn / np.where(sliding, speed, 1.0)), 0.0)
-            held = vn > 0  # only where it moves into the wall
-            v[self.dofs] = np.where(held[:, None], vt * keep[:, None], vd)
-            return
-        if centroids is None:
-            raise ValueError("a friction wall with a gap needs the nodal centres of mass and masses")
-        depth = self.gap - (self.points - centroids.centre[self.dofs]) @ n  # NaN where no mass
-        touching = depth > 0
-        m = centroids.mass[self.dofs]
-        share = np.stack([np.where(touching & (vn > 0), m * vn, 0.0), np.where(touching, m * depth, 0.0)], axis=1)
-        P, W = self.graph.patch_sums(touching, share).T  # over each touching node's patch
-        dvn = np.where(touching & (W > 0), P * np.where(touching, depth, 0.0) / np.where(W > 0, W, 1.0), 0.0)
-        keep = np.where(sliding, np.maximum(0.0, 1.0 - self.mu * dvn / np.where(sliding, speed, 1.0)), 1.0)
-        v[self.dofs] = np.where(touching[:, None], vt * keep[:, None] + (vn - dvn)[:, None] * n, vd)
+        keep = np.where(sliding, np.maximum(0.0, 1.0 - self.mu * dvn / np.where(sliding, speed, 1.0)), 0.0)
+        v[self.dofs] = np.where(held[:, None], vt * keep[:, None] + (vn - dvn)[:, None] * n, vd)
 
 
 def _axis(normal: npt.NDArray) -> int | None:
