@@ -17,8 +17,9 @@ value is 0), the energy left over the work of gravity, and the wall time.
 
 What it takes (see the scene's docstring): the disk has 4 x 4 particles per cell, and the
 plane holds only the nodes the disk touches (its nodal centre of mass within half a cell of
-the plane, `fempm.boundary.Friction` with a `gap`); the block just above the friction angle
-has PIC blended in (FLIP 0.5).
+the plane, `fempm.boundary.Friction` with a `gap`, and the contact's gap on the rigid plane)
+and shares the normal impulse it takes over them by depth; the block just above the friction
+angle has PIC blended in (FLIP 0.5), and so has the block sticking on the rigid plane.
 
 Run: `python demos/incline.py [--cells 8 16] [--cases NAME ...] [--out docs/incline]`
 """
@@ -53,7 +54,9 @@ CASES = {
     "disk mu=0.3": dict(body="disk", friction=0.3),
     "disk mu=1": dict(body="disk", friction=1.0),
     "rigid plane, block mu=0.2": dict(body="block", friction=0.2, plane="rigid"),
+    "rigid plane, block mu=1": dict(body="block", friction=1.0, flip=0.5, plane="rigid"),
     "rigid plane, disk mu=0.1": dict(body="disk", friction=0.1, plane="rigid"),
+    "rigid plane, disk mu=0.2": dict(body="disk", friction=0.2, plane="rigid"),
     "rigid plane, disk mu=0.3": dict(body="disk", friction=0.3, plane="rigid"),
 }
 COLUMNS = ["case", "cells", "ppc", "acceleration", "analytic", "error_percent", "energy_ratio", "steps", "wall_s"]

@@ -6,7 +6,7 @@ r"""Grid boundary conditions on the velocity dofs of a blocked (vector) space.
 * :class:`Prescribed`: velocity components held at given values (a moving rigid plate).
 * :class:`Friction`: a rigid wall with Coulomb friction; with a ``gap`` it holds only the nodes
   a body touches and shares the normal momentum it takes over each patch of them by depth
-  (:class:`WallGraph`, :class:`NodalCentres`).
+  (:class:`fempm.patches.Patches`, :class:`NodalCentres`).
 
 Dofs are located with DOLFINx (``locate_dofs_geometrical`` or, from gmsh facet tags,
 ``locate_dofs_topological``); they are block indices of the vector space.
@@ -22,7 +22,8 @@ import dolfinx.fem
 import dolfinx.mesh
 import numpy as np
 import numpy.typing as npt
-from mpi4py import MPI
+
+from fempm.patches import Patches
 
 
 @dataclass(frozen=True)
@@ -76,75 +77,6 @@ class NodalCentres(NamedTuple):
 
 
 @dataclass(frozen=True)
-class WallGraph:
-    """The dofs of a wall as a graph over all ranks: the global index of each local wall dof
-    and the pairs of wall dofs that share a cell (every rank holds all pairs), so that the
-    nodes touching the wall fall into patches, one per place a body touches it."""
-
-    comm: MPI.Comm
-    owned: npt.NDArray[np.bool_]  # (local wall dofs,)
-    global_index: npt.NDArray[np.int64]  # (local wall dofs,)
-    edges: npt.NDArray[np.int64]  # (pairs, 2), global indices
-
-    @classmethod
-    def build(cls, V: dolfinx.fem.FunctionSpace, dofs: npt.NDArray[np.int32]) -> WallGraph:
-        """Collective."""
-        imap = V.dofmap.index_map
-        cell_dofs = np.asarray(V.dofmap.list)
-        on = np.isin(cell_dofs, dofs)
-        pairs = [np.zeros((0, 2), dtype=np.int32)]
-        for a in range(cell_dofs.shape[1]):
-            for b in range(a + 1, cell_dofs.shape[1]):
-                both = on[:, a] & on[:, b]
-                pairs.append(np.stack([cell_dofs[both, a], cell_dofs[both, b]], axis=1))
-        local = np.concatenate(pairs).astype(np.int32)
-        glob = np.asarray(imap.local_to_global(local.ravel()), dtype=np.int64).reshape(-1, 2)
-        glob = np.sort(glob, axis=1)
-        edges = np.unique(np.concatenate(V.mesh.comm.allgather(glob) + [glob[:0]]), axis=0)
-        index = np.asarray(imap.local_to_global(np.asarray(dofs, dtype=np.int32)), dtype=np.int64)
-        return cls(V.mesh.comm, np.asarray(dofs) < imap.size_local, index, edges)
-
-    def patch_sums(self, touching: npt.NDArray[np.bool_], values: npt.NDArray) -> npt.NDArray:
-        """For each local wall dof that touches: the sums of ``values`` (dofs, k) over the
-        touching dofs of its patch (a connected set of touching dofs, over all ranks; each dof
-        counted once, at its owner); 0 elsewhere. Collective."""
-        mine = self.owned & touching
-        gathered = self.comm.allgather((self.global_index[mine], values[mine]))
-        nodes = np.concatenate([g for g, _ in gathered])
-        vals = np.concatenate([v for _, v in gathered])
-        order = np.argsort(nodes, kind="stable")
-        nodes, vals = nodes[order], vals[order]
-        out = np.zeros_like(values)
-        if len(nodes) == 0:
-            return out
-        inside = np.isin(self.edges, nodes).all(axis=1)
-        ends = np.searchsorted(nodes, self.edges[inside])
-        label = _components(len(nodes), ends[:, 0], ends[:, 1])
-        sums = np.zeros((len(nodes), values.shape[1]))
-        np.add.at(sums, label, vals)
-        here = np.flatnonzero(touching)
-        pos = np.minimum(np.searchsorted(nodes, self.global_index[here]), len(nodes) - 1)
-        found = nodes[pos] == self.global_index[here]  # a ghost touches where its owner does
-        out[here[found]] = sums[label[pos[found]]]
-        return out
-
-
-def _components(n: int, a: npt.NDArray, b: npt.NDArray) -> npt.NDArray:
-    """The connected components of the graph with nodes 0..n-1 and edges (a, b): each node's
-    label, the smallest node of its component (label propagation with pointer jumping)."""
-    label = np.arange(n)
-    while True:
-        low = np.minimum(label[a], label[b])
-        new = label.copy()
-        np.minimum.at(new, a, low)
-        np.minimum.at(new, b, low)
-        new = new[new]
-        if np.array_equal(new, label):
-            return label
-        label = new
-
-
-@dataclass(frozen=True)
 class Friction:
     r"""A rigid wall with Coulomb friction (coefficient ``mu``) at ``dofs``, outward ``normal``
     (unit, (d,)). Where the grid velocity moves into the wall (:math:`v_n = v \cdot n > 0`),
@@ -186,8 +118,8 @@ class Friction:
     (docs/contact.md). A node ahead keeps part of its motion into the wall until its depth
     takes its share; the gap still frees every node the body does not touch.
 
-    ``points`` are the dofs' coordinates and ``graph`` their :class:`WallGraph` (``gap`` needs
-    them). A wall with a gap needs the nodal centres of mass and masses (:attr:`needs_positions`):
+    ``points`` are the dofs' coordinates and ``patches`` finds the patches among them
+    (:class:`fempm.patches.Patches`; ``gap`` needs both). A wall with a gap needs the nodal centres of mass and masses (:attr:`needs_positions`):
     the solver (the generic or the compiled step) maps them each step and passes them to
     :meth:`apply` (collective then)."""
 
@@ -196,7 +128,7 @@ class Friction:
     mu: float
     gap: float | None = None
     points: npt.NDArray | None = None
-    graph: WallGraph | None = None
+    patches: Patches | None = None
 
     @property
     def needs_positions(self) -> bool:
@@ -219,7 +151,9 @@ class Friction:
             depth = np.where(held, depth, 0.0)
             m = centroids.mass[self.dofs]
             share = np.stack([np.where(held & (vn > 0), m * vn, 0.0), m * depth], axis=1)
-            P, W = self.graph.patch_sums(held, share).T  # over each touching node's patch
+            touching = np.flatnonzero(held)
+            P, W = np.zeros((2, len(vn)))
+            P[touching], W[touching] = self.patches.sums(self.dofs[touching], share[touching]).T  # collective
             dvn = np.where(W > 0, P * depth / np.where(W > 0, W, 1.0), 0.0)
         # Coulomb: at most mu dvn of the tangential velocity (0 where it sticks)
         speed = np.linalg.norm(vt, axis=1)
@@ -298,7 +232,8 @@ def friction(V: dolfinx.fem.FunctionSpace, where: Callable[[npt.NDArray], npt.ND
     if not V.element.interpolation_ident:
         raise ValueError("a friction wall with a gap needs a Lagrange space whose dofs are point values")
     points = V.tabulate_dof_coordinates()[dofs, :d]
-    return Friction(dofs, _unit_normal(normal, d, "friction"), float(mu), float(gap), points, WallGraph.build(V, dofs))
+    return Friction(dofs, _unit_normal(normal, d, "friction"), float(mu), float(gap), points,
+                    Patches.of_space(V, dofs))
 
 
 def fixed_on_facets(V: dolfinx.fem.FunctionSpace, facet_tags: dolfinx.mesh.MeshTags, tag: int) -> Fixed:

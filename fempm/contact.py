@@ -61,7 +61,27 @@ has mass its velocity replaces :math:`v^{cm}`, the normal is its own, :math:`\ha
 (a deformable body's mass gradient tilts at its corners, and a block's front corner then
 brakes on a flat plane; Nairn's codes bias the normal to the rigid material for the same
 reason), and only the other groups are corrected (the momentum they lose there goes into the
-rigid body). Grid conditions do not act on it.
+rigid body). Grid conditions do not act on it. With a ``gap`` the nodes of a group that touch a
+rigid body and approach it share the normal momentum it takes over each patch of touching
+nodes (a connected set, :class:`fempm.patches.Patches`, over all ranks) by depth, much as a
+frictional wall does (:class:`fempm.boundary.Friction`): with :math:`w = v^g - v^r`, the depth
+:math:`\delta_i = \text{gap} - ((\bar x^r_i - \bar x^g_i) \cdot \hat n - \Delta t\, w_n) > 0`
+and :math:`P = \sum_j m^g_j w_{n,j}` over the patch's approaching nodes :math:`A`,
+
+.. math::
+    \Delta w_{n,i} = P\, \frac{\delta_i}{\sum_{j \in A} m^g_j \delta_j}, \qquad
+    w_{n,i} \leftarrow w_{n,i} - \Delta w_{n,i}, \qquad
+    w_{t,i} \leftarrow w_{t,i} \max\Big(0,\ 1 - \mu \frac{\Delta w_{n,i}}{|w_{t,i}|}\Big)
+    \quad (i \in A),
+
+and a separating node stays free. The patch takes the normal momentum it takes node by node,
+centred where the body is deepest: node by node a disk turning on a rigid plane is braked by the
+nodes ahead of its contact point and slid at mu = 0.2, 4 % above its rolling threshold (-1.5 %
+and -2.0 % at 8 and 16 cells, docs/contact.md). Shared over every touching node (the grid
+wall's rule), separating ones too, the disk rolled as well, but separating nodes were pushed off
+the rigid body, and USL with GIMP domains, stable node by node, gained 20 % energy within 161
+steps. Between deformable groups the correction stays node by node, which conserves every
+node's momentum.
 
 A node where a group has less than ``mass_cutoff`` (default 1 %) of the largest nodal mass
 gives that group no force update there (it keeps the mapped velocity): in a single field such
@@ -75,6 +95,7 @@ and none at CFL 0.1; USL loses 14 % (3 % with consistent mass).
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
@@ -84,6 +105,7 @@ from mpi4py import MPI
 
 from fempm.boundary import NodalCentres
 from fempm.loads import external_forces
+from fempm.patches import Patches
 from fempm.transfer import SUPPORT_TOL, mass_centres, p2g, p2g_gradients
 
 if TYPE_CHECKING:
@@ -117,7 +139,8 @@ class Contact:
 
 def correct(m: npt.NDArray, v: npt.NDArray, grad: npt.NDArray, friction: float,
             rigid: npt.NDArray | None = None, moments: npt.NDArray | None = None,
-            gap: float | None = None, dt: float = 0.0) -> npt.NDArray[np.bool_]:
+            gap: float | None = None, dt: float = 0.0,
+            patches: Callable[[npt.NDArray, npt.NDArray], npt.NDArray] | None = None) -> npt.NDArray[np.bool_]:
     r"""The contact correction of the module, in place: group masses ``m`` (G, n), velocities
     ``v`` (G, n, d) and mass gradients ``grad`` (G, n, d) at n nodes; returns which nodes are
     contact nodes (two or more groups with mass). ``rigid`` (G,) bool: groups of infinite mass,
@@ -125,14 +148,18 @@ def correct(m: npt.NDArray, v: npt.NDArray, grad: npt.NDArray, friction: float,
     have, the one with the most mass). ``gap`` with the groups' first mass moments ``moments``
     (G, n, d), :math:`\sum_p M_p N_{ip} x_p`: a group is corrected only where the others'
     nodal centre of mass lies less than ``gap`` ahead of its own along its normal at the end of
-    the step ``dt``, at the present speed of approach."""
+    the step ``dt``, at the present speed of approach. ``patches(dofs, values)``: the sums of
+    ``values`` over the patch of each of the nodes ``dofs`` (:meth:`fempm.patches.Patches.sums`,
+    collective); with it and a gap, the nodes touching and approaching a rigid group share its
+    normal impulse by depth (see the module); without it each node is on its own."""
     present = m > 0.0
     contact = np.count_nonzero(present, axis=0) >= 2
-    if not contact.any():
+    rigid = np.zeros(len(m), dtype=np.bool_) if rigid is None else np.asarray(rigid, dtype=np.bool_)
+    share = patches is not None and gap is not None and rigid.any()  # collective calls below
+    if not contact.any() and not share:
         return contact
     total = m.sum(axis=0)
     vcm = np.einsum("gn,gnd->nd", m, v) / np.where(total > 0, total, 1.0)[:, None]
-    rigid = np.zeros(len(m), dtype=np.bool_) if rigid is None else np.asarray(rigid, dtype=np.bool_)
     on = np.zeros(len(total), dtype=np.bool_)
     top_all = np.zeros(len(total), dtype=np.int64)
     if gap is not None:
@@ -158,8 +185,9 @@ def correct(m: npt.NDArray, v: npt.NDArray, grad: npt.NDArray, friction: float,
         wn = np.einsum("nd,nd->n", w, n)
         wt = w - wn[:, None] * n
         twt = np.linalg.norm(wt, axis=1)
-        approach = wn > 0.0
-        if gap is not None:  # ... and touches: the others' centre of mass within gap of its own
+        held = wn > 0.0  # approaching: gives up its normal velocity wn (node by node) ...
+        dwn = wn.copy()
+        if gap is not None:  # ... where it touches: the others' centre of mass within gap of its own
             own = moments[g, at] / m[g, at, None]
             others = np.maximum(total[at] - m[g, at], tiny)
             rest = (moment_sum[at] - moments[g, at]) / others[:, None]
@@ -168,13 +196,20 @@ def correct(m: npt.NDArray, v: npt.NDArray, grad: npt.NDArray, friction: float,
             k = top_all[at[r]]
             rest[r] = moments[k, at[r]] / m[k, at[r], None]
             closing[r] = wn[r]
-            approach &= np.einsum("nd,nd->n", rest - own, n) - dt * closing < gap
-        stick = approach & (friction * wn >= twt)
-        slip = approach & ~stick
+            depth = gap - (np.einsum("nd,nd->n", rest - own, n) - dt * closing)
+            held &= depth > 0.0
+            if share:  # at a rigid body the approaching nodes share their patch's impulse by depth
+                r = r[depth[r] > 0.0]  # the touching nodes: a patch is a connected set of them
+                dr = np.where(held[r], depth[r], 0.0)  # separating ones take no share
+                mr = m[g, at[r]]
+                P, W = patches(at[r], np.stack([mr * np.where(held[r], wn[r], 0.0), mr * dr], axis=1)).T
+                dwn[r] = np.where(W > 0.0, P * dr / np.where(W > 0.0, W, 1.0), 0.0)
+        stick = held & (friction * dwn >= twt)
+        slip = held & ~stick
         new = v[g, at]
-        new[stick] = vcm[at[stick]]
+        new[stick] = vcm[at[stick]] + (wn - dwn)[stick, None] * n[stick]  # wn - dwn: 0 node by node
         s = np.flatnonzero(slip)
-        new[s] -= wn[s, None] * n[s] + friction * wn[s, None] * wt[s] / twt[s, None]
+        new[s] -= dwn[s, None] * n[s] + friction * dwn[s, None] * wt[s] / twt[s, None]
         v[g, at] = new
     return contact
 
@@ -261,7 +296,8 @@ def contact_step(solver: ExplicitSolver, dt: float | None, dt_max: float) -> flo
     a[weak] = 0.0
     a[rigid] = 0.0
     v_new = v_old + dt * a
-    correct(m_has, v_new, grad, contact.friction, rigid, moments, contact.gap, dt)
+    patches = Patches.of_space(basis.V, index_map=basis.index_map).sums if rigid.any() else None
+    correct(m_has, v_new, grad, contact.friction, rigid, moments, contact.gap, dt, patches)
     constrain(v_new)
     # rigid particles keep their velocity and deformation (L = 0) and move with that velocity
     vp = fld["v"].copy()

@@ -29,12 +29,13 @@ friction angle needs PIC blended in (``flip=0.5``): with pure FLIP the elastic r
 start unloads the nodes at its uphill end and it creeps (mu = 0.6: 0.8 m/s^2 at 8 cells).
 
 Measured (``python demos/incline.py``, 30 degrees, MUSL; docs/incline/incline.md and
-docs/contact.md): every case within 2 % at 8 and 16 cells, the disk within 0.84 % also just
-above its rolling threshold (mu = 0.2 and 0.22). That takes a plane that shares its normal
-impulse over the nodes the disk touches (:class:`fempm.boundary.Friction`): held node by node,
-the node ahead of the contact point carried the disk's weight, up to a cell ahead of its
-centre, and braked the rotation, so that the disk slid at mu = 0.2 (-1.5 % and -2.0 %) and
-rolled only from mu = 0.25-0.3 at 8 cells.
+docs/contact.md): every case within 2 % at 8 and 16 cells, on either plane, the disk within
+0.84 % also just above its rolling threshold (mu = 0.2 and 0.22). That takes a plane that
+shares its normal impulse over the nodes the disk touches (:class:`fempm.boundary.Friction`,
+and :func:`fempm.contact.correct` for the rigid plane): held node by node, the node ahead of
+the contact point carried the disk's weight, up to a cell ahead of its centre, and braked the
+rotation, so that the disk slid at mu = 0.2 (-1.5 % and -2.0 %) and rolled only from
+mu = 0.25-0.3 at 8 cells.
 
 The results (:func:`slope_acceleration`): ``acceleration``, the along-slope acceleration of the
 body's centre of mass once it moves (:math:`2 c_2` of the least-squares fit

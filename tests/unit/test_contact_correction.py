@@ -89,6 +89,41 @@ def test_the_position_check_corrects_only_groups_that_touch():
         np.testing.assert_allclose(v[0, :, 0] + v[1, :, 0], 1.0, rtol=1e-15)  # momentum kept either way
 
 
+def test_nodes_touching_a_rigid_body_share_its_normal_impulse_by_depth():
+    """A rigid body at rest below four nodes of group 0 (mass 1, 2, 1, 1; normal -y into the
+    rigid body; its nodal centre of mass at y = -0.3), whose own centres are at y = 0.1, 0,
+    0.2 and 0.9: with a gap of 0.6 their depths are 0.2, 0.3, 0.1 and -0.6, so nodes 0-2 touch
+    (one patch) and node 3 does not. Nodes 0 and 1 move into it at 0.5 and 0.2, node 2 leaves
+    at 0.1, all at 1 along x. The patch takes P = 1 * 0.5 + 2 * 0.2 = 0.9 of normal momentum,
+    shared by the approaching nodes as dv_n = P d / sum(m d) (sum(m d) = 1 * 0.2 + 2 * 0.3 =
+    0.8): 0.225 and 0.3375, so node 0 keeps 0.275 of its approach and node 1 leaves at 0.1375;
+    friction takes mu dv_n of the tangential speed, or all of it (stick); node 2 separates
+    freely. Without patches each node is on its own: 0 and 1 stop."""
+    m = np.array([[1.0, 2.0, 1.0, 1.0], [1e-3] * 4])
+    grad = np.array([[[0.3, -1.0]] * 4, [[0.0, 1.0]] * 4])  # the rigid body's gradient: +y out of it
+    y = np.array([0.1, 0.0, 0.2, 0.9])
+    centres = np.stack([np.stack([np.zeros(4), y], axis=1), np.tile([0.0, -0.3], (4, 1))])
+    moments = m[:, :, None] * centres
+    rigid = np.array([False, True])
+
+    def one_patch(dofs, values):  # nodes 0-2 (node 3 is never asked: it does not touch)
+        assert set(dofs) <= {0, 1, 2}
+        return np.broadcast_to(values.sum(axis=0), values.shape)
+
+    for mu, patches, expect in [
+        (0.5, one_patch, [[1.0 - 0.5 * 0.225, -0.275], [1.0 - 0.5 * 0.3375, 0.1375], [1.0, 0.1], [1.0, -1.0]]),
+        (20.0, one_patch, [[0.0, -0.275], [0.0, 0.1375], [1.0, 0.1], [1.0, -1.0]]),
+        (0.5, None, [[0.75, 0.0], [0.9, 0.0], [1.0, 0.1], [1.0, -1.0]]),
+    ]:
+        v = np.zeros((2, 4, 2))
+        v[0] = before = [[1.0, -0.5], [1.0, -0.2], [1.0, 0.1], [1.0, -1.0]]
+        correct(m, v, grad, mu, rigid, moments, gap=0.6, patches=patches)
+        np.testing.assert_allclose(v[0], expect, rtol=0, atol=1e-15)
+        np.testing.assert_array_equal(v[1], 0.0)
+        taken = m[0] @ (v[0, :, 1] - np.array(before)[:, 1])  # the normal momentum the rigid body took:
+        assert taken == pytest.approx(0.9, rel=1e-14)  # shared or node by node, 1 * 0.5 + 2 * 0.2
+
+
 def test_bad_options():
     with pytest.raises(ValueError, match="friction"):
         Contact(friction=-0.1)
