@@ -217,8 +217,11 @@ class RunWriter:
             self._stress.write(stress.x.array, t)
 
     def summary(self, data: dict) -> None:
+        """``summary.json``, written by rank 0; every rank returns once it is on disk (a script
+        on any rank may read it next). Collective."""
         if self.comm.rank == 0:
             (self.folder / "summary.json").write_text(json.dumps(data, indent=2, default=float))
+        self.comm.barrier()
 
     def close(self) -> None:
         for series in (self._velocity, self._stress):
