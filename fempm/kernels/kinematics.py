@@ -1,5 +1,7 @@
 r"""Kinematics and the elastic laws, per particle.
 
+* :func:`sym`, :func:`skew`: the rate of deformation :math:`D = \mathrm{sym}\, L` and the
+  spin :math:`W = \mathrm{skew}\, L` of a batch (n, d, d).
 * :func:`deform`: :math:`F^+ = (I + \Delta t\, L) F`, :math:`J = \det F^+` (closed form in
   1, 2 and 3 dimensions), in one pass and without temporaries.
 * :func:`neo_hookean_stress`: :math:`\sigma = \frac{\mu}{J}(F F^T - I) + \frac{\lambda \ln J}{J} I`
@@ -15,6 +17,16 @@ import numpy as np
 import numpy.typing as npt
 
 from fempm.kernels.choice import pick
+
+
+def sym(A: npt.NDArray) -> npt.NDArray:
+    """(A + A^T) / 2 for a batch A (n, d, d)."""
+    return 0.5 * (A + np.swapaxes(A, 1, 2))
+
+
+def skew(A: npt.NDArray) -> npt.NDArray:
+    """(A - A^T) / 2 for a batch A (n, d, d)."""
+    return 0.5 * (A - np.swapaxes(A, 1, 2))
 
 
 def deform_numpy(F, L, dt):
@@ -33,7 +45,7 @@ def neo_hookean_stress_numpy(F, lam, mu):
 
 def linear_elastic_stress_numpy(F, lam, mu):
     d = F.shape[1]
-    eps = 0.5 * (F + np.swapaxes(F, 1, 2)) - np.eye(d)
+    eps = sym(F) - np.eye(d)
     return lam * np.trace(eps, axis1=1, axis2=2)[:, None, None] * np.eye(d) + 2 * mu * eps
 
 

@@ -24,6 +24,7 @@ import numpy as np
 import numpy.typing as npt
 
 from fempm.kernels.choice import pick
+from fempm.kernels.kinematics import skew, sym
 
 
 def to3(sigma: npt.NDArray, zz: npt.NDArray | None) -> npt.NDArray:
@@ -50,8 +51,7 @@ def jaumann_trial_numpy(L, sigma, zz, dt, lam, mu):
     L3 = np.zeros((n, 3, 3))
     L3[:, :d, :d] = L
     S = to3(sigma, zz)
-    D = 0.5 * (L3 + np.swapaxes(L3, 1, 2))
-    W = 0.5 * (L3 - np.swapaxes(L3, 1, 2))
+    D, W = sym(L3), skew(L3)
     S = S + dt * (W @ S - S @ W)
     S += dt * 2 * mu * D
     S[:, range(3), range(3)] += (dt * lam * np.trace(D, axis1=1, axis2=2))[:, None]

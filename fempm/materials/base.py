@@ -8,6 +8,8 @@ from typing import ClassVar, Protocol
 import numpy as np
 import numpy.typing as npt
 
+from fempm.kernels.kinematics import skew, sym  # noqa: F401  (the materials' tensor helpers)
+
 
 @dataclass(frozen=True)
 class Internal:
@@ -77,14 +79,6 @@ class IsotropicElastic:
 
 def identity(n: int, d: int) -> npt.NDArray:
     return np.broadcast_to(np.eye(d), (n, d, d)).copy()
-
-
-def skew(A: npt.NDArray) -> npt.NDArray:
-    return 0.5 * (A - np.swapaxes(A, 1, 2))
-
-
-def sym(A: npt.NDArray) -> npt.NDArray:
-    return 0.5 * (A + np.swapaxes(A, 1, 2))
 
 
 def trace(A: npt.NDArray) -> npt.NDArray:
