@@ -23,7 +23,7 @@ import dolfinx.mesh
 import numpy as np
 import numpy.typing as npt
 
-from fempm.patches import Patches
+from fempm.patches import Patches, depth_shares
 
 
 @dataclass(frozen=True)
@@ -149,12 +149,10 @@ class Friction:
             depth = self.gap - (self.points - centroids.centre[self.dofs]) @ n  # NaN where no mass
             held = depth > 0
             depth = np.where(held, depth, 0.0)
-            m = centroids.mass[self.dofs]
-            share = np.stack([np.where(held & (vn > 0), m * vn, 0.0), m * depth], axis=1)
-            touching = np.flatnonzero(held)
-            P, W = np.zeros((2, len(vn)))
-            P[touching], W[touching] = self.patches.sums(self.dofs[touching], share[touching]).T  # collective
-            dvn = np.where(W > 0, P * depth / np.where(W > 0, W, 1.0), 0.0)
+            t = np.flatnonzero(held)  # every touching node takes a share, those moving in give
+            dvn = np.zeros_like(vn)
+            dvn[t] = depth_shares(self.patches.sums, self.dofs[t], centroids.mass[self.dofs[t]],
+                                  np.maximum(vn[t], 0.0), depth[t])  # collective
         # Coulomb: at most mu dvn of the tangential velocity (0 where it sticks)
         speed = np.linalg.norm(vt, axis=1)
         sliding = speed > 0

@@ -105,7 +105,7 @@ from mpi4py import MPI
 
 from fempm.boundary import NodalCentres
 from fempm.loads import external_forces
-from fempm.patches import Patches
+from fempm.patches import Patches, depth_shares
 from fempm.transfer import SUPPORT_TOL, mass_centres, p2g, p2g_gradients
 
 if TYPE_CHECKING:
@@ -200,10 +200,8 @@ def correct(m: npt.NDArray, v: npt.NDArray, grad: npt.NDArray, friction: float,
             held &= depth > 0.0
             if share:  # at a rigid body the approaching nodes share their patch's impulse by depth
                 r = r[depth[r] > 0.0]  # the touching nodes: a patch is a connected set of them
-                dr = np.where(held[r], depth[r], 0.0)  # separating ones take no share
-                mr = m[g, at[r]]
-                P, W = patches(at[r], np.stack([mr * np.where(held[r], wn[r], 0.0), mr * dr], axis=1)).T
-                dwn[r] = np.where(W > 0.0, P * dr / np.where(W > 0.0, W, 1.0), 0.0)
+                dwn[r] = depth_shares(patches, at[r], m[g, at[r]], np.where(held[r], wn[r], 0.0),
+                                      np.where(held[r], depth[r], 0.0))  # separating ones take no share
         stick = held & (friction * dwn >= twt)
         slip = held & ~stick
         new = v[g, at]

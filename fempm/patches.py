@@ -10,12 +10,13 @@ over them,
     S_i = \sum_{j \in T(i)} s_j,
 
 with :math:`T(i)` the patch of the marked dof :math:`i` and each dof counted once, at the rank
-that owns it. The patches are found anew at every call (one ``allgather`` of the marked dofs,
+that owns it; :func:`depth_shares` gives each node its share of the patch's normal momentum. The patches are found anew at every call (one ``allgather`` of the marked dofs,
 their values and the pairs of them that share a cell), by label propagation over those pairs.
 """
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import dolfinx.common
@@ -90,6 +91,21 @@ class Patches:
         found = nodes[pos] == glob
         out[found] = totals[label[pos[found]]]
         return out
+
+
+def depth_shares(sums: Callable[[npt.NDArray, npt.NDArray], npt.NDArray], dofs: npt.NDArray, mass: npt.NDArray,
+                 speed: npt.NDArray, depth: npt.NDArray) -> npt.NDArray:
+    r"""The normal velocity each marked node gives up when its patch shares the normal momentum
+    :math:`P = \sum_j m_j v_j` by depth,
+
+    .. math::
+        \Delta v_i = P\, \frac{\delta_i}{\sum_j m_j \delta_j}
+
+    (sums over the patch; 0 where it has no depth): ``mass`` :math:`m`, ``speed`` :math:`v` (0
+    where a node gives none) and ``depth`` :math:`\delta` (0 where a node takes no share) of
+    the nodes ``dofs``; ``sums``: :meth:`Patches.sums` or a stand-in. Collective with it."""
+    P, W = sums(dofs, np.stack([mass * speed, mass * depth], axis=1)).T
+    return np.where(W > 0.0, P * depth / np.where(W > 0.0, W, 1.0), 0.0)
 
 
 def components(n: int, a: npt.NDArray, b: npt.NDArray) -> npt.NDArray:
