@@ -17,7 +17,7 @@ import numpy.typing as npt
 from mpi4py import MPI
 
 from fempm.location import CellLocator, OutsideMeshError, outside_message
-from fempm.migration import distribute, migrate
+from fempm.migration import SLACK, distribute, migrate
 
 log = logging.getLogger("fempm")
 
@@ -200,37 +200,54 @@ class Particles:
         compiled step does, in closed form); only those are searched for.
         """
         ghosts = self.comm.size > 1  # leavers found in a ghost cell go straight to its owner
-        searched = None  # the particles searched for (all, when None)
         if left is None:
             previous = self.cells  # relocate returns new arrays
             cells, X = self.locator.relocate(self.x, self.cells, ghosts=ghosts)
-        else:
+            rows = np.flatnonzero((cells < 0) | (cells >= self.locator.num_cells) if ghosts else cells < 0)
+        else:  # only the particles searched for can have left the owned cells: O(leavers)
             cells, X = self.cells, self.X
             searched = np.flatnonzero(left)
-            previous = cells[searched]  # their cells before the search (a copy; every leaver is one of them)
+            previous = cells[searched]  # their cells before the search (a copy)
             if len(searched):
                 cells[searched], X[searched] = self.locator.locate_near(self.x[searched], previous, ghosts=ghosts)
-        leaving = (cells < 0) | (cells >= self.locator.num_cells) if ghosts else cells < 0
-        lost = int(np.count_nonzero(leaving))
-        if (lost if self.comm.size == 1 else self.comm.allreduce(lost)) == 0:
+            found = cells[searched]
+            gone = (found < 0) | (found >= self.locator.num_cells) if ghosts else found < 0
+            rows, previous = searched[gone], previous[gone]
+        lost = int(np.count_nonzero(cells[rows] < 0))
+        counts = np.array([len(rows) - lost, lost])  # in a ghost cell, in none here
+        if self.comm.size > 1:
+            self.comm.Allreduce(MPI.IN_PLACE, counts, op=MPI.SUM)
+        self.removed = 0
+        if not counts.any():
             self.cells, self.X = cells, X
             return
         if outside not in _OUTSIDE:  # before anything moves
             raise ValueError(f"unknown option outside={outside!r}; expected one of {_OUTSIDE}")
         arrays = {"x": self.x, "cells": cells, "X": X, **self._arrays()}
-        rows = np.flatnonzero(leaving)
-        if ghosts:
-            previous = previous[rows if searched is None else np.searchsorted(searched, rows)]
-        arrays, gone = migrate(self.locator, arrays, rows, previous if ghosts else None)  # in place, O(leavers)
-        self._check_outside(gone, outside)
+        if ghosts and left is None:
+            previous = previous[rows]
+        arrays, gone = migrate(self.locator, arrays, rows, previous if ghosts else None,
+                               counts=(int(counts[0]), int(counts[1])))  # in place, O(leavers)
+        if gone is not None:  # some rank searched beyond its ghost cells
+            self._check_outside(gone, outside)
         self._set_arrays(arrays)
 
     def sort_by_cell(self) -> None:
-        """Order the particles by cell (stable), for memory locality in the particle passes."""
+        """Order the particles by cell (stable), for memory locality in the particle passes.
+        The sorted arrays keep :data:`fempm.migration.SLACK` spare rows, so that the particles
+        arriving from other ranks over the next steps do not reallocate them."""
         order = np.argsort(self.cells, kind="stable")
         if np.all(order[1:] > order[:-1]):
             return
         for name in ("x", "cells", "X", "mass", "volume", "ids"):  # one array at a time: one temporary
-            setattr(self, name, getattr(self, name)[order])
+            setattr(self, name, _sorted_with_room(getattr(self, name), order))
         for k in list(self.fields):
-            self.fields[k] = self.fields[k][order]
+            self.fields[k] = _sorted_with_room(self.fields[k], order)
+
+
+def _sorted_with_room(a: npt.NDArray, order: npt.NDArray) -> npt.NDArray:
+    """``a[order]`` as the first rows of an array with :data:`~fempm.migration.SLACK` more."""
+    n = len(order)
+    room = np.empty((int(n * (1 + SLACK)) + 1, *a.shape[1:]), dtype=a.dtype)
+    np.take(a, order, axis=0, out=room[:n])
+    return room[:n]
