@@ -42,6 +42,12 @@ def _concat(parts: list[dict[str, npt.NDArray]], like: dict[str, npt.NDArray]):
     return {k: np.concatenate([p[k] for p in parts] + [like[k][:0]]) for k in like}
 
 
+def with_room(n: int, like: npt.NDArray, slack: float = SLACK) -> npt.NDArray:
+    """An empty array for ``n`` rows of ``like``'s row shape and dtype plus ``slack`` spare
+    rows (the caller uses its first ``n`` rows; :func:`replace_rows` grows into the rest)."""
+    return np.empty((int(n * (1 + slack)) + 1, *like.shape[1:]), dtype=like.dtype)
+
+
 def _row_bytes(a: npt.NDArray) -> int:
     return a.dtype.itemsize * math.prod(a.shape[1:])
 
@@ -147,7 +153,7 @@ def replace_rows(arrays: dict[str, npt.NDArray], holes: npt.NDArray, arrivals: d
                 and base.ctypes.data == a.ctypes.data and base.flags.c_contiguous and a.flags.c_contiguous):
             grown = base[:n_new]
         else:
-            grown = np.empty((int(n_new * (1 + slack)) + 1, *a.shape[1:]), dtype=a.dtype)
+            grown = with_room(n_new, a, slack)
             grown[:n] = a
             grown = grown[:n_new]
         grown[n:] = arrivals[k][fill:]

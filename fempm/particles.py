@@ -17,7 +17,7 @@ import numpy.typing as npt
 from mpi4py import MPI
 
 from fempm.location import CellLocator, OutsideMeshError, outside_message
-from fempm.migration import SLACK, distribute, migrate
+from fempm.migration import distribute, migrate, with_room
 
 log = logging.getLogger("fempm")
 
@@ -200,19 +200,20 @@ class Particles:
         compiled step does, in closed form); only those are searched for.
         """
         ghosts = self.comm.size > 1  # leavers found in a ghost cell go straight to its owner
+        searched = None  # the particles searched for (all, when None)
         if left is None:
             previous = self.cells  # relocate returns new arrays
             cells, X = self.locator.relocate(self.x, self.cells, ghosts=ghosts)
-            rows = np.flatnonzero((cells < 0) | (cells >= self.locator.num_cells) if ghosts else cells < 0)
         else:  # only the particles searched for can have left the owned cells: O(leavers)
             cells, X = self.cells, self.X
             searched = np.flatnonzero(left)
             previous = cells[searched]  # their cells before the search (a copy)
             if len(searched):
                 cells[searched], X[searched] = self.locator.locate_near(self.x[searched], previous, ghosts=ghosts)
-            found = cells[searched]
-            gone = (found < 0) | (found >= self.locator.num_cells) if ghosts else found < 0
-            rows, previous = searched[gone], previous[gone]
+        found = cells if searched is None else cells[searched]
+        leaving = (found < 0) | (found >= self.locator.num_cells) if ghosts else found < 0
+        rows = np.flatnonzero(leaving) if searched is None else searched[leaving]
+        previous = previous[leaving]  # the leavers' cells before they moved
         lost = int(np.count_nonzero(cells[rows] < 0))
         counts = np.array([len(rows) - lost, lost])  # in a ghost cell, in none here
         if self.comm.size > 1:
@@ -224,8 +225,6 @@ class Particles:
         if outside not in _OUTSIDE:  # before anything moves
             raise ValueError(f"unknown option outside={outside!r}; expected one of {_OUTSIDE}")
         arrays = {"x": self.x, "cells": cells, "X": X, **self._arrays()}
-        if ghosts and left is None:
-            previous = previous[rows]
         arrays, gone = migrate(self.locator, arrays, rows, previous if ghosts else None,
                                counts=(int(counts[0]), int(counts[1])))  # in place, O(leavers)
         if gone is not None:  # some rank searched beyond its ghost cells
@@ -234,8 +233,8 @@ class Particles:
 
     def sort_by_cell(self) -> None:
         """Order the particles by cell (stable), for memory locality in the particle passes.
-        The sorted arrays keep :data:`fempm.migration.SLACK` spare rows, so that the particles
-        arriving from other ranks over the next steps do not reallocate them."""
+        The sorted arrays keep spare rows (:func:`fempm.migration.with_room`), so that the
+        particles arriving from other ranks over the next steps do not reallocate them."""
         order = np.argsort(self.cells, kind="stable")
         if np.all(order[1:] > order[:-1]):
             return
@@ -246,8 +245,9 @@ class Particles:
 
 
 def _sorted_with_room(a: npt.NDArray, order: npt.NDArray) -> npt.NDArray:
-    """``a[order]`` as the first rows of an array with :data:`~fempm.migration.SLACK` more."""
+    """``a[order]`` as the first rows of an array with spare rows
+    (:func:`~fempm.migration.with_room`)."""
     n = len(order)
-    room = np.empty((int(n * (1 + SLACK)) + 1, *a.shape[1:]), dtype=a.dtype)
+    room = with_room(n, a)
     np.take(a, order, axis=0, out=room[:n])
     return room[:n]

@@ -10,8 +10,9 @@ over them,
     S_i = \sum_{j \in T(i)} s_j,
 
 with :math:`T(i)` the patch of the marked dof :math:`i` and each dof counted once, at the rank
-that owns it; :func:`depth_shares` gives each node its share of the patch's normal momentum. The patches are found anew at every call (one ``allgather`` of the marked dofs,
-their values and the pairs of them that share a cell), by label propagation over those pairs.
+that owns it; :func:`depth_shares` gives each node its share of the patch's normal momentum.
+The patches are found anew at every call (one ``allgather`` of the marked dofs, their values
+and the pairs of them that share a cell), by label propagation over those pairs.
 """
 
 from __future__ import annotations
