@@ -54,6 +54,7 @@ class ConsistentPointStep(LumpedPointStep):
         self.cell_mass = kc.cell_mass(solver.particles.locator.geometry.cell_name)
         self._ghosted = self._nodal_array(self.d)
         self._accel: npt.NDArray | None = None  # the last acceleration, the warm start of its solve
+        self._spare: npt.NDArray | None = None  # the array of the acceleration before it
         self._ratio_age = RATIO_EVERY
         self._ratio_key = -1
 
@@ -103,17 +104,15 @@ class ConsistentPointStep(LumpedPointStep):
         s = self.solver
         opts = s.options
         sy = self.systems
-        a = np.zeros((self.num_dofs, self.d))
+        a = self._spare if self._spare is not None else np.zeros((self.num_dofs, self.d))
         if opts.lumped_forces:
             m = mass[:, 0]
             a[sy.active] = force[sy.active, cf:cf + self.d] / m[sy.active, None]
         else:
-            sy.solve(force, cf, a, self._accel)
+            sy.solve(force, cf, a, self._accel)  # every owned entry of a written
             self._ghosts(a)
-            self._accel = a.copy()
-        if opts.damping > 0.0:
-            a -= opts.damping * v_old
-        a[mass[:, 0] <= weak_max] = 0.0
-        v_new = v_old + dt * a
+            self._accel, self._spare = a, self._accel  # the next warm start; the next output
+        v_new = np.empty_like(a)
+        kc.advance(a, v_old, mass[:, 0], weak_max, float(dt), float(opts.damping), v_new)
         s._apply_bcs(v_new, centroids)
         return self._ghosts(v_new)

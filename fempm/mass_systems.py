@@ -100,6 +100,7 @@ class ConsistentSystems:
         self._ratio_rhs: npt.NDArray | None = None  # over all owned dofs, made on first use
         self.pattern = np.full(len(cell_dofs), -1, dtype=np.int32)  # cell -> its row in the blocks (-1: outside)
         self.pattern_cells = np.zeros(0, dtype=np.int32)
+        self._pattern_dofs = np.zeros((0, cell_dofs.shape[1]), dtype=np.int32)
         self._base_values_stale = True
         self._blocks: npt.NDArray | None = None
         self._count = np.zeros(0, dtype=np.int64)
@@ -153,6 +154,7 @@ class ConsistentSystems:
         self.slot = slot[: len(cells) * k * k].reshape(len(cells), k, k).astype(np.int32)
         self.diagonal_slot = np.searchsorted(unique, np.arange(n_sub) * (width + 1)).astype(np.int32)
         self.pattern_cells = cells
+        self._pattern_dofs = np.ascontiguousarray(cd[cells])
         self.pattern = np.full(len(self.cell_dofs), -1, dtype=np.int32)  # cell -> its row in the blocks
         self.pattern[cells] = np.arange(len(cells), dtype=np.int32)
         self.values = np.empty(len(rows))
@@ -190,9 +192,9 @@ class ConsistentSystems:
         changed = (prev is None or not np.array_equal(prev[0], occupied) or not np.array_equal(prev[1], self.active)
                    or not np.array_equal(prev[2], self.lump))
         if self.comm.allreduce(changed, op=MPI.LOR):
-            cells = self.pattern_cells[occupied]
+            # the empty cells' blocks are 0: they determine nothing, and no copy of the others
             check_nonsingular(self.index_map, num_particles, self.active, self.lump,
-                              (cells, self.cell_dofs[cells], self._blocks[occupied]))
+                              (self.pattern_cells, self._pattern_dofs, self._blocks))
             self._structure = (occupied, self.active, self.lump)
             self.tests += 1
             for s in self.systems:  # a few changed rows cost more iterations than a new set-up
@@ -227,15 +229,14 @@ class ConsistentSystems:
         systems = self._all()
         for i, own in enumerate(self.systems):
             s = systems[self._matrix_of[i]]
-            keep = s.keep[sel]
             s.ksp.getPC().setReusePreconditioner(not s.refresh)
             most = 0
             for c in own.components:
-                s.b.array[:] = np.where(keep, rhs[sel, col + c], 0.0)
+                kc.to_system(rhs, col + c, sel, s.keep, s.b.array)
                 if guess is None:
                     s.x.set(0.0)
                 else:
-                    s.x.array[:] = np.where(keep, guess[sel, c], 0.0)
+                    kc.to_system(guess, c, sel, s.keep, s.x.array)
                 with fpetsc.temporary_options(self.prefix, KSP_OPTIONS) if s.refresh else contextlib.nullcontext():
                     # a fresh set-up reads the sub-block options (bjacobi)
                     reason = fpetsc.solve_from(s.ksp, s.b, s.x, guess is not None)
@@ -247,7 +248,7 @@ class ConsistentSystems:
                         f"{s.ksp.getIterationNumber()} iterations); the particle mass matrix may be singular")
                 self.iterations.append(s.ksp.getIterationNumber())
                 most = max(most, self.iterations[-1])
-                out[sel, c] = s.x.array
+                kc.from_system(s.x.array, sel, c, out)
             if s.refresh:
                 s.refresh, s.fresh_iterations = False, most
             elif most > REFRESH_GROWTH * s.fresh_iterations + 2:

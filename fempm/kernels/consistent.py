@@ -103,13 +103,13 @@ if AVAILABLE:
         for i in range(nd):
             start[i + 1] += start[i]
         fill = start[:-1].copy()
-        adjacent = np.empty(n * k, dtype=np.int64)
+        adjacent = np.empty(n * k, dtype=np.int32)
         for c in range(n):
             for a in range(k):
                 i = dofs[c, a]
                 adjacent[fill[i]] = c
                 fill[i] += 1
-        queue = np.empty(n, dtype=np.int64)  # a ring of at most n queued cells
+        queue = np.empty(n, dtype=np.int32)  # a ring of at most n queued cells
         queued = np.zeros(n, dtype=np.bool_)
         head, size = 0, 0
         for c in range(n):
@@ -120,44 +120,76 @@ if AVAILABLE:
         B = np.empty((1, k, k))
         bounds = np.empty((1, 2))
         scale = np.empty(k)
+        free = np.empty(k, dtype=np.bool_)
         while size > 0:
             c = queue[head]
-            head = (head + 1) % n
+            head = head + 1 if head + 1 < n else 0
             size -= 1
             queued[c] = False
             unsure[c] = False
             if not pending[c]:
                 continue
-            untouched = False
+            undetermined, untouched = 0, False
             for a in range(k):
-                diag = blocks[c, a, a]
-                if not determined[dofs[c, a]] and diag <= 0.0:
-                    untouched = True
-                scale[a] = 1.0 / np.sqrt(diag) if diag > 0.0 else 0.0
+                free[a] = not determined[dofs[c, a]]
+                if free[a]:
+                    undetermined += 1
+                    diag = blocks[c, a, a]
+                    untouched |= diag <= 0.0
+                    scale[a] = 1.0 / np.sqrt(diag) if diag > 0.0 else 0.0
+            if undetermined == 0:  # nothing left to determine: done without a test
+                pending[c] = False
+                continue
             if untouched:
                 continue
-            for a in range(k):
-                ka = not determined[dofs[c, a]]
-                for b in range(k):
-                    if ka and not determined[dofs[c, b]]:
-                        B[0, a, b] = blocks[c, a, b] * scale[a] * scale[b]
-                    else:
-                        B[0, a, b] = 1.0 if a == b and not ka else 0.0
-            eigenvalue_bounds(B, bounds)
-            if bounds[0, 1] <= 2.0 * tol:
-                unsure[c] = bounds[0, 0] >= 0.5 * tol
-                continue
+            if undetermined > 1:  # one dof with a positive diagonal: its scaled block is 1
+                for a in range(k):
+                    for b in range(k):
+                        if free[a] and free[b]:
+                            B[0, a, b] = blocks[c, a, b] * scale[a] * scale[b]
+                        else:
+                            B[0, a, b] = 1.0 if a == b else 0.0
+                eigenvalue_bounds(B, bounds)
+                if bounds[0, 1] <= 2.0 * tol:
+                    unsure[c] = bounds[0, 0] >= 0.5 * tol
+                    continue
             pending[c] = False
             for a in range(k):
                 i = dofs[c, a]
                 if determined[i]:
                     continue
                 determined[i] = True
-                for e in adjacent[start[i]:start[i + 1]]:
+                for q in range(start[i], start[i + 1]):
+                    e = adjacent[q]
                     if pending[e] and not queued[e]:
-                        queue[(head + size) % n] = e
+                        t = head + size
+                        queue[t if t < n else t - n] = e
                         queued[e] = True
                         size += 1
+
+    @njit(cache=True)
+    def to_system(values, col, sel, keep, out):  # pragma: no cover
+        """``out[q] = values[sel[q], col]`` where ``keep[sel[q]]``, else 0: a column of a nodal
+        array (parent dofs) as a vector of the system (its dofs ``sel``)."""
+        for q in range(len(sel)):
+            i = sel[q]
+            out[q] = values[i, col] if keep[i] else 0.0
+
+    @njit(cache=True)
+    def from_system(x, sel, col, out):  # pragma: no cover
+        """``out[sel[q], col] = x[q]``: a solution of the system into a nodal array."""
+        for q in range(len(sel)):
+            out[sel[q], col] = x[q]
+
+    @njit(cache=True)
+    def advance(a, v_old, mass, weak_max, dt, damping, v_new):  # pragma: no cover
+        r""":math:`v^+ = v + \Delta t\,(a - c\, v)`, with the acceleration 0 where the mass is at
+        most ``weak_max``."""
+        for i in range(len(a)):
+            weak = mass[i] <= weak_max
+            for j in range(a.shape[1]):
+                acc = 0.0 if weak else a[i, j] - damping * v_old[i, j]
+                v_new[i, j] = v_old[i, j] + dt * acc
 
 
 @functools.cache
