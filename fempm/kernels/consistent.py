@@ -92,9 +92,9 @@ if AVAILABLE:
         in place, to its fixed point: a ``pending`` cell whose Jacobi-scaled block restricted to
         its undetermined dofs has its smallest eigenvalue clearly above ``tol`` (pivot bounds,
         :func:`eigenvalue_bounds`, by a factor 2; one undetermined dof: its diagonal above 0)
-        makes them ``determined`` and is done; cells
-        sharing a newly determined dof are tested again (a worklist). ``unsure[c]``: the last
-        test of cell ``c`` was not clear either way (for an exact eigenvalue test)."""
+        makes them ``determined`` and is done; cells sharing a newly determined dof are tested
+        again (a worklist). ``unsure[c]``: the last test of cell ``c`` was not clear either way
+        (for an exact eigenvalue test)."""
         n, k = dofs.shape
         nd = len(determined)
         start = np.zeros(nd + 1, dtype=np.int64)  # dof -> cells (CSR)
