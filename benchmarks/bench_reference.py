@@ -18,9 +18,11 @@ steps, then 7 batches of at least 0.4 s; the median time per step (maximum over 
 particle-steps per second. Peak memory per particle: the growth of the peak resident set from
 after the mesh is built to the end of the run, summed over ranks, over the number of particles.
 ``--check`` first runs 300 steps at 1e4 particles in fempm and in the numba kernel and compares
-the positions (same physics before comparing speed). ``--rounds K`` runs every configuration K
-times in rounds (the references, then fempm, K times over) and reports medians: this machine's
-speed drifts by 20-50 % within minutes, so a ratio is taken within a round, then its median.
+the positions (same physics before comparing speed). The speed-up from 1 to R ranks (threads)
+of each implementation is printed (and written under ``scaling``). ``--rounds K`` runs every
+configuration K times in rounds (the references, then fempm, K times over) and reports medians:
+this machine's speed drifts by 20-50 % within minutes, so a ratio is taken within a round, then
+its median.
 """
 
 from __future__ import annotations
@@ -314,6 +316,13 @@ def main(argv=None) -> None:
                 if lumped and consistent:
                     print(f"consistent / lumped step time, {mesh}, {lumped['n']} particles, {r} rank(s): "
                           f"{consistent['t_step_s'] / lumped['t_step_s']:.2f}")
+    out["scaling"] = []  # one rank's (thread's) step time over R ranks' (threads'), same size and kind
+    for row in out["rows"]:
+        one = [q for q in out["rows"] if q["impl"] == row["impl"] and q["ranks"] == 1 and q["n"] == row["n"]]
+        if row["ranks"] > 1 and one and row.get("t_step_s"):
+            speedup = one[0]["t_step_s"] / row["t_step_s"]
+            out["scaling"].append({"impl": row["impl"], "n": row["n"], "ranks": row["ranks"], "speedup": speedup})
+            print(f"{row['ranks']} ranks/threads over 1, {row['impl']}, {row['n']} particles: {speedup:.2f}x")
     if a.json:
         a.json.write_text(json.dumps(out, indent=1))
 
