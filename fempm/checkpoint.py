@@ -16,9 +16,10 @@ old one), so a run killed at any moment leaves a complete checkpoint (:func:`rea
 to ``checkpoint.old`` if it was killed inside the swap).
 
 Restoring on the same number of ranks puts every array back as it was, in the same order, so
-that the continued run is bit for bit the uninterrupted one (with lumped mass; with consistent
-mass the incomplete-Cholesky preconditioner is set up afresh, so the velocities agree to the
-solver tolerance). On another number of ranks the particles are distributed anew by their
+that the continued run is bit for bit the uninterrupted one. With consistent mass the compiled
+step's kept systems go in too (:meth:`fempm.consistent_step.ConsistentPointStep.checkpoint_arrays`:
+the sparsity's cells, the matrix values each preconditioner was set up from, the warm starts and
+counters), and the preconditioners are set up again from those values. On another number of ranks the particles are distributed anew by their
 cells (:class:`fempm.particles.Particles`) and the warm starts are dropped: results agree to
 round-off.
 """
@@ -78,9 +79,8 @@ def write(out: Path, scene, solver, monitor, writer_state: dict, rebuild: dict |
     if solver.grid_velocity is not None:
         arrays["solver:grid_velocity"] = solver.grid_velocity
     step = solver._lumped_step
-    accel = getattr(step, "_accel", None)
-    if accel is not None:
-        arrays["solver:accel"] = accel
+    if hasattr(step, "checkpoint_arrays"):  # the consistent step's warm starts and kept systems
+        arrays.update({f"solver:{k}": v for k, v in step.checkpoint_arrays().items()})
     error = None
     try:
         with open(tmp / f"rank_{comm.rank:05d}.npz", "wb") as fh:
@@ -181,10 +181,11 @@ def restore_solver(solver, monitor, data: dict, solver_arrays: dict) -> None:
     if step is not None:
         if s["since_sort"] is not None:
             step._since_sort = int(s["since_sort"])
-        if hasattr(step, "_accel"):
-            step._accel = solver_arrays.get("accel")
+        if hasattr(step, "restore_arrays"):
             if s["ratio_age"] is not None:
                 step._ratio_age = int(s["ratio_age"])
+            # collective: on another number of ranks every rank passes {} (no solver arrays)
+            step.restore_arrays(solver_arrays)
     for k, v in data["monitor"].items():
         setattr(monitor, k, np.asarray(v) if isinstance(v, list) else v)
 

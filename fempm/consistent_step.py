@@ -84,6 +84,24 @@ class ConsistentPointStep(LumpedPointStep):
             self._ratio_key, self._ratio_age = key, 0
         return float(np.sqrt(MASS_RATIO_SAFETY * s.mass_ratio))
 
+    def checkpoint_arrays(self) -> dict[str, npt.NDArray]:
+        """This rank's state that a resumed run needs to repeat the next steps bit for bit: the
+        warm start of the acceleration solve, the kept systems (:meth:`ConsistentSystems.state`)
+        and the stable-step estimate's key."""
+        out = {f"mass:{k}": v for k, v in self.systems.state().items()}
+        out["ratio_key"] = np.array([self._ratio_key])
+        if self._accel is not None:
+            out["accel"] = self._accel
+        return out
+
+    def restore_arrays(self, arrays: dict[str, npt.NDArray]) -> None:
+        """The state of :meth:`checkpoint_arrays` (from a run on as many ranks; an empty dict
+        on another number of ranks: the next steps then agree to round-off). Collective."""
+        self._accel = arrays.get("accel")
+        if "ratio_key" in arrays:
+            self._ratio_key = int(arrays["ratio_key"][0])
+        self.systems.restore({k[5:]: v for k, v in arrays.items() if k.startswith("mass:")})
+
     def _ghosts(self, u: npt.NDArray) -> npt.NDArray:
         """Owned values of ``u`` (dofs, d) to the ghosts (in place)."""
         vec, arr = self._ghosted

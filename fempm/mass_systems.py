@@ -17,6 +17,9 @@ builds for one use is kept here:
 - the *KSPs* (the options prefix of the step), warm-started from the last solution;
 - the *singularity tests* (:func:`fempm.mass_span.check_nonsingular`) run when the occupied
   cells, the supported dofs or the lumped dofs change, not every step;
+- the *checkpoint state* (:meth:`ConsistentSystems.state`, :meth:`ConsistentSystems.restore`):
+  the sparsity's cells and the values each preconditioner was set up from, so that a resumed
+  run sets up the same factors and repeats the uninterrupted run bit for bit;
 - the *stable-step estimate* :math:`\lambda_{min}(M_L^{-1} M_C)` (Lanczos coefficients of CG,
   :meth:`fempm.transfer.Projector.mass_ratio_min`) on the system without slip constraints,
   refreshed when asked (every step when the step size is the stable one).
@@ -69,6 +72,8 @@ class _System:
     keep: npt.NDArray[np.bool_] | None = None  # this step's dofs solved for (supported and free)
     refresh: bool = True  # set the preconditioner up from the current values at the next solve
     fresh_iterations: int = 0  # KSP iterations with a fresh preconditioner
+    values: npt.NDArray | None = None  # the matrix's COO values of this step
+    factored: npt.NDArray | None = None  # the values its preconditioner was set up from
 
 
 class ConsistentSystems:
@@ -106,6 +111,7 @@ class ConsistentSystems:
         self._ratio_rhs: npt.NDArray | None = None  # over all owned dofs, made on first use
         self.pattern = np.full(len(cell_dofs), -1, dtype=np.int32)  # cell -> its row in the blocks (-1: outside)
         self.pattern_cells = np.zeros(0, dtype=np.int32)
+        self._nnz = 0  # entries of the sparsity
         self._pattern_dofs = np.zeros((0, cell_dofs.shape[1]), dtype=np.int32)
         self._base_values_stale = True
         self._blocks: npt.NDArray | None = None
@@ -140,7 +146,11 @@ class ConsistentSystems:
         touched = np.zeros(self.num_dofs, dtype=np.bool_)
         touched[cd[np.unique(particle_cells)].ravel()] = True
         touched = share_flags(self.index_map, touched)
-        cells = np.flatnonzero(touched[cd].any(axis=1)).astype(np.int32)
+        self._build(np.flatnonzero(touched[cd].any(axis=1)).astype(np.int32))
+
+    def _build(self, cells: npt.NDArray[np.int32]) -> None:
+        """The sparsity of the cells ``cells`` (owned), matrices and vectors. Collective."""
+        cd = self.cell_dofs[: self.num_cells]
         dofs = np.zeros(self.num_dofs, dtype=np.bool_)
         dofs[cd[cells].ravel()] = True
         dofs = share_flags(self.index_map, dofs)
@@ -163,7 +173,7 @@ class ConsistentSystems:
         self._pattern_dofs = np.ascontiguousarray(cd[cells])
         self.pattern = np.full(len(self.cell_dofs), -1, dtype=np.int32)  # cell -> its row in the blocks
         self.pattern[cells] = np.arange(len(cells), dtype=np.int32)
-        self.values = np.empty(len(rows))
+        self._nnz = len(rows)
         lgmap = fpetsc.local_to_global_map(self.sub_map)
         for s in self._all():
             if s.matrix is not None:
@@ -171,6 +181,7 @@ class ConsistentSystems:
                     obj.destroy()
             s.matrix = fpetsc.coo_pattern(self.sub_map, rows, cols, lgmap)
             s.x, s.b = s.matrix.createVecs()
+            s.values = s.factored = None
             if s.ksp is not None:
                 s.ksp.reset()  # new sizes
                 s.ksp.setOperators(s.matrix)
@@ -220,9 +231,11 @@ class ConsistentSystems:
         self._base_values_stale = True
 
     def _set_values(self, s: _System) -> None:
+        if s.values is None:
+            s.values = np.empty(self._nnz)
         kc.coo_values(self._blocks, self.pattern_cells, self.cell_dofs, s.keep, self.lump, self.slot,
-                      self.owned_parent, self.diagonal_slot, self.values)
-        s.matrix.setValuesCOO(self.values, addv=PETSc.InsertMode.INSERT_VALUES)
+                      self.owned_parent, self.diagonal_slot, s.values)
+        s.matrix.setValuesCOO(s.values, addv=PETSc.InsertMode.INSERT_VALUES)
 
     # -- solves -------------------------------------------------------------------------------
     def solve(self, rhs: npt.NDArray, col: int, out: npt.NDArray, guess: npt.NDArray | None = None) -> None:
@@ -255,10 +268,54 @@ class ConsistentSystems:
                 self.iterations.append(s.ksp.getIterationNumber())
                 most = max(most, self.iterations[-1])
                 kc.from_system(s.x.array, sel, c, out)
-            if s.refresh:
+            if s.refresh:  # set up from this step's values: kept (a checkpoint holds them)
                 s.refresh, s.fresh_iterations = False, most
+                s.factored, s.values = s.values, s.factored
             elif most > REFRESH_GROWTH * s.fresh_iterations + 2:
                 s.refresh = True
+
+    # -- checkpoints -------------------------------------------------------------------------
+    def state(self) -> dict[str, npt.NDArray]:
+        """What a resumed run needs to continue bit for bit (this rank's arrays): the sparsity's
+        cells, the values each preconditioner was set up from, the last singularity test's
+        structure and the counters. See :meth:`restore`."""
+        systems = self._all()
+        out = {"pattern_cells": self.pattern_cells,
+               "counters": np.array([self.rebuilds] + [s.refresh for s in systems]
+                                    + [s.fresh_iterations for s in systems], dtype=np.int64)}
+        for i, s in enumerate(systems):
+            if s.factored is not None:
+                out[f"factored{i}"] = s.factored
+        if self._structure is not None:
+            out.update(occupied=self._structure[0], active=self._structure[1], lump=self._structure[2])
+        return out
+
+    def restore(self, state: dict[str, npt.NDArray]) -> None:
+        """The sparsity, preconditioners and counters of :meth:`state`, written by a run on as
+        many ranks: each preconditioner set up again from the same values gives the same
+        factors, so the next solves repeat those of the run that wrote them. Collective."""
+        if "pattern_cells" not in state:
+            return
+        cells = np.asarray(state["pattern_cells"], dtype=np.int32)
+        if not self.comm.allreduce(len(cells)):  # written before the first step: built then
+            return
+        self._build(cells)
+        systems = self._all()
+        counters = state["counters"]
+        n = len(systems)
+        self.rebuilds = int(counters[0])
+        for i, s in enumerate(systems):
+            values = state.get(f"factored{i}")
+            if values is not None and s.ksp is not None:
+                s.matrix.setValuesCOO(values, addv=PETSc.InsertMode.INSERT_VALUES)
+                with fpetsc.temporary_options(self.prefix, self.ksp_options):
+                    s.ksp.setUp()
+                    s.ksp.setUpOnBlocks()  # block methods factor their blocks at the first solve
+                s.factored = np.array(values)
+            s.refresh = bool(counters[1 + i])
+            s.fresh_iterations = int(counters[1 + n + i])
+        if "occupied" in state:
+            self._structure = (state["occupied"], state["active"].astype(bool), state["lump"].astype(bool))
 
     def mass_ratio_min(self, V, iterations: int) -> float:
         r"""Estimate of :math:`\lambda_{min}(M_L^{-1} M_C)` on the system without slip
