@@ -17,11 +17,12 @@ to ``checkpoint.old`` if it was killed inside the swap).
 
 Restoring on the same number of ranks puts every array back as it was, in the same order, so
 that the continued run is bit for bit the uninterrupted one. With consistent mass the compiled
-step's kept systems go in too (:meth:`fempm.consistent_step.ConsistentPointStep.checkpoint_arrays`:
-the sparsity's cells, the matrix values each preconditioner was set up from, the warm starts and
-counters), and the preconditioners are set up again from those values. On another number of ranks the particles are distributed anew by their
-cells (:class:`fempm.particles.Particles`) and the warm starts are dropped: results agree to
-round-off.
+step's kept systems go in too
+(:meth:`fempm.consistent_step.ConsistentPointStep.checkpoint_arrays`: the sparsity's cells,
+the matrix values each preconditioner was set up from, the warm starts and counters), and the
+preconditioners are set up again from those values. On another number of ranks the particles
+are distributed anew by their cells (:class:`fempm.particles.Particles`) and the warm starts
+and kept systems are dropped: results agree to round-off.
 """
 
 from __future__ import annotations

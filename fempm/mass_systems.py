@@ -311,7 +311,7 @@ class ConsistentSystems:
                 with fpetsc.temporary_options(self.prefix, self.ksp_options):
                     s.ksp.setUp()
                     s.ksp.setUpOnBlocks()  # block methods factor their blocks at the first solve
-                s.factored = np.array(values)
+                s.factored = np.asarray(values)  # read from the checkpoint: no other owner
             s.refresh = bool(counters[1 + i])
             s.fresh_iterations = int(counters[1 + n + i])
         if "occupied" in state:
