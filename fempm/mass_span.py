@@ -34,7 +34,7 @@ from fempm.kernels.shape import AVAILABLE
 from fempm.transfer import SingularMassError, sum_over_ranks
 
 if AVAILABLE:
-    from fempm.kernels.consistent import eigenvalue_bounds, propagate
+    from fempm.kernels.consistent import adjacency, eigenvalue_bounds, propagate
 
 log = logging.getLogger("fempm")
 
@@ -74,14 +74,18 @@ def _smallest_above(B: npt.NDArray, tol: float, exact: bool = False) -> npt.NDAr
 
 
 def _propagate(blocks: npt.NDArray, dofs: npt.NDArray, determined: npt.NDArray[np.bool_],
-               pending: npt.NDArray[np.bool_]) -> None:
+               pending: npt.NDArray[np.bool_], cells_of: tuple | None = None) -> None:
     """Step 2 of the module on this rank, in place, until nothing changes: compiled
     (:func:`fempm.kernels.consistent.propagate`, the cells its bounds leave unsure tested with
-    ``eigvalsh``), or in rounds over all pending cells without numba."""
+    ``eigvalsh``; ``cells_of``: the cells of each dof, :func:`fempm.kernels.consistent.adjacency`
+    of ``dofs``, made here if None), or in rounds over all pending cells without numba."""
+    if AVAILABLE and cells_of is None:
+        cells_of = adjacency(np.ascontiguousarray(dofs), len(determined))
     while True:
         if AVAILABLE:
             unsure = np.zeros(len(dofs), dtype=np.bool_)
-            propagate(np.ascontiguousarray(blocks), np.ascontiguousarray(dofs), determined, pending, RANK_TOL, unsure)
+            propagate(np.ascontiguousarray(blocks), np.ascontiguousarray(dofs), determined, pending, RANK_TOL, unsure,
+                      *cells_of)
             idx = np.flatnonzero(pending & unsure)
             solved = _nonsingular(blocks[idx], ~determined[dofs[idx]], exact=True)
         else:
@@ -101,11 +105,12 @@ def share_flags(index_map, flags: npt.NDArray[np.bool_]) -> npt.NDArray[np.bool_
 
 
 def check_nonsingular(index_map, num_particles: int, active: npt.NDArray[np.bool_], lump: npt.NDArray[np.bool_] | None,
-                      blocks: tuple[npt.NDArray, npt.NDArray, npt.NDArray] | None) -> None:
+                      blocks: tuple[npt.NDArray, npt.NDArray, npt.NDArray] | None, cells_of: tuple | None = None) -> None:
     """Raise :class:`fempm.transfer.SingularMassError` when the consistent mass on the ``active``
     dofs (``lump`` ones lumped) is singular: more coupled dofs than ``num_particles`` (global),
     or, given the point particles' cell ``blocks`` (:func:`fempm.transfer.cell_blocks`), a null
-    direction (:func:`singular_dofs`). Collective."""
+    direction (:func:`singular_dofs`; ``cells_of``: kept :func:`fempm.kernels.consistent.adjacency`
+    of the blocks' dofs). Collective."""
     n = index_map.size_local
     coupled = active[:n] & (~lump[:n] if lump is not None else True)
     nactive = index_map.comm.allreduce(int(np.count_nonzero(coupled)))
@@ -117,7 +122,7 @@ def check_nonsingular(index_map, num_particles: int, active: npt.NDArray[np.bool
         )
     if blocks is None:
         return
-    null, undetermined = singular_dofs(index_map, blocks, active, lump)
+    null, undetermined = singular_dofs(index_map, blocks, active, lump, cells_of)
     if null:
         raise SingularMassError(
             f"the consistent mass matrix is singular: the particles determine no unique value on "
@@ -128,11 +133,12 @@ def check_nonsingular(index_map, num_particles: int, active: npt.NDArray[np.bool
 
 
 def singular_dofs(imap, blocks: tuple[npt.NDArray, npt.NDArray, npt.NDArray], active: npt.NDArray[np.bool_],
-                  lump: npt.NDArray[np.bool_] | None = None) -> tuple[int, int]:
+                  lump: npt.NDArray[np.bool_] | None = None, cells_of: tuple | None = None) -> tuple[int, int]:
     """(number of null directions of the consistent mass on the ``active`` dofs, number of dofs
     left undetermined after the cell tests), both global, from the per-cell matrices ``blocks``
-    of :func:`fempm.transfer.cell_blocks`, dofs of the ``imap`` (owned + ghost). Collective;
-    point basis only."""
+    of :func:`fempm.transfer.cell_blocks`, dofs of the ``imap`` (owned + ghost); ``cells_of``:
+    the cells of each dof (:func:`fempm.kernels.consistent.adjacency` of the blocks' dofs),
+    made here if None. Collective; point basis only."""
     comm = imap.comm
     n_local = imap.size_local + imap.num_ghosts
     cells, dofs, blocks = blocks
@@ -140,9 +146,11 @@ def singular_dofs(imap, blocks: tuple[npt.NDArray, npt.NDArray, npt.NDArray], ac
     if lump is not None:
         determined |= lump[:n_local]
     pending = np.ones(len(cells), dtype=bool)
+    if AVAILABLE and cells_of is None:  # once for the rounds over ranks
+        cells_of = adjacency(np.ascontiguousarray(dofs), n_local)
     while True:
         before = determined.copy()
-        _propagate(blocks, dofs, determined, pending)
+        _propagate(blocks, dofs, determined, pending, cells_of)
         if comm.size == 1 or not comm.allreduce(int(np.count_nonzero(determined & ~before))):
             break  # one rank: _propagate reached the fixed point
         determined = share_flags(imap, determined)

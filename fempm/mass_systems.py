@@ -183,6 +183,7 @@ class ConsistentSystems:
         self.diagonal_slot = np.searchsorted(unique, np.arange(n_sub) * (width + 1)).astype(np.int32)
         self.pattern_cells = cells
         self._pattern_dofs = np.ascontiguousarray(cd[cells])
+        self._cells_of = kc.adjacency(self._pattern_dofs, self.num_dofs)  # of the singularity tests
         self.pattern = np.full(len(self.cell_dofs), -1, dtype=np.int32)  # cell -> its row in the blocks
         self.pattern[cells] = np.arange(len(cells), dtype=np.int32)
         self._nnz = len(rows)
@@ -223,7 +224,7 @@ class ConsistentSystems:
         if self.comm.allreduce(changed, op=MPI.LOR):
             # the empty cells' blocks are 0: they determine nothing, and no copy of the others
             check_nonsingular(self.index_map, num_particles, self.active, self.lump,
-                              (self.pattern_cells, self._pattern_dofs, self._blocks))
+                              (self.pattern_cells, self._pattern_dofs, self._blocks), self._cells_of)
             self._structure = (occupied, self.active, self.lump)
             self.tests += 1
             for s in self.systems:  # a few changed rows cost more iterations than a new set-up

@@ -87,17 +87,11 @@ if AVAILABLE:
 
 
     @njit(cache=True)
-    def propagate(blocks, dofs, determined, pending, tol, unsure):  # pragma: no cover
-        """The cell-by-cell determination of :func:`fempm.mass_span.singular_dofs` on one rank,
-        in place, to its fixed point: a ``pending`` cell whose Jacobi-scaled block restricted to
-        its undetermined dofs has its smallest eigenvalue clearly above ``tol`` (pivot bounds,
-        :func:`eigenvalue_bounds`, by a factor 2; one undetermined dof: its diagonal above 0)
-        makes them ``determined`` and is done; cells sharing a newly determined dof are tested
-        again (a worklist). ``unsure[c]``: the last test of cell ``c`` was not clear either way
-        (for an exact eigenvalue test)."""
+    def adjacency(dofs, nd):  # pragma: no cover
+        """The cells of each dof, (start (nd + 1,), cells): dof ``i``'s cells are
+        ``cells[start[i]:start[i + 1]]`` (CSR of the transposed ``dofs`` (cells, k))."""
         n, k = dofs.shape
-        nd = len(determined)
-        start = np.zeros(nd + 1, dtype=np.int64)  # dof -> cells (CSR)
+        start = np.zeros(nd + 1, dtype=np.int64)
         for c in range(n):
             for a in range(k):
                 start[dofs[c, a] + 1] += 1
@@ -110,6 +104,19 @@ if AVAILABLE:
                 i = dofs[c, a]
                 adjacent[fill[i]] = c
                 fill[i] += 1
+        return start, adjacent
+
+    @njit(cache=True)
+    def propagate(blocks, dofs, determined, pending, tol, unsure, start, adjacent):  # pragma: no cover
+        """The cell-by-cell determination of :func:`fempm.mass_span.singular_dofs` on one rank,
+        in place, to its fixed point: a ``pending`` cell whose Jacobi-scaled block restricted to
+        its undetermined dofs has its smallest eigenvalue clearly above ``tol`` (pivot bounds,
+        :func:`eigenvalue_bounds`, by a factor 2; one undetermined dof: its diagonal above 0)
+        makes them ``determined`` and is done; cells sharing a newly determined dof (``start``,
+        ``adjacent``: :func:`adjacency` of ``dofs``) are tested again (a worklist).
+        ``unsure[c]``: the last test of cell ``c`` was not clear either way (for an exact
+        eigenvalue test)."""
+        n, k = dofs.shape
         queue = np.empty(n, dtype=np.int32)  # a ring of at most n queued cells
         queued = np.zeros(n, dtype=np.bool_)
         head, size = 0, 0
