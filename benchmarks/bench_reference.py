@@ -19,10 +19,12 @@ particle-steps per second. Peak memory per particle: the growth of the peak resi
 after the mesh is built to the end of the run, summed over ranks, over the number of particles.
 ``--check`` first runs 300 steps at 1e4 particles in fempm and in the numba kernel and compares
 the positions (same physics before comparing speed). The speed-up from 1 to R ranks (threads)
-of each implementation is printed (and written under ``scaling``). ``--rounds K`` runs every
-configuration K times in rounds (the references, then fempm, K times over) and reports medians:
-this machine's speed drifts by 20-50 % within minutes, so a ratio is taken within a round, then
-its median.
+of each implementation is printed (and written under ``scaling``); on several ranks, also each
+rank's time in the compiled particle passes alone (P2G and G2P, no communication; one more
+batch of steps, ``per_rank`` in the rows): the faster ranks wait for the slowest.
+``--rounds K`` runs every configuration K times in rounds (the references, then fempm, K times
+over) and reports medians: this machine's speed drifts by 20-50 % within minutes, so a ratio is
+taken within a round, then its median.
 """
 
 from __future__ import annotations
@@ -161,11 +163,43 @@ def worker(args) -> None:
     k = max(1, int(0.4 / max(timed(1), 1e-9)))
     times = [timed(k) for _ in range(7)]
     peak = comm.allreduce(max(_peak_kb() - rss0, 0))
+    passes = particle_pass_times(solver, dt, k) if comm.size > 1 else None
     if comm.rank == 0:
         med = statistics.median(times)
         print(json.dumps({"impl": f"fempm-{args.mesh}-{args.mass}", "n": N, "ranks": comm.size, "t_step_s": med,
                           "pps": N / med, "peak_kb_per_particle": peak / N, "steps_per_batch": k,
-                          "dt": dt}), flush=True)
+                          "dt": dt, **({"per_rank": passes} if passes else {})}), flush=True)
+
+
+def particle_pass_times(solver, dt: float, steps: int) -> list[dict]:
+    """Each rank's particles and the time a step spends in its compiled particle passes (P2G and
+    G2P, no communication), over ``steps`` steps after the timed ones: where the ranks differ in
+    speed, the faster waits for the slower in the next collective. Collective."""
+    from mpi4py import MPI
+
+    comm = MPI.COMM_WORLD
+    kernels = solver._compiled_step().kernels
+    spent = {"p2g": 0.0, "g2p": 0.0}
+
+    def timer(f, key):
+        def g(*a, **kw):
+            t0 = time.perf_counter()
+            try:
+                return f(*a, **kw)
+            finally:
+                spent[key] += time.perf_counter() - t0
+        return g
+
+    originals = kernels.scatter, kernels.g2p_update
+    kernels.scatter, kernels.g2p_update = timer(originals[0], "p2g"), timer(originals[1], "g2p")
+    try:
+        for _ in range(steps):
+            solver.step(dt)
+    finally:
+        kernels.scatter, kernels.g2p_update = originals
+    mine = {"particles": len(solver.particles), "p2g_ms": 1e3 * spent["p2g"] / steps,
+            "g2p_ms": 1e3 * spent["g2p"] / steps}
+    return comm.gather(mine)
 
 
 # -- the driver -----------------------------------------------------------------------------------
@@ -316,6 +350,13 @@ def main(argv=None) -> None:
                 if lumped and consistent:
                     print(f"consistent / lumped step time, {mesh}, {lumped['n']} particles, {r} rank(s): "
                           f"{consistent['t_step_s'] / lumped['t_step_s']:.2f}")
+    for row in out["rows"]:  # the ranks' particle passes, without communication (fempm, several ranks)
+        runs = row.get("rounds", [row])
+        if all("per_rank" in run for run in runs):
+            each = [[r["p2g_ms"] + r["g2p_ms"] for r in run["per_rank"]] for run in runs]
+            print(f"particle passes per rank, {row['impl']}, {row['n']} particles, {row['ranks']} ranks "
+                  f"[ms a step]: " + "; ".join(", ".join(f"{t:.1f}" for t in ts) for ts in each)
+                  + f" (slowest over fastest rank {', '.join(f'{max(ts) / min(ts):.2f}' for ts in each)})")
     out["scaling"] = []  # one rank's (thread's) step time over R ranks' (threads'), same size and kind
     for row in out["rows"]:
         one = [q for q in out["rows"] if q["impl"] == row["impl"] and q["ranks"] == 1 and q["n"] == row["n"]]

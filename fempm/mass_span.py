@@ -105,7 +105,8 @@ def share_flags(index_map, flags: npt.NDArray[np.bool_]) -> npt.NDArray[np.bool_
 
 
 def check_nonsingular(index_map, num_particles: int, active: npt.NDArray[np.bool_], lump: npt.NDArray[np.bool_] | None,
-                      blocks: tuple[npt.NDArray, npt.NDArray, npt.NDArray] | None, cells_of: tuple | None = None) -> None:
+                      blocks: tuple[npt.NDArray, npt.NDArray, npt.NDArray] | None,
+                      cells_of: tuple | None = None) -> None:
     """Raise :class:`fempm.transfer.SingularMassError` when the consistent mass on the ``active``
     dofs (``lump`` ones lumped) is singular: more coupled dofs than ``num_particles`` (global),
     or, given the point particles' cell ``blocks`` (:func:`fempm.transfer.cell_blocks`), a null
