@@ -348,8 +348,10 @@ def main(argv=None) -> None:
                         and row["impl"].startswith(f"fempm-{mesh}") and abs(row["n"] - n) < 0.2 * n}
                 lumped, consistent = pair.get(f"fempm-{mesh}-lumped"), pair.get(f"fempm-{mesh}-consistent")
                 if lumped and consistent:
+                    per_second = [row["t_step_s"] / row["dt"] for row in (consistent, lumped)]
                     print(f"consistent / lumped step time, {mesh}, {lumped['n']} particles, {r} rank(s): "
-                          f"{consistent['t_step_s'] / lumped['t_step_s']:.2f}")
+                          f"{consistent['t_step_s'] / lumped['t_step_s']:.2f}; wall time per simulated second "
+                          f"{per_second[0]:.4g} s / {per_second[1]:.4g} s = {per_second[0] / per_second[1]:.2f}")
     for row in out["rows"]:  # the ranks' particle passes, without communication (fempm, several ranks)
         runs = row.get("rounds", [row])
         if all("per_rank" in run for run in runs):
