@@ -74,13 +74,11 @@ def _smallest_above(B: npt.NDArray, tol: float, exact: bool = False) -> npt.NDAr
 
 
 def _propagate(blocks: npt.NDArray, dofs: npt.NDArray, determined: npt.NDArray[np.bool_],
-               pending: npt.NDArray[np.bool_], cells_of: tuple | None = None) -> None:
+               pending: npt.NDArray[np.bool_], cells_of: tuple | None) -> None:
     """Step 2 of the module on this rank, in place, until nothing changes: compiled
     (:func:`fempm.kernels.consistent.propagate`, the cells its bounds leave unsure tested with
     ``eigvalsh``; ``cells_of``: the cells of each dof, :func:`fempm.kernels.consistent.adjacency`
-    of ``dofs``, made here if None), or in rounds over all pending cells without numba."""
-    if AVAILABLE and cells_of is None:
-        cells_of = adjacency(np.ascontiguousarray(dofs), len(determined))
+    of ``dofs``), or in rounds over all pending cells without numba (``cells_of`` unused)."""
     while True:
         if AVAILABLE:
             unsure = np.zeros(len(dofs), dtype=np.bool_)

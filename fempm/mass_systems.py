@@ -46,11 +46,12 @@ from fempm.transfer import SUPPORT_TOL
 
 #: KSP defaults of the kept systems on one rank (the options prefix overrides them): CG with
 #: incomplete Cholesky, 5-10 iterations where Jacobi takes 50-60 (P1/Q1, 4 particles per cell).
-#: The tolerance holds for the true residual, :math:`\|b - m u\|_2 \le` rtol :math:`\|b\|_2`:
-#: with a warm start, the preconditioned norm needs the preconditioner applied to ``b`` once
-#: more per solve (about 2.5 ms at 1e6 particles), the true one half an iteration more on
-#: average; a step is 5 % faster (median of 3-step batches alternating in one process)
-KSP_OPTIONS = {"ksp_type": "cg", "pc_type": "bjacobi", "sub_pc_type": "icc", "ksp_norm_type": "unpreconditioned"}
+#: CG stops on the true residual, :math:`\|b - m u\|_2 \le` rtol :math:`\|b\|_2` (unless
+#: the options prefix sets ``ksp_norm_type``): with a warm start, the preconditioned norm needs
+#: the preconditioner applied to ``b`` once more per solve (about 2.5 ms at 1e6 particles), the
+#: true one half an iteration more on average; a step is 5 % faster (median of 3-step batches
+#: alternating in one process)
+KSP_OPTIONS = {"ksp_type": "cg", "pc_type": "bjacobi", "sub_pc_type": "icc"}
 #: on several ranks: incomplete Cholesky on each rank's rows and one layer of their neighbours
 #: (restricted additive Schwarz, overlap 1). Block Jacobi drops the couplings across the
 #: partition and takes 2-3x the iterations at the 1e-13 tolerance (20 instead of 7-11 on two
@@ -116,7 +117,7 @@ class ConsistentSystems:
                     s.components.append(c)
                     break
             else:
-                self.systems.append(_System(col, [c], fpetsc.create_ksp(self.comm, prefix, self.ksp_options)))
+                self.systems.append(_System(col, [c], self._create_ksp()))
         same = [not self.comm.allreduce(bool(np.any(s.free != base)), op=MPI.LOR) for s in self.systems]
         self.base = self.systems[same.index(True)] if any(same) else _System(base, [], None)
         self._ratio_ksp: PETSc.KSP | None = None
@@ -136,6 +137,14 @@ class ConsistentSystems:
         self.iterations: list[int] = []
         self.rebuilds = 0  # sparsity builds, for diagnostics
         self.tests = 0  # singularity tests, for diagnostics
+
+    def _create_ksp(self) -> PETSc.KSP:
+        """A KSP of the options prefix with :attr:`ksp_options`; CG stops on the true residual
+        (see :data:`KSP_OPTIONS`) where the prefix does not set the norm."""
+        ksp = fpetsc.create_ksp(self.comm, self.prefix, self.ksp_options)
+        if ksp.getType() == PETSc.KSP.Type.CG and not PETSc.Options().hasName(self.prefix + "ksp_norm_type"):
+            ksp.setNormType(PETSc.KSP.NormType.UNPRECONDITIONED)
+        return ksp
 
     # -- sparsity -----------------------------------------------------------------------------
     def work_arrays(self) -> tuple[npt.NDArray, npt.NDArray, npt.NDArray, tuple]:
