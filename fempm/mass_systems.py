@@ -64,8 +64,8 @@ KSP_OPTIONS_PARALLEL = {"ksp_type": "gcr", "pc_type": "asm", "sub_pc_type": "icc
 #: drop (8-9) and the step is 4 % slower, so they keep ICC(0)
 SIMPLEX_OPTIONS = {"sub_pc_factor_levels": 1}
 #: the preconditioner is set up again when a solve takes more than this factor times the
-#: iterations it took fresh (plus 2), and whenever the sparsity, the supported or the lumped
-#: dofs change
+#: iterations it took fresh (plus 2), and whenever the sparsity, the occupied cells, the
+#: supported or the lumped dofs change
 REFRESH_GROWTH = 1.5
 
 
@@ -126,6 +126,7 @@ class ConsistentSystems:
         self.pattern_cells = np.zeros(0, dtype=np.int32)
         self._nnz = 0  # entries of the sparsity
         self._pattern_dofs = np.zeros((0, cell_dofs.shape[1]), dtype=np.int32)
+        self._cells_of: tuple | None = None  # the cells of each dof in the pattern (made with it)
         self._base_values_stale = True
         self._blocks: npt.NDArray | None = None
         self._count = np.zeros(0, dtype=np.int64)
@@ -171,9 +172,9 @@ class ConsistentSystems:
 
     def _build(self, cells: npt.NDArray[np.int32]) -> None:
         """The sparsity of the cells ``cells`` (owned), matrices and vectors. Collective."""
-        cd = self.cell_dofs[: self.num_cells]
+        pattern_dofs = np.ascontiguousarray(self.cell_dofs[cells])  # (cells, k)
         dofs = np.zeros(self.num_dofs, dtype=np.bool_)
-        dofs[cd[cells].ravel()] = True
+        dofs[pattern_dofs.ravel()] = True
         dofs = share_flags(self.index_map, dofs)
         self.sub_map, self.sub_to_parent = create_sub_index_map(self.index_map, np.flatnonzero(dofs).astype(np.int32),
                                                                 False)
@@ -181,7 +182,7 @@ class ConsistentSystems:
         self.owned_parent = np.ascontiguousarray(self.sub_to_parent[:n_sub])
         parent_to_sub = np.full(self.num_dofs, -1, dtype=np.int64)
         parent_to_sub[self.sub_to_parent] = np.arange(len(self.sub_to_parent))
-        local = parent_to_sub[cd[cells]]  # (cells, k)
+        local = parent_to_sub[pattern_dofs]
         k = local.shape[1]
         width = len(self.sub_to_parent)
         key = np.concatenate([(np.repeat(local, k, axis=1) * width + np.tile(local, (1, k))).ravel(),
@@ -191,8 +192,8 @@ class ConsistentSystems:
         self.slot = slot[: len(cells) * k * k].reshape(len(cells), k, k).astype(np.int32)
         self.diagonal_slot = np.searchsorted(unique, np.arange(n_sub) * (width + 1)).astype(np.int32)
         self.pattern_cells = cells
-        self._pattern_dofs = np.ascontiguousarray(cd[cells])
-        self._cells_of = kc.adjacency(self._pattern_dofs, self.num_dofs)  # of the singularity tests
+        self._pattern_dofs = pattern_dofs
+        self._cells_of = kc.adjacency(pattern_dofs, self.num_dofs)  # of the singularity tests
         self.pattern = np.full(len(self.cell_dofs), -1, dtype=np.int32)  # cell -> its row in the blocks
         self.pattern[cells] = np.arange(len(cells), dtype=np.int32)
         self._nnz = len(rows)
