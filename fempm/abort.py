@@ -13,6 +13,11 @@ can do the same::
 
 Errors that every rank raises alike (fempm's checks of arguments and of the state are
 collective) end the ranks the same way, only with ``MPI_Abort`` instead of a return.
+
+:class:`FailureAgreement` tells a rank that caught an exception whether every rank caught one
+(the failure is collective: the ranks can still write their outputs together) or only some
+(the others wait in a collective call: only :func:`abort` ends them);
+:func:`fempm.scene.run` uses it, so that a run under MPI never hangs whatever fails.
 """
 
 from __future__ import annotations
@@ -21,9 +26,27 @@ import contextlib
 import sys
 import time
 import traceback
+from typing import TYPE_CHECKING, NoReturn
+
+if TYPE_CHECKING:  # mpi4py is imported where it is used: the command line imports this module first
+    from mpi4py import MPI
 
 #: seconds between the failing rank's message and MPI_Abort
 GRACE = 1.0
+#: seconds the ranks that caught an exception wait for the others to catch one as well
+AGREE_TIMEOUT = 2.0
+
+
+def abort(comm: MPI.Comm, message: str) -> NoReturn:
+    """Print ``message`` (with the current exception's traceback, if any) to stderr with this
+    rank, then end every rank of ``comm`` with exit code 1 (``MPI_Abort``). Local: one rank
+    may call it while the others wait anywhere."""
+    trace = traceback.format_exc() if sys.exc_info()[0] is not None else ""
+    sys.stderr.write(f"fempm: rank {comm.rank} of {comm.size} failed; aborting all ranks\n{message}\n{trace}")
+    sys.stderr.flush()
+    time.sleep(GRACE)  # mpiexec forwards the message before MPI_Abort ends the job (else it may be lost)
+    comm.Abort(1)
+    raise SystemExit(1)  # not reached: Abort does not return
 
 
 @contextlib.contextmanager
@@ -33,13 +56,42 @@ def abort_on_error(comm=None):
     ranks with exit code 1; on one rank it propagates. ``SystemExit`` passes through."""
     try:
         yield
-    except (Exception, KeyboardInterrupt):
+    except (Exception, KeyboardInterrupt) as e:
         from mpi4py import MPI
 
         comm = comm or MPI.COMM_WORLD
         if comm.size == 1:
             raise
-        sys.stderr.write(f"fempm: rank {comm.rank} of {comm.size} failed; aborting all ranks\n{traceback.format_exc()}")
-        sys.stderr.flush()
-        time.sleep(GRACE)  # mpiexec forwards the message before MPI_Abort ends the job (else it may be lost)
-        comm.Abort(1)
+        abort(comm, f"{type(e).__name__}: {e}")
+
+
+class FailureAgreement:
+    """Whether a failure on this rank is every rank's.
+
+    Made collectively (it duplicates ``comm``, so that its barrier can never match a
+    collective call of the computation); then a rank that caught an exception calls
+    :meth:`everyone`: a non-blocking barrier that completes only if every rank calls it
+    within ``timeout`` seconds, as ranks that raise alike do. A rank whose failure is its own
+    finds the others absent (they wait in a collective call of ``comm``) and should
+    :func:`abort`. Ranks must call :meth:`everyone` the same number of times."""
+
+    def __init__(self, comm: MPI.Comm):
+        self.comm = comm.Dup() if comm.size > 1 else None
+
+    def everyone(self, timeout: float = AGREE_TIMEOUT) -> bool:
+        """True when every rank reaches this call within ``timeout`` (at once on one rank)."""
+        if self.comm is None:
+            return True
+        request = self.comm.Ibarrier()
+        deadline = time.monotonic() + timeout
+        while not request.Test():
+            if time.monotonic() > deadline:
+                return False
+            time.sleep(1e-3)
+        return True
+
+    def free(self) -> None:
+        """Release the duplicated communicator (collective; skip it after a one-rank failure)."""
+        if self.comm is not None:
+            self.comm.Free()
+            self.comm = None

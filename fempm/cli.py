@@ -275,7 +275,8 @@ def _execute(scene, out: Path, name: str, **kwargs) -> int:
     from mpi4py import MPI
 
     from fempm.checkpoint import CheckpointError, RunInterrupted
-    from fempm.io import OutputFolderError
+    from fempm.io import OutputFolderError, OutputWriteError
+    from fempm.location import OutsideMeshError
     from fempm.scene import run
     from fempm.stepping import SimulationError
     from fempm.transfer import SingularMassError
@@ -285,28 +286,35 @@ def _execute(scene, out: Path, name: str, **kwargs) -> int:
         run(scene, out, **kwargs)
     except (OutputFolderError, CheckpointError) as e:
         raise UsageError(f"fempm {name}: {e}") from None
-    except (SimulationError, SingularMassError) as e:
+    except (SimulationError, SingularMassError, OutsideMeshError) as e:
         if rank0:
             print(f"\nfempm run {name}: aborted: {e}\n(summary and the failing state in {out})", file=sys.stderr)
         return 3
+    except OutputWriteError as e:
+        if rank0:
+            print(f"\nfempm run {name}: failed: {e}\n(summary in {out})", file=sys.stderr)
+        return 1
     except RunInterrupted as e:
         if rank0:
             print(f"\nfempm run {name}: {e}; continue with: python -m fempm resume {out}", file=sys.stderr)
         return 128 + e.signum
     if rank0:
         saved = ", checkpoint/" if kwargs.get("checkpoint_every") or kwargs.get("resume") else ""
-        print(f"wrote {out}/summary.json, energies.csv, particles/, particles.pvd, grid_velocity*.pvd, grid_stress*.pvd{saved}")
+        print(f"wrote {out}/summary.json, energies.csv, particles.pvd, grid_velocity.pvd, grid_stress.pvd, particles/, "
+              f"grid/{saved}")
     return 0
 
 
 def _resume(args) -> int:
     """``python -m fempm resume OUT``: rebuild the scene from the checkpoint's command line and
     continue it (to ``--t-end`` if given)."""
-    from fempm.checkpoint import CheckpointError, manifest
+    from mpi4py import MPI
+
+    from fempm.checkpoint import CheckpointError, choose
 
     try:
-        data = manifest(args.out)
-    except (CheckpointError, OSError, ValueError) as e:
+        data = choose(args.out, MPI.COMM_WORLD)[1]
+    except (CheckpointError, OSError) as e:
         raise UsageError(f"fempm resume: {e}") from None
     rebuild = data.get("rebuild")
     if not rebuild:

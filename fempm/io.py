@@ -1,22 +1,37 @@
-"""Output as a run goes: energies CSV (flushed every row), particle frames as VTK XML point
-clouds written by every rank in parallel (:mod:`fempm.vtu`), grid velocity and stress with
-VTK XML as well (:class:`GridSeries`), and a JSON summary."""
+"""Output as a run goes: energies CSV (flushed every row), particle frames and grid fields as
+VTK XML time series written by every rank in parallel (:mod:`fempm.vtu`, :class:`FrameSeries`),
+and a JSON summary.
+
+A run's folder holds ``energies.csv``, ``summary.json``, the collections ``particles.pvd``,
+``grid_velocity.pvd`` and ``grid_stress.pvd``, and their pieces in ``particles/`` and ``grid/``.
+Every collection is rewritten with each frame, so that a run killed at any moment leaves series
+that ParaView reads; a continued run (:mod:`fempm.checkpoint`) drops what was written after its
+checkpoint and goes on with the same series, so that they equal the uninterrupted run's.
+
+Writing is collective: a rank that cannot write its piece makes every rank raise
+:class:`OutputWriteError` naming it, instead of leaving the others waiting.
+"""
 
 from __future__ import annotations
 
 import csv
 import json
+import os
 import shutil
+from collections.abc import Callable
 from pathlib import Path
 
 import dolfinx.fem
-import dolfinx.io
+import dolfinx.plot
 import numpy as np
 import numpy.typing as npt
 from mpi4py import MPI
 
 from fempm import vtu
 from fempm.particles import Particles
+
+__all__ = ["GRID_FIELDS", "OUTPUT_FILES", "FrameSeries", "GridField", "OutputFolderError", "OutputWriteError", "RunWriter",
+           "earlier_outputs", "make_folder", "write_json"]
 
 
 def _pad3(a: npt.NDArray) -> npt.NDArray:
@@ -30,9 +45,17 @@ class OutputFolderError(OSError):
     """The output folder cannot be created or written (raised on every rank alike)."""
 
 
+class OutputWriteError(OSError):
+    """Writing an output failed on some rank during a run (raised on every rank alike; the
+    message names the failing ranks and their errors)."""
+
+
+#: the grid fields a run can write (:attr:`fempm.scene.Scene.outputs`)
+GRID_FIELDS = ("grid_velocity", "grid_stress")
+
 #: what a run writes into its output folder (glob patterns)
-OUTPUT_FILES = ("summary.json", "energies.csv", "particles", "particles.pvd", "frames", "grid_velocity*", "grid_stress*",
-           "checkpoint", "checkpoint.old", "checkpoint.tmp")
+OUTPUT_FILES = ("summary.json", "energies.csv", "particles", "particles.pvd", "frames", "grid", "grid_velocity*",
+                "grid_stress*", "checkpoint", "checkpoint.prev", "checkpoint.old", "checkpoint.tmp")
 
 
 def earlier_outputs(folder: Path) -> list[Path]:
@@ -66,36 +89,122 @@ def make_folder(folder: Path, comm, *, keep: bool = True, overwrite: bool = Fals
         raise OutputFolderError(error)
 
 
-class GridSeries:
-    """A time series of one grid field in VTK XML (:class:`dolfinx.io.VTKFile`: a ``.pvd`` with
-    a ``.pvtu`` and a ``.vtu`` per rank and frame, read by ParaView and pyvista on a fresh
-    install). Fields of a Lagrange variant VTK cannot show point by point (Bernstein) are
-    interpolated into the standard Lagrange space of the same degree, which holds them exactly."""
+def write_json(path: Path, data: dict) -> None:
+    """``data`` as JSON into ``path``, atomically (a complete file or the one before; numpy
+    numbers as plain ones). Local: any rank may call it."""
+    path = Path(path)
+    tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
+    tmp.write_text(json.dumps(data, indent=2, default=float))
+    os.replace(tmp, path)
 
-    def __init__(self, V: dolfinx.fem.FunctionSpace, path: Path):
-        el = V.element.basix_element
-        name = Path(path).stem.split("_part")[0]
-        shape = V.value_shape
-        self._source = None
-        if V.element.interpolation_ident:
-            self.u = dolfinx.fem.Function(V, name=name)
-        else:
-            out = dolfinx.fem.functionspace(V.mesh, ("Lagrange", el.degree, tuple(shape)))
-            self.u = dolfinx.fem.Function(out, name=name)
+
+def _everywhere(comm: MPI.Comm, what: str, action: Callable[[], None], *, root_only: bool = False) -> None:
+    """``action`` on every rank (or rank 0 with ``root_only``), then an
+    :class:`OutputWriteError` on every rank if it failed on any. Collective."""
+    error = None
+    if not root_only or comm.rank == 0:
+        try:
+            action()
+        except OSError as e:
+            error = f"rank {comm.rank}: {e}"
+    errors = [e for e in comm.allgather(error) if e] if comm.size > 1 else [error] if error else []
+    if errors:
+        raise OutputWriteError(f"writing {what} failed ({'; '.join(errors)})")
+
+
+def _read_times(path: Path) -> list[tuple[int, float]]:
+    if not path.exists():
+        return []
+    return [(int(k), float(t)) for k, t in (line.split(",") for line in path.read_text().splitlines() if line)]
+
+
+class FrameSeries:
+    """A time series of one output in VTK XML: each rank's piece ``DIR/STEM_NNNNN_rRRRRR.vtu``
+    (``NNNNN`` the run's frame number), their index ``DIR/STEM_NNNNN.pvtu``, the collection
+    ``OUT/STEM.pvd`` and the frames' times ``times`` (CSV rows ``frame,t``; default
+    ``DIR/STEM_times.csv``). The collection is rewritten with every frame. The folder is made
+    at the first frame."""
+
+    def __init__(self, out: Path, folder: str, stem: str, comm: MPI.Comm, times: Path | None = None):
+        self.out, self.folder, self.stem, self.comm = Path(out), Path(out) / folder, stem, comm
+        self.times_path = times or self.folder / f"{stem}_times.csv"
+        self.frames = _read_times(self.times_path) if comm.rank == 0 else []  # (frame, time) written (rank 0)
+        self._made = False
+
+    def _name(self, frame: int) -> str:
+        return f"{self.stem}_{frame:05d}"
+
+    def write(self, frame: int, t: float, x: npt.NDArray, data: dict[str, npt.NDArray],
+              cells: tuple[npt.NDArray, npt.NDArray] | None = None) -> None:
+        """Frame ``frame`` at time ``t``: this rank's points ``x`` (n, 3), point ``data`` and
+        ``cells`` (:func:`fempm.vtu.write_piece`). Ranks without points write no piece (one piece
+        at least, rank 0's). Collective."""
+        name = self._name(frame)
+        if not self._made:  # the allgather after rank 0's mkdir: no rank writes into it before
+            _everywhere(self.comm, f"the folder {self.folder}", lambda: self.folder.mkdir(parents=True, exist_ok=True),
+                        root_only=True)
+            self._made = True
+        ranks = [r for r, c in enumerate(self.comm.allgather(len(x))) if c] or [0]  # ranks holding points
+
+        def piece():
+            if self.comm.rank in ranks:
+                vtu.write_piece(self.folder / f"{name}_r{self.comm.rank:05d}.vtu", x, data, cells)
+
+        _everywhere(self.comm, f"{self.stem} frame {frame}", piece)
+
+        def index():
+            vtu.write_index(self.folder / f"{name}.pvtu", [f"{name}_r{r:05d}.vtu" for r in ranks], x, data)
+            with open(self.times_path, "a", newline="") as fh:
+                fh.write(f"{frame},{float(t)!r}\n")  # a plain number, not np.float64(...)
+            self.frames.append((frame, float(t)))
+            self._collection()
+
+        _everywhere(self.comm, f"the index of {self.stem} frame {frame}", index, root_only=True)
+
+    def _collection(self) -> None:
+        vtu.write_collection(self.out / f"{self.stem}.pvd",
+                             [(t, f"{self.folder.name}/{self._name(k)}.pvtu") for k, t in self.frames])
+
+    def truncate(self, frames: int) -> None:
+        """Drop the frames numbered ``frames`` and later (a continued run's outputs after its
+        checkpoint) and rewrite the times and the collection; rank 0 only."""
+        self.frames = [(k, t) for k, t in _read_times(self.times_path) if k < frames]
+        if self.times_path.exists():
+            self.times_path.write_text("".join(f"{k},{t!r}\n" for k, t in self.frames))
+        for q in self.folder.glob(f"{self.stem}_*.*vtu"):
+            number = q.stem[len(self.stem) + 1:].split("_")[0]
+            if number.isdigit() and int(number) >= frames:
+                q.unlink()
+        if self.frames or (self.out / f"{self.stem}.pvd").exists():
+            self._collection()
+
+
+class GridField:
+    """What the VTK pieces of a Lagrange field of ``V`` need: this rank's cells and dof points
+    (:func:`dolfinx.plot.vtk_mesh`: VTK Lagrange cells of the space's degree) and its values
+    at them. A field of a variant whose dofs are not point values (Bernstein) is interpolated
+    into the standard Lagrange space of the same degree, which holds it exactly."""
+
+    def __init__(self, V: dolfinx.fem.FunctionSpace):
+        self.shape = tuple(V.value_shape)
+        self._source = self._target = None
+        if not V.element.interpolation_ident:
+            el = V.element.basix_element
+            self._target = dolfinx.fem.Function(dolfinx.fem.functionspace(V.mesh, ("Lagrange", el.degree, self.shape)))
             self._source = dolfinx.fem.Function(V)
-        self.file = dolfinx.io.VTKFile(V.mesh.comm, str(path), "w")
+            V = self._target.function_space
+        topology, types, self.points = dolfinx.plot.vtk_mesh(V)
+        self.cells = (topology.reshape(len(types), -1)[:, 1:], types)
 
-    def write(self, values: npt.NDArray, t: float) -> None:
-        """Write the field with local dof ``values`` (owned and ghost) at time ``t``; collective."""
-        if self._source is None:
-            self.u.x.array[:] = values
-        else:
-            self._source.x.array[:] = values
-            self.u.interpolate(self._source)
-        self.file.write_function(self.u, float(t))
-
-    def close(self) -> None:
-        self.file.close()
+    def values(self, local: npt.NDArray) -> npt.NDArray:
+        """The point data (points, 3) of a vector or (points, 9) of a tensor field from its
+        local dof values (owned and ghost, blocked); collective for a Bernstein field."""
+        if self._source is not None:
+            self._source.x.array[:] = np.ravel(local)
+            self._target.interpolate(self._source)
+            local = self._target.x.array
+        a = np.asarray(local).reshape(len(self.points), *self.shape)
+        return _pad3(a).reshape(len(a), -1)
 
 
 class RunWriter:
@@ -104,11 +213,9 @@ class RunWriter:
     def __init__(self, folder: Path, particles: Particles, V: dolfinx.fem.FunctionSpace | None = None,
                  *, png: bool = False, resume: dict | None = None, overwrite: bool = True):
         """``resume``: the :meth:`state` of the writer of the run being continued (from its
-        checkpoint): the energies and frames written after it are dropped, the frames go on
-        from its count, and the grid frames go into ``grid_velocity_partK.pvd`` (and
-        ``grid_stress_partK.pvd``) for the K-th continuation.
-        Otherwise the outputs of an earlier run in ``folder`` are removed with ``overwrite``,
-        else refused (:func:`make_folder`)."""
+        checkpoint): the energies and frames written after it are dropped and the series go on
+        from its frame count. Otherwise the outputs of an earlier run in ``folder`` are removed
+        with ``overwrite``, else refused (:func:`make_folder`). Collective."""
         self.folder = Path(folder)
         self.png = png
         x = particles.mesh.geometry.x
@@ -117,62 +224,78 @@ class RunWriter:
         particles.comm.Allreduce(MPI.IN_PLACE, hi, op=MPI.MAX)
         self.bounds = np.array([lo, hi])
         self.comm = particles.comm
-        self.frame = 0
+        self.frame = 0  # frames written (particles, grid fields or both: one numbering)
         self.rows = 0  # energies.csv rows written
-        self.part = 0  # continuations of the run
-        self._times: list[tuple[int, float]] = []  # (frame, time) of the frames written (rank 0)
         self._csv = None
-        self._stress_vtx = None
         make_folder(self.folder, self.comm, keep=resume is not None, overwrite=overwrite)
+        self._particles = FrameSeries(self.folder, "particles", "particles", self.comm,
+                                      times=self.folder / "particles" / "times.csv")
+        self._grid = {stem: FrameSeries(self.folder, "grid", stem, self.comm) for stem in GRID_FIELDS}
+        self._fields: dict[str, GridField] = {}  # made on first use: only the fields written
+        self.V = V
         if resume is not None:
-            self.frame, self.rows, self.part = int(resume["frame"]), int(resume["rows"]), int(resume["part"]) + 1
+            self.frame, self.rows = int(resume["frame"]), int(resume["rows"])
             if self.comm.rank == 0:
                 self._truncate()
             self.comm.Barrier()
-        self.V = V
-        self._velocity: GridSeries | None = None  # made on first use: only the fields written
-        self._stress: GridSeries | None = None
-
-    def _grid_name(self, stem: str) -> str:
-        return f"{stem}.pvd" if self.part == 0 else f"{stem}_part{self.part}.pvd"
 
     def _truncate(self) -> None:
-        """Drop what the continued run wrote after its checkpoint: energies.csv rows, frame
-        times and particle frames."""
-        times = self.folder / "particles" / "times.csv"
-        for path, keep in ((self.folder / "energies.csv", 1 + self.rows), (times, self.frame)):
-            if path.exists():
-                path.write_text("".join(path.read_text().splitlines(keepends=True)[:keep]))
-        if times.exists():
-            self._times = [(int(k), float(tk)) for k, tk in (line.split(",") for line in times.read_text().splitlines())]
-        for frame in (self.folder / "particles").glob("particles_*.*vtu"):
-            if int(frame.stem.split("_")[1]) >= self.frame:
-                frame.unlink()
+        """Drop what the continued run wrote after its checkpoint: energies.csv rows, frames of
+        every series and PNG frames (rank 0)."""
+        energies = self.folder / "energies.csv"
+        if energies.exists():
+            lines = energies.read_bytes().split(b"\n")
+            energies.write_bytes(b"".join(line + b"\n" for line in lines[: 1 + self.rows] if line))
+        for series in (self._particles, *self._grid.values()):
+            series.truncate(self.frame)
+        for png in (self.folder / "frames").glob("frame_*.png"):
+            if int(png.stem.split("_")[1]) >= self.frame:
+                png.unlink()
 
     def state(self) -> dict:
         """What a continuation needs (:mod:`fempm.checkpoint`)."""
-        return {"frame": self.frame, "rows": self.rows, "part": self.part}
+        return {"frame": self.frame, "rows": self.rows}
 
     def energies(self, row: dict) -> None:
+        """One row of ``energies.csv`` (rank 0 writes; LF line ends; flushed)."""
         self.rows += 1
         if self.comm.rank != 0:
             return
         if self._csv is None:
             path = self.folder / "energies.csv"
-            append = self.rows > 0 and path.exists()
+            append = path.exists() and path.stat().st_size > 0  # a continued run's
             self._file = open(path, "a" if append else "w", newline="")
-            self._csv = csv.DictWriter(self._file, fieldnames=list(row))
+            self._csv = csv.DictWriter(self._file, fieldnames=list(row), lineterminator="\n")
             if not append:
                 self._csv.writeheader()
         self._csv.writerow(row)
         self._file.flush()
 
-    def particles(self, particles: Particles, t: float) -> None:
-        """A particle frame at time ``t``, written in parallel (:mod:`fempm.vtu`): each rank's
-        piece ``particles/particles_NNNNN_rRRRRR.vtu``, their index ``particles_NNNNN.pvtu``
-        and the time collection ``particles.pvd``; the frame's time in ``particles/times.csv``.
-        Point data: velocity, stress (9 components), J, id, body and every other scalar or vector
-        field (the laws' internal variables, ``volume0``, ``X0``). Collective."""
+    def write_frame(self, t: float, particles: Particles | None = None, velocity: npt.NDArray | None = None,
+                    stress: dolfinx.fem.Function | None = None) -> None:
+        """One frame at time ``t`` of what is given: the particles, the grid velocity (local
+        dof values of the writer's space) and the grid stress. Collective; a frame that fails
+        keeps its number (the next frame takes the next one)."""
+        try:
+            if particles is not None:
+                self._write_particles(particles, t)
+            if velocity is not None and self.V is not None:
+                self._write_grid("grid_velocity", self.V, velocity, t)
+            if stress is not None:
+                stress.x.scatter_forward()
+                self._write_grid("grid_stress", stress.function_space, stress.x.array, t)
+        finally:
+            self.frame += 1
+
+    def _write_grid(self, stem: str, V: dolfinx.fem.FunctionSpace, values: npt.NDArray, t: float) -> None:
+        if stem not in self._fields:
+            self._fields[stem] = GridField(V)
+        field = self._fields[stem]
+        self._grid[stem].write(self.frame, t, field.points, {stem: field.values(values)}, field.cells)
+
+    def _write_particles(self, particles: Particles, t: float) -> None:
+        """The particle frame: point data velocity, stress (9 components), J, id, body and every
+        other scalar or vector field (the laws' internal variables, ``volume0``, ``X0``)."""
         f = particles.fields
         n = len(particles)
         x = _pad3(particles.x)
@@ -181,17 +304,7 @@ class RunWriter:
         for name, a in f.items():  # the laws' internal variables and other per-particle fields
             if name not in ("v", "sigma", "F", "body") and a.ndim in (1, 2) and a.dtype == np.float64:
                 data[name] = a
-        folder, stem = self.folder / "particles", f"particles_{self.frame:05d}"
-        ranks = [r for r, c in enumerate(self.comm.allgather(n)) if c] or [0]  # ranks holding particles
-        if self.comm.rank in ranks:
-            vtu.write_piece(folder / f"{stem}_r{self.comm.rank:05d}.vtu", x, data)
-        if self.comm.rank == 0:
-            vtu.write_index(folder / f"{stem}.pvtu", [f"{stem}_r{r:05d}.vtu" for r in ranks], x, data)
-            with open(folder / "times.csv", "a") as fh:
-                fh.write(f"{self.frame},{float(t)!r}\n")  # a plain number, not np.float64(...)
-            self._times.append((self.frame, float(t)))
-            vtu.write_collection(self.folder / "particles.pvd",
-                                 [(tk, f"particles/particles_{k:05d}.pvtu") for k, tk in self._times])
+        self._particles.write(self.frame, t, x, data)
         if self.png:  # a picture of all particles: gathered
             parts = self.comm.gather((x, np.linalg.norm(data["velocity"], axis=1)), root=0)
             if self.comm.rank == 0:
@@ -200,32 +313,14 @@ class RunWriter:
                 plot_particle_frame(np.concatenate([q[0] for q in parts]), np.concatenate([q[1] for q in parts]),
                                     self.folder / "frames" / f"frame_{self.frame:05d}.png", title=f"t = {t:.4g}",
                                     label="|velocity|", bounds=self.bounds)
-        self.frame += 1
-
-    def grid(self, v: npt.NDArray | None, t: float, stress: dolfinx.fem.Function | None = None) -> None:
-        """Grid velocity (``grid_velocity.pvd``) and grid stress (``grid_stress.pvd``), those
-        given, at time ``t`` (:class:`GridSeries`). Collective."""
-        if self.V is None:
-            return
-        if v is not None:
-            if self._velocity is None:
-                self._velocity = GridSeries(self.V, self.folder / self._grid_name("grid_velocity"))
-            self._velocity.write(v.ravel(), t)
-        if stress is not None:
-            if self._stress is None:
-                self._stress = GridSeries(stress.function_space, self.folder / self._grid_name("grid_stress"))
-            self._stress.write(stress.x.array, t)
 
     def summary(self, data: dict) -> None:
-        """``summary.json``, written by rank 0; every rank returns once it is on disk (a script
-        on any rank may read it next). Collective."""
-        if self.comm.rank == 0:
-            (self.folder / "summary.json").write_text(json.dumps(data, indent=2, default=float))
-        self.comm.barrier()
+        """``summary.json``, written by rank 0 (atomically); every rank returns once it is on
+        disk (a script on any rank may read it next). Collective."""
+        _everywhere(self.comm, "summary.json", lambda: write_json(self.folder / "summary.json", data), root_only=True)
 
     def close(self) -> None:
-        for series in (self._velocity, self._stress):
-            if series is not None:
-                series.close()
-        if self.comm.rank == 0 and self._csv is not None:
+        """Close the energies file (local: any rank may call it, also after a failure)."""
+        if self._csv is not None:
             self._file.close()
+            self._csv = None

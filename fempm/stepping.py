@@ -371,6 +371,8 @@ class ExplicitSolver:
                                  "give dt or dt_max")
         elif dt > stable / self.options.cfl:
             self._fail(f"time step {dt:.3g} exceeds the stability limit {stable / self.options.cfl:.3g} (CFL > 1)")
+        if not self.t + dt > self.t:  # e.g. a particle at 1e200 m/s: the stable step underflows
+            self._fail(f"time step collapse: dt = {dt:.3g} does not advance t = {self.t:.6g}")
         return dt
 
     def _check_bodies(self) -> None:
@@ -514,9 +516,12 @@ class ExplicitSolver:
         return sum(vd[:, a, :, None] * G[:, a, None, :] for a in range(G.shape[1]))
 
     def _check_finite(self) -> None:
+        """Positions, stresses and the kinetic energy density :math:`v_p \\cdot v_p` (hence the
+        velocities) finite at every particle, else a :class:`SimulationError` (collective)."""
         p = self.particles
         f = p.fields
-        bad = ~(np.isfinite(p.x).all(1) & np.isfinite(f["v"]).all(1) & np.isfinite(f["sigma"]).all((1, 2)))
+        speed2 = np.einsum("nd,nd->n", f["v"], f["v"]) if len(p) else np.zeros(0)
+        bad = ~(np.isfinite(p.x).all(1) & np.isfinite(speed2) & np.isfinite(f["sigma"]).all((1, 2)))
         if p.comm.allreduce(int(bad.sum())):
             self._fail(f"non-finite state at particle(s) {self._ids(bad)}")
 

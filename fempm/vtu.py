@@ -1,8 +1,9 @@
-"""Particle frames as VTK XML point clouds, written in parallel: each rank writes its own
-piece (``.vtu``, an UnstructuredGrid of vertex cells with the point data inline, base64
-binary), rank 0 the index of the pieces (``.pvtu``) and the time collection (``.pvd``). Nothing
-is gathered; ParaView and pyvista (``pyvista.read``, ``pyvista.PVDReader``) read all three on a
-fresh install (the VTK XML readers are in every VTK build)."""
+"""Frames as VTK XML, written in parallel: each rank writes its own piece (``.vtu``, an
+UnstructuredGrid with the point data inline, base64 binary: the particles as vertex cells, a
+grid field on the rank's cells), rank 0 the index of the pieces (``.pvtu``) and the time
+collection (``.pvd``). Nothing is gathered; ParaView and pyvista (``pyvista.read``,
+``pyvista.PVDReader``) read all three on a fresh install (the VTK XML readers are in every VTK
+build)."""
 
 from __future__ import annotations
 
@@ -37,15 +38,24 @@ def _declare(a: npt.NDArray, name: str | None = None) -> str:
     return f'<PDataArray type="{_TYPES[np.asarray(a).dtype]}"{label} NumberOfComponents="{comps}"/>\n'
 
 
-def write_piece(path: Path, x: npt.NDArray, data: dict[str, npt.NDArray]) -> None:
-    """One rank's points ``x`` (n, 3) with point ``data`` (n,) or (n, k) as a ``.vtu``."""
+def write_piece(path: Path, x: npt.NDArray, data: dict[str, npt.NDArray],
+                cells: tuple[npt.NDArray, npt.NDArray] | None = None) -> None:
+    """One rank's points ``x`` (n, 3) with point ``data`` (n,) or (n, k) as a ``.vtu``; without
+    ``cells`` a vertex per point (a point cloud), else ``cells = (connectivity (c, k), VTK
+    types (c,))``: c cells of k points each, in VTK's node order (:func:`dolfinx.plot.vtk_mesh`)."""
     n = len(x)
+    if cells is None:
+        conn, offsets, types = np.arange(n, dtype=np.int64), np.arange(1, n + 1, dtype=np.int64), np.ones(n, np.uint8)
+    else:
+        topology, kinds = cells
+        conn = np.asarray(topology, dtype=np.int64).ravel()
+        offsets = np.arange(1, len(topology) + 1, dtype=np.int64) * np.shape(topology)[1]
+        types = np.asarray(kinds, dtype=np.uint8)
     out = [_HEADER.format("UnstructuredGrid"), "<UnstructuredGrid>\n",
-           f'<Piece NumberOfPoints="{n}" NumberOfCells="{n}">\n<PointData>\n']
+           f'<Piece NumberOfPoints="{n}" NumberOfCells="{len(types)}">\n<PointData>\n']
     out += [_array(a, name) for name, a in data.items()]
     out += ["</PointData>\n<Points>\n", _array(np.asarray(x, dtype=np.float64)), "</Points>\n<Cells>\n",
-            _array(np.arange(n, dtype=np.int64), "connectivity"), _array(np.arange(1, n + 1, dtype=np.int64), "offsets"),
-            _array(np.ones(n, dtype=np.uint8), "types"),  # VTK_VERTEX
+            _array(conn, "connectivity"), _array(offsets, "offsets"), _array(types, "types"),
             "</Cells>\n</Piece>\n</UnstructuredGrid>\n</VTKFile>\n"]
     Path(path).write_text("".join(out))
 

@@ -296,10 +296,12 @@ def _g2p_kernel(cell: str, blend: bool, kinematics: bool, move: bool, remap: boo
                     linear_elastic_at(F, p, D, lam[body[p]], mu[body[p]], sigma)
             if move:
                 ok = True
+                speed2 = 0.0
                 for j in range(D):  # the stress of the compiled laws is finite where J is
                     x[p, j] += dt * (v[p, j] if by_particle else vg[j])
-                    ok = ok and np.isfinite(x[p, j]) and np.isfinite(v[p, j])
-                if not ok:
+                    ok = ok and np.isfinite(x[p, j])
+                    speed2 += v[p, j] * v[p, j]
+                if not (ok and np.isfinite(speed2)):  # x or v (v.v: the kinetic energy)
                     nonfinite += 1
                 out = not inside_after_pull_back(x, p, x0, K, c, SIMPLEX, D, tol, X)
                 if out:  # the neighbours, while their geometry is in cache

@@ -194,8 +194,8 @@ def g2p_kernel(simplex: bool, blend: bool, kinematics: bool, move: bool, remap: 
                 y0 = x[p, 0] + dt * (v[p, 0] if by_particle else vg0)
                 y1 = x[p, 1] + dt * (v[p, 1] if by_particle else vg1)
                 x[p, 0], x[p, 1] = y0, y1
-                if not (np.isfinite(y0) and np.isfinite(y1) and np.isfinite(v[p, 0]) and np.isfinite(v[p, 1])):
-                    nonfinite += 1  # the stress of the compiled laws is finite where J is
+                if not (np.isfinite(y0) and np.isfinite(y1) and np.isfinite(v[p, 0] * v[p, 0] + v[p, 1] * v[p, 1])):
+                    nonfinite += 1  # x or v (v.v: the kinetic energy); the compiled laws' stress is finite where J is
                 e0, e1 = y0 - x0[c, 0], y1 - x0[c, 1]
                 r0 = K[c, 0, 0] * e0 + K[c, 0, 1] * e1
                 r1 = K[c, 1, 0] * e0 + K[c, 1, 1] * e1

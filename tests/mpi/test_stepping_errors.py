@@ -102,3 +102,47 @@ def test_unknown_domain_and_cpdi2_without_corners_are_errors():
     solver = block_scene(options=StepOptions(domain="cpdi2")).solver()  # particles without corners
     with pytest.raises(ValueError, match="CPDI2 needs particle corners"):
         solver.step()
+
+
+#: the step implementations a bare step() loop can take: the compiled lumped and consistent
+#: steps, the generic step (compiled=False) and the contact step
+STEPS = {"lumped": dict(options=StepOptions()), "consistent": dict(options=StepOptions(mass="consistent")),
+         "generic": dict(options=StepOptions(), compiled=False),
+         "gimp": dict(options=StepOptions(domain="gimp"))}
+
+
+def _bare_solver(kind: str):
+    from fempm.stepping import ExplicitSolver
+
+    scene = block_scene()
+    V = scene.space()
+    opts = STEPS[kind]
+    return ExplicitSolver(V, scene.particles, scene.materials, options=opts["options"],
+                          compiled=opts.get("compiled"))
+
+
+@pytest.mark.parametrize("kind", sorted(STEPS))
+def test_a_bare_step_refuses_a_particle_at_1e200_metres_per_second(kind):
+    """|v|^2 overflows: the kinetic energy is inf and the stable step underflows to 0. Set
+    before the first step and between steps (the arrays the step already checked, changed in
+    place), each step implementation refuses it instead of stepping on with t = 0."""
+    for when in ("before", "between"):
+        solver = _bare_solver(kind)
+        if when == "between":
+            solver.step()
+        t = solver.t
+        fast = solver.particles.ids == comm.allreduce(int(solver.particles.ids.min(initial=10**9)), op=MPI.MIN)
+        solver.particles.fields["v"][fast] = [1e200, 0.0]
+        with pytest.raises(SimulationError, match="non-finite state|time step collapse"):
+            for _ in range(3):
+                solver.step()
+        assert solver.t == t
+
+
+@pytest.mark.parametrize("kind", sorted(STEPS))
+def test_a_bare_step_refuses_an_inverted_particle_made_between_steps(kind):
+    solver = _bare_solver(kind)
+    solver.step()
+    solver.particles.fields["F"][:1, 0, :] *= -1.0  # in place: J < 0 on the first particle of each rank
+    with pytest.raises(SimulationError, match=r"inverted deformation J <= 0|non-finite"):
+        solver.step()
