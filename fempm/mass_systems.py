@@ -82,9 +82,10 @@ class _System:
     b: PETSc.Vec | None = None
     keep: npt.NDArray[np.bool_] | None = None  # this step's dofs solved for (supported and free)
     refresh: bool = True  # set the preconditioner up from the current values at the next solve
-    fresh_iterations: int = 0  # KSP iterations with a fresh preconditioner
+    fresh_iterations: int = 0  # KSP iterations of the first solve (of > 0) with a fresh preconditioner
     values: npt.NDArray | None = None  # the matrix's COO values of this step
     factored: npt.NDArray | None = None  # the values its preconditioner was set up from
+    current: bool = False  # the matrix holds ``values`` (not yet ``factored``)
 
 
 class ConsistentSystems:
@@ -205,6 +206,7 @@ class ConsistentSystems:
             s.matrix = fpetsc.coo_pattern(self.sub_map, rows, cols, lgmap)
             s.x, s.b = s.matrix.createVecs()
             s.values = s.factored = None
+            s.current = False
             if s.ksp is not None:
                 s.ksp.reset()  # new sizes
                 s.ksp.setOperators(s.matrix)
@@ -259,6 +261,18 @@ class ConsistentSystems:
         kc.coo_values(self._blocks, self.pattern_cells, self.cell_dofs, s.keep, self.lump, self.slot,
                       self.owned_parent, self.diagonal_slot, s.values)
         s.matrix.setValuesCOO(s.values, addv=PETSc.InsertMode.INSERT_VALUES)
+        s.current = True
+
+    def _set_up(self, s: _System) -> None:
+        """The preconditioner of ``s`` set up now from the matrix's values, blocks included,
+        then reused until the next refresh; the values are kept as ``s.factored``. A matrix
+        whose values it was already set up from is left as it is (PETSc would too)."""
+        if s.current or s.factored is None:
+            with fpetsc.temporary_options(self.prefix, self.ksp_options):  # a set-up reads the sub-block options
+                fpetsc.set_up_now(s.ksp)
+            s.factored, s.values = s.values, s.factored
+            s.current = False
+        s.refresh, s.fresh_iterations = False, 0
 
     # -- solves -------------------------------------------------------------------------------
     def solve(self, rhs: npt.NDArray, col: int, out: npt.NDArray, guess: npt.NDArray | None = None) -> None:
@@ -271,7 +285,8 @@ class ConsistentSystems:
         systems = self._all()
         for i, own in enumerate(self.systems):
             s = systems[self._matrix_of[i]]
-            s.ksp.getPC().setReusePreconditioner(not s.refresh)
+            if s.refresh:
+                self._set_up(s)
             most = 0
             for c in own.components:
                 kc.to_system(rhs, col + c, sel, s.keep, s.b.array)
@@ -279,9 +294,7 @@ class ConsistentSystems:
                     s.x.set(0.0)
                 else:
                     kc.to_system(guess, c, sel, s.keep, s.x.array)
-                with fpetsc.temporary_options(self.prefix, self.ksp_options) if s.refresh else contextlib.nullcontext():
-                    # a fresh set-up reads the sub-block options (bjacobi, asm)
-                    reason = fpetsc.solve_from(s.ksp, s.b, s.x, guess is not None)
+                reason = fpetsc.solve_from(s.ksp, s.b, s.x, guess is not None)
                 if reason < 0:
                     from fempm.stepping import SimulationError
 
@@ -291,9 +304,8 @@ class ConsistentSystems:
                 self.iterations.append(s.ksp.getIterationNumber())
                 most = max(most, self.iterations[-1])
                 kc.from_system(s.x.array, sel, c, out)
-            if s.refresh:  # set up from this step's values: kept (a checkpoint holds them)
-                s.refresh, s.fresh_iterations = False, most
-                s.factored, s.values = s.values, s.factored
+            if s.fresh_iterations == 0:  # the first solve (of any iterations) since the set-up
+                s.fresh_iterations = most
             elif most > REFRESH_GROWTH * s.fresh_iterations + 2:
                 s.refresh = True
 
@@ -329,12 +341,11 @@ class ConsistentSystems:
         self.rebuilds = int(counters[0])
         for i, s in enumerate(systems):
             values = state.get(f"factored{i}")
-            if values is not None and s.ksp is not None:
-                s.matrix.setValuesCOO(values, addv=PETSc.InsertMode.INSERT_VALUES)
-                with fpetsc.temporary_options(self.prefix, self.ksp_options):
-                    s.ksp.setUp()
-                    s.ksp.setUpOnBlocks()  # block methods factor their blocks at the first solve
-                s.factored = np.asarray(values)  # read from the checkpoint: no other owner
+            if values is not None and s.ksp is not None:  # as the run set it up (_set_up)
+                s.values = np.array(values)
+                s.matrix.setValuesCOO(s.values, addv=PETSc.InsertMode.INSERT_VALUES)
+                s.current = True
+                self._set_up(s)
             s.refresh = bool(counters[1 + i])
             s.fresh_iterations = int(counters[1 + n + i])
         if "occupied" in state:

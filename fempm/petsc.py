@@ -110,6 +110,39 @@ def solve_from(ksp: PETSc.KSP, b: PETSc.Vec, x: PETSc.Vec, warm: bool) -> int:
     return reason
 
 
+def sub_ksps(ksp: PETSc.KSP) -> list[PETSc.KSP]:
+    """The KSPs of a block preconditioner's blocks (block Jacobi, additive Schwarz) once it is
+    set up, else none."""
+    pc = ksp.getPC()
+    try:
+        if pc.getType() == PETSc.PC.Type.BJACOBI:
+            return list(pc.getBJacobiSubKSP())
+        if pc.getType() == PETSc.PC.Type.ASM:
+            return list(pc.getASMSubKSP())
+    except PETSc.Error:  # not set up yet
+        pass
+    return []
+
+
+def set_up_now(ksp: PETSc.KSP) -> None:
+    """Set the preconditioner of ``ksp`` up from its operator's current values, blocks included,
+    and reuse it from then on (until the next call): its factors are then known to be those of
+    these values, and the same whether the KSP was set up before or is new (a resumed run).
+
+    ``KSPSetUp`` of a KSP set up before does not set its preconditioner up again, hence
+    ``PCSetUp``; a solve with reuse switched off does not do it either: a solve that converges
+    at once never applies the preconditioner, block methods factor their blocks when they are
+    first applied, and blocks of a preconditioner that was reused keep being reused."""
+    pc = ksp.getPC()
+    pc.setReusePreconditioner(False)
+    ksp.setUp()
+    pc.setUp()
+    for sub in sub_ksps(ksp):
+        sub.getPC().setReusePreconditioner(False)
+    ksp.setUpOnBlocks()
+    pc.setReusePreconditioner(True)
+
+
 def converged_reason_name(reason: int) -> str:
     names = {v: k for k, v in vars(PETSc.KSP.ConvergedReason).items() if isinstance(v, int)}
     return names.get(reason, str(reason))

@@ -372,6 +372,7 @@ class ExplicitSolver:
         elif dt > stable / self.options.cfl:
             self._fail(f"time step {dt:.3g} exceeds the stability limit {stable / self.options.cfl:.3g} (CFL > 1)")
         if not self.t + dt > self.t:  # e.g. a particle at 1e200 m/s: the stable step underflows
+            self._check_finite()  # collective: names a non-finite velocity first
             self._fail(f"time step collapse: dt = {dt:.3g} does not advance t = {self.t:.6g}")
         return dt
 

@@ -156,3 +156,46 @@ def test_command_line_checkpoint_resume_and_sigterm(tmp_path):
     assert "interrupted by SIGTERM" in err and f"python -m fempm resume {slow}" in err
     assert json.loads((slow / "summary.json").read_text())["status"] == "interrupted"
     assert 0.0 < manifest(slow)["t"] < 50.0
+
+
+def _command(ranks: int, *args: str) -> list[str]:
+    """``python -m fempm ARGS``, under ``mpiexec -n ranks`` for more than one rank."""
+    mpiexec = [str(Path(sys.executable).with_name("mpiexec")), "-n", str(ranks)] if ranks > 1 else []
+    return [*mpiexec, sys.executable, "-m", "fempm", *args]
+
+
+def _terminated(cmd: list[str], out: Path, rows: int) -> subprocess.CompletedProcess:
+    """Start ``cmd`` and send SIGTERM once ``out/energies.csv`` holds ``rows`` rows (a step
+    boundary nobody chose: wherever the run is then)."""
+    proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    deadline = time.monotonic() + 300
+    energies = out / "energies.csv"
+    while proc.poll() is None and time.monotonic() < deadline:
+        if energies.exists() and energies.read_bytes().count(b"\n") > rows:
+            break
+        time.sleep(0.02)
+    proc.send_signal(signal.SIGTERM)
+    stdout, stderr = proc.communicate(timeout=300)
+    return subprocess.CompletedProcess(cmd, proc.returncode, stdout, stderr)
+
+
+@pytest.mark.skipif(comm.size > 1, reason="starts its own processes")
+@pytest.mark.parametrize("ranks", [1, 2])
+@pytest.mark.parametrize("mass", ["lumped", "consistent"])
+def test_sigterm_then_resume_writes_what_the_uninterrupted_run_writes(tmp_path, mass, ranks):
+    """`run` stopped by SIGTERM wherever it is, then `resume`: energies.csv is equal byte for
+    byte to the uninterrupted run's (cmp), and so is every other output (the particle frames,
+    the grid series, the collections, the summary's totals): the frame of the interrupted
+    state is dropped on resume."""
+    args = ["run", "disks", "--cells", "24", "--t-end", "3", "--frames", "10", "--mass", mass]
+    whole, parts = tmp_path / "whole", tmp_path / "parts"
+    r = subprocess.run(_command(ranks, *args, "--out", str(whole)), capture_output=True, text=True, timeout=600)
+    assert r.returncode == 0, r.stderr
+    r = _terminated(_command(ranks, *args, "--out", str(parts)), parts, rows=40)
+    assert r.returncode == 143 and "interrupted by SIGTERM" in r.stderr, r.stderr
+    stopped = manifest(parts)
+    assert 40 <= stopped["step_count"] < json.loads((whole / "summary.json").read_text())["steps"]
+    r = subprocess.run(_command(ranks, "resume", str(parts)), capture_output=True, text=True, timeout=600)
+    assert r.returncode == 0, r.stderr
+    assert subprocess.run(["cmp", str(whole / "energies.csv"), str(parts / "energies.csv")]).returncode == 0
+    assert_same_outputs(parts, whole)
