@@ -199,3 +199,151 @@ def test_sigterm_then_resume_writes_what_the_uninterrupted_run_writes(tmp_path, 
     assert r.returncode == 0, r.stderr
     assert subprocess.run(["cmp", str(whole / "energies.csv"), str(parts / "energies.csv")]).returncode == 0
     assert_same_outputs(parts, whole)
+
+
+@pytest.mark.skipif(comm.size > 1, reason="starts its own processes")
+def test_sigkill_then_resume_writes_what_the_uninterrupted_run_writes(tmp_path):
+    """Killed with SIGKILL between two checkpoints: the collections (particles.pvd,
+    grid_velocity.pvd, grid_stress.pvd) are readable as written so far, and after `resume`
+    every output equals the uninterrupted run's (what was written after the checkpoint is
+    dropped)."""
+    args = ["run", "disks", "--cells", "24", "--t-end", "3", "--frames", "20", "--checkpoint-every", "25"]
+    whole, parts = tmp_path / "whole", tmp_path / "parts"
+    assert subprocess.run(_command(1, *args, "--out", str(whole)), capture_output=True, timeout=600).returncode == 0
+    proc = subprocess.Popen(_command(1, *args, "--out", str(parts)), stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    deadline = time.monotonic() + 300
+    while proc.poll() is None and time.monotonic() < deadline:
+        if (parts / "checkpoint").exists() and manifest(parts)["step_count"] >= 50 and \
+                (parts / "energies.csv").read_bytes().count(b"\n") > 62:
+            break
+        time.sleep(0.01)
+    proc.kill()
+    proc.wait()
+    assert proc.returncode == -signal.SIGKILL
+    for name in ("particles", "grid_velocity", "grid_stress"):  # the series so far, complete
+        pvd = (parts / f"{name}.pvd").read_text()
+        assert pvd.endswith("</VTKFile>\n") and pvd.count("<DataSet") >= 2
+    r = subprocess.run(_command(1, "resume", str(parts)), capture_output=True, text=True, timeout=600)
+    assert r.returncode == 0, r.stderr
+    assert_same_outputs(parts, whole)
+
+
+def _damage(folder: Path, kind: str) -> str:
+    """Damage the checkpoint ``folder`` as ``kind`` says; returns what the message must name."""
+    rank_file = folder / "rank_00000.npz"
+    if kind == "truncated":
+        data = rank_file.read_bytes()
+        rank_file.write_bytes(data[: len(data) // 2])
+        return "rank_00000.npz is truncated"
+    if kind == "corrupted":
+        data = bytearray(rank_file.read_bytes())
+        data[len(data) // 2] ^= 0xFF
+        rank_file.write_bytes(bytes(data))
+        return "rank_00000.npz is corrupted"
+    if kind == "missing rank file":
+        rank_file.unlink()
+        return "rank_00000.npz is missing"
+    if kind == "manifest not JSON":
+        (folder / "manifest.json").write_text("{ this is not JSON")
+        return "manifest.json is not JSON"
+    if kind == "manifest without keys":
+        data = json.loads((folder / "manifest.json").read_text())
+        del data["files"], data["monitor"]
+        (folder / "manifest.json").write_text(json.dumps(data))
+        return "manifest.json lacks the key(s) files, monitor"
+    raise ValueError(kind)
+
+
+DAMAGES = ("truncated", "corrupted", "missing rank file", "manifest not JSON", "manifest without keys")
+
+
+@pytest.mark.skipif(comm.size > 1, reason="starts its own processes")
+def test_a_damaged_checkpoint_falls_back_on_the_one_before_or_is_one_clear_line(tmp_path):
+    """Each damage of the newest checkpoint: `resume` says which file is damaged and how,
+    continues from checkpoint.prev, and writes the energies of the uninterrupted run to the
+    new end. Both damaged: exit 2 and one line naming the file, no traceback."""
+    import shutil
+
+    cmd = ["run", "disks", "--cells", "10", "--checkpoint-every", "10"]
+    ran = tmp_path / "ran"
+    r = subprocess.run(_command(1, *cmd, "--t-end", "0.5", "--out", str(ran)), capture_output=True, text=True,
+                       timeout=300)
+    assert r.returncode == 0, r.stderr
+    previous = json.loads((ran / "checkpoint.prev" / "manifest.json").read_text())
+    assert previous["step_count"] < manifest(ran)["step_count"] and (ran / "checkpoint.prev").is_dir()
+    whole = tmp_path / "whole"
+    assert subprocess.run(_command(1, *cmd, "--t-end", "0.6", "--out", str(whole)), capture_output=True,
+                          timeout=300).returncode == 0
+    for kind in DAMAGES:
+        out = tmp_path / kind.replace(" ", "-")
+        shutil.copytree(ran, out)
+        named = _damage(out / "checkpoint", kind)
+        r = subprocess.run(_command(1, "resume", str(out), "--t-end", "0.6"), capture_output=True, text=True,
+                           timeout=300)
+        assert r.returncode == 0, (kind, r.stderr)
+        assert f"checkpoint/{named}" in r.stderr and "continuing from checkpoint.prev/" in r.stderr, (kind, r.stderr)
+        assert f"step {previous['step_count']}" in r.stderr
+        assert (out / "energies.csv").read_bytes() == (whole / "energies.csv").read_bytes(), kind
+        # the one before damaged as well: nothing to continue from
+        shutil.rmtree(out)
+        shutil.copytree(ran, out)
+        _damage(out / "checkpoint", kind)
+        _damage(out / "checkpoint.prev", "truncated")
+        r = subprocess.run(_command(1, "resume", str(out), "--t-end", "0.7"), capture_output=True, text=True,
+                           timeout=300)
+        assert r.returncode == 2 and "Traceback" not in r.stderr, (kind, r.stderr)
+        lines = r.stderr.strip().splitlines()
+        assert len(lines) == 1 and "is damaged" in lines[0] and "checkpoint.prev/rank_00000.npz is truncated" in lines[0]
+
+
+def test_a_checkpoint_is_checked_against_the_scene_it_resumes(tmp_path):
+    """Another parameter, another mass model, another mesh, a checkpoint without the velocity
+    field: each a CheckpointError naming the difference; only t_end may change."""
+    import dataclasses
+
+    import dolfinx.mesh as dm
+
+    from fempm.checkpoint import CheckpointError
+    from fempm.seeding import create_particles
+
+    out = _folder(tmp_path, "disks")
+    run(two_disks(cells=10, t_end=0.2, frames=2), out, progress=False, checkpoint_every=5)
+    with pytest.raises(CheckpointError, match=r"parameter E is 1000.0 in the checkpoint, 2000.0 here"):
+        run(two_disks(cells=10, t_end=0.3, frames=2, E=2000.0), out, progress=False, resume=True)
+    with pytest.raises(CheckpointError, match=r"option mass is 'lumped' in the checkpoint, 'consistent' here"):
+        run(two_disks(cells=10, t_end=0.3, frames=2, mass="consistent"), out, progress=False, resume=True)
+    with pytest.raises(CheckpointError, match=r"health limit j_min is 0.01 in the checkpoint, 0.001 here"):
+        scene = two_disks(cells=10, t_end=0.3, frames=2)
+        run(dataclasses.replace(scene, health=dataclasses.replace(scene.health, j_min=1e-3)), out, progress=False,
+            resume=True)
+    scene = two_disks(cells=10, t_end=0.3, frames=2)
+    other = dm.create_unit_square(comm, 10, 10, dm.CellType.triangle)  # the same parameters, another mesh
+    moved = dataclasses.replace(scene, mesh=other, particles=create_particles(other, 4, density=1000.0))
+    with pytest.raises(CheckpointError, match=r"written on another mesh \(digest quadrilateral:100:.* this mesh "
+                                              r"triangle:200:"):
+        run(moved, out, progress=False, resume=True)
+    resumed = run(two_disks(cells=10, t_end=0.3, frames=2), out, progress=False, resume=True)
+    assert resumed["status"] == "completed" and resumed["t_end"] == 0.3
+
+
+@pytest.mark.skipif(comm.size > 1, reason="rewrites one rank file")
+def test_a_checkpoint_without_a_field_the_run_needs_is_refused(tmp_path):
+    """A rank file (and manifest) without ``field:v``: the solver would start it at v = 0
+    and report "completed"; it is a CheckpointError naming the field."""
+    import hashlib
+
+    from fempm.checkpoint import CheckpointError
+
+    out = tmp_path / "disks"
+    run(two_disks(cells=10, t_end=0.2, frames=2), out, progress=False, checkpoint_every=5)
+    folder = out / "checkpoint"
+    rank = folder / "rank_00000.npz"
+    with np.load(rank) as z:
+        arrays = {k: z[k] for k in z.files if k != "field:v"}
+    np.savez(rank, **arrays)
+    data = json.loads((folder / "manifest.json").read_text())
+    del data["fields"]["v"]
+    data["files"]["rank_00000.npz"] = {"bytes": rank.stat().st_size, "sha256": hashlib.sha256(rank.read_bytes()).hexdigest()}
+    (folder / "manifest.json").write_text(json.dumps(data))
+    with pytest.raises(CheckpointError, match=r"lacks the particle field\(s\) v"):
+        run(two_disks(cells=10, t_end=0.3, frames=2), out, progress=False, resume=True)
