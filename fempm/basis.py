@@ -20,6 +20,7 @@ import dolfinx
 import numpy as np
 import numpy.typing as npt
 
+from fempm.domains import make_domain
 from fempm.kernels import shape as shape_kernels
 from fempm.particles import Particles
 
@@ -48,6 +49,8 @@ class ParticleBasis:
     ):
         if V.mesh is not particles.mesh:
             raise ValueError("the function space and the particles live on different meshes")
+        if isinstance(domain, str):  # a name, as StepOptions(domain=...) takes it
+            domain = make_domain(domain)
         element = V.element.basix_element
         if element.family != basix.ElementFamily.P:
             raise NotImplementedError(f"fempm supports Lagrange-family spaces, not {element.family.name}")

@@ -5,7 +5,7 @@
     python -m fempm study convergence [--quick] [--problems NAME ...] [--out DIR]
     python -m fempm study stability [--quick] [--cases NAME ...] [--out DIR]
     python -m fempm study error-vs-time [--quick] [--problems NAME ...] [--out DIR]
-    python -m fempm run SCENE [--out DIR] [--overwrite] [--checkpoint-every N] [--option value ...]
+    python -m fempm run SCENE [--out DIR] [--overwrite] [--force] [--checkpoint-every N] [--option value ...]
     python -m fempm resume OUT [--t-end T] [--checkpoint-every N]
     python -m fempm run --help          (the scenes, a line each)
     python -m fempm --version
@@ -22,6 +22,7 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
+import math
 import sys
 from pathlib import Path
 
@@ -71,6 +72,8 @@ def _main(argv: list[str] | None) -> int:
     runp.add_argument("--checkpoint-every", type=int, default=None, metavar="N",
                       help="write the full state to OUT/checkpoint every N steps and at the end")
     runp.add_argument("--overwrite", action="store_true", help="replace the outputs of an earlier run in OUT")
+    runp.add_argument("--force", action="store_true",
+                      help="write the frames even when they would exceed 2 GB (else the run stops before it starts)")
     resume = sub.add_parser("resume", help="continue a run from the checkpoint in its output folder", allow_abbrev=False)
     resume.add_argument("out", type=Path, help="the output folder of the run")
     resume.add_argument("--t-end", type=float, default=None, help="run to this time (default: the run's own t_end)")
@@ -148,7 +151,8 @@ def _scene_options(builder, rest: list[str]) -> dict:
             raise UsageError(f"fempm run: expected --option value, got {flag!r}")
         name = flag[2:].replace("-", "_")
         if name not in params:
-            raise UsageError(f"fempm run: unknown option --{flag[2:]}; options: {', '.join(sorted(params))}")
+            raise UsageError(f"fempm run: unknown option --{flag[2:]}; options: "
+                             f"{', '.join('--' + k.replace('_', '-') for k in sorted(params))}")
         value = next(it, None)
         if value is None:
             raise UsageError(f"fempm run: option {flag} needs a value")
@@ -161,6 +165,8 @@ def _scene_options(builder, rest: list[str]) -> dict:
                 opts[name] = type(default)(value)
             except ValueError:
                 raise UsageError(f"fempm run: option {flag} expects {kind}, got {value!r}") from None
+            if not math.isfinite(opts[name]):
+                raise UsageError(f"fempm run: option {flag} expects a finite number, got {value!r}")
         elif default is None:  # an optional number, an integer where annotated so (or a name)
             kinds = [k.strip() for k in str(signature[name].annotation).split("|")]
             try:
@@ -169,6 +175,8 @@ def _scene_options(builder, rest: list[str]) -> dict:
                 if "int" in kinds:
                     raise UsageError(f"fempm run: option {flag} expects an integer, got {value!r}") from None
                 opts[name] = value
+            if isinstance(opts[name], float) and not math.isfinite(opts[name]):
+                raise UsageError(f"fempm run: option {flag} expects a finite number, got {value!r}")
         else:
             opts[name] = value
     return opts
@@ -221,6 +229,7 @@ def _run(args, rest: list[str]) -> int:
 
 
     from fempm.health import Health
+    from fempm.io import OUTPUT_LIMIT
     from fempm.scenes import SCENES
 
     if args.scene is None and args.help:
@@ -235,7 +244,8 @@ def _run(args, rest: list[str]) -> int:
         raise UsageError(f"fempm run: unknown scene {args.scene!r}; scenes: {', '.join(SCENES)}")
     builder = SCENES[args.scene]
     if args.help:
-        print(f"python -m fempm run {args.scene} [--out DIR] [--overwrite] [--checkpoint-every N] options (defaults):")
+        print(f"python -m fempm run {args.scene} [--out DIR] [--overwrite] [--force] [--checkpoint-every N] options "
+              "(defaults):")
         for k, v in inspect.signature(builder).parameters.items():
             if k != "comm":
                 print(f"  --{k.replace('_', '-')} {v.default}")
@@ -249,7 +259,7 @@ def _run(args, rest: list[str]) -> int:
     rebuild = {"scene": args.scene, "options": options, "health": health, "checkpoint_every": args.checkpoint_every}
     scene = _build(rebuild)
     return _execute(scene, args.out or Path("output") / args.scene, args.scene, checkpoint_every=args.checkpoint_every,
-                    rebuild=rebuild, overwrite=args.overwrite)
+                    rebuild=rebuild, overwrite=args.overwrite, output_limit=None if args.force else OUTPUT_LIMIT)
 
 
 def _check_every(every: int | None, command: str) -> None:
@@ -275,7 +285,7 @@ def _execute(scene, out: Path, name: str, **kwargs) -> int:
     from mpi4py import MPI
 
     from fempm.checkpoint import CheckpointError, RunInterrupted
-    from fempm.io import OutputFolderError, OutputWriteError
+    from fempm.io import OutputFolderError, OutputSizeError, OutputWriteError
     from fempm.location import OutsideMeshError
     from fempm.scene import run
     from fempm.stepping import SimulationError
@@ -284,7 +294,7 @@ def _execute(scene, out: Path, name: str, **kwargs) -> int:
     rank0 = MPI.COMM_WORLD.rank == 0
     try:
         run(scene, out, **kwargs)
-    except (OutputFolderError, CheckpointError) as e:
+    except (OutputFolderError, OutputSizeError, CheckpointError) as e:
         raise UsageError(f"fempm {name}: {e}") from None
     except (SimulationError, SingularMassError, OutsideMeshError) as e:
         if rank0:

@@ -236,7 +236,14 @@ def contact_step(solver: ExplicitSolver, dt: float | None, dt_max: float) -> flo
     if bad:
         raise ValueError(f"contact: fields[{contact.field!r}] must hold one non-negative integer group per particle")
     group = group.astype(np.int64)
-    G = max(comm.allreduce(int(group.max(initial=-1)) + 1, op=MPI.MAX), max(contact.rigid, default=-1) + 1)
+    G = comm.allreduce(int(group.max(initial=-1)) + 1, op=MPI.MAX)
+    present = np.zeros(max(G, max(contact.rigid, default=-1) + 1), dtype=np.int64)
+    present[:G] = np.bincount(group, minlength=G)
+    comm.Allreduce(MPI.IN_PLACE, present, op=MPI.SUM)
+    absent = [g for g in contact.rigid if present[g] == 0]
+    if absent:
+        raise ValueError(f"contact: rigid group(s) {absent} hold no particle (fields[{contact.field!r}] has the groups "
+                         f"{np.flatnonzero(present).tolist()})")
     masks = [group == g for g in range(G)]
     rigid = np.isin(np.arange(G), contact.rigid)
     deformable = np.flatnonzero(~rigid)

@@ -30,8 +30,9 @@ from mpi4py import MPI
 from fempm import vtu
 from fempm.particles import Particles
 
-__all__ = ["GRID_FIELDS", "OUTPUT_FILES", "FrameSeries", "GridField", "OutputFolderError", "OutputWriteError", "RunWriter",
-           "earlier_outputs", "make_folder", "write_json"]
+__all__ = ["GRID_FIELDS", "OUTPUT_FILES", "OUTPUT_LIMIT", "FrameSeries", "GridField", "OutputFolderError",
+           "OutputSizeError", "OutputWriteError", "RunWriter", "check_output_size", "earlier_outputs", "frame_bytes",
+           "make_folder", "write_json"]
 
 
 def _pad3(a: npt.NDArray) -> npt.NDArray:
@@ -116,6 +117,53 @@ def _read_times(path: Path) -> list[tuple[int, float]]:
     if not path.exists():
         return []
     return [(int(k), float(t)) for k, t in (line.split(",") for line in path.read_text().splitlines() if line)]
+
+
+#: a run whose outputs would exceed this many bytes stops before it starts, unless allowed
+#: (:func:`fempm.scene.run`'s ``output_limit``, the command line's ``--force``)
+OUTPUT_LIMIT = 2e9
+
+
+class OutputSizeError(ValueError):
+    """A run's outputs would exceed the allowed size (raised on every rank alike, before the
+    run writes anything)."""
+
+
+def frame_bytes(particles: Particles, V: dolfinx.fem.FunctionSpace | None, outputs: tuple[str, ...]) -> int:
+    """The bytes of one frame of ``outputs`` (:data:`fempm.scene.OUTPUTS`) over all ranks: the
+    particle pieces (position, velocity, stress, J, id, body and the other float fields) and
+    the grid pieces (points, cells and values), base64-encoded as :mod:`fempm.vtu` writes them.
+    Collective."""
+    raw = 0
+    if "particles" in outputs:
+        n = len(particles)
+        per = 8 * (3 + 3 + 9 + 1 + 1) + 4
+        per += sum(8 * int(np.prod(a.shape[1:])) for k, a in particles.fields.items()
+                   if k not in ("v", "sigma", "F", "body") and a.ndim in (1, 2) and a.dtype == np.float64)
+        raw += n * (per + 8 + 8 + 1)  # + the vertex cells
+    grids = [name for name in GRID_FIELDS if name in outputs]
+    if grids and V is not None:
+        points = V.dofmap.index_map.size_local + V.dofmap.index_map.num_ghosts
+        cells = V.mesh.topology.index_map(V.mesh.topology.dim).size_local
+        k = V.dofmap.dof_layout.num_dofs
+        for name in grids:
+            raw += points * 8 * (3 + (3 if name == "grid_velocity" else 9)) + cells * (8 * k + 8 + 1)
+    return int(particles.comm.allreduce(raw) * 4 / 3)
+
+
+def check_output_size(particles: Particles, V, outputs: tuple[str, ...], frames: int,
+                      limit: float | None = OUTPUT_LIMIT) -> int:
+    """The estimated bytes of a run's frames (:func:`frame_bytes` times the frames: ``frames``
+    over the run, at least one, and the final state); an :class:`OutputSizeError` above
+    ``limit`` (None: no limit). Collective."""
+    total = frame_bytes(particles, V, outputs) * (max(frames, 1) + 1)
+    if limit is not None and total > limit:
+        raise OutputSizeError(f"the run would write about {total / 1e9:.3g} GB of frames ({max(frames, 1) + 1} frames of "
+                              f"{total / (max(frames, 1) + 1) / 1e6:.3g} MB: {particles.num_global} particles"
+                              f"{' and the grid fields' if any(g in outputs for g in GRID_FIELDS) else ''}), more than "
+                              f"the {limit / 1e9:g} GB allowed: give fewer frames (--frames), or --force "
+                              "(output_limit=None) to write them")
+    return total
 
 
 class FrameSeries:

@@ -271,7 +271,8 @@ class LumpedPointStep:
         p = s.particles
         d = self.d
         if p.comm.allreduce(self._state() != self._checked, op=MPI.LOR):  # arrays set from outside (any rank)
-            s._check_finite()  # collective; the passes check their own results
+            s._check_fields()  # collective; the passes check their own results
+            s._check_finite()
             s._check_bodies()
         if self._since_sort >= SORT_EVERY:
             p.sort_by_cell()

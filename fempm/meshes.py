@@ -32,21 +32,38 @@ def _gmsh():
     return gmsh
 
 
+class MeshFileError(ValueError):
+    """A file that is not a readable gmsh mesh (raised on every rank alike)."""
+
+
 def read_msh(path: str | Path, comm: MPI.Comm = MPI.COMM_WORLD, gdim: int | None = None):
     """Read a gmsh ``.msh`` file; returns DOLFINx ``MeshData`` (mesh, cell_tags, facet_tags, ...).
 
-    ``gdim`` defaults to the dimension of the highest-dimensional cells.
+    ``gdim`` defaults to the dimension of the highest-dimensional cells. Rank 0 reads the file;
+    a missing, empty, corrupt or non-mesh file is a :class:`MeshFileError` on every rank that
+    names the file (and what gmsh said), not gmsh's words alone. Collective.
     """
     path = Path(path)
-    if not path.exists():
-        raise FileNotFoundError(f"mesh file {path} does not exist")
     gmsh = _gmsh()
-    dim = 0
+    dim, error = 0, None
     if comm.rank == 0:
-        _start(gmsh)
-        gmsh.open(str(path))
-        dim = gmsh.model.getDimension()
-    gdim = comm.bcast(dim, root=0) if gdim is None else gdim
+        if not path.is_file():
+            error = f"mesh file {str(path)!r} does not exist"
+        else:
+            _start(gmsh)
+            try:
+                gmsh.open(str(path))
+                dim = gmsh.model.getDimension()
+                if dim < 1 or not len(gmsh.model.mesh.getElements(dim)[0]):
+                    error = f"{str(path)!r} is not a readable gmsh mesh: it holds no cells"
+            except Exception as e:  # noqa: BLE001 - gmsh raises plain Exceptions with its own words
+                error = f"{str(path)!r} is not a readable gmsh mesh (gmsh: {str(e).strip() or type(e).__name__})"
+            if error is not None:
+                gmsh.finalize()
+    dim, error = comm.bcast((dim, error), root=0)
+    if error is not None:
+        raise MeshFileError(error)
+    gdim = dim if gdim is None else gdim
     data = _gmshio().model_to_mesh(gmsh.model, comm, 0, gdim=gdim)
     gmsh.finalize() if comm.rank == 0 else None
     return data

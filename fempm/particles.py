@@ -161,6 +161,28 @@ class Particles:
         data.update({"field:" + k: v for k, v in self.fields.items()})
         return data
 
+    def check_fields(self, shapes: dict[str, tuple[int, ...]]) -> None:
+        """Every per-particle array has a row per particle, and the fields named in ``shapes``
+        have those shapes per particle; else a ValueError naming the field and the shapes
+        (collective: raised on every rank when it is wrong on any)."""
+        n = len(self.x)
+        problem = None
+        arrays = {"mass": self.mass, "volume": self.volume, "ids": self.ids,
+                  **{f"fields[{k!r}]": v for k, v in self.fields.items()}}
+        for name, a in arrays.items():
+            a = np.asarray(a)
+            key = name[8:-2] if name.startswith("fields[") else None
+            want = (n, *shapes[key]) if key in shapes else None
+            if (want is not None and a.shape != want) or (want is None and (a.ndim == 0 or len(a) != n)):
+                problem = (f"particle {name} has shape {a.shape}, expected "
+                           f"{want if want is not None else f'({n}, ...)'} for {n} particles in {self.gdim}D")
+                break
+        if problem is not None and self.comm.size > 1:
+            problem += f" (on rank {self.comm.rank})"
+        problems = [q for q in (self.comm.allgather(problem) if self.comm.size > 1 else [problem]) if q]
+        if problems:
+            raise ValueError(problems[0])
+
     # -- queries ------------------------------------------------------------------------------
     @property
     def comm(self) -> MPI.Comm:

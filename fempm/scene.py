@@ -10,6 +10,8 @@ from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 
+import basix
+import basix.ufl
 import dolfinx.fem
 import dolfinx.mesh
 import numpy as np
@@ -19,7 +21,7 @@ from tqdm import tqdm
 from fempm.abort import FailureAgreement, abort
 from fempm.contact import Contact
 from fempm.health import Health, HealthMonitor
-from fempm.io import RunWriter, write_json
+from fempm.io import OUTPUT_LIMIT, RunWriter, check_output_size, write_json
 from fempm.location import OutsideMeshError
 from fempm.particles import Particles
 from fempm.stepping import ExplicitSolver, Loads, SimulationError, StepOptions
@@ -33,6 +35,33 @@ def check_counts(**counts: int) -> None:
         if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < 1:
             raise ValueError(f"{name}={value!r} must be a positive integer")
 
+
+def check_finite(**values: float) -> None:
+    """Scene builders' physical parameters must be finite real numbers: a ValueError naming the
+    first that is not (NaN would otherwise fail deep inside the mesh set-up)."""
+    for name, value in values.items():
+        if isinstance(value, bool) or not isinstance(value, (int, float, np.integer, np.floating)) \
+                or not np.isfinite(value):
+            raise ValueError(f"{name}={value!r} must be a finite number")
+
+
+def dofs_per_cell(cell_name: str, degree: int) -> int:
+    """The dofs of a scalar Lagrange element of ``degree`` on a cell: the fewest particles in a
+    cell that can determine its consistent mass block."""
+    k = degree
+    return {"interval": k + 1, "triangle": (k + 1) * (k + 2) // 2, "quadrilateral": (k + 1) ** 2,
+            "tetrahedron": (k + 1) * (k + 2) * (k + 3) // 6, "hexahedron": (k + 1) ** 3}[cell_name]
+
+
+def emptiest_cell(particles: Particles) -> int:
+    """The fewest particles in an owned cell of the particles' mesh, over all ranks (collective)."""
+    num = particles.mesh.topology.index_map(particles.mesh.topology.dim).size_local
+    counts = np.bincount(particles.cells[particles.cells < num], minlength=num)
+    return particles.comm.allreduce(int(counts.min(initial=np.iinfo(np.int64).max)), op=MPI.MIN)
+
+
+#: the Lagrange variants a scene's space can take (basix's names, :attr:`Scene.variant`)
+VARIANTS = tuple(v.name for v in basix.LagrangeVariant if v.name != "unset")
 
 #: the frames a scene can ask for (:attr:`Scene.outputs`)
 OUTPUTS = ("particles", "grid_velocity", "grid_stress")
@@ -90,14 +119,19 @@ class Scene:
             raise ValueError(f"frames={self.frames!r} must be a non-negative integer")
         if self.dt is not None and not (np.isfinite(self.dt) and self.dt > 0):
             raise ValueError(f"dt={self.dt} must be a positive number (or None for the CFL step)")
+        check_counts(degree=self.degree)
+        if self.variant is not None and self.variant not in VARIANTS:
+            raise ValueError(f"unknown option variant={self.variant!r}; expected one of {', '.join(VARIANTS)}")
+        if self.degree > 1 and self.variant != "bernstein" and self.options.mass_mode in ("lumped", "fmpm"):
+            raise ValueError(f"mass={self.options.mass!r} needs a non-negative basis (degree 1 or variant='bernstein'): "
+                             f"the vertex functions of degree-{self.degree} Lagrange integrate to zero or less, so their "
+                             "lumped masses vanish; use mass='consistent' or variant='bernstein'")
 
     def space(self) -> dolfinx.fem.FunctionSpace:
         """The vector Lagrange velocity space of the scene's degree (and variant)."""
         d = self.mesh.geometry.dim
         if self.variant is None:
             return dolfinx.fem.functionspace(self.mesh, ("Lagrange", self.degree, (d,)))
-        import basix.ufl
-
         variant = getattr(basix.LagrangeVariant, self.variant)
         return dolfinx.fem.functionspace(
             self.mesh, basix.ufl.element("Lagrange", self.mesh.basix_cell(), self.degree, variant, shape=(d,)))
@@ -159,6 +193,7 @@ def run(
     resume: bool = False,
     rebuild: dict | None = None,
     overwrite: bool = True,
+    output_limit: float | None = OUTPUT_LIMIT,
 ) -> dict:
     """Run ``scene`` to ``t_end``. Energies and momentum are recorded every step (returned in
     ``history`` and, with ``out``, written to ``energies.csv`` as the run goes, together with
@@ -187,14 +222,18 @@ def run(
     uninterrupted run writes. ``rebuild``: how to build ``scene`` again (the command
     line's scene name and options), kept in the checkpoint for ``python -m fempm resume``.
     ``overwrite``: remove the outputs of an earlier run in ``out`` (else they are an error;
-    :func:`fempm.io.make_folder`). Collective."""
+    :func:`fempm.io.make_folder`). ``output_limit``: the bytes of frames a run may write
+    (estimated before it starts, :func:`fempm.io.check_output_size`, and printed with
+    ``progress``); above it the run is a :class:`fempm.io.OutputSizeError` before anything is
+    written (None: no limit). Collective."""
     if (checkpoint_every is not None or resume) and out is None:
         raise ValueError("checkpoints need an output folder (out)")
     if checkpoint_every is not None and (isinstance(checkpoint_every, bool) or int(checkpoint_every) != checkpoint_every
                                          or checkpoint_every < 1):
         raise ValueError(f"checkpoint_every={checkpoint_every!r} must be a positive number of steps")
     return _Run(scene, None if out is None else Path(out), png=png, resume=resume, overwrite=overwrite,
-                checkpoint_every=checkpoint_every, rebuild=rebuild).execute(progress, callback)
+                checkpoint_every=checkpoint_every, rebuild=rebuild, output_limit=output_limit,
+                progress=progress).execute(progress, callback)
 
 
 class _Run:
@@ -202,7 +241,7 @@ class _Run:
     how it ends."""
 
     def __init__(self, scene: Scene, out: Path | None, *, png: bool, resume: bool, overwrite: bool,
-                 checkpoint_every: int | None, rebuild: dict | None):
+                 checkpoint_every: int | None, rebuild: dict | None, output_limit: float | None, progress: bool):
         from fempm import checkpoint
 
         self.scene, self.out, self.every, self.resumed, self.rebuild = scene, out, checkpoint_every, resume, rebuild
@@ -211,6 +250,10 @@ class _Run:
         self.solver = solver = scene.solver()
         if saved is not None:
             checkpoint.check_fields(saved, scene.particles, comm)
+        if out is not None:
+            size = check_output_size(scene.particles, solver.V, scene.outputs, scene.frames, output_limit)
+            if progress and comm.rank == 0:
+                print(f"{scene.name}: about {size / 1e6:.3g} MB of frames into {out}")
         self.writer = (RunWriter(out, scene.particles, solver.V, png=png, resume=saved["writer"] if saved else None,
                                  overwrite=overwrite) if out is not None else None)
         self.monitor = HealthMonitor(solver, scene.health)

@@ -29,11 +29,17 @@ from fempm.particles import Particles
 _TDIM = {"interval": 1, "triangle": 2, "quadrilateral": 2, "tetrahedron": 3, "hexahedron": 3}
 
 
-def _root(ppc: int, d: int) -> int:
+def per_direction(ppc: int, d: int) -> int:
+    """The particles per cell and direction of ``ppc`` particles per cell seeded as a lattice
+    in ``d`` dimensions; a ValueError unless ``ppc`` is a ``d``-th power. Every scene's ``ppc``
+    (and the command line's ``--ppc``) counts the particles per cell, as
+    :func:`create_particles` does."""
     n = int(round(ppc ** (1.0 / d)))
     if ppc < 1 or n**d != ppc:
         ok = ", ".join(str(k**d) for k in range(1, 6))
-        raise ValueError(f"ppc={ppc} is not a {d}-th power: per-cell patterns need ppc in {ok}, ...")
+        shape = {1: "a count", 2: "a square", 3: "a cube"}[d]
+        raise ValueError(f"ppc={ppc} particles per cell must be {shape} for the per-cell lattice in {d}D "
+                         f"({ok}, ...)")
     return n
 
 
@@ -43,7 +49,7 @@ def reference_pattern(cell_name: str, ppc: int) -> npt.NDArray:
     Boxes give their lower and upper corners (nverts = 2); simplices their d + 1 vertices.
     """
     d = _TDIM[cell_name]
-    n = _root(ppc, d)
+    n = per_direction(ppc, d)
     grid = np.array(list(itertools.product(range(n), repeat=d)), dtype=float)  # (n^d, d)
     if cell_name in ("interval", "quadrilateral", "hexahedron"):
         return np.stack([grid / n, (grid + 1) / n], axis=1)

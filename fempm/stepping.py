@@ -33,6 +33,7 @@ import numpy.typing as npt
 from mpi4py import MPI
 
 from fempm import kernels
+from fempm.arguments import check_numbers
 from fempm.basis import ParticleBasis, is_nonnegative
 from fempm.boundary import Fixed, NodalCentres, Slip
 from fempm.domains import GIMP_NAMES, domain_geometry, make_domain
@@ -105,6 +106,7 @@ class StepOptions:
     fmpm_order: int | None = None
 
     def __post_init__(self):
+        check_numbers(self)
         if self.scheme not in ("USL", "USF", "MUSL"):
             raise ValueError(f"unknown option scheme={self.scheme!r}; expected USL, USF or MUSL")
         self.mass_mode, self.mass_order = parse_mass(self.mass, self.fmpm_order)
@@ -121,6 +123,12 @@ class StepOptions:
             raise ValueError(f"damping={self.damping} must be >= 0")
         if not 0.0 < self.cfl <= 1.0:
             raise ValueError(f"cfl={self.cfl} must lie in (0, 1]: a CFL number above 1 is unstable")
+        if not 0.0 <= self.mass_cutoff < 1.0:
+            raise ValueError(f"mass_cutoff={self.mass_cutoff} must lie in [0, 1): a fraction of the largest nodal mass")
+        if not 0.0 <= self.lump_below < 1.0:
+            raise ValueError(f"lump_below={self.lump_below} must lie in [0, 1): a fraction of the largest lumped mass")
+        if self.gimp_order is not None and self.gimp_order < 1:
+            raise ValueError(f"gimp_order={self.gimp_order} must be a positive number of Gauss points (or None)")
 
 
 def cell_sizes(mesh) -> npt.NDArray:
@@ -193,6 +201,9 @@ class ExplicitSolver:
 
     def __post_init__(self):
         p = self.particles
+        if self.V.mesh is not p.mesh:
+            raise ValueError("the particles were made on another mesh than the velocity space's: make them on V.mesh "
+                             "(fempm.create_particles(V.mesh, ...) or fempm.Particles(V.mesh, ...))")
         d = p.gdim
         n = len(p)
         f = p.fields
@@ -208,6 +219,7 @@ class ExplicitSolver:
                 if np.shape(f.setdefault(h.name, h.allocate(n, d))) != expected:
                     raise ValueError(f"internal variable {h.name!r} of {type(mat).__name__} has shape "
                                      f"{np.shape(f[h.name])}; expected {expected}")
+        self._check_fields()
         self.h_cell = cell_sizes(p.mesh)
         self.terms: Counter = Counter()  # how often each force term was assembled
         self.grid_velocity: npt.NDArray | None = None  # last step's, also the CG warm start
@@ -376,6 +388,15 @@ class ExplicitSolver:
             self._fail(f"time step collapse: dt = {dt:.3g} does not advance t = {self.t:.6g}")
         return dt
 
+    def _check_fields(self) -> None:
+        """Every particle array has a row per particle, and the fields the step reads their
+        shapes (collective)."""
+        d = self.particles.gdim
+        shapes = {"v": (d,), "F": (d, d), "sigma": (d, d), "volume0": (), "body": (), "X0": (d,)}
+        for mat in self.materials:
+            shapes.update({h.name: h.shape_for(d) for h in getattr(mat, "history", ())})
+        self.particles.check_fields(shapes)
+
     def _check_bodies(self) -> None:
         """Every particle's body indexes a material (collective)."""
         body = self.particles.fields["body"]
@@ -472,6 +493,7 @@ class ExplicitSolver:
 
     def _open_step(self) -> ParticleBasis:
         """The checks that open a generic step, and its particle basis (values and gradients)."""
+        self._check_fields()
         self._check_finite()
         self._check_bodies()
         basis = ParticleBasis(self.V, self.particles, gradients=True, domain=self.options.particle_domain)

@@ -182,7 +182,9 @@ class Projector:
     (Dirichlet); ``exclude_components[c]`` lists dofs whose component ``c`` only is held at 0
     (a slip wall normal to axis c): component c is then solved on its own active set, the
     constrained least-squares fit, instead of being zeroed after an unconstrained solve.
-    ``domain``: particle domains (:mod:`fempm.domains`; default the point).
+    ``domain``: particle domains, a name (``"gimp"``, ``"cpdi1"``, ... as in
+    :class:`fempm.stepping.StepOptions`) or a domain object (:mod:`fempm.domains`; default the
+    point).
     ``lump_below`` (consistent mode): dofs whose lumped mass is below this
     fraction of the largest get lumped rows and columns (see :func:`consistent_mass_matrix`),
     so that the solve does not extrapolate into nodes that particles barely reach (FMPM: those

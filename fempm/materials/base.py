@@ -8,6 +8,7 @@ from typing import ClassVar, Protocol
 import numpy as np
 import numpy.typing as npt
 
+from fempm.arguments import check_numbers
 from fempm.kernels.kinematics import skew, sym  # noqa: F401  (the materials' tensor helpers)
 
 
@@ -65,6 +66,7 @@ class IsotropicElastic:
     history: ClassVar[tuple[Internal, ...]] = ()  # a law's internal variables (none: elastic)
 
     def __post_init__(self):
+        check_numbers(self)  # every numeric parameter of the law (subclasses' too)
         if not (0.0 < self.E < np.inf) or not -1.0 < self.nu < 0.5:  # NaN fails both
             raise ValueError(f"{type(self).__name__} needs E > 0 and -1 < nu < 0.5 (got E={self.E}, nu={self.nu})")
 

@@ -11,6 +11,7 @@ from dataclasses import dataclass
 import numpy as np
 import numpy.typing as npt
 
+from fempm.arguments import check_numbers
 from fempm.materials.base import identity, sym, trace
 
 
@@ -23,6 +24,7 @@ class NewtonianTait:
     history: tuple = ()
 
     def __post_init__(self):
+        check_numbers(self)
         for name, low in (("rho0", 0.0), ("kappa", 0.0), ("gamma", 1.0)):
             value = getattr(self, name)
             if not (low < value < np.inf):

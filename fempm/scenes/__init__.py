@@ -10,6 +10,7 @@ from fempm.scenes.dam import MARTIN_MOYCE, dam_break, surge_front
 from fempm.scenes.disks import two_disks
 from fempm.scenes.impact import disk_impact
 from fempm.scenes.incline import incline
+from fempm.scenes.manufactured import manufactured_scene
 
 SCENES = {"bar": vibrating_bar, "disks": two_disks, "cantilever": cantilever, "dam": dam_break, "block": hanging_block,
           "cook": cook_membrane, "column": column_collapse, "incline": incline, "impact": disk_impact}
@@ -18,5 +19,5 @@ __all__ = [
     "MARTIN_MOYCE", "SCENES", "cantilever", "cantilever_reference", "cantilever_tip", "column_collapse", "cook_membrane",
     "dam_break", "deposit", "disk_impact",
     "hanging_block", "incline",
-    "largest_neighbour_gap", "surge_front", "two_disks", "vibrating_bar",
+    "largest_neighbour_gap", "manufactured_scene", "surge_front", "two_disks", "vibrating_bar",
 ]

@@ -9,12 +9,12 @@ from mpi4py import MPI
 from fempm.boundary import fixed
 from fempm.materials import LinearElastic
 from fempm.scene import Scene, check_counts
-from fempm.seeding import create_particles
+from fempm.seeding import create_particles, per_direction
 from fempm.stepping import StepOptions
 
 
 def vibrating_bar(
-    cells: int = 16, ppc: int = 2, scheme: str = "MUSL", flip: float = 1.0, mass: str = "lumped",
+    cells: int = 16, ppc: int | None = None, scheme: str = "MUSL", flip: float = 1.0, mass: str = "lumped",
     cfl: float = 0.5, t_end: float = 40.0, L: float = 25.0, E: float = 100.0, rho: float = 1.0,
     v0: float = 0.1, mode: int = 1, dim: int = 1, lumped_forces: bool = False, comm: MPI.Comm = MPI.COMM_WORLD,
 ) -> Scene:
@@ -24,15 +24,18 @@ def vibrating_bar(
     Exact: v_cm(t) = v0 / (beta L) cos(omega t), beta = (2 mode - 1) pi / (2 L), omega = beta c.
     The mesh extends 4 cells past the free end so the bar can stretch.
     """
-    check_counts(cells=cells, ppc=ppc, mode=mode, dim=dim)
+    check_counts(cells=cells, mode=mode, dim=dim)
     if dim not in (1, 2):
         raise ValueError(f"dim={dim} must be 1 or 2")
+    ppc = 2**dim if ppc is None else ppc  # particles per cell: 2 per direction by default
+    check_counts(ppc=ppc)
+    per_direction(ppc, dim)
     h = L / cells
     if dim == 1:
         mesh = dm.create_interval(comm, cells + 4, [0.0, L + 4 * h])
     else:  # a strip one cell high (quadrilaterals), nu = 0: the same 1D solution
         mesh = dm.create_rectangle(comm, [[0.0, 0.0], [L + 4 * h, h]], [cells + 4, 1], dm.CellType.quadrilateral)
-    p = create_particles(mesh, ppc**dim, density=rho, cells=lambda x: x[0] < L)
+    p = create_particles(mesh, ppc, density=rho, cells=lambda x: x[0] < L)
     beta = (2 * mode - 1) * np.pi / (2 * L)
     p.fields["v"] = np.zeros((len(p), dim))
     p.fields["v"][:, 0] = v0 * np.sin(beta * p.x[:, 0])

@@ -11,11 +11,12 @@ from fempm.domains import box_corners
 from fempm.materials import NeoHookean
 from fempm.particles import Particles
 from fempm.scene import Scene, check_counts
+from fempm.seeding import per_direction
 from fempm.stepping import Loads, StepOptions
 
 
 def hanging_block(
-    cells: int = 10, ppc: int = 3, domain: str = "point", mesh: str = "structured", scheme: str = "MUSL",
+    cells: int = 10, ppc: int = 9, domain: str = "point", mesh: str = "structured", scheme: str = "MUSL",
     flip: float = 0.99, mass: str = "lumped", cfl: float = 0.4, t_end: float = 0.5, g: float = 1000.0,
     E: float = 1e6, nu: float = 0.3, rho: float = 1050.0, frames: int = 10, comm: MPI.Comm = MPI.COMM_WORLD,
 ) -> Scene:
@@ -40,8 +41,8 @@ def hanging_block(
         m = unstructured_rectangle(comm, h, size=(2.0, 4.0 + h), origin=(-0.5, -4.0), split_y=(0.0,))
     else:
         raise ValueError(f"unknown option mesh={mesh!r}; expected structured or unstructured")
-    # particles on a regular lattice of spacing h / ppc (also on the triangle mesh)
-    n = cells * ppc
+    # particles on a regular lattice of spacing h / sqrt(ppc) (also on the triangle mesh)
+    n = cells * per_direction(ppc, 2)
     s = (np.arange(n) + 0.5) / n
     X, Y = np.meshgrid(s, s - 1.0, indexing="ij")
     x = np.column_stack([X.ravel(), Y.ravel()]) if comm.rank == 0 else np.zeros((0, 2))

@@ -8,8 +8,8 @@ from mpi4py import MPI
 
 from fempm.boundary import fixed
 from fempm.materials import LinearElastic, NeoHookean
-from fempm.scene import Scene, check_counts
-from fempm.seeding import create_particles
+from fempm.scene import Scene, check_counts, check_finite, dofs_per_cell
+from fempm.seeding import create_particles, per_direction
 from fempm.stepping import Loads, StepOptions
 
 
@@ -33,7 +33,7 @@ def cantilever_tip(particles, params: dict) -> tuple[float, float]:
 
 
 def cantilever(
-    cells: int = 4, ppc: int = 2, scheme: str = "MUSL", flip: float = 0.95, mass: str = "lumped",
+    cells: int = 4, ppc: int | None = None, scheme: str = "MUSL", flip: float = 0.95, mass: str = "lumped",
     cfl: float = 0.4, t_end: float = 0.6, L: float = 0.7, H: float = 0.047, E: float = 6e7, nu: float = 0.0,
     rho: float = 1000.0, g: float = 10.0, material: str = "neo-hookean", degree: int = 1, mass_cutoff: float = 1e-9,
     domain: str = "point", frames: int = 20,
@@ -53,8 +53,18 @@ def cantilever(
     tip, makes no stress) or "linear" (small strain :math:`\mathrm{sym}\,F - I`, which a
     rotation by :math:`\theta` strains by :math:`\cos\theta - 1`: about 25 % of the bending
     strain near the tip here).
+
+    ``ppc``: particles per cell, a square lattice (default :math:`(k + 1)^2` for degree
+    :math:`k`: 4, and 9 for P2, which a consistent mass needs at least).
     """
+    ppc = (degree + 1) ** 2 if ppc is None else ppc
     check_counts(cells=cells, ppc=ppc, degree=degree)
+    check_finite(t_end=t_end, L=L, H=H, E=E, nu=nu, rho=rho, g=g)
+    per_direction(ppc, 2)
+    if mass == "consistent" and ppc < dofs_per_cell("quadrilateral", degree):
+        raise ValueError(f"ppc={ppc} particles per cell cannot determine the consistent mass of degree {degree} "
+                         f"({dofs_per_cell('quadrilateral', degree)} dofs per quadrilateral): give ppc="
+                         f"{(degree + 1) ** 2} or more, or leave it unset")
     if material not in ("neo-hookean", "linear"):
         raise ValueError(f"unknown option material={material!r}; expected neo-hookean or linear")
     hy = H / cells
@@ -65,7 +75,7 @@ def cantilever(
     # one cell column behind the clamp, so that particle domains (GIMP, CPDI) at the clamp stay in the mesh
     mesh = dm.create_rectangle(comm, [[-hx, -below * hy], [(nl + 2) * hx, H + 2 * hy]], [nl + 3, below + cells + 2],
                                dm.CellType.quadrilateral)
-    p = create_particles(mesh, ppc**2, density=rho, cells=lambda x: (x[0] > 0) & (x[0] < L) & (x[1] > 0) & (x[1] < H),
+    p = create_particles(mesh, ppc, density=rho, cells=lambda x: (x[0] > 0) & (x[0] < L) & (x[1] > 0) & (x[1] < H),
                          corners=domain == "cpdi2")  # CPDI2: each particle is its sub-cell
     p.fields["X0"] = p.x.copy()
     params = dict(cells=cells, ppc=ppc, scheme=scheme, flip=flip, mass=mass, cfl=cfl, L=L, H=H, E=E, nu=nu, rho=rho,

@@ -22,7 +22,7 @@ from mpi4py import MPI
 from fempm.boundary import friction, slip
 from fempm.materials import DruckerPrager
 from fempm.scene import Scene, check_counts
-from fempm.seeding import create_particles
+from fempm.seeding import create_particles, per_direction
 from fempm.stepping import Loads, StepOptions
 
 
@@ -67,13 +67,13 @@ def deposit(scene: Scene, solver) -> dict:
 
 
 def column_collapse(
-    aspect: float = 1.0, width: float = 0.2, cells: int = 16, ppc: int = 2, rho: float = 2000.0, E: float = 5.0e6,
+    aspect: float = 1.0, width: float = 0.2, cells: int = 16, ppc: int = 4, rho: float = 2000.0, E: float = 5.0e6,
     nu: float = 0.3, friction_angle: float = 30.0, dilation_angle: float = 0.0, cohesion: float = 0.0,
     floor_friction: float = 0.5, g: float = 9.81, t_end: float | None = None, scheme: str = "MUSL",
     flip: float = 0.99, cfl: float = 0.4, frames: int = 20, comm: MPI.Comm = MPI.COMM_WORLD,
 ) -> Scene:
     """The column collapse (see the module): ``cells`` square cells across the column width,
-    ``ppc`` x ``ppc`` particles per cell; the mesh reaches ``2 + 3 a`` column widths along the
+    ``ppc`` particles per cell (a square lattice: 4 = 2 x 2); the mesh reaches ``2 + 3 a`` column widths along the
     floor and ``1.05 a`` up. ``t_end`` defaults to :math:`6\\sqrt{H_0/g}` (the collapse ends
     after about :math:`3\\sqrt{H_0/g}`)."""
     check_counts(cells=cells, ppc=ppc)
@@ -85,7 +85,7 @@ def column_collapse(
     H0 = aspect * width
     nx, ny = int(np.ceil((2.0 + 3.0 * aspect) * cells)), int(np.ceil(1.05 * aspect * cells)) + 1
     mesh = dm.create_rectangle(comm, [[0.0, 0.0], [nx * h, ny * h]], [nx, ny], dm.CellType.quadrilateral)
-    p = create_particles(mesh, ppc**2, density=rho, cells=lambda x: (x[0] < width) & (x[1] < H0))
+    p = create_particles(mesh, ppc, density=rho, cells=lambda x: (x[0] < width) & (x[1] < H0))
     sand = DruckerPrager(E, nu, friction_angle=friction_angle, dilation_angle=dilation_angle, cohesion=cohesion)
     K0 = 1.0 - np.sin(np.radians(friction_angle))
     syy = -rho * g * (H0 - p.x[:, 1])
@@ -97,7 +97,7 @@ def column_collapse(
         t_end = 6.0 * np.sqrt(H0 / g)
     params = dict(aspect=aspect, width=width, height=H0, cells=cells, ppc=ppc, rho=rho, E=E, nu=nu,
                   friction_angle=friction_angle, dilation_angle=dilation_angle, cohesion=cohesion,
-                  floor_friction=floor_friction, g=g, K0=K0, spacing=h / ppc, scheme=scheme, flip=flip, cfl=cfl)
+                  floor_friction=floor_friction, g=g, K0=K0, spacing=h / per_direction(ppc, 2), scheme=scheme, flip=flip, cfl=cfl)
     return Scene(
         name="column_collapse", mesh=mesh, particles=p, materials=[sand], t_end=t_end,
         bcs=lambda V: [slip(V, lambda x: np.isclose(x[0], 0.0), (-1.0, 0.0)),

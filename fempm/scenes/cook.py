@@ -24,7 +24,8 @@ from fempm.boundary import fixed
 from fempm.domains import domain_geometry
 from fempm.materials import LinearElastic
 from fempm.particles import Particles
-from fempm.scene import Scene, check_counts
+from fempm.meshes import unstructured_polygon
+from fempm.scene import Scene, check_counts, dofs_per_cell, emptiest_cell
 from fempm.stepping import Loads, StepOptions
 
 CORNERS = np.array([[0.0, 0.0], [48.0, 44.0], [48.0, 60.0], [0.0, 44.0]])  # A, B, C, D
@@ -55,22 +56,27 @@ def cook_membrane(
     comm: MPI.Comm = MPI.COMM_WORLD,
 ) -> Scene:
     """Cook's membrane with triangles of size ``h``; particle lattice ``spacing`` (default h / 2:
-    two particles per cell size and direction). ``damping``
+    two particles per cell size and direction; with consistent mass of degree 2 it is refined
+    until every triangle holds at least 6 particles, and a given one that leaves fewer is an
+    error). ``damping``
     defaults to :math:`2\\omega_1` with :math:`\\omega_1` estimated from a cantilever of the
     panel's mean height; ``t_end`` to :math:`12 / \\omega_1`."""
     check_counts(degree=degree)
-    from fempm.meshes import unstructured_polygon
-
+    if spacing is not None and not 0.0 < spacing < np.inf:
+        raise ValueError(f"spacing={spacing} must be a positive length")
     mesh = unstructured_polygon(comm, CORNERS, h)
+    # consistent mass of degree >= 2 needs every triangle to hold as many particles as dofs
+    needed = dofs_per_cell("triangle", degree) if mass == "consistent" and degree > 1 else 0
     s = h / 2 if spacing is None else spacing
-    nx, ny = max(int(round(48.0 / s)), 1), max(int(round(30.0 / s)), 1)
-    x, area, corners, column = panel_lattice(nx, ny)
-    if comm.rank != 0:
-        x, area, corners, column = x[:0], area[:0], corners[:0], column[:0]
-    fields = {"area": np.where(column == nx - 1, EDGE / ny, 0.0), "loaded": (column == nx - 1).astype(float)}
-    if domain == "cpdi2":
-        fields["corners"] = corners
-    p = Particles(mesh, x, rho * area, area, fields=fields)
+    while True:
+        p, nx, ny = _lattice_particles(mesh, s, rho, domain, comm)
+        if not needed or emptiest_cell(p) >= needed:
+            break
+        if spacing is not None:
+            raise ValueError(f"spacing={spacing} leaves {emptiest_cell(p)} particle(s) in the emptiest triangle; "
+                             f"the consistent mass of degree {degree} needs {needed} in every one: give a smaller "
+                             "spacing, or leave it unset (the scene then refines its lattice until each has them)")
+        s *= 0.8
     omega1 = first_frequency(E, nu, rho)
     traction = np.array([0.0, load / EDGE])
 
@@ -87,6 +93,19 @@ def cook_membrane(
                             damping=2.0 * omega1 if damping is None else damping),
         degree=degree, variant=variant, params=params,
     )
+
+
+def _lattice_particles(mesh, s: float, rho: float, domain: str, comm) -> tuple[Particles, int, int]:
+    """The panel's particles on a lattice of about ``s`` (:func:`panel_lattice`), with the
+    loaded edge's lengths in ``fields["area"]``; (particles, nx, ny). Collective."""
+    nx, ny = max(int(round(48.0 / s)), 1), max(int(round(30.0 / s)), 1)
+    x, area, corners, column = panel_lattice(nx, ny)
+    if comm.rank != 0:
+        x, area, corners, column = x[:0], area[:0], corners[:0], column[:0]
+    fields = {"area": np.where(column == nx - 1, EDGE / ny, 0.0), "loaded": (column == nx - 1).astype(float)}
+    if domain == "cpdi2":
+        fields["corners"] = corners
+    return Particles(mesh, x, rho * area, area, fields=fields), nx, ny
 
 
 def first_frequency(E: float, nu: float, rho: float) -> float:

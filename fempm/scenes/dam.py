@@ -10,7 +10,7 @@ from fempm.boundary import slip
 from fempm.materials import NewtonianTait
 from fempm.health import Health
 from fempm.scene import Scene, check_counts
-from fempm.seeding import create_particles
+from fempm.seeding import create_particles, per_direction
 from fempm.stepping import Loads, StepOptions
 
 
@@ -30,7 +30,7 @@ def surge_front(particles, params: dict) -> float:
 
 
 def dam_break(
-    cells: int = 10, ppc: int = 2, scheme: str = "MUSL", flip: float = 0.99, mass: str = "lumped",
+    cells: int = 10, ppc: int = 4, scheme: str = "MUSL", flip: float = 0.99, mass: str = "lumped",
     cfl: float = 0.4, t_end: float = 0.22, a: float = 0.1, box: float = 0.4, rho0: float = 1000.0,
     kappa: float = 2.0e4, gamma: float = 7.0, viscosity: float = 1.0e-3, g: float = 9.81, frames: int = 22,
     comm: MPI.Comm = MPI.COMM_WORLD,
@@ -39,7 +39,7 @@ def dam_break(
     (n^2 = 2) at the left of a box ``box`` wide, slip walls left, right and at the bottom, open
     top; Tait water :math:`p = \kappa((\rho/\rho_0)^\gamma - 1)`.
 
-    ``cells`` cells across the column width (square cells), ``ppc`` x ``ppc`` particles per
+    ``cells`` cells across the column width (square cells), ``ppc`` particles per
     cell. The column starts at rest in hydrostatic equilibrium: the particle density is
     :math:`\rho = \rho_0 (1 + \rho_0 g (2a - y) / \kappa)^{1/\gamma}` and its stress
     :math:`-p I`. Reference: the surge front of Martin and Moyce (1952), ``MARTIN_MOYCE``.
@@ -53,12 +53,12 @@ def dam_break(
     def density(x):
         return rho0 * (1 + rho0 * g * (H - x[:, 1]) / kappa) ** (1 / gamma)
 
-    p = create_particles(mesh, ppc**2, density=density, cells=lambda x: (x[0] < a) & (x[1] < H))
+    p = create_particles(mesh, ppc, density=density, cells=lambda x: (x[0] < a) & (x[1] < H))
     water = NewtonianTait(rho0=rho0, kappa=kappa, gamma=gamma, viscosity=viscosity)
     pressure = water.pressure(p.mass / p.volume)
     p.fields["sigma"] = -pressure[:, None, None] * np.eye(2)
     params = dict(cells=cells, ppc=ppc, scheme=scheme, flip=flip, mass=mass, cfl=cfl, a=a, box=nx * h, rho0=rho0,
-                  kappa=kappa, gamma=gamma, viscosity=viscosity, g=g, spacing=h / ppc, time_scale=np.sqrt(2 * g / a))
+                  kappa=kappa, gamma=gamma, viscosity=viscosity, g=g, spacing=h / per_direction(ppc, 2), time_scale=np.sqrt(2 * g / a))
     W = nx * h
 
     def bcs(V):

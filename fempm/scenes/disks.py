@@ -29,6 +29,12 @@ def two_disks(
     (triangles from ``meshes/unit_square_tri.msh``).
     """
     check_counts(cells=cells, ppc=ppc)
+    if friction and not contact:
+        raise ValueError(f"friction={friction} needs contact=True: without contact the disks share one grid velocity "
+                         "and no friction acts between them")
+    if not 0.0 < radius <= 0.2:
+        raise ValueError(f"radius={radius} must lie in (0, 0.2]: the disks, centred at (0.2, 0.2) and (0.8, 0.8), "
+                         "must lie in the unit square and apart")
     if mesh == "structured":
         m = dm.create_unit_square(comm, cells, cells, dm.CellType.quadrilateral)
     elif mesh == "unstructured":

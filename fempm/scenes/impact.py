@@ -33,7 +33,7 @@ from fempm.boundary import slip
 from fempm.contact import Contact, shared_cells
 from fempm.materials import NeoHookean
 from fempm.scene import Scene, check_counts
-from fempm.seeding import create_particles
+from fempm.seeding import create_particles, per_direction
 from fempm.stepping import StepOptions
 
 PLATE = (0.1, 0.9, 0.2)  # x from, x to, thickness
@@ -70,14 +70,17 @@ class _Overlap:
 
 
 def disk_impact(
-    cells: int = 40, ppc: int = 2, speed: float = 10.0, radius: float = 0.1, E: float = 1.0e5, nu: float = 0.3,
+    cells: int = 40, ppc: int = 4, speed: float = 10.0, radius: float = 0.1, E: float = 1.0e5, nu: float = 0.3,
     rho: float = 1000.0, contact: bool = True, friction: float = 0.0, gap: float = 0.8, scheme: str = "USL",
     flip: float = 1.0, cfl: float = 0.4, t_end: float = 0.08, frames: int = 10, comm: MPI.Comm = MPI.COMM_WORLD,
 ) -> Scene:
     """The impact of the module on a grid of ``cells`` x ``0.6 cells`` quadrilaterals over
-    :math:`[0, 1] \\times [0, 0.6]`, ``ppc`` x ``ppc`` particles per cell; the disk starts two
+    :math:`[0, 1] \\times [0, 0.6]`, ``ppc`` particles per cell (a square lattice); the disk starts two
     cells above the plate. ``gap``: the contact's position check in cells (0: none)."""
     check_counts(cells=cells, ppc=ppc)
+    if friction and not contact:
+        raise ValueError(f"friction={friction} needs contact=True: without contact the disk and the plate share one "
+                         "grid velocity and no friction acts between them")
     if not speed > 0.0:
         raise ValueError(f"speed={speed} must be > 0")
     if not 0.0 <= gap < np.inf:
@@ -87,16 +90,19 @@ def disk_impact(
     mesh = dm.create_rectangle(comm, [[0.0, 0.0], [1.0, ny * h]], [cells, ny], dm.CellType.quadrilateral)
     x0, x1, thick = PLATE
     centre = np.array([0.5, thick + 2.0 * h + radius])
+    if not 0.0 < radius < min(0.5, (ny * h - centre[1] + radius) / 2):
+        raise ValueError(f"radius={radius} must be > 0 and let the disk, two cells above the plate, fit in the "
+                         f"{1.0:g} x {ny * h:g} mesh (radius < {min(0.5, (ny * h - centre[1] + radius) / 2):.3g})")
 
     def inside(x):
         plate = (x[0] > x0) & (x[0] < x1) & (x[1] < thick)
         return plate | (np.hypot(x[0] - centre[0], x[1] - centre[1]) < radius)
 
-    p = create_particles(mesh, ppc**2, density=rho, where=inside)
+    p = create_particles(mesh, ppc, density=rho, where=inside)
     disk = (p.x[:, 1] > thick).astype(np.int32)
     p.fields["impactor"] = disk
     p.fields["v"] = np.outer(disk, [0.0, -speed])
-    overlap = _Overlap(h / ppc, 0.25 * radius)
+    overlap = _Overlap(h / per_direction(ppc, 2), 0.25 * radius)
 
     def results(scene, solver) -> dict:
         k = p.fields["impactor"] == 1

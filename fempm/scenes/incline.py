@@ -53,7 +53,7 @@ from fempm.boundary import friction as friction_wall
 from fempm.contact import Contact
 from fempm.materials import VonMises
 from fempm.scene import Scene, check_counts
-from fempm.seeding import create_particles
+from fempm.seeding import create_particles, per_direction
 from fempm.stepping import Loads, StepOptions
 
 BODIES = ("block", "disk")
@@ -64,9 +64,10 @@ RIGID_MASS_CUTOFF = 1e-4
 
 
 def _depth(ppc: int) -> float:
-    """How far below a node on its surface a layer of ``ppc`` x ``ppc`` particles per cell
+    """How far below a node on its surface a layer of ``ppc`` particles per cell (a square lattice)
     has its nodal centre of mass, in cells (1/3 for a continuum, 0.375 for 2)."""
-    y = (np.arange(ppc) + 0.5) / ppc
+    n = per_direction(ppc, 2)
+    y = (np.arange(n) + 0.5) / n
     return float(np.sum((1.0 - y) * y) / np.sum(1.0 - y))
 
 
@@ -111,9 +112,9 @@ def incline(
     t_end: float | None = None, scheme: str = "MUSL", flip: float = 1.0, cfl: float = 0.4, frames: int = 10,
     plane: str = "grid", gap: float | None = None, comm: MPI.Comm = MPI.COMM_WORLD,
 ) -> Scene:
-    """The incline of the module: ``cells`` cells across ``size``, ``ppc`` x ``ppc`` particles per
-    cell (default 2 for the block, 4 for the disk, whose staircase of particles rolls within
-    2 % only at that spacing). ``t_end`` defaults to the time the body takes to travel three sizes at
+    """The incline of the module: ``cells`` cells across ``size``, ``ppc`` particles per
+    cell, a square lattice (default 4 = 2 x 2 for the block, 16 = 4 x 4 for the disk, whose
+    staircase of particles rolls within 2 % only at that spacing). ``t_end`` defaults to the time the body takes to travel three sizes at
     :math:`g \\sin\\theta` (at least 0.2 s). ``plane``: ``grid``, the frictional grid boundary
     :math:`y = 0` holding the nodes the body touches (its nodal centre of mass within ``gap``
     cells of the plane; 0, the block's default: every node moving into it; 0.5 the disk's),
@@ -123,9 +124,10 @@ def incline(
     nodal centre of mass, which lies :func:`_depth` cells under its surface)."""
     if body not in BODIES:
         raise ValueError(f"unknown option body={body!r}; expected one of {', '.join(BODIES)}")
-    ppc = (4 if body == "disk" else 2) if ppc is None else ppc
+    ppc = (16 if body == "disk" else 4) if ppc is None else ppc
     gap = (0.5 if body == "disk" else 0.0) if gap is None else gap
     check_counts(cells=cells, ppc=ppc)
+    per_direction(ppc, 2)
     if not 0.0 < angle < 90.0:
         raise ValueError(f"angle={angle} must lie in (0, 90) degrees")
     if not 0.0 <= friction < np.inf:
@@ -151,7 +153,7 @@ def incline(
     else:
         def inside(x):
             return np.hypot(x[0] - x0 - size, x[1] - size) < size
-    p = create_particles(mesh, ppc**2, density=rho, where=inside if plane == "grid" else
+    p = create_particles(mesh, ppc, density=rho, where=inside if plane == "grid" else
                          lambda x: inside(x) | ((x[1] < 0.0) & (x[1] > -2.0 * h)))
     group = (p.x[:, 1] < 0.0).astype(np.int32)  # 0 the body, 1 the rigid plane (at rest)
     p.fields["plane"] = group

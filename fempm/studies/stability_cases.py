@@ -207,7 +207,7 @@ def contact_impact(quick: bool, comm=MPI.COMM_WORLD) -> Scene:
 def contact_rolling(quick: bool, comm=MPI.COMM_WORLD) -> Scene:
     """The disk rolling down a rigid plane at 30 degrees, mu = 0.3, 8 cells across the radius
     with 4 x 4 particles per cell (quick: 4 cells, 2 x 2 particles, a tenth of the time)."""
-    scene = incline("disk", 30.0, 0.3, cells=4 if quick else 8, ppc=2 if quick else 4, plane="rigid", frames=0,
+    scene = incline("disk", 30.0, 0.3, cells=4 if quick else 8, ppc=4 if quick else 16, plane="rigid", frames=0,
                     comm=comm)
     if quick:
         scene.t_end *= 0.1

@@ -79,7 +79,7 @@ def test_incline_demo_writes_its_table(tmp_path):
                       "--out", str(tmp_path)])
     assert [(r["case"], r["cells"]) for r in rows] == [("block mu=0.2", 4), ("disk mu=0.3", 4)]
     assert rows[0]["error_percent"] == pytest.approx(0.0, abs=2.0)
-    assert rows[1]["ppc"] == 4 and np.isfinite(rows[1]["acceleration"])
+    assert rows[1]["ppc"] == 16 and np.isfinite(rows[1]["acceleration"])
     table = (tmp_path / "incline.md").read_text()
     assert table.count("\n| ") == 3 and "disk mu=0.3" in table
     with pytest.raises(ValueError, match="unknown case"):

@@ -141,7 +141,7 @@ def test_p2_scene_with_output_runs(tmp_path):
     from fempm.scenes import cantilever
 
     out = MPI.COMM_WORLD.bcast(str(tmp_path), root=0)
-    scene = cantilever(cells=2, ppc=3, degree=2, mass="consistent", t_end=2e-4, frames=2)
+    scene = cantilever(cells=2, ppc=9, degree=2, mass="consistent", t_end=2e-4, frames=2)
     s = run(scene, f"{out}/p2", progress=False)
     solver = s["solver"]
     assert solver.V.element.basix_element.degree == 2 and s["steps"] > 2

@@ -31,8 +31,8 @@ def test_optional_options_take_their_annotated_type():
     """``ppc: int | None``, ``gap: float | None``, ``t_end: float | None`` of the incline."""
     from fempm.scenes import incline
 
-    opts = _scene_options(incline, ["--ppc", "3", "--gap", "0.7", "--t-end", "1"])
-    assert opts == {"ppc": 3, "gap": 0.7, "t_end": 1.0} and type(opts["ppc"]) is int
+    opts = _scene_options(incline, ["--ppc", "9", "--gap", "0.7", "--t-end", "1"])
+    assert opts == {"ppc": 9, "gap": 0.7, "t_end": 1.0} and type(opts["ppc"]) is int
     with pytest.raises(SystemExit, match="option --ppc expects an integer, got '2.5'"):
         _scene_options(incline, ["--ppc", "2.5"])
 
