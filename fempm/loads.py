@@ -11,8 +11,11 @@ import inspect
 from collections.abc import Callable
 from dataclasses import dataclass
 
+import dolfinx.la
+import dolfinx.mesh
 import numpy as np
 import numpy.typing as npt
+from mpi4py import MPI
 
 
 @dataclass
@@ -27,9 +30,9 @@ class Loads:
     traction: a function t -> (n, d), the traction :math:`\bar t_p` on each particle (zero rows
     away from the loaded surface), applied as the force :math:`\bar t_p A_p` where :math:`A_p`
     is the particle's share of the loaded surface: ``fields["area"]`` when the particles carry
-    it (e.g. from :func:`surface_areas`), else :math:`(V^0_p)^{(d-1)/d}`, the face of a cubic
-    particle (exact for a layer of square/cubic particles on a flat face, at any number of
-    particles per cell).
+    it (e.g. from :func:`surface_areas`), else the body's boundary facets next to the loaded
+    particles (:func:`boundary_shares`: the traction times the loaded boundary's measure on
+    every cell type).
     """
 
     body_force: npt.ArrayLike | Callable | None = None
@@ -79,14 +82,150 @@ def body_force_at(b, particles, t: float) -> npt.NDArray:
     return acc
 
 
-def surface_shares(particles) -> npt.NDArray:
-    """The particles' shares of the loaded surface: ``fields["area"]``, else the face
-    :math:`(V^0_p)^{(d-1)/d}` of a square/cubic particle (see :class:`Loads`)."""
+def _facet_geometry(mesh, facets: npt.NDArray[np.int32]) -> tuple[npt.NDArray, npt.NDArray, npt.NDArray]:
+    """(a point, the unit normal, the measure) of each facet (straight edges in 2D, planar
+    triangles or quadrilaterals in 3D; the vertices of the facet)."""
+    d = mesh.geometry.dim
+    nodes = dolfinx.mesh.entities_to_geometry(mesh, mesh.topology.dim - 1, facets)
+    xv = mesh.geometry.x[nodes][:, :, :d]  # (facets, vertices, d)
+    origin = xv[:, 0]
+    if d == 2:
+        t = xv[:, 1] - xv[:, 0]
+        measure = np.linalg.norm(t, axis=1)
+        normal = np.stack([-t[:, 1], t[:, 0]], axis=1)
+    else:  # triangles; quadrilaterals (vertices 0 1 3 2 in DOLFINx order) as two triangles
+        a = np.cross(xv[:, 1] - xv[:, 0], xv[:, 2] - xv[:, 0])
+        normal = a
+        measure = 0.5 * np.linalg.norm(a, axis=1)
+        if xv.shape[1] == 4:
+            b = np.cross(xv[:, 2] - xv[:, 3], xv[:, 1] - xv[:, 3])
+            measure = measure + 0.5 * np.linalg.norm(b, axis=1)
+    normal = normal / np.linalg.norm(normal, axis=1)[:, None]
+    return origin, normal, measure
+
+
+def _facet_counts(mesh, links: npt.NDArray, flags: npt.NDArray[np.bool_]) -> npt.NDArray:
+    """For each local facet, the number of cells on either side (over all ranks) whose owned
+    ``flags`` hold. Collective."""
+    fdim = mesh.topology.dim - 1
+    counts = dolfinx.la.vector(mesh.topology.index_map(fdim), 1, dtype=np.float64)
+    np.add.at(counts.array, links[: len(flags)][flags].ravel(), 1.0)
+    counts.scatter_reverse(dolfinx.la.InsertMode.add)
+    counts.scatter_forward()
+    return counts.array.copy()
+
+
+def boundary_shares(particles, loaded: npt.NDArray[np.bool_]) -> npt.NDArray:
+    r"""Each loaded particle's share of the loaded part of the body's surface, -1 for the
+    particles not loaded (collective).
+
+    The body's surface is made of the facets with exactly one occupied cell (a cell holding
+    particles) on either side, over all ranks. A surface facet :math:`F` of a cell :math:`c` is
+    loaded when
+
+    * the loaded particles lie next to it: more than half of the row of :math:`c`'s particles
+      nearest to :math:`F` (within 1.5 times the smallest distance to its plane) are loaded,
+      and the loaded particles of :math:`c` all lie nearer to :math:`F` than its other
+      particles (or, where all of :math:`c`'s particles are loaded, no cell behind :math:`F`,
+      across a facet of :math:`c` facing away from it, holds loaded particles): this drops
+      the facets that a layer along another face only reaches at the body's edges (where no
+      facet of :math:`c` passes, the layer is thicker than a row, and the facets next to it
+      are taken);
+    * the loaded surface goes on across its vertices: another such facet of about its
+      orientation (outward normals within 60 degrees) shares a vertex with it (unless no
+      facet anywhere has such a neighbour: a load on one facet).
+
+    The measure of the loaded facets of :math:`c` is shared by :math:`c`'s loaded particles in
+    proportion to their volume. A layer of loaded particles one row of the seeding lattice
+    thick along a boundary of cell facets then carries exactly the traction times the
+    boundary's measure, on every cell type and at any number of particles per cell; a thicker
+    layer that wraps round an edge of the body adds the facets it covers there (give
+    ``fields["area"]``, :func:`surface_areas`, to load exactly a layer of any shape)."""
+    mesh = particles.mesh
+    d = mesh.geometry.dim
+    tdim, fdim = mesh.topology.dim, mesh.topology.dim - 1
+    mesh.topology.create_entities(fdim)
+    for a, b in ((tdim, fdim), (fdim, tdim), (fdim, 0)):
+        mesh.topology.create_connectivity(a, b)
+    c2f, f2v = mesh.topology.connectivity(tdim, fdim), mesh.topology.connectivity(fdim, 0)
+    cmap = mesh.topology.index_map(tdim)
+    num_cells = cmap.size_local
+    links = np.asarray(c2f.array).reshape(num_cells + cmap.num_ghosts, -1)
+    cells = particles.cells
+    occupied, holds_loaded = np.zeros(num_cells, dtype=np.bool_), np.zeros(num_cells, dtype=np.bool_)
+    occupied[cells[cells < num_cells]] = True
+    holds_loaded[cells[loaded & (cells < num_cells)]] = True
+    surface = _facet_counts(mesh, links, occupied) == 1.0
+    across = _facet_counts(mesh, links, holds_loaded)  # cells with loaded particles at each facet
+    loaded_rows = np.flatnonzero(loaded)
+    loaded_rows = loaded_rows[np.argsort(cells[loaded_rows], kind="stable")]
+    by_cell = np.split(loaded_rows, np.flatnonzero(np.diff(cells[loaded_rows])) + 1) if len(loaded_rows) else []
+    members = np.argsort(cells, kind="stable")
+    starts = np.searchsorted(cells[members], np.arange(num_cells + 1))
+    cand_cell, cand_facet, cand_normal, cand_measure = [], [], [], []
+    for rows in by_cell:
+        c = int(cells[rows[0]])
+        facets = links[c]
+        inside = members[starts[c]:starts[c + 1]]  # all particles of c
+        origin, normal, measure = _facet_geometry(mesh, facets.astype(np.int32))
+        side = np.einsum("fpd,fd->fp", particles.x[inside][None, :, :] - origin[:, None, :], normal)
+        normal = normal * -np.sign(side.mean(axis=1))[:, None]  # outward: away from the particles
+        depth = np.abs(side)
+        lit_p = loaded[inside]
+        next_to, thin = [], []
+        for k in np.flatnonzero(surface[facets]):
+            row = depth[k] <= 1.5 * depth[k].min() + 1e-12 * measure[k]
+            if not 2 * np.count_nonzero(row & lit_p) > np.count_nonzero(row):
+                continue
+            next_to.append(k)
+            if lit_p.all():  # behind it, across the facets of c facing away, no loaded cell
+                if not np.any(across[facets[(normal @ normal[k]) < -0.3]] > 1.0):
+                    thin.append(k)
+            elif depth[k][lit_p].max() < depth[k][~lit_p].min():
+                thin.append(k)
+        for k in thin or next_to:  # a thicker layer: the facets it lies next to
+            cand_cell.append(c)
+            cand_facet.append(facets[k])
+            cand_normal.append(normal[k])
+            cand_measure.append(measure[k])
+    cand_facet = np.asarray(cand_facet, dtype=np.int64)
+    cand_normal = np.asarray(cand_normal, dtype=np.float64).reshape(-1, d)
+    # the sums of the candidates' outward normals at each vertex, over the ranks
+    sums = dolfinx.la.vector(mesh.topology.index_map(0), d, dtype=np.float64)
+    width = len(f2v.links(0)) if len(f2v.array) else 1
+    vertices = np.asarray(f2v.array).reshape(-1, width)[cand_facet] if len(cand_facet) else \
+        np.zeros((0, width), dtype=np.int32)
+    np.add.at(sums.array.reshape(-1, d), vertices.ravel(), np.repeat(cand_normal, width, axis=0))
+    sums.scatter_reverse(dolfinx.la.InsertMode.add)
+    sums.scatter_forward()
+    at = sums.array.reshape(-1, d)
+    parallel = (np.einsum("fvd,fd->fv", at[vertices] - cand_normal[:, None, :], cand_normal) > 0.5).any(axis=1)
+    if not particles.comm.allreduce(bool(parallel.any()), op=MPI.LOR):
+        parallel[:] = True  # one loaded facet (on no rank another beside it)
+    share = np.where(loaded, 0.0, -1.0)
+    cand_cell, cand_measure = np.asarray(cand_cell, dtype=np.int64), np.asarray(cand_measure)
+    for rows in by_cell:
+        keep = (cand_cell == cells[rows[0]]) & parallel
+        if keep.any():
+            v = particles.volume[rows]
+            share[rows] = float(cand_measure[keep].sum()) * v / v.sum()
+    return share
+
+
+def surface_shares(particles, loaded: npt.NDArray[np.bool_]) -> npt.NDArray:
+    """The particles' shares of the loaded surface (collective): ``fields["area"]`` when the
+    particles carry it (e.g. from :func:`surface_areas`), else the body's loaded boundary
+    facets shared by the loaded particles (:func:`boundary_shares`), computed when the traction
+    first loads particles and kept in ``fields["surface_share"]`` (-1: not loaded then),
+    computed again when it loads a particle that had no share."""
     f = particles.fields
     if "area" in f:
         return f["area"]
-    d = particles.gdim
-    return f["volume0"] ** ((d - 1) / d)
+    share = f.get("surface_share")
+    stale = share is None or bool(np.any(loaded & (share < 0)))
+    if particles.comm.allreduce(stale, op=MPI.LOR) and particles.comm.allreduce(bool(loaded.any()), op=MPI.LOR):
+        share = f["surface_share"] = boundary_shares(particles, loaded)
+    return np.zeros(len(particles)) if share is None else np.maximum(share, 0.0)
 
 
 def external_forces(loads, particles, t: float) -> npt.NDArray:
@@ -101,5 +240,5 @@ def external_forces(loads, particles, t: float) -> npt.NDArray:
         if traction.shape != f.shape:
             raise ValueError(f"the traction returned shape {traction.shape} for {len(p)} particles in {p.gdim}D "
                              f"(expected {f.shape})")
-        f += traction * surface_shares(p)[:, None]
+        f += traction * surface_shares(p, np.any(traction != 0.0, axis=1))[:, None]
     return f

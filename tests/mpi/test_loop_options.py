@@ -2,21 +2,24 @@
 with an exact total force, a fixed time step that ends exactly at t_end, particle error
 norms, damping; a P2 scene with output. Serial and on 2 ranks."""
 
+import dolfinx.fem
 import dolfinx.mesh as dm
 import numpy as np
 import pytest
 from mpi4py import MPI
 
+import fempm
 from fempm import manufactured as mf
 from fempm.errors import ErrorHistory, particle_errors
 from fempm.materials import LinearElastic
 from fempm.scene import Scene, run
 from fempm.scenes.manufactured import manufactured_scene
-from fempm.seeding import create_particles
 from fempm.loads import surface_areas, takes_reference_positions
+from fempm.seeding import create_particles
+from fempm.meshes import unstructured_rectangle
 from fempm.stepping import ExplicitSolver, Loads, StepOptions
 
-import dolfinx.fem
+comm = MPI.COMM_WORLD
 
 
 def _block(ppc: int, cells: int = 8):
@@ -85,6 +88,46 @@ def test_traction_gives_the_exact_total_force(ppc):
         assert solver.terms == {"internal": 1, "traction": 1}
         q.x = x0
         q.relocate()
+
+
+LOADED_MESHES = {
+    "triangle, right": lambda: dm.create_unit_square(comm, 8, 8, dm.CellType.triangle, diagonal=dm.DiagonalType.right),
+    "triangle, crossed": lambda: dm.create_unit_square(comm, 8, 8, dm.CellType.triangle,
+                                                       diagonal=dm.DiagonalType.crossed),
+    "triangle, gmsh": lambda: unstructured_rectangle(comm, 1.0 / 8),
+    "quadrilateral": lambda: dm.create_unit_square(comm, 8, 8, dm.CellType.quadrilateral),
+    "tetrahedron": lambda: dm.create_unit_cube(comm, 4, 4, 4),
+    "hexahedron": lambda: dm.create_unit_cube(comm, 4, 4, 4, dm.CellType.hexahedron),
+}
+
+
+@pytest.mark.parametrize("mesh_name", sorted(LOADED_MESHES))
+def test_the_default_surface_share_gives_the_total_force_on_every_cell_type(mesh_name):
+    """A traction t on the particles next to the face x = 1 (measure 1) with the default share
+    (no fields["area"]: fempm.loads.boundary_shares): the first step's momentum is t dt, for
+    the layer of the particles nearest to it and (in 2D) for layers one lattice row and one
+    cell thick, at 1, 4 (8) and 9 particles per cell. Before, the share V^(1/2) of a square particle gave 0.71 or 1.41
+    of the force on triangles."""
+    mesh = LOADED_MESHES[mesh_name]()
+    d = mesh.geometry.dim
+    h = 1.0 / 8 if d == 2 else 0.25
+    V = dolfinx.fem.functionspace(mesh, ("Lagrange", 1, (d,)))
+    t_bar = np.array([0.3, -0.2, 0.1][:d])
+    dt = 1e-4
+    for ppc in ((1, 4, 9) if d == 2 else (1, 8)):
+        n = round(ppc ** (1 / d))
+        # the nearest particles, one lattice row, one cell; on tetrahedra the nearest only: the
+        # Kuhn sub-tetrahedra's rows are 1/4 h apart, and thicker layers wrap round the cube's edges
+        bands = (0.3 * h / n,) if mesh_name == "tetrahedron" else (0.6 * h / n, h / n, h)
+        for band in bands:
+            p = fempm.create_particles(mesh, ppc, density=1.0)
+            layer = p.x[:, 0] > 1.0 - band
+            assert p.comm.allreduce(int(layer.sum())) > 0
+            traction = np.where(layer[:, None], t_bar, 0.0)
+            solver = ExplicitSolver(V, p, [LinearElastic(1.0, 0.0)], loads=Loads(traction=lambda t: traction))
+            solver.step(dt)
+            assert np.allclose(_momentum(p), t_bar * dt, rtol=1e-12), (ppc, band)
+            assert "surface_share" in p.fields and "area" not in p.fields
 
 
 def test_fixed_dt_ends_exactly_at_t_end_and_errors_are_reduced():
