@@ -7,13 +7,35 @@ positive) and :math:`J_2 = \tfrac12 s : s`:
 .. math::
     f = \sqrt{J_2} + \eta\, p - \xi c, \qquad g = \sqrt{J_2} + \bar\eta\, p .
 
-The cone is matched to Mohr-Coulomb with friction angle :math:`\phi` and cohesion :math:`c`
-(de Souza Neto, Peric and Owen, *Computational Methods for Plasticity*, 2008, section 8.2.1):
-in 2D to the plane-strain failure load,
-:math:`\eta = 3\tan\phi / \sqrt{9 + 12\tan^2\phi}`, :math:`\xi = 3 / \sqrt{9 + 12\tan^2\phi}`;
-in 3D to the outer edges (triaxial compression),
-:math:`\eta = 6\sin\phi / (\sqrt3 (3 - \sin\phi))`, :math:`\xi = 6\cos\phi / (\sqrt3 (3 - \sin\phi))`;
-:math:`\bar\eta` likewise from the dilation angle :math:`\psi \le \phi`.
+The cone is matched to Mohr-Coulomb with friction angle :math:`\phi`, dilation angle
+:math:`\psi \le \phi` and cohesion :math:`c`.
+
+In 2D (plane strain) the match is that of steady plane-strain plastic flow (no out-of-plane
+plastic strain rate, :math:`\partial g / \partial \sigma_{zz} = 0`): there the in-plane
+principal stresses satisfy Mohr-Coulomb,
+:math:`\tfrac12(\sigma_1 - \sigma_2) = c\cos\phi - \tfrac12(\sigma_1 + \sigma_2)\sin\phi`, and the
+in-plane plastic strain rates have the dilatancy of :math:`\psi`,
+:math:`\sin\psi = -(\dot\epsilon_1 + \dot\epsilon_2)/(\dot\epsilon_1 - \dot\epsilon_2)`, when
+
+.. math::
+    \bar\eta = \frac{\sqrt3 \sin\psi}{\sqrt{3 + \sin^2\psi}}, \qquad
+    \eta = \frac{3 \sin\phi}{\sqrt3 \sqrt{3 - \bar\eta^2} + \bar\eta \sin\phi}, \qquad
+    \xi = \frac{(3 - \eta\bar\eta) \cos\phi}{\sqrt3 \sqrt{3 - \bar\eta^2}}
+
+(in steady plane-strain flow :math:`s_{zz} = -\tfrac23 \bar\eta \sqrt{J_2}`, so that
+:math:`\sqrt{J_2} = \sqrt3\, t / \sqrt{3 - \bar\eta^2}` and
+:math:`p = \tfrac12(\sigma_1 + \sigma_2) - \bar\eta\, t / (\sqrt3 \sqrt{3 - \bar\eta^2})` with
+:math:`t = \tfrac12(\sigma_1 - \sigma_2)`; putting them into :math:`f = 0` gives Mohr-Coulomb).
+For associated flow (:math:`\psi = \phi`) this is the classical plane-strain match
+:math:`\eta = 3\tan\phi / \sqrt{9 + 12\tan^2\phi}`, :math:`\xi = 3 / \sqrt{9 + 12\tan^2\phi}`
+(de Souza Neto, Peric and Owen, *Computational Methods for Plasticity*, 2008, section 8.2.1);
+for :math:`\psi = 0` it is :math:`\eta = \sin\phi`, :math:`\xi = \cos\phi`. (The classical
+match used with :math:`\psi = 0` mobilises only 28.7 degrees for :math:`\phi` = 30 and 37.1 for
+40 in steady flow.)
+
+In 3D the cone passes through the outer edges of Mohr-Coulomb (triaxial compression),
+:math:`\eta = 6\sin\phi / (\sqrt3 (3 - \sin\phi))`, :math:`\xi = 6\cos\phi / (\sqrt3 (3 - \sin\phi))`,
+:math:`\bar\eta` likewise from :math:`\psi`.
 
 Return mapping (exact for this cone, elastic moduli :math:`G = \mu`, :math:`K`): where
 :math:`f^{tr} > 0`, :math:`\Delta\gamma = f^{tr} / (G + K \eta\bar\eta)`,
@@ -39,13 +61,23 @@ from fempm.materials.hypoelastic import SIGMA_ZZ, HypoelasticPlastic, split
 
 
 def cone(angle_deg: float, d: int) -> tuple[float, float]:
-    """(eta, xi) of the Mohr-Coulomb match for an angle in degrees: plane strain in 2D, the
-    outer cone in 3D."""
+    """(eta, xi) of the Mohr-Coulomb match of associated flow for an angle in degrees: plane
+    strain in 2D, the outer cone in 3D (the eta of a dilation angle is its eta_bar)."""
     a = np.radians(angle_deg)
     if d == 2:
         root = np.sqrt(9.0 + 12.0 * np.tan(a) ** 2)
         return 3.0 * np.tan(a) / root, 3.0 / root
     return 6.0 * np.sin(a) / (np.sqrt(3.0) * (3.0 - np.sin(a))), 6.0 * np.cos(a) / (np.sqrt(3.0) * (3.0 - np.sin(a)))
+
+
+def plane_strain_cone(friction_deg: float, dilation_deg: float) -> tuple[float, float, float]:
+    """(eta, xi, eta_bar) of the match to Mohr-Coulomb in steady plane-strain flow with the
+    dilation angle (see the module); the classical match for associated flow."""
+    phi = np.radians(friction_deg)
+    eta_bar = cone(dilation_deg, 2)[0]
+    root = np.sqrt(3.0) * np.sqrt(3.0 - eta_bar**2)
+    eta = 3.0 * np.sin(phi) / (root + eta_bar * np.sin(phi))
+    return eta, (3.0 - eta * eta_bar) * np.cos(phi) / root, eta_bar
 
 
 @dataclass(frozen=True)
@@ -74,8 +106,11 @@ class DruckerPrager(HypoelasticPlastic):
 
     def parameters(self, d: int) -> tuple[float, float, float, float]:
         """(eta, xi c, eta_bar, p_t) in ``d`` dimensions."""
-        eta, xi = cone(self.friction_angle, d)
-        eta_bar = cone(self.dilation_angle, d)[0]
+        if d == 2:
+            eta, xi, eta_bar = plane_strain_cone(self.friction_angle, self.dilation_angle)
+        else:
+            eta, xi = cone(self.friction_angle, d)
+            eta_bar = cone(self.dilation_angle, d)[0]
         apex = xi * self.cohesion / eta if eta > 0 else np.inf
         return eta, xi * self.cohesion, eta_bar, min(apex, np.inf if self.tension is None else self.tension)
 
