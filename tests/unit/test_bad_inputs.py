@@ -277,3 +277,37 @@ def test_the_table_covers_enough_inputs():
 @pytest.mark.skipif(MPI.COMM_WORLD.size > 1, reason="serial inputs")
 def test_a_bound_given_to_a_law_without_wave_speed_makes_a_step():
     assert _solver(Dust(1.0, 0.0)).step(dt_max=1e-3) == 1e-3
+
+
+@pytest.mark.skipif(MPI.COMM_WORLD.size > 1, reason="serial inputs")
+def test_particle_domains_by_name_everywhere():
+    """fempm.project and Projector take the domain names StepOptions takes (before, "gimp"
+    failed with "'str' object has no attribute 'samples'")."""
+    V = dolfinx.fem.functionspace(MESH, ("Lagrange", 1))
+    p = fempm.create_particles(MESH, 4, density=1.0)
+    from fempm.domains import make_domain
+
+    for name in ("point", "gimp", "ugimp", "cpgimp", "cpdi1"):
+        u = fempm.project(V, p, lambda x: 1.0 + 2.0 * x[0], domain=name, mass="consistent")
+        ref = fempm.project(V, p, lambda x: 1.0 + 2.0 * x[0], domain=make_domain(name), mass="consistent")
+        assert np.array_equal(u.x.array, ref.x.array), name
+        assert np.allclose(u.x.array, 1.0 + 2.0 * V.tabulate_dof_coordinates()[:, 0], atol=1e-2), name
+
+
+def test_the_readme_names_import():
+    from fempm.scenes import manufactured_scene  # noqa: F401  (as the README writes it)
+
+
+@pytest.mark.skipif(MPI.COMM_WORLD.size > 1, reason="serial inputs")
+def test_p2_consistent_scenes_seed_enough_particles_by_default():
+    """Cantilever and Cook's membrane with P2 consistent mass start without a singular mass
+    (before: SingularMassError at the start): 9 particles per quadrilateral, and a Cook lattice
+    refined until every triangle holds 6."""
+    from fempm.scene import emptiest_cell
+
+    c = fempm.scenes.cantilever(degree=2, mass="consistent", t_end=2e-4, frames=1, comm=comm)
+    assert c.params["ppc"] == 9
+    assert run(c, None, progress=False)["status"] == "completed"
+    k = fempm.scenes.cook_membrane(degree=2, mass="consistent", t_end=0.05, frames=1, comm=comm)
+    assert emptiest_cell(k.particles) >= 6
+    assert run(k, None, progress=False)["status"] == "completed"

@@ -75,6 +75,17 @@ def test_version_and_the_list_of_scenes(capsys):
     (["run", "bar", "--cfl", "-0.5"], "cfl"),
     (["run", "bar", "--scheme", "XYZ"], "scheme"),
     (["run", "bar", "--j-min", "x"], "option --j-min expects a number"),
+    (["run", "bar", "--t_end_x", "1"], "options: --E, --L, --cells, --cfl, --dim, --flip, --lumped-forces"),
+    (["run", "cantilever", "--g", "nan"], "option --g expects a finite number, got 'nan'"),
+    (["run", "cook", "--variant", "foo"], "unknown option variant='foo'"),
+    (["run", "cantilever", "--degree", "2"], "mass='lumped' needs a non-negative basis"),
+    (["run", "cantilever", "--degree", "2", "--mass", "consistent", "--ppc", "4"],
+     "ppc=4 particles per cell cannot determine the consistent mass of degree 2"),
+    (["run", "cook", "--spacing", "-1"], "spacing=-1.0 must be a positive length"),
+    (["run", "disks", "--friction", "0.5"], "friction=0.5 needs contact=True"),
+    (["run", "impact", "--contact", "no", "--friction", "0.5"], "friction=0.5 needs contact=True"),
+    (["run", "disks", "--radius", "0.9"], "radius=0.9 must lie in (0, 0.2]"),
+    (["run", "dam", "--ppc", "2"], "ppc=2 particles per cell must be a square"),
 ])
 def test_usage_errors_exit_2_with_one_line(argv, message, capsys):
     from fempm.cli import main
@@ -108,3 +119,36 @@ def test_an_earlier_run_in_the_output_folder_needs_overwrite(tmp_path, capsys):
     (tmp_path / "notes.txt").write_text("mine")
     assert main(argv + ["--overwrite"]) == 0
     assert (tmp_path / "notes.txt").read_text() == "mine"  # only the run's own outputs are replaced
+
+
+@pytest.mark.skipif(MPI.COMM_WORLD.size > 1, reason="command-line output on one rank")
+def test_a_particle_leaving_the_mesh_exits_3_with_a_summary(tmp_path, capsys):
+    """The disks collide, bounce apart and leave the unit square (32 cells, to t = 6): exit 3,
+    one message naming the particles outside the mesh, summary.json with status "aborted"."""
+    import json
+
+    from fempm.cli import main
+
+    assert main(["run", "disks", "--cells", "32", "--t-end", "6", "--frames", "2", "--out", str(tmp_path)]) == 3
+    err = capsys.readouterr().err
+    assert "aborted" in err and "lie outside the mesh" in err and "Traceback" not in err
+    summary = json.loads((tmp_path / "summary.json").read_text())
+    assert summary["status"] == "aborted" and "outside the mesh" in summary["health"]["error"]
+
+
+@pytest.mark.skipif(MPI.COMM_WORLD.size > 1, reason="command-line output on one rank")
+def test_frames_above_2_gb_need_force(tmp_path, capsys):
+    """The column at aspect 50 on 8 cells builds a 512,000-cell mesh: 3.3 GB of frames. The run
+    stops before it writes anything, saying so, unless --force or fewer --frames."""
+    from fempm.cli import main
+
+    argv = ["run", "column", "--aspect", "50", "--cells", "8", "--out", str(tmp_path / "c")]
+    assert main(argv) == 2
+    err = capsys.readouterr().err
+    assert "would write about 3.32 GB of frames (21 frames" in err and "--force" in err
+    assert not (tmp_path / "c" / "energies.csv").exists()
+    from fempm.io import check_output_size
+    from fempm.scenes import column_collapse
+
+    scene = column_collapse(aspect=50.0, cells=8, frames=5)
+    assert check_output_size(scene.particles, scene.space(), scene.outputs, scene.frames) < 2e9
