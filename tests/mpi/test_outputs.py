@@ -78,6 +78,11 @@ def test_grid_frames_include_the_final_state_and_pyvista_reads_them(tmp_path):
     assert len(np.unique(np.concatenate(comm.allgather(gdofs)))) == len(xs)
     if comm.rank != 0:
         return
+    # the pieces lie in grid/ (one per rank and frame) as the particles' in particles/, not beside the collections
+    assert sorted(q.name for q in out.iterdir() if q.is_file()) == [
+        "energies.csv", "grid_stress.pvd", "grid_velocity.pvd", "particles.pvd", "summary.json"]
+    assert len(list((out / "grid").glob("grid_velocity_*_r*.vtu"))) == 4 * comm.size
+    assert len(list((out / "grid").glob("grid_stress_*.pvtu"))) == 4
     for name in ("grid_velocity", "grid_stress"):
         reader = pv.PVDReader(out / f"{name}.pvd")
         # at every particle frame (t = 0: the mapped velocity) and at the end
