@@ -50,7 +50,8 @@ class ConsistentPointStep(LumpedPointStep):
             fixed[solver._fixed_dofs] = True
         self.systems = ConsistentSystems(solver.V, self.cell_dofs, self.free, fixed,
                                          prefix=self.options.petsc_options_prefix,
-                                         lump_below=self.options.lump_below)
+                                         lump_below=self.options.lump_below,
+                                         always_lumped=solver.node_local_dofs)
         self.cell_mass = kc.cell_mass(solver.particles.locator.geometry.cell_name)
         self._ghosted = self._nodal_array(self.d)
         self._accel: npt.NDArray | None = None  # the last acceleration, the warm start of its solve

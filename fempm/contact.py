@@ -36,8 +36,15 @@ body's with its velocity), USL and MUSL, any number of ranks (the nodal sums are
 over ranks as in the single-field step, and the correction is node-local), lumped or
 consistent mass (and FMPM). With consistent mass each group has its own mass matrix
 :math:`M^g_{ij} = \sum_{p \in g} M_p N_{ip} N_{jp}` and its velocity and acceleration are
-the solves :math:`M^g v^g = p^g` and :math:`M^g a^g = f^g`; the correction stays node-local
-and weighs the groups by their lumped masses :math:`m^g_i = \sum_j M^g_{ij}`. Since
+the solves :math:`M^g v^g = p^g` and :math:`M^g a^g = f^g`, with lumped rows at the contact
+nodes (where two or more groups have mass) when the contact has friction; the correction stays
+node-local and weighs the groups by their lumped masses :math:`m^g_i = \sum_j M^g_{ij}`.
+Coulomb friction acts on each node's own tangential velocity, and consistently solved
+velocities oscillate from node to node: without the lumped rows some contact nodes moved
+slower than mu times their normal velocity change, the friction there was cut short, and a
+block on a rigid plane at 30 degrees slid 19 % faster than g (sin - mu cos) at mu = 0.5 and
+slid at mu = 0.6 (FLIP 0.8, 8 cells; with the lumped rows and PIC: -0.16 % and at rest). (Frictionless contact keeps the consistent rows: two
+elastic bars rebound at 95.7 % of their speed with them, 89.7 % with lumped contact rows.) Since
 :math:`\sum_{ij} M^g_{ij} v^g_j = \sum_i m^g_i v^g_i`, conserving
 :math:`\sum_g m^g_i v^g_i` at every node conserves the total momentum of the consistent
 fields, and the FLIP increments carry it to the particles. The stable step is the lumped one
@@ -247,12 +254,18 @@ def contact_step(solver: ExplicitSolver, dt: float | None, dt_max: float) -> flo
     masks = [group == g for g in range(G)]
     rigid = np.isin(np.arange(G), contact.rigid)
     deformable = np.flatnonzero(~rigid)
-    # consistent mass or FMPM: each deformable group's own mass (its masses, zeros elsewhere)
-    ops = {} if opts.mass_mode == "lumped" else {g: solver._mass_operator(basis, p.mass * masks[g]) for g in deformable}
+    m = np.stack([p2g(basis, (p.mass * k)[:, None])[:, 0] for k in masks])
+    total = m.sum(axis=0)
+    top = comm.allreduce(float(total[: basis.index_map.size_local].max(initial=0.0)), op=MPI.MAX)
+    has = m > SUPPORT_TOL * top
+    # consistent mass or FMPM: each deformable group's own mass (its masses, zeros elsewhere), with
+    # lumped rows at the contact nodes where friction acts (see the module)
+    shared = np.count_nonzero(has, axis=0) >= 2 if contact.friction > 0.0 else None
+    ops = {} if opts.mass_mode == "lumped" else {g: solver._mass_operator(basis, p.mass * masks[g], lump_dofs=shared)
+                                                 for g in deformable}
     dt = solver._time_step(solver._stable_with(list(ops.values())), dt, dt_max)
     d = p.gdim
     eye = np.eye(d)
-    m = np.stack([p2g(basis, (p.mass * k)[:, None])[:, 0] for k in masks])
     grad = np.stack([p2g_gradients(basis, (p.mass * k)[:, None, None] * eye) for k in masks])
     solver._count_terms()
     fext = external_forces(solver.loads, p, solver.t)
@@ -260,9 +273,6 @@ def contact_step(solver: ExplicitSolver, dt: float | None, dt_max: float) -> flo
     for g in deformable:  # rigid groups take no forces
         k = masks[g]
         force[g] = p2g_gradients(basis, -(p.volume * k)[:, None, None] * fld["sigma"]) + p2g(basis, fext * k[:, None])
-    total = m.sum(axis=0)
-    top = comm.allreduce(float(total[: basis.index_map.size_local].max(initial=0.0)), op=MPI.MAX)
-    has = m > SUPPORT_TOL * top
     m_has = np.where(has, m, 0.0)
     inv = np.where(has, 1.0 / np.where(has, m, 1.0), 0.0)[:, :, None]
     # per group: a node with a sliver of one body's mass keeps its mapped velocity (a_g = f_g / m_g

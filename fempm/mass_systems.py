@@ -94,10 +94,13 @@ class ConsistentSystems:
     ``cell_dofs`` (cells, k): the dofmap; ``free`` (dofs, d): which dof components are solved
     for (False on Dirichlet dofs and, per component, on axis-normal slip walls); ``fixed``
     (dofs,): the Dirichlet dofs (excluded from the stable-step system too); ``V``: the space
-    (dof coordinates of the stable-step estimate's right-hand side)."""
+    (dof coordinates of the stable-step estimate's right-hand side); ``always_lumped`` (dofs,):
+    dofs whose rows are lumped whatever their mass (the walls' of node-local conditions,
+    :attr:`fempm.stepping.ExplicitSolver.node_local_dofs`)."""
 
     def __init__(self, V, cell_dofs: npt.NDArray[np.int32], free: npt.NDArray[np.bool_],
-                 fixed: npt.NDArray[np.bool_], *, prefix: str, lump_below: float):
+                 fixed: npt.NDArray[np.bool_], *, prefix: str, lump_below: float,
+                 always_lumped: npt.NDArray[np.bool_] | None = None):
         self.index_map = V.dofmap.index_map
         self.comm = self.index_map.comm
         self.cell_dofs = cell_dofs
@@ -105,6 +108,7 @@ class ConsistentSystems:
         self.num_dofs = self.num_owned + self.index_map.num_ghosts
         self.num_cells = V.mesh.topology.index_map(V.mesh.topology.dim).size_local
         self.lump_below = lump_below
+        self.always_lumped = always_lumped  # dofs whose rows are lumped in any case (node-local conditions)
         self.prefix = prefix
         self.ksp_options = dict(KSP_OPTIONS if self.comm.size == 1 else KSP_OPTIONS_PARALLEL)
         if V.mesh.topology.cell_type in (CellType.triangle, CellType.tetrahedron):
@@ -229,6 +233,8 @@ class ConsistentSystems:
         self.comm.Allreduce(MPI.IN_PLACE, top, op=MPI.MAX)
         self.active = (diagonal > SUPPORT_TOL * top[0]) & self.base.free
         self.lump = lumped < self.lump_below * top[1] if self.lump_below > 0.0 else np.zeros(self.num_dofs, bool)
+        if self.always_lumped is not None:
+            self.lump |= self.always_lumped
         occupied = np.flatnonzero(self._count)
         prev = self._structure
         changed = (prev is None or not np.array_equal(prev[0], occupied) or not np.array_equal(prev[1], self.active)

@@ -185,6 +185,9 @@ class Projector:
     ``domain``: particle domains, a name (``"gimp"``, ``"cpdi1"``, ... as in
     :class:`fempm.stepping.StepOptions`) or a domain object (:mod:`fempm.domains`; default the
     point).
+    ``lump_dofs`` (consistent mode and FMPM): a mask over owned + ghost dofs whose rows are
+    lumped as well (those of conditions that act node by node, :mod:`fempm.contact`,
+    :class:`fempm.boundary.Friction`).
     ``lump_below`` (consistent mode): dofs whose lumped mass is below this
     fraction of the largest get lumped rows and columns (see :func:`consistent_mass_matrix`),
     so that the solve does not extrapolate into nodes that particles barely reach (FMPM: those
@@ -231,6 +234,7 @@ class Projector:
         weight: str = "mass",
         fmpm_order: int | None = None,
         weights: npt.NDArray | None = None,
+        lump_dofs: npt.NDArray[np.bool_] | None = None,
     ):
         self.weights = particle_weights(particles, weight) if weights is None else np.asarray(weights, dtype=np.float64)
         self.weight = weight
@@ -264,6 +268,10 @@ class Projector:
         if mass != "lumped" and lump_below > 0.0 and self.basis.nonnegative:  # P2 Lagrange: lumping can make it indefinite
             m = self.lumped_masses()
             lump = m < lump_below * comm.allreduce(float(m[: self.num_owned].max(initial=0.0)), op=MPI.MAX)
+        if mass != "lumped" and lump_dofs is not None and self.basis.nonnegative:
+            extra = np.zeros(len(self.active), dtype=np.bool_)
+            extra[: len(lump_dofs)] = lump_dofs[: len(self.active)]
+            lump = extra if lump is None else lump | extra
         self.lump = lump
         if mass == "consistent":
             blocks = None
