@@ -10,7 +10,7 @@ jittered particles per grid cell, v = 0.5 sin(4 pi x_(k+1)), compressible neo-Ho
 particle's mass, the normal velocity zero on the outer 3 node layers, dt = 0.1 dx / 40. fempm
 runs it on structured quadrilaterals (``quad``, the reference grid) and on gmsh triangles of the
 same size (``tri``), under ``mpiexec -n R``; the references run with R threads. On several
-ranks the mesh is distributed by particles (:func:`fempm.partition.particle_balanced`; DOLFINx's
+ranks the mesh is distributed by particles (:func:`fempm.particles.partition.particle_balanced`; DOLFINx's
 own partition, by cells, with ``--partition cells``).
 
 Each configuration runs in its own process (a worker: this script with ``--worker``): 3 warm-up
@@ -73,7 +73,7 @@ def _peak_kb() -> int:
 def build(n_target: int, mesh_kind: str, mass: str, reference: Path, partition: str = "particles"):
     """The reference problem as a fempm solver; returns (solver, dt, particles, rss after mesh).
     ``partition``: on several ranks, the mesh distributed by particles
-    (:func:`fempm.partition.particle_balanced`) or as DOLFINx partitions it (``cells``)."""
+    (:func:`fempm.particles.partition.particle_balanced`) or as DOLFINx partitions it (``cells``)."""
     import dolfinx.mesh as dm
     import numpy as np
     from mpi4py import MPI
@@ -93,7 +93,7 @@ def build(n_target: int, mesh_kind: str, mass: str, reference: Path, partition: 
     else:
         mesh = triangle_mesh(comm, dx)
     if comm.size > 1 and partition == "particles":
-        from fempm.partition import particle_balanced
+        from fempm.particles.partition import particle_balanced
 
         mesh = particle_balanced(mesh, x if comm.rank == 0 else np.zeros((0, 2)))
     rss0 = _rss_kb()
@@ -300,7 +300,7 @@ def main(argv=None) -> None:
     ap.add_argument("--json", type=Path, help="write the figures to this file")
     ap.add_argument("--reference", type=Path, default=DEFAULT_REFERENCE, help="the reference-mpm folder")
     ap.add_argument("--partition", default="particles", choices=["particles", "cells"],
-                    help="on several ranks: the mesh distributed by particles (fempm.partition) or by cells (DOLFINx)")
+                    help="on several ranks: the mesh distributed by particles (fempm.particles.partition) or by cells (DOLFINx)")
     # worker mode (one configuration under mpiexec)
     ap.add_argument("--worker", action="store_true", help=argparse.SUPPRESS)
     ap.add_argument("--n", default="1e4", help=argparse.SUPPRESS)

@@ -91,7 +91,7 @@ def main(argv: list[str] | None = None) -> dict:
               f"({out['tip_error']:+.2%}; q L^4 / 8EI = {P['tip_deflection']:.5f} m); largest {d.max():.5f} m; "
               f"{res['steps']} steps")
         if not a.no_plot:
-            from fempm.plot import plot_curves
+            from fempm.io.plot import plot_curves
 
             plot_curves(a.out / "tip.png", [(t, d, "-", {"label": "fempm tip deflection"})],
                         hlines=[(w_ref, {"color": "k", "ls": "--", "label": f"Euler-Bernoulli w(x = {x_tip:.4f})"}),

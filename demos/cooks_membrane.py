@@ -79,7 +79,7 @@ def main(argv: list[str] | None = None) -> dict:
             w.writeheader()
             w.writerows(rows)
         if not a.no_plot:
-            from fempm.plot import plot_curves
+            from fempm.io.plot import plot_curves
 
             curves, hlines = [], []
             for nu in a.nu:

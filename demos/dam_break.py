@@ -73,7 +73,7 @@ def main(argv: list[str] | None = None) -> dict:
         for t, z, zs, e in zip(ref[:, 0], ref[:, 1], Zs, dev):
             print(f"  {t:4.2f}   {z:6.2f}               {zs:6.3f}      {e:+6.1%}")
         if not a.no_plot:
-            from fempm.plot import plot_curves
+            from fempm.io.plot import plot_curves
 
             plot_curves(a.out / "front.png", [
                 (T, Z, "-", {"label": f"fempm ({a.cells} cells across the column)"}),

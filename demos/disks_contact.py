@@ -5,7 +5,7 @@ $\rho = 1000$, $\pm(0.1, 0.1)$ m/s, 20 x 20 quadrilaterals), run twice with USL:
 
 * with one grid velocity field, the disks interact through the nodes they share, from a cell
   apart;
-* with contact (`two_disks(contact=True)`, `fempm.contact.Contact`), each disk has its own
+* with contact (`two_disks(contact=True)`, `fempm.stepping.contact.Contact`), each disk has its own
   field; where both have mass the approaching normal velocity is removed against the node's
   centre-of-mass velocity, and separation is free.
 
@@ -29,7 +29,7 @@ import fempm  # noqa: F401
 import numpy as np
 from mpi4py import MPI
 
-from fempm.contact import shared_cells
+from fempm.stepping.contact import shared_cells
 from fempm.scene import run
 from fempm.scenes import two_disks
 

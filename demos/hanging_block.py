@@ -37,7 +37,7 @@ import fempm  # noqa: F401
 import numpy as np
 from mpi4py import MPI
 
-from fempm.location import OutsideMeshError
+from fempm.particles.location import OutsideMeshError
 from fempm.scenes import hanging_block, largest_neighbour_gap
 from fempm.stepping import SimulationError
 
@@ -107,7 +107,7 @@ def main(argv: list[str] | None = None) -> dict:
 
 
 def _plot(runs: dict, a) -> None:
-    from fempm.plot import _pyplot, _save, plot_curves
+    from fempm.io.plot import _pyplot, _save, plot_curves
 
     plt = _pyplot()
     meshes, domains = a.meshes, a.domains

@@ -33,7 +33,7 @@ import numpy as np
 import ufl
 from mpi4py import MPI
 
-from fempm.errors import l2_error
+from fempm.verification.errors import l2_error
 from fempm.meshes import read_msh
 
 HERE = Path(__file__).resolve().parent
@@ -113,7 +113,7 @@ def main(argv: list[str] | None = None) -> dict:
 
     # ## A picture: particles coloured by their value, and the consistent P1 field
     if not args.no_plot:
-        from fempm.plot import plot_projection
+        from fempm.io.plot import plot_projection
 
         plot_projection(out_fields[1], particles, fp, args.out / "projection.png")
     return results

@@ -67,7 +67,7 @@ def main(argv: list[str] | None = None) -> dict:
               f"kinetic {ke[0]:.4f} -> min {ke.min():.4f} at t = {out['t_kinetic_min']:.3f} -> {ke[-1]:.4f}, "
               f"lower disk velocity {np.round(v_low, 4).tolist()}")
         if not a.no_plot:
-            from fempm.plot import plot_energies
+            from fempm.io.plot import plot_energies
 
             plot_energies(h, a.out / "energies.png", title=f"two disks, {a.mesh} mesh, {a.scheme}, {a.mass} mass")
     if not a.no_plot:
@@ -83,7 +83,7 @@ def _plot_particles(scene, path: Path) -> None:
     vm = np.sqrt(np.maximum(s[:, 0, 0] ** 2 - s[:, 0, 0] * s[:, 1, 1] + s[:, 1, 1] ** 2 + 3 * s[:, 0, 1] ** 2, 0.0))
     xs, vs = comm.gather(p.x, root=0), comm.gather(vm, root=0)
     if comm.rank == 0:
-        from fempm.plot import plot_particle_frame
+        from fempm.io.plot import plot_particle_frame
 
         plot_particle_frame(np.concatenate(xs), np.concatenate(vs), path, title=f"two disks at t = {scene.t_end:g}",
                             label="von Mises stress", bounds=np.array([[0.0, 0.0], [1.0, 1.0]]))

@@ -62,7 +62,7 @@ def main(argv: list[str] | None = None) -> dict:
         print(f"bar ({a.dim}D), {a.cells} cells, {a.scheme}, flip={a.flip}, {a.mass}: max |v_cm error| / amplitude = "
               f"{out['vcm_error']:.4f}, energy error = {out['energy_error']:.2e}, {res['steps']} steps")
         if not a.no_plot:
-            from fempm.plot import plot_curves
+            from fempm.io.plot import plot_curves
 
             plot_curves(a.out / "vcm.png", [(t, vcm, "-", {"label": "fempm"}), (t, exact, "--", {"label": "exact"})],
                         xlabel="t", ylabel="centre-of-mass velocity",

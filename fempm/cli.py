@@ -15,7 +15,7 @@ Scene options are the keyword arguments of the scene builders in :mod:`fempm.sce
 a value of the wrong type or out of range, an output folder that cannot be created) prints one
 line and exits with code 2; a run stopped by its health limits or a failed step exits with 3;
 a run stopped by SIGTERM or SIGINT writes a checkpoint and exits with 128 + the signal
-(``resume`` continues it, :mod:`fempm.checkpoint`).
+(``resume`` continues it, :mod:`fempm.io.checkpoint`).
 """
 
 from __future__ import annotations
@@ -26,6 +26,23 @@ import math
 import sys
 from pathlib import Path
 
+from fempm import __version__
+from fempm.abort import abort_on_error
+from fempm.io.checkpoint import CheckpointError, RunInterrupted, choose
+from fempm.io.writers import (
+    OUTPUT_LIMIT,
+    OutputFolderError,
+    OutputSizeError,
+    OutputWriteError,
+)
+from fempm.particles.location import OutsideMeshError
+from fempm.scene.loop import run
+from fempm.scenes import SCENES
+from fempm.stepping.health import Health
+from fempm.stepping.options import SimulationError
+from fempm.studies import mapping, particle_basis
+from fempm.transfer.mapping import SingularMassError
+
 
 class UsageError(SystemExit):
     """A mistake in the command line: its message on one line, exit code 2, no traceback."""
@@ -34,7 +51,6 @@ class UsageError(SystemExit):
 def main(argv: list[str] | None = None) -> int:
     """The command line; under MPI an exception on one rank ends every rank
     (:func:`fempm.abort.abort_on_error`; usage errors, the same on every rank, exit with 2)."""
-    from fempm.abort import abort_on_error
 
     try:
         with abort_on_error():
@@ -48,8 +64,6 @@ def main(argv: list[str] | None = None) -> int:
 
 
 def _main(argv: list[str] | None) -> int:
-    from fempm import __version__
-
     parser = argparse.ArgumentParser(prog="python -m fempm", description="fempm: MPM on DOLFINx meshes", allow_abbrev=False)
     parser.add_argument("--version", action="version", version=f"fempm {__version__}")
     sub = parser.add_subparsers(dest="command", required=True)
@@ -83,8 +97,6 @@ def _main(argv: list[str] | None) -> int:
     if args.command != "run" and rest:
         parser.error(f"unrecognized arguments: {' '.join(rest)}")
 
-    import fempm  # noqa: F401  (dolfinx_solver before dolfinx)
-
     if args.command == "run":
         return _run(args, rest)
     if args.command == "resume":
@@ -92,8 +104,6 @@ def _main(argv: list[str] | None) -> int:
 
     if args.command == "study" and args.name == "particle-basis":
         from mpi4py import MPI
-
-        from fempm.studies import particle_basis
 
         out = args.out or Path("output/study-particle-basis")
         if MPI.COMM_WORLD.rank == 0:  # dense operators on small bodies: one rank
@@ -125,8 +135,6 @@ def _main(argv: list[str] | None) -> int:
         return 0
 
     if args.command == "study" and args.name == "mapping":
-        from fempm.studies import mapping
-
         sizes = args.sizes or ((8, 16, 32, 64, 128) if args.full else (8, 16, 32))
         ppcs = args.ppc or ((1, 4, 9, 16) if args.full else (4, 9))
         out = args.out or Path("output/study-mapping")
@@ -193,7 +201,6 @@ def _boolean(flag: str, value: str) -> bool:
 def _health_options(rest: list[str]) -> tuple[dict, list[str]]:
     """Split the run-health limits (``--energy-tolerance X|none``, ``--j-min``, ``--j-max``,
     ``--dt-floor``) from the scene options."""
-    from fempm.health import Health
 
     defaults = Health().asdict()
     health, others = {}, []
@@ -227,11 +234,6 @@ def _summary(builder) -> str:
 def _run(args, rest: list[str]) -> int:
     import inspect
 
-
-    from fempm.health import Health
-    from fempm.io import OUTPUT_LIMIT
-    from fempm.scenes import SCENES
-
     if args.scene is None and args.help:
         print("python -m fempm run SCENE [--out DIR] [--option value ...]; scenes:")
         for name, builder in SCENES.items():
@@ -249,7 +251,7 @@ def _run(args, rest: list[str]) -> int:
         for k, v in inspect.signature(builder).parameters.items():
             if k != "comm":
                 print(f"  --{k.replace('_', '-')} {v.default}")
-        print("run health (fempm.health.Health; a crossed limit stops the run with exit code 3):")
+        print("run health (fempm.stepping.health.Health; a crossed limit stops the run with exit code 3):")
         for k, v in Health().asdict().items():
             print(f"  --{k.replace('_', '-')} {v}")
         return 0
@@ -269,7 +271,6 @@ def _check_every(every: int | None, command: str) -> None:
 
 def _build(rebuild: dict):
     """The scene of a command line (name, options, health limits)."""
-    from fempm.scenes import SCENES
 
     try:
         scene = SCENES[rebuild["scene"]](**rebuild["options"])
@@ -283,13 +284,6 @@ def _execute(scene, out: Path, name: str, **kwargs) -> int:
     """Run (or continue) ``scene`` into ``out``; the exit code: 0 done, 3 stopped by a failed
     step or a health limit, 128 + the signal when interrupted (after a checkpoint)."""
     from mpi4py import MPI
-
-    from fempm.checkpoint import CheckpointError, RunInterrupted
-    from fempm.io import OutputFolderError, OutputSizeError, OutputWriteError
-    from fempm.location import OutsideMeshError
-    from fempm.scene import run
-    from fempm.stepping import SimulationError
-    from fempm.transfer import SingularMassError
 
     rank0 = MPI.COMM_WORLD.rank == 0
     try:
@@ -319,8 +313,6 @@ def _resume(args) -> int:
     """``python -m fempm resume OUT``: rebuild the scene from the checkpoint's command line and
     continue it (to ``--t-end`` if given)."""
     from mpi4py import MPI
-
-    from fempm.checkpoint import CheckpointError, choose
 
     try:
         data = choose(args.out, MPI.COMM_WORLD)[1]

@@ -1,5 +1,5 @@
 r"""Compiled pieces of the consistent mass for point particles on affine degree-1 cells
-(:class:`fempm.consistent_step.ConsistentPointStep` drives them; :func:`fempm.transfer.cell_blocks`
+(:class:`fempm.stepping.consistent.ConsistentPointStep` drives them; :func:`fempm.transfer.cell_blocks`
 and :func:`fempm.transfer.consistent_mass_matrix` are their reference).
 
 :func:`cell_mass` (one particle pass): the local matrices, the diagonal and the occupancy,
@@ -53,7 +53,6 @@ if AVAILABLE:
             if not keep[identity_dofs[r]]:
                 out[diagonal_slot[r]] += 1.0
 
-
     @njit(cache=True)
     def eigenvalue_bounds(B, out):  # pragma: no cover
         r"""Bounds of the smallest eigenvalue of each symmetric positive semi-definite ``B[n]``
@@ -85,7 +84,6 @@ if AVAILABLE:
             out[c, 0] = lo
             out[c, 1] = det / tr ** (k - 1) if lo > 0.0 else 0.0
 
-
     @njit(cache=True)
     def adjacency(dofs, nd):  # pragma: no cover
         """The cells of each dof, (start (nd + 1,), cells): dof ``i``'s cells are
@@ -108,7 +106,7 @@ if AVAILABLE:
 
     @njit(cache=True)
     def propagate(blocks, dofs, determined, pending, tol, unsure, start, adjacent):  # pragma: no cover
-        """The cell-by-cell determination of :func:`fempm.mass_span.singular_dofs` on one rank,
+        """The cell-by-cell determination of :func:`fempm.transfer.mass_span.singular_dofs` on one rank,
         in place, to its fixed point: a ``pending`` cell whose Jacobi-scaled block restricted to
         its undetermined dofs has its smallest eigenvalue clearly above ``tol`` (pivot bounds,
         :func:`eigenvalue_bounds`, by a factor 2; one undetermined dof: its diagonal above 0)

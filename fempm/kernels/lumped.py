@@ -1,5 +1,5 @@
 r"""The lumped-mass explicit step for point particles on affine degree-1 cells, in four
-compiled passes (:class:`fempm.lumped_step.LumpedPointStep` drives them; the generic
+compiled passes (:class:`fempm.stepping.lumped.LumpedPointStep` drives them; the generic
 :meth:`fempm.stepping.ExplicitSolver.step` is their reference). The basis is evaluated on the
 fly (:func:`fempm.kernels.shape.shape`), never stored.
 
@@ -37,45 +37,20 @@ from types import SimpleNamespace
 
 import numpy as np
 
+from fempm.kernels import planar
+from fempm.kernels.particle_checks import (
+    LINEAR_ELASTIC,
+    NEO_HOOKEAN,
+    count_j,
+    stable_time,
+)
 from fempm.kernels.shape import AVAILABLE, CELLS
-
-NEO_HOOKEAN, LINEAR_ELASTIC = 1, 2
-
 
 if AVAILABLE:
     from numba import njit
 
     from fempm.kernels.kinematics import _det, linear_elastic_at, neo_hookean_at
     from fempm.kernels.shape import inside_after_pull_back, shape, star_search
-
-    @njit(inline="always")
-    def stable_time(best, bound, m, V, speed, mod, c, p, hp):  # pragma: no cover - compiled
-        """``best`` updated with particle ``p`` (mass ``m``, volume ``V``, squared speed ``speed``,
-        P-wave modulus ``mod`` of its body, else wave speed ``c[p]``, cell size ``hp``): the
-        minimum of :math:`h / (c + |v|)`, or with ``bound`` the maximum of
-        :math:`(c^2 + |v|^2) / h^2` (see :func:`_scatter_kernel`). NaN propagates; a particle at
-        rest without a wave speed sets no limit."""
-        if bound:
-            if mod > 0.0:
-                r = (mod * V + m * speed) / (m * hp * hp)
-            else:
-                r = (c[p] * c[p] + speed) / (hp * hp)
-            return r if not r <= best else best
-        wave = np.sqrt(mod / (m / V)) if mod > 0.0 else c[p]
-        total = wave + np.sqrt(speed)
-        t = hp / total if not total <= 0.0 else np.inf
-        return t if not t >= best else best
-
-    @njit(inline="always")
-    def count_j(J, nonfinite_j, inverted, jmin, jmax):  # pragma: no cover - compiled
-        """(J finite and positive, then the counts of non-finite and non-positive J and the range
-        of the finite J, updated with ``J``)."""
-        if not np.isfinite(J):
-            return False, nonfinite_j + 1, inverted, jmin, jmax
-        jmin, jmax = min(jmin, J), max(jmax, J)
-        if J <= 0.0:
-            return False, nonfinite_j, inverted + 1, jmin, jmax
-        return True, nonfinite_j, inverted, jmin, jmax
 
     @njit(cache=True, error_model="numpy")
     def grid_velocity(mass, mom, cv, free, active_min, v):  # pragma: no cover
@@ -127,7 +102,6 @@ if AVAILABLE:
 def kernels_for(cell: str) -> SimpleNamespace:
     """The particle passes ``scatter`` and ``g2p_update`` compiled for one cell type (for
     triangles and quadrilaterals the scalar ones of :mod:`fempm.kernels.planar`)."""
-    from fempm.kernels import planar
 
     scatter_kernel, g2p_kernel = _scatter_kernel, _g2p_kernel
     if cell in ("triangle", "quadrilateral"):

@@ -21,13 +21,13 @@ import functools
 
 import numpy as np
 
-from fempm.kernels.lumped import LINEAR_ELASTIC, NEO_HOOKEAN
+from fempm.kernels.particle_checks import LINEAR_ELASTIC, NEO_HOOKEAN
 from fempm.kernels.shape import AVAILABLE
 
 if AVAILABLE:
     from numba import njit
 
-    from fempm.kernels.lumped import count_j, stable_time
+    from fempm.kernels.particle_checks import count_j, stable_time
     from fempm.kernels.shape import star_search
 
     @njit(inline="always")

@@ -9,11 +9,11 @@ On a cell :math:`c` with :math:`x = x_0 + J X` and :math:`K = J^{-1}`:
 with :math:`\hat N_0 = 1 - \sum_t X_t`, :math:`\hat N_{a} = X_{a-1}` on simplices and
 :math:`\hat N_a = \prod_t \big(X_t \text{ if bit } t \text{ of } a \text{ else } 1 - X_t\big)`
 on the reference square and cube (basix's vertex order: vertex ``a`` has coordinate ``t``
-equal to bit ``t`` of ``a``). The pull-back's inside test is :meth:`fempm.geometry.CellGeometry.contains`.
+equal to bit ``t`` of ``a``). The pull-back's inside test is :meth:`fempm.meshes.geometry.CellGeometry.contains`.
 
-:func:`affine_basis` fills the per-particle arrays of :class:`fempm.basis.ParticleBasis`
+:func:`affine_basis` fills the per-particle arrays of :class:`fempm.transfer.basis.ParticleBasis`
 (basix tabulation and the geometry's inverse Jacobians are its reference);
-:func:`affine_pull_back` serves :meth:`fempm.location.CellLocator.relocate`. The other kernels
+:func:`affine_pull_back` serves :meth:`fempm.particles.location.CellLocator.relocate`. The other kernels
 evaluate the basis on the fly with :func:`shape` instead of storing it.
 """
 
@@ -32,7 +32,6 @@ except ImportError:  # pragma: no cover - numba is a dependency
     njit = None
 
 if njit is not None:
-
     @njit(inline="always")
     def shape(X, p, K, c, simplex, t, k, N, G):  # pragma: no cover - compiled
         """Values ``N`` (k,) and physical gradients ``G`` (k, t) of particle ``p`` at reference
@@ -74,7 +73,7 @@ if njit is not None:
     @njit(inline="always")
     def inside_after_pull_back(x, p, x0, K, c, simplex, t, tol, X):  # pragma: no cover - compiled
         """X[p] <- K[c] (x[p] - x0[c]); whether it lies in the reference cell within ``tol``
-        (:meth:`fempm.geometry.CellGeometry.contains`; NaN lies outside)."""
+        (:meth:`fempm.meshes.geometry.CellGeometry.contains`; NaN lies outside)."""
         ok = True
         s = 0.0
         for i in range(t):

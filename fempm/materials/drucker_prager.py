@@ -55,9 +55,9 @@ from typing import ClassVar
 import numpy as np
 import numpy.typing as npt
 
-from fempm.kernels.plasticity import drucker_prager_return
+from fempm.kernels.plasticity import drucker_prager_return, split
 from fempm.materials.base import Internal
-from fempm.materials.hypoelastic import SIGMA_ZZ, HypoelasticPlastic, split
+from fempm.materials.hypoelastic import SIGMA_ZZ, HypoelasticPlastic
 
 
 def cone(angle_deg: float, d: int) -> tuple[float, float]:

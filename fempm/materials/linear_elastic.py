@@ -12,7 +12,8 @@ from dataclasses import dataclass
 import numpy as np
 import numpy.typing as npt
 
-from fempm.materials.base import IsotropicElastic, identity, sym, trace
+from fempm.kernels.kinematics import linear_elastic_stress, sym
+from fempm.materials.base import IsotropicElastic, identity, trace
 
 
 @dataclass(frozen=True)
@@ -23,7 +24,6 @@ class LinearElastic(IsotropicElastic):
     def stress(self, F, L, sigma, dt, rho) -> npt.NDArray:
         """The compiled kernel :func:`fempm.kernels.linear_elastic_stress`; :meth:`stress_numpy`
         is its reference."""
-        from fempm.kernels import linear_elastic_stress
 
         return linear_elastic_stress(np.ascontiguousarray(F), *self.lame)
 

@@ -10,6 +10,7 @@ from dataclasses import dataclass
 import numpy as np
 import numpy.typing as npt
 
+from fempm.kernels.kinematics import neo_hookean_stress
 from fempm.materials.base import IsotropicElastic, identity
 
 
@@ -20,7 +21,6 @@ class NeoHookean(IsotropicElastic):
     def stress(self, F, L, sigma, dt, rho) -> npt.NDArray:
         """The compiled kernel :func:`fempm.kernels.neo_hookean_stress`; :meth:`stress_numpy`
         is its reference."""
-        from fempm.kernels import neo_hookean_stress
 
         return neo_hookean_stress(np.ascontiguousarray(F), *self.lame)
 

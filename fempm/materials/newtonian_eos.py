@@ -12,7 +12,8 @@ import numpy as np
 import numpy.typing as npt
 
 from fempm.arguments import check_numbers
-from fempm.materials.base import identity, sym, trace
+from fempm.kernels.kinematics import sym
+from fempm.materials.base import identity, trace
 
 
 @dataclass(frozen=True)

@@ -23,9 +23,9 @@ from typing import ClassVar
 import numpy as np
 import numpy.typing as npt
 
-from fempm.kernels.plasticity import von_mises_return
+from fempm.kernels.plasticity import split, von_mises_return
 from fempm.materials.base import Internal
-from fempm.materials.hypoelastic import SIGMA_ZZ, HypoelasticPlastic, split
+from fempm.materials.hypoelastic import SIGMA_ZZ, HypoelasticPlastic
 
 
 @dataclass(frozen=True)

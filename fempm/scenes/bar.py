@@ -6,11 +6,11 @@ import dolfinx.mesh as dm
 import numpy as np
 from mpi4py import MPI
 
-from fempm.boundary import fixed
-from fempm.materials import LinearElastic
-from fempm.scene import Scene, check_counts
-from fempm.seeding import create_particles, per_direction
-from fempm.stepping import StepOptions
+from fempm.boundary.walls import fixed
+from fempm.materials.linear_elastic import LinearElastic
+from fempm.particles.seeding import create_particles, per_direction
+from fempm.scene.definition import Scene, check_counts
+from fempm.stepping.options import StepOptions
 
 
 def vibrating_bar(

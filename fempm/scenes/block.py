@@ -6,13 +6,15 @@ import dolfinx.mesh as dm
 import numpy as np
 from mpi4py import MPI
 
-from fempm.boundary import fixed
-from fempm.domains import box_corners
-from fempm.materials import NeoHookean
-from fempm.particles import Particles
-from fempm.scene import Scene, check_counts
-from fempm.seeding import per_direction
-from fempm.stepping import Loads, StepOptions
+from fempm.boundary.walls import fixed
+from fempm.materials.neo_hookean import NeoHookean
+from fempm.meshes.generators import unstructured_rectangle
+from fempm.particles.corners import box_corners
+from fempm.particles.particle_set import Particles
+from fempm.particles.seeding import per_direction
+from fempm.scene.definition import Scene, check_counts
+from fempm.stepping.loads import Loads
+from fempm.stepping.options import StepOptions
 
 
 def hanging_block(
@@ -36,8 +38,6 @@ def hanging_block(
     if mesh == "structured":
         m = dm.create_rectangle(comm, box, [int(round(2 / h)), int(round((4 + h) / h))], dm.CellType.quadrilateral)
     elif mesh == "unstructured":
-        from fempm.meshes import unstructured_rectangle
-
         m = unstructured_rectangle(comm, h, size=(2.0, 4.0 + h), origin=(-0.5, -4.0), split_y=(0.0,))
     else:
         raise ValueError(f"unknown option mesh={mesh!r}; expected structured or unstructured")

@@ -6,11 +6,13 @@ import dolfinx.mesh as dm
 import numpy as np
 from mpi4py import MPI
 
-from fempm.boundary import fixed
-from fempm.materials import LinearElastic, NeoHookean
-from fempm.scene import Scene, check_counts, check_finite, dofs_per_cell
-from fempm.seeding import create_particles, per_direction
-from fempm.stepping import Loads, StepOptions
+from fempm.boundary.walls import fixed
+from fempm.materials.linear_elastic import LinearElastic
+from fempm.materials.neo_hookean import NeoHookean
+from fempm.particles.seeding import create_particles, per_direction
+from fempm.scene.definition import Scene, check_counts, check_finite, dofs_per_cell
+from fempm.stepping.loads import Loads
+from fempm.stepping.options import StepOptions
 
 
 def cantilever_reference(L: float = 0.7, H: float = 0.047, E: float = 6e7, rho: float = 1000.0,

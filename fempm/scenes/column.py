@@ -19,12 +19,12 @@ import dolfinx.mesh as dm
 import numpy as np
 from mpi4py import MPI
 
-from fempm.boundary import friction, slip
-from fempm.materials import DruckerPrager
-from fempm.scene import Scene, check_counts
-from fempm.seeding import create_particles, per_direction
-from fempm.stepping import Loads, StepOptions
-
+from fempm.boundary.walls import friction, slip
+from fempm.materials.drucker_prager import DruckerPrager
+from fempm.particles.seeding import create_particles, per_direction
+from fempm.scene.definition import Scene, check_counts
+from fempm.stepping.loads import Loads
+from fempm.stepping.options import StepOptions
 
 #: the experimental runout laws :math:`(L_\infty - L_0)/L_0 = c_1 a` for :math:`a < a_1` and
 #: :math:`c_2 a^{2/3}` for :math:`a > a_2` of quasi-two-dimensional columns in channels: Lube,

@@ -20,13 +20,15 @@ from __future__ import annotations
 import numpy as np
 from mpi4py import MPI
 
-from fempm.boundary import fixed
-from fempm.domains import domain_geometry
-from fempm.materials import LinearElastic
-from fempm.particles import Particles
-from fempm.meshes import unstructured_polygon
-from fempm.scene import Scene, check_counts, dofs_per_cell, emptiest_cell
-from fempm.stepping import Loads, StepOptions
+from fempm.boundary.walls import fixed
+from fempm.materials.base import lame
+from fempm.materials.linear_elastic import LinearElastic
+from fempm.meshes.generators import unstructured_polygon
+from fempm.particles.corners import domain_geometry
+from fempm.particles.particle_set import Particles
+from fempm.scene.definition import Scene, check_counts, dofs_per_cell, emptiest_cell
+from fempm.stepping.loads import Loads
+from fempm.stepping.options import StepOptions
 
 CORNERS = np.array([[0.0, 0.0], [48.0, 44.0], [48.0, 60.0], [0.0, 44.0]])  # A, B, C, D
 EDGE = 16.0  # length of the loaded edge BC
@@ -41,7 +43,7 @@ def panel_map(xi: np.ndarray, eta: np.ndarray) -> np.ndarray:
 
 def panel_lattice(nx: int, ny: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """Particles of an ``nx`` x ``ny`` lattice of the panel: centroids (n, 2), areas (n,),
-    corners (n, 4, 2) (:func:`fempm.domains.box_corners` order) and lattice column index (n,)."""
+    corners (n, 4, 2) (:func:`fempm.transfer.domains.box_corners` order) and lattice column index (n,)."""
     i, j = np.meshgrid(np.arange(nx), np.arange(ny), indexing="ij")
     i, j = i.ravel(), j.ravel()
     corners = np.stack([panel_map((i + a) / nx, (j + b) / ny) for a, b in ((0, 0), (0, 1), (1, 0), (1, 1))], axis=1)
@@ -148,9 +150,6 @@ def fe_reference(nu: float, h: float = 1.0, E: float = 1.0, load: float = 1.0, c
     import dolfinx.geometry
     import dolfinx.mesh
     import ufl
-
-    from fempm.materials.base import lame
-    from fempm.meshes import unstructured_polygon
 
     mesh = unstructured_polygon(comm, CORNERS, h)
     cell = mesh.basix_cell()

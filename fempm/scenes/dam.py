@@ -6,13 +6,13 @@ import dolfinx.mesh as dm
 import numpy as np
 from mpi4py import MPI
 
-from fempm.boundary import slip
-from fempm.materials import NewtonianTait
-from fempm.health import Health
-from fempm.scene import Scene, check_counts
-from fempm.seeding import create_particles, per_direction
-from fempm.stepping import Loads, StepOptions
-
+from fempm.boundary.walls import slip
+from fempm.materials.newtonian_eos import NewtonianTait
+from fempm.particles.seeding import create_particles, per_direction
+from fempm.scene.definition import Scene, check_counts
+from fempm.stepping.health import Health
+from fempm.stepping.loads import Loads
+from fempm.stepping.options import StepOptions
 
 #: Martin and Moyce (1952), n^2 = 2: surge front Z = x / a against T = t sqrt(2 g / a)
 #: (their Table 2, as tabulated in the dam-break literature).

@@ -6,11 +6,12 @@ import dolfinx.mesh as dm
 import numpy as np
 from mpi4py import MPI
 
-from fempm.materials import LinearElastic
-from fempm.contact import Contact
-from fempm.scene import Scene, check_counts
-from fempm.seeding import create_particles
-from fempm.stepping import StepOptions
+from fempm.materials.linear_elastic import LinearElastic
+from fempm.meshes.generators import MESHES, read_msh
+from fempm.particles.seeding import create_particles
+from fempm.scene.definition import Scene, check_counts
+from fempm.stepping.contact import Contact
+from fempm.stepping.options import StepOptions
 
 
 def two_disks(
@@ -23,7 +24,7 @@ def two_disks(
 
     Disks of radius 0.2 at (0.2, 0.2) and (0.8, 0.8) moving at +-(0.1, 0.1); contact through
     the single-valued grid velocity, or with ``contact`` one velocity field per disk
-    (``fields["disk"]``, :class:`fempm.contact.Contact` with Coulomb ``friction``); no boundary
+    (``fields["disk"]``, :class:`fempm.stepping.contact.Contact` with Coulomb ``friction``); no boundary
     conditions (the disks never reach the walls).
     ``mesh``: "structured" (quadrilaterals, ``cells`` per side) or "unstructured"
     (triangles from ``meshes/unit_square_tri.msh``).
@@ -38,8 +39,6 @@ def two_disks(
     if mesh == "structured":
         m = dm.create_unit_square(comm, cells, cells, dm.CellType.quadrilateral)
     elif mesh == "unstructured":
-        from fempm.meshes import MESHES, read_msh
-
         m = read_msh(MESHES / "unit_square_tri.msh", comm, gdim=2).mesh
     else:
         raise ValueError(f"unknown option mesh={mesh!r}; expected structured or unstructured")

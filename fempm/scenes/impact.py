@@ -7,7 +7,7 @@ domain, both neo-Hookean (``E``, ``nu``, ``rho``; the defaults give a dilatation
 of 11.6 m/s, and the default 10 m/s is 0.86 times it). With one velocity field the two bodies
 share the nodes between them and stick; at this speed the particles at the interface are
 crushed (at 20 cells the run stops with :math:`J \le 0` as the disk pulls back). With
-``contact`` (:class:`fempm.contact.Contact`, one field per body, Coulomb ``friction``,
+``contact`` (:class:`fempm.stepping.contact.Contact`, one field per body, Coulomb ``friction``,
 contact only where the bodies touch: ``gap`` cells between their nodal centres of mass) the
 disk stops on the plate's surface and rebounds: at 20 cells the columns of particles under
 its middle stay 0.67 particle spacings apart at the closest, :math:`J \ge 0.5`, it leaves at
@@ -29,12 +29,12 @@ import dolfinx.mesh as dm
 import numpy as np
 from mpi4py import MPI
 
-from fempm.boundary import slip
-from fempm.contact import Contact, shared_cells
-from fempm.materials import NeoHookean
-from fempm.scene import Scene, check_counts
-from fempm.seeding import create_particles, per_direction
-from fempm.stepping import StepOptions
+from fempm.boundary.walls import slip
+from fempm.materials.neo_hookean import NeoHookean
+from fempm.particles.seeding import create_particles, per_direction
+from fempm.scene.definition import Scene, check_counts
+from fempm.stepping.contact import Contact, shared_cells
+from fempm.stepping.options import StepOptions
 
 PLATE = (0.1, 0.9, 0.2)  # x from, x to, thickness
 

@@ -48,7 +48,7 @@ Measured (``python demos/incline.py``, 30 degrees, MUSL; docs/incline/incline.md
 docs/contact.md): every case within 2 % at 8 and 16 cells, on either plane, the disk within
 0.84 % also just above its rolling threshold (mu = 0.2 and 0.22). That takes a plane that
 shares its normal impulse over the nodes the disk touches (:class:`fempm.boundary.Friction`,
-and :func:`fempm.contact.correct` for the rigid plane): held node by node, the node ahead of
+and :func:`fempm.stepping.contact.correct` for the rigid plane): held node by node, the node ahead of
 the contact point carried the disk's weight, up to a cell ahead of its centre, and braked the
 rotation, so that the disk slid at mu = 0.2 (-1.5 % and -2.0 %) and rolled only from
 mu = 0.25-0.3 at 8 cells.
@@ -65,12 +65,13 @@ import dolfinx.mesh as dm
 import numpy as np
 from mpi4py import MPI
 
-from fempm.boundary import friction as friction_wall
-from fempm.contact import Contact
-from fempm.materials import VonMises
-from fempm.scene import Scene, check_counts
-from fempm.seeding import create_particles, per_direction
-from fempm.stepping import Loads, StepOptions
+from fempm.boundary.walls import friction as friction_wall
+from fempm.materials.von_mises import VonMises
+from fempm.particles.seeding import create_particles, per_direction
+from fempm.scene.definition import Scene, check_counts
+from fempm.stepping.contact import Contact
+from fempm.stepping.loads import Loads
+from fempm.stepping.options import StepOptions
 
 BODIES = ("block", "disk")
 #: the PIC/FLIP blend of the block by default: pure FLIP lets the frictional sliding of the
@@ -141,7 +142,7 @@ def incline(
     cells of the plane; 0, the block's default: every node moving into it; 0.5 the disk's),
     or ``rigid``, a rigid layer of particles two cells thick under :math:`y = 0` in frictional
     contact with the body
-    (:class:`fempm.contact.Contact` with ``rigid=(1,)``, the gap measured from the layer's own
+    (:class:`fempm.stepping.contact.Contact` with ``rigid=(1,)``, the gap measured from the layer's own
     nodal centre of mass, which lies :func:`_depth` cells under its surface)."""
     if body not in BODIES:
         raise ValueError(f"unknown option body={body!r}; expected one of {', '.join(BODIES)}")

@@ -1,8 +1,8 @@
-r"""Scenes of the exact and manufactured solutions of :mod:`fempm.manufactured`.
+r"""Scenes of the exact and manufactured solutions of :mod:`fempm.verification.manufactured`.
 
 :func:`manufactured_scene` puts a problem on a background mesh of a given resolution: the
 particles carry their reference positions ``fields["X0"]`` (the body force is
-:math:`b(X, t)`, and :func:`fempm.errors.particle_errors` compares :math:`x_p - X_p` with
+:math:`b(X, t)`, and :func:`fempm.verification.errors.particle_errors` compares :math:`x_p - X_p` with
 :math:`u(X_p, t)`), start with the exact velocity (and, where the problem says so, at
 :math:`X + u(X, 0)` with :math:`F(X, 0)`, its volume and stress), and the grid conditions
 follow the problem's walls.
@@ -14,12 +14,14 @@ import dolfinx.mesh as dm
 import numpy as np
 from mpi4py import MPI
 
-from fempm.boundary import fixed, slip
-from fempm.domains import domain_geometry
-from fempm.particles import Particles
-from fempm.scene import Scene
-from fempm.seeding import create_particles
-from fempm.stepping import Loads, StepOptions
+from fempm.boundary.walls import fixed, slip
+from fempm.meshes.generators import unstructured_box, unstructured_rectangle
+from fempm.particles.corners import domain_geometry
+from fempm.particles.particle_set import Particles
+from fempm.particles.seeding import create_particles
+from fempm.scene.definition import Scene
+from fempm.stepping.loads import Loads
+from fempm.stepping.options import StepOptions
 
 MESH_KINDS = ("structured", "triangles", "unstructured")
 
@@ -36,8 +38,6 @@ def background_mesh(lower, upper, cells_per_unit: float, kind: str, comm: MPI.Co
     if d == 1:
         return dm.create_interval(comm, n[0], [lo[0], hi[0]])
     if kind == "unstructured":
-        from fempm.meshes import unstructured_box, unstructured_rectangle
-
         if d == 2:
             return unstructured_rectangle(comm, 1.0 / cells_per_unit, size=tuple(hi - lo), origin=tuple(lo))
         mesh = unstructured_box(comm, 1.0 / cells_per_unit, size=tuple(hi - lo))
@@ -54,7 +54,7 @@ def annulus_lattice(r_in: float, r_out: float, spacing: float) -> tuple[np.ndarr
     r"""Particles of an annulus on a polar lattice of about ``spacing``: rings of equal
     thickness, each split into equal angular sectors; every particle is the straight-sided
     quadrilateral of its sector's corners. Returns the centroids (n, 2), areas (n,) and corners
-    (n, 4, 2) in :func:`fempm.domains.box_corners` order."""
+    (n, 4, 2) in :func:`fempm.transfer.domains.box_corners` order."""
     nr = max(int(round((r_out - r_in) / spacing)), 1)
     radii = np.linspace(r_in, r_out, nr + 1)
     corners = []
@@ -114,7 +114,7 @@ def manufactured_scene(
     flip: float = 1.0, cfl: float = 0.4, dt: float | None = None, t_end: float | None = None,
     frames: int = 10, comm: MPI.Comm = MPI.COMM_WORLD, **options,
 ) -> Scene:
-    """A scene of ``problem`` (:mod:`fempm.manufactured`) with ``cells`` cells per unit length
+    """A scene of ``problem`` (:mod:`fempm.verification.manufactured`) with ``cells`` cells per unit length
     of the reference body's largest side (per side of the background square for the vortex;
     per bar length for the bar).
 

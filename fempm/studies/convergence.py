@@ -6,7 +6,7 @@ fixed time step proportional to the cell size,
 :math:`\Delta t = \mathrm{cfl}\, h / (k\, (c + v_{max}))` (cfl per problem, smaller for
 consistent mass on the vortex) (:math:`c` the dilatational wave
 speed, :math:`v_{max}` the largest exact speed, :math:`k` the space's degree), and records the
-particle displacement errors against the exact motion (:func:`fempm.errors.particle_errors`,
+particle displacement errors against the exact motion (:func:`fempm.verification.errors.particle_errors`,
 each the maximum over time):
 
 * ``DIR/convergence.csv``, one row per run with the columns :data:`COLUMNS`; ``status`` is
@@ -17,8 +17,8 @@ each the maximum over time):
   at most :data:`FIT_SIZES`), with a verdict, and the reasons of the failed runs;
 * ``DIR/convergence_<problem>.png``, the :math:`L^2` error against :math:`h` per problem.
 
-The problems are the smooth exact and manufactured motions of :mod:`fempm.manufactured` and,
-with plasticity, the elastic-plastic impact of :mod:`fempm.plastic_impact` (two waves, a jump
+The problems are the smooth exact and manufactured motions of :mod:`fempm.verification.manufactured` and,
+with plasticity, the elastic-plastic impact of :mod:`fempm.verification.plastic_impact` (two waves, a jump
 in velocity at each: the displacement error converges at most like :math:`h`).
 
 A run that fails or stops converging stays a row of the table.
@@ -34,8 +34,12 @@ from pathlib import Path
 import numpy as np
 from mpi4py import MPI
 
-from fempm import manufactured as mf
-from fempm.plastic_impact import plastic_impact
+from fempm.io.plot import plot_convergence
+from fempm.scene.loop import run as run_scene
+from fempm.scenes.manufactured import manufactured_scene
+from fempm.verification import manufactured as mf
+from fempm.verification.errors import ErrorHistory
+from fempm.verification.plastic_impact import plastic_impact
 
 COLUMNS = ["problem", "mesh", "degree", "variant", "mass", "domain", "scheme", "cells", "h", "dt", "steps",
            "error_max", "error_rms", "error_l2", "wall_s", "status"]
@@ -149,9 +153,6 @@ def max_speed(problem) -> float:
 
 def run_case(name: str, config: Config, cells: int, comm: MPI.Comm = MPI.COMM_WORLD) -> dict:
     """One run: returns its row (:data:`COLUMNS`) and the failure message (``reason``)."""
-    from fempm.errors import ErrorHistory
-    from fempm.scene import run
-    from fempm.scenes.manufactured import manufactured_scene
 
     spec = PROBLEMS[name]
     problem = spec.make()
@@ -170,7 +171,7 @@ def run_case(name: str, config: Config, cells: int, comm: MPI.Comm = MPI.COMM_WO
         scene.dt = dt
         row.update(h=h, dt=dt)
         history = ErrorHistory(problem, scene.particles)
-        summary = run(scene, None, progress=False, callback=history)
+        summary = run_scene(scene, None, progress=False, callback=history)
         row["steps"] = summary["steps"]
     except Exception as e:  # noqa: BLE001 - every failure is a row of the table, with its class and message
         row["status"] = type(e).__name__
@@ -237,7 +238,6 @@ def read_csv(path: Path) -> list[dict]:
 
 def write_report(rows: list[dict], out: Path, *, quick: bool = False) -> None:
     """``convergence.csv``, ``convergence.md`` and the figures of ``rows`` into ``out``."""
-    from fempm.plot import plot_convergence
 
     out = Path(out)
     write_csv(rows, out / "convergence.csv")

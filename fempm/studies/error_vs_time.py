@@ -30,7 +30,11 @@ from pathlib import Path
 import numpy as np
 from mpi4py import MPI
 
+from fempm.io.plot import plot_pareto
+from fempm.particles.seeding import create_particles
+from fempm.studies import convergence, mapping
 from fempm.studies.convergence import Config
+from fempm.transfer.domains import half_widths
 
 COLUMNS = ["problem", "mesh", "degree", "mass", "domain", "scheme", "cells", "ppc", "error", "wall_s", "repeats",
            "threads", "pareto"]
@@ -91,10 +95,6 @@ def threads() -> int:
 
 
 def _mapping_case(config: Config, cells: int, comm) -> dict:
-    from fempm.domains import half_widths
-    from fempm.seeding import create_particles
-    from fempm.studies import mapping
-
     mesh = mapping.make_mesh("structured-quad" if config.mesh == "structured" else "unstructured-tri", cells, comm)
     p = create_particles(mesh, config.ppc, jitter=0.5, seed=1)
     ell = half_widths(p)
@@ -104,9 +104,7 @@ def _mapping_case(config: Config, cells: int, comm) -> dict:
 
 
 def _loop_case(problem: str, config: Config, cells: int, comm) -> dict:
-    from fempm.studies.convergence import run_case
-
-    r = run_case(problem, config, cells, comm)
+    r = convergence.run_case(problem, config, cells, comm)
     return {"error": r["error_l2"] if r["status"] == "ok" else np.nan, "wall_s": r["wall_s"], "status": r["status"],
             "reason": r.get("reason", ""), "mesh": r["mesh"]}
 
@@ -230,7 +228,6 @@ def _name(r: dict) -> str:
 
 def write_report(rows: list[dict], out: Path, *, quick: bool = False, wall: float | None = None) -> None:
     """CSV, Markdown summary and one figure per problem."""
-    from fempm.plot import plot_pareto
 
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)

@@ -37,11 +37,14 @@ import numpy as np
 import ufl
 from mpi4py import MPI
 
-from fempm.basis import ParticleBasis
-from fempm.domains import half_widths, make_domain
-from fempm.errors import l2_error
-from fempm.seeding import create_particles
-from fempm.transfer import Projector, SingularMassError
+from fempm.io.plot import plot_error_vs_time
+from fempm.meshes.generators import unstructured_rectangle
+from fempm.particles.seeding import create_particles
+from fempm.transfer.basis import ParticleBasis
+from fempm.transfer.domains import half_widths, make_domain
+from fempm.transfer.mapping import SingularMassError
+from fempm.transfer.projection import Projector
+from fempm.verification.errors import l2_error
 
 MESH_KINDS = ("structured-tri", "structured-quad", "unstructured-tri")
 SPACES = ((1, "lumped"), (1, "consistent"), (2, "consistent"))
@@ -53,8 +56,6 @@ def make_mesh(kind: str, n: int, comm: MPI.Comm) -> dm.Mesh:
     if kind == "structured-quad":
         return dm.create_unit_square(comm, n, n, dm.CellType.quadrilateral)
     if kind == "unstructured-tri":
-        from fempm.meshes import unstructured_rectangle
-
         return unstructured_rectangle(comm, 1.0 / n)
     raise ValueError(f"unknown mesh kind {kind!r}; expected one of {MESH_KINDS}")
 
@@ -176,8 +177,6 @@ COLUMNS = ["mesh", "n", "cells", "ppc", "domain", "particles", "field", "space",
 
 
 def write(rows: list[dict], out: Path) -> None:
-    from fempm.plot import plot_error_vs_time
-
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     with open(out / "mapping.csv", "w", newline="") as f:

@@ -8,8 +8,15 @@ from pathlib import Path
 
 import numpy as np
 
-from fempm.plot import _pyplot, _save
-from fempm.studies.particle_basis import DENSITIES, DOMAINS, OPTIONS, line_body, quad_body, tri_body
+from fempm.io.plot import _pyplot, _save
+from fempm.studies.particle_basis_bodies import (
+    DENSITIES,
+    DOMAINS,
+    OPTIONS,
+    line_body,
+    quad_body,
+    tri_body,
+)
 
 MOTIONS = {
     "translation": [dict(shift=0.0), dict(shift=0.25), dict(shift=0.5)],

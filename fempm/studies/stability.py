@@ -3,7 +3,7 @@ r"""The stability catalogue: ``python -m fempm study stability [--quick] [--out 
 Each case of :data:`fempm.studies.stability_cases.CASES` (a small scene that stresses one
 thing) runs with every option of :func:`options_for` (scheme, mass matrix, particle domain,
 mass cut-off, CFL number; one factor at a time from USL lumped point, plus MUSL crossed with
-consistent mass, FMPM(5) and CPDI1), with the default run-health limits (:class:`fempm.health.Health`:
+consistent mass, FMPM(5) and CPDI1), with the default run-health limits (:class:`fempm.stepping.health.Health`:
 20 % energy growth beyond the work of the loads, :math:`10^{-2} \le J \le 10^2`, time-step
 floor). The outcome of a run is
 
@@ -29,7 +29,12 @@ from pathlib import Path
 import numpy as np
 from mpi4py import MPI
 
+from fempm.io.plot import plot_stability
+from fempm.particles.location import OutsideMeshError
+from fempm.scene.loop import run
+from fempm.stepping.options import SimulationError
 from fempm.studies.stability_cases import CASES
+from fempm.transfer.mapping import SingularMassError
 
 COLUMNS = ["case", "option", "outcome", "reason", "energy_ratio", "momentum_drift", "j_min", "j_max", "steps", "wall_s"]
 
@@ -64,10 +69,6 @@ def options_for(case: str, quick: bool = False) -> list[dict]:
 
 def run_one(case: str, opts: dict, *, quick: bool, comm: MPI.Comm = MPI.COMM_WORLD) -> dict:
     """One (case, option) run; returns its row (:data:`COLUMNS`)."""
-    from fempm.location import OutsideMeshError
-    from fempm.scene import run
-    from fempm.stepping import SimulationError
-    from fempm.transfer import SingularMassError
 
     row = {"case": case, "option": label(opts), "outcome": "stable", "reason": "", "steps": 0,
            "energy_ratio": np.nan, "momentum_drift": np.nan, "j_min": np.nan, "j_max": np.nan}
@@ -122,7 +123,6 @@ def run_study(out: Path = Path("output/study-stability"), *, quick: bool = False
 
 def write_report(rows: list[dict], out: Path, *, quick: bool = False, wall: float | None = None) -> None:
     """``stability.csv``, ``stability.md`` and the outcome matrix ``stability.png`` into ``out``."""
-    from fempm.plot import plot_stability
 
     Path(out).mkdir(parents=True, exist_ok=True)
     write_csv(rows, Path(out) / "stability.csv")

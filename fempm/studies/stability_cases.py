@@ -26,7 +26,7 @@ with each option of :func:`options_for`.
   aspect ratio 2, 8 cells across; 4 cells and half the time quick) collapsing under gravity
   onto a rough floor;
 * ``contact-disks``: the disks with one velocity field per disk and frictionless contact
-  (:class:`fempm.contact.Contact`);
+  (:class:`fempm.stepping.contact.Contact`);
 * ``contact-impact``: a disk fired at 10 m/s (0.86 times the wave speed) onto a plate with
   contact (:func:`fempm.scenes.disk_impact`, 20 cells; 16 quick);
 * ``contact-rolling``: a disk rolling down a 30 degree incline, a rigid plane in frictional
@@ -45,15 +45,17 @@ import dolfinx.mesh as dm
 import numpy as np
 from mpi4py import MPI
 
-from fempm.materials import LinearElastic, NeoHookean, VonMises
-from fempm.particles import Particles
-from fempm.scene import Scene
+from fempm.materials.linear_elastic import LinearElastic
+from fempm.materials.neo_hookean import NeoHookean
+from fempm.materials.von_mises import VonMises
+from fempm.particles.particle_set import Particles
+from fempm.particles.seeding import create_particles
+from fempm.scene.definition import Scene
 from fempm.scenes.bar import vibrating_bar
 from fempm.scenes.column import column_collapse
 from fempm.scenes.disks import two_disks
 from fempm.scenes.impact import disk_impact
 from fempm.scenes.incline import incline
-from fempm.seeding import create_particles
 
 
 def _disks(quick: bool, comm, **kw) -> Scene:

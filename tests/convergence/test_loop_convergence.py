@@ -88,7 +88,7 @@ def test_vortex_errors_decrease_and_failures_say_why(study):
 
 
 def test_plastic_impact_converges(study):
-    """The J2 strip hitting a wall (fempm.plastic_impact): the two-wave exact solution is
+    """The J2 strip hitting a wall (fempm.verification.plastic_impact): the two-wave exact solution is
     approached under refinement, lumped and consistent, at about h^(1/2) (the velocity jumps
     at both fronts)."""
     _, rows, _ = study

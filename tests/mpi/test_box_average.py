@@ -1,4 +1,4 @@
-"""Exact GIMP: integrals of the basis over boxes cut by the cells (fempm.box_average), the
+"""Exact GIMP: integrals of the basis over boxes cut by the cells (fempm.transfer.box_average), the
 averaged basis built from them, truncation at the mesh boundary; serial and on 2 ranks."""
 
 import dolfinx
@@ -8,18 +8,18 @@ import pytest
 from conftest import make_mesh
 from mpi4py import MPI
 
-from fempm.basis import ParticleBasis
-from fempm.box_average import BoxIntegrator, CellBins, clip_simplices
-from fempm.domains import GIMP, make_domain
+from fempm.transfer.basis import ParticleBasis
+from fempm.transfer.box_average import BoxIntegrator, CellBins, clip_simplices
+from fempm.transfer.domains import GIMP, make_domain
 from fempm.particles import Particles
-from fempm.seeding import create_particles
+from fempm.particles.seeding import create_particles
 
 #: meshes whose cells map affinely (or as axis-aligned boxes): the box integrals are exact
 EXACT = ["interval", "triangle", "quadrilateral", "tetrahedron", "hexahedron", "unstructured-tetrahedron"]
 
 
 def integrator(V):
-    from fempm.geometry import CellGeometry
+    from fempm.meshes.geometry import CellGeometry
 
     mesh = V.mesh
     g = CellGeometry(mesh)
@@ -180,8 +180,8 @@ def test_every_domain_runs_the_loop_in_the_boundary_cells(mesh, domain):
     """The 2D axis-aligned solution fills the unit square (slip walls) with particles in every
     boundary cell: each domain type runs a fifth of a period, with errors a few percent of the
     amplitude, the same on any number of ranks."""
-    from fempm import manufactured as mf
-    from fempm.errors import ErrorHistory
+    from fempm.verification import manufactured as mf
+    from fempm.verification.errors import ErrorHistory
     from fempm.scene import run
     from fempm.scenes.manufactured import manufactured_scene
 
@@ -196,8 +196,8 @@ def test_every_domain_runs_the_loop_in_the_boundary_cells(mesh, domain):
 
 
 def _serial_final_errors(mesh: str, domain: str) -> float:
-    from fempm import manufactured as mf
-    from fempm.errors import particle_errors
+    from fempm.verification import manufactured as mf
+    from fempm.verification.errors import particle_errors
     from fempm.scene import run
     from fempm.scenes.manufactured import manufactured_scene
 

@@ -1,4 +1,4 @@
-"""Checkpoint and restart (fempm.checkpoint): a run interrupted at t = 1 and resumed to t = 2
+"""Checkpoint and restart (fempm.io.checkpoint): a run interrupted at t = 1 and resumed to t = 2
 writes bit for bit what the uninterrupted run writes, on 1 and on 2 ranks; a checkpoint of
 one number of ranks resumes on another to round-off."""
 
@@ -14,7 +14,7 @@ import numpy as np
 import pytest
 from mpi4py import MPI
 
-from fempm.checkpoint import RunInterrupted, manifest
+from fempm.io.checkpoint import RunInterrupted, manifest
 from fempm.scene import run
 from fempm.scenes import two_disks
 
@@ -303,8 +303,8 @@ def test_a_checkpoint_is_checked_against_the_scene_it_resumes(tmp_path):
 
     import dolfinx.mesh as dm
 
-    from fempm.checkpoint import CheckpointError
-    from fempm.seeding import create_particles
+    from fempm.io.checkpoint import CheckpointError
+    from fempm.particles.seeding import create_particles
 
     out = _folder(tmp_path, "disks")
     run(two_disks(cells=10, t_end=0.2, frames=2), out, progress=False, checkpoint_every=5)
@@ -332,7 +332,7 @@ def test_a_checkpoint_without_a_field_the_run_needs_is_refused(tmp_path):
     and report "completed"; it is a CheckpointError naming the field."""
     import hashlib
 
-    from fempm.checkpoint import CheckpointError
+    from fempm.io.checkpoint import CheckpointError
 
     out = tmp_path / "disks"
     run(two_disks(cells=10, t_end=0.2, frames=2), out, progress=False, checkpoint_every=5)

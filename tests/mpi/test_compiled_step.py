@@ -1,4 +1,4 @@
-"""The compiled lumped step (fempm.lumped_step) against the generic step, its reference.
+"""The compiled lumped step (fempm.stepping.lumped) against the generic step, its reference.
 
 Both run the same scene from the same state on the same partition (1 or 2 ranks); positions,
 velocities, deformation gradients and stresses agree to round-off after every scheme, on every
@@ -161,7 +161,7 @@ def test_a_warm_start_far_worse_than_zero_restarts_the_mass_solve(compiled):
         systems.solve(rhs, 1, cold)
         systems.solve(rhs, 1, warm, guess)
     else:
-        from fempm.basis import ParticleBasis
+        from fempm.transfer.basis import ParticleBasis
 
         proj = solver._mass_operator(ParticleBasis(solver.V, solver.particles, gradients=False))
         m = proj.num_owned + solver.V.dofmap.index_map.num_ghosts

@@ -1,4 +1,4 @@
-"""Multi-velocity-field contact in the loop (fempm.contact): one group is the single-field step,
+"""Multi-velocity-field contact in the loop (fempm.stepping.contact): one group is the single-field step,
 bodies bounce apart instead of sticking, momentum is conserved to round-off, serial = 2 ranks."""
 
 import dolfinx
@@ -7,8 +7,8 @@ import numpy as np
 import pytest
 from mpi4py import MPI
 
-from fempm.contact import Contact, shared_cells
-from fempm.domains import box_corners
+from fempm.stepping.contact import Contact, shared_cells
+from fempm.particles.corners import box_corners
 from fempm.materials import LinearElastic
 from fempm.scenes.disks import two_disks
 from fempm.scene import run

@@ -17,7 +17,7 @@ import ufl
 from conftest import make_mesh
 from mpi4py import MPI
 
-from fempm.domains import domain_geometry
+from fempm.transfer.domains import domain_geometry
 from fempm.materials import LinearElastic, NeoHookean
 from fempm.meshes import unstructured_rectangle
 from fempm.stepping import ExplicitSolver, StepOptions

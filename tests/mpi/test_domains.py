@@ -1,7 +1,7 @@
 """Particle domains (GIMP, CPDI1, CPDI2): the averaged basis keeps the partition of unity and,
 on affine cells, linear completeness; the consistent projection with averaged bases reproduces
 linear fields; mass and momentum are conserved. On 1 and 2 ranks: sample points beyond a rank's
-ghost cells are evaluated by the rank that owns them (:mod:`fempm.halo`)."""
+ghost cells are evaluated by the rank that owns them (:mod:`fempm.particles.halo`)."""
 
 import dolfinx.fem as fem
 import dolfinx.mesh as dm
@@ -11,8 +11,9 @@ import pytest
 from conftest import make_mesh
 from mpi4py import MPI
 
-from fempm.basis import ParticleBasis
-from fempm.domains import CPDI1, CPDI2, GIMP, box_corners, domain_geometry, half_widths, make_domain
+from fempm.transfer.basis import ParticleBasis
+from fempm.transfer.domains import CPDI1, CPDI2, GIMP, domain_geometry, half_widths, make_domain
+from fempm.particles.corners import box_corners
 from fempm.meshes import unstructured_rectangle
 from fempm.stepping import cell_sizes
 

@@ -1,4 +1,4 @@
-"""FMPM(k) (fempm.fmpm): k = 1 is the lumped map, the grid values approach the consistent ones
+"""FMPM(k) (fempm.transfer.fmpm): k = 1 is the lumped map, the grid values approach the consistent ones
 as k grows, every order conserves momentum, and the loop runs with it."""
 
 import dolfinx.fem as fem
@@ -8,7 +8,7 @@ import pytest
 from mpi4py import MPI
 
 import fempm
-from fempm.fmpm import parse_mass
+from fempm.transfer.fmpm import parse_mass
 from fempm.scene import run
 from fempm.scenes import two_disks, vibrating_bar
 

@@ -8,7 +8,8 @@ import pytest
 from mpi4py import MPI
 
 import fempm
-from fempm.boundary import NodalCentres, friction, slip
+from fempm.transfer.centres import NodalCentres
+from fempm.boundary import friction, slip
 from fempm.materials import LinearElastic
 from fempm.stepping import ExplicitSolver, Loads, StepOptions
 

@@ -9,13 +9,13 @@ import pytest
 from mpi4py import MPI
 
 import fempm
-from fempm import manufactured as mf
-from fempm.errors import ErrorHistory, particle_errors
+from fempm.verification import manufactured as mf
+from fempm.verification.errors import ErrorHistory, particle_errors
 from fempm.materials import LinearElastic
 from fempm.scene import Scene, run
 from fempm.scenes.manufactured import manufactured_scene
-from fempm.loads import surface_areas, takes_reference_positions
-from fempm.seeding import create_particles
+from fempm.stepping.loads import surface_areas, takes_reference_positions
+from fempm.particles.seeding import create_particles
 from fempm.meshes import unstructured_rectangle
 from fempm.stepping import ExplicitSolver, Loads, StepOptions
 
@@ -104,7 +104,7 @@ LOADED_MESHES = {
 @pytest.mark.parametrize("mesh_name", sorted(LOADED_MESHES))
 def test_the_default_surface_share_gives_the_total_force_on_every_cell_type(mesh_name):
     """A traction t on the particles next to the face x = 1 (measure 1) with the default share
-    (no fields["area"]: fempm.loads.boundary_shares): the first step's momentum is t dt, for
+    (no fields["area"]: fempm.stepping.loads.boundary_shares): the first step's momentum is t dt, for
     the layer of the particles nearest to it and (in 2D) for layers one lattice row and one
     cell thick, at 1, 4 (8) and 9 particles per cell. Before, the share V^(1/2) of a square particle gave 0.71 or 1.41
     of the force on triangles."""

@@ -9,8 +9,8 @@ import ufl
 from mpi4py import MPI
 
 import fempm
-from fempm.domains import GIMP
-from fempm.particle_basis import particle_basis_functions
+from fempm.transfer.domains import GIMP
+from fempm.transfer.particle_basis import particle_basis_functions
 
 comm = MPI.COMM_WORLD
 

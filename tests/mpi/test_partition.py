@@ -1,4 +1,4 @@
-"""A mesh distributed by particles (fempm.partition): balanced counts, the same mesh, the same run."""
+"""A mesh distributed by particles (fempm.particles.partition): balanced counts, the same mesh, the same run."""
 
 import dolfinx
 import fempm
@@ -7,7 +7,7 @@ import pytest
 import ufl
 from fempm.boundary import slip
 from fempm.materials import NeoHookean
-from fempm.partition import particle_balanced, rcb_parts
+from fempm.particles.partition import particle_balanced, rcb_parts
 from fempm.stepping import ExplicitSolver, StepOptions
 from mpi4py import MPI
 
@@ -51,7 +51,7 @@ def test_particles_are_balanced_and_the_mesh_is_the_same(cell_type):
 
 
 def _energies(mesh, steps=30):
-    from fempm.seeding import create_particles
+    from fempm.particles.seeding import create_particles
 
     p = create_particles(mesh, 4, where=lambda y: (y[0] < 0.45) & (y[1] < 0.45) & (y[0] > 0.05) & (y[1] > 0.05),
                          seed=1)

@@ -1,4 +1,4 @@
-"""Patches of marked nodes (fempm.patches): the sums over each connected set of marked dofs
+"""Patches of marked nodes (fempm.boundary.patches): the sums over each connected set of marked dofs
 are the same on every rank, owned or ghost, and on any number of ranks."""
 
 import dolfinx.fem
@@ -8,7 +8,7 @@ import pytest
 from mpi4py import MPI
 
 import fempm  # noqa: F401  (DOLFINx from the wheel first)
-from fempm.patches import Patches, components
+from fempm.boundary.patches import Patches, components
 
 comm = MPI.COMM_WORLD
 

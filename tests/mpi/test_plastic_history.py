@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 from mpi4py import MPI
 
-from fempm.checkpoint import RunInterrupted
+from fempm.io.checkpoint import RunInterrupted
 from fempm.materials import DruckerPrager, VonMises
 from fempm.scene import run
 from fempm.scenes import two_disks

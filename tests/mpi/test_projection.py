@@ -191,7 +191,7 @@ def test_component_constraints_give_the_constrained_least_squares_fit():
     """exclude_components: component 0 held at 0 on x = 0 and x = 1 (slip walls normal to x),
     component 1 on y = 0. The consistent result is the constrained fit: those components vanish
     and the residual sum_p M_p (F(x_p) - f_p) N_j(x_p) is zero for every free (dof, component)."""
-    from fempm.basis import ParticleBasis
+    from fempm.transfer.basis import ParticleBasis
     from fempm.boundary import locate_dofs
     from fempm.transfer import p2g
 

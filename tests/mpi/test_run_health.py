@@ -1,4 +1,4 @@
-"""Run health (fempm.health): unstable runs stop with a SimulationError that names the cause and
+"""Run health (fempm.stepping.health): unstable runs stop with a SimulationError that names the cause and
 a non-zero exit from the CLI, with their summary written; healthy runs record their figures."""
 
 import json
@@ -9,7 +9,7 @@ import pytest
 from mpi4py import MPI
 
 from fempm.cli import main
-from fempm.health import Health, HealthMonitor
+from fempm.stepping.health import Health, HealthMonitor
 from fempm.scene import run
 from fempm.scenes import hanging_block, two_disks, vibrating_bar
 from fempm.stepping import SimulationError

@@ -4,7 +4,7 @@ import pytest
 from conftest import make_mesh
 from mpi4py import MPI
 
-from fempm.seeding import reference_pattern
+from fempm.particles.seeding import reference_pattern
 
 
 @pytest.mark.parametrize("cell,ppc", [("interval", 3), ("triangle", 9), ("quadrilateral", 4), ("tetrahedron", 27), ("hexahedron", 8)])

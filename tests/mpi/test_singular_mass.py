@@ -1,4 +1,4 @@
-"""Singular consistent mass detected from the particles' span (fempm.mass_span), and
+"""Singular consistent mass detected from the particles' span (fempm.transfer.mass_span), and
 consistent-mass runs that do not depend on the number of ranks."""
 
 import dolfinx.fem as fem
@@ -73,7 +73,7 @@ def test_compiled_span_test_equals_the_rounds_of_eigenvalue_tests(monkeypatch, c
     """The worklist kernel with pivot bounds (fempm.kernels.consistent.propagate) reaches the
     same determined dofs as rounds of eigvalsh tests, on sparse random particles (many cells
     span nothing, some are determined only through their neighbours) and collinear ones."""
-    from fempm import mass_span
+    from fempm.transfer import mass_span
     from fempm.transfer import cell_blocks
 
     mesh = dm.create_unit_square(comm, 9, 7, cell)
@@ -95,7 +95,7 @@ def test_compiled_span_test_equals_the_rounds_of_eigenvalue_tests(monkeypatch, c
 
 
 def test_eigenvalue_bounds_decide_like_eigvalsh():
-    from fempm.mass_span import _smallest_above
+    from fempm.transfer.mass_span import _smallest_above
 
     rng = np.random.default_rng(1)
     for k in (2, 3, 4, 8):

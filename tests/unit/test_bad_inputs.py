@@ -16,10 +16,10 @@ import fempm.materials
 import fempm.meshes
 import fempm.scenes
 from fempm.boundary import friction, prescribed, slip
-from fempm.checkpoint import CheckpointError
-from fempm.health import Health
+from fempm.io.checkpoint import CheckpointError
+from fempm.stepping.health import Health
 from fempm.io import OutputFolderError, OutputSizeError
-from fempm.location import OutsideMeshError
+from fempm.particles.location import OutsideMeshError
 from fempm.meshes import MeshFileError
 from fempm.materials import LinearElastic, NeoHookean, NewtonianTait
 from fempm.scene import Scene, run
@@ -85,7 +85,7 @@ def _other_mesh():
 
 
 def _absent_rigid_group():
-    from fempm.contact import Contact
+    from fempm.stepping.contact import Contact
 
     p = fempm.create_particles(MESH, 4, density=1.0)
     p.fields["group"] = (p.x[:, 1] > 0.5).astype(np.int32)
@@ -285,7 +285,7 @@ def test_particle_domains_by_name_everywhere():
     failed with "'str' object has no attribute 'samples'")."""
     V = dolfinx.fem.functionspace(MESH, ("Lagrange", 1))
     p = fempm.create_particles(MESH, 4, density=1.0)
-    from fempm.domains import make_domain
+    from fempm.transfer.domains import make_domain
 
     for name in ("point", "gimp", "ugimp", "cpgimp", "cpdi1"):
         u = fempm.project(V, p, lambda x: 1.0 + 2.0 * x[0], domain=name, mass="consistent")

@@ -1,10 +1,10 @@
-"""The nodal contact correction (fempm.contact.correct): momentum conserved to round-off, no
+"""The nodal contact correction (fempm.stepping.contact.correct): momentum conserved to round-off, no
 approach left, Coulomb's stick and slip, separation free."""
 
 import numpy as np
 import pytest
 
-from fempm.contact import Contact, correct
+from fempm.stepping.contact import Contact, correct
 
 
 def _two_groups(n=500, d=2, seed=0):

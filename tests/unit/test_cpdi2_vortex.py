@@ -6,8 +6,8 @@ thinned domains' width); 48 cells run through (tests/convergence/test_loop_conve
 
 import numpy as np
 
-from fempm import manufactured as mf
-from fempm.domains import domain_geometry
+from fempm.verification import manufactured as mf
+from fempm.transfer.domains import domain_geometry
 from fempm.scene import run
 from fempm.scenes.manufactured import manufactured_scene
 from fempm.stepping import ExplicitSolver, SimulationError

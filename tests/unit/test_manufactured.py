@@ -5,7 +5,7 @@ material law (6th-order central differences, nested), at random points and times
 import numpy as np
 import pytest
 
-from fempm import manufactured as mf
+from fempm.verification import manufactured as mf
 
 #: 6th-order central first-derivative stencil: offsets and weights
 OFFS = np.array([-3.0, -2.0, -1.0, 1.0, 2.0, 3.0])

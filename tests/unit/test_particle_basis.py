@@ -4,7 +4,7 @@ exactly, the ones that do not, and the PETSc projection against the dense formul
 import numpy as np
 import pytest
 
-from fempm.particle_basis import particle_basis_functions
+from fempm.transfer.particle_basis import particle_basis_functions
 from fempm.studies.particle_basis import DOMAINS, _integrals, _interior_dofs, _interior_particles, line_body, tri_body
 
 OFFSET = np.array([0.13, 0.07])
@@ -81,7 +81,7 @@ def test_galilean_and_lagrangian_invariance_with_the_grid(option):
 def test_rate_of_the_averaged_basis_under_translation():
     """(xi): dv_ip/dt = G_i . xdot_p holds for GIMP (the average of the gradient is the
     derivative of the average) and fails for CPDI1 (the corner-interpolated gradient is not)."""
-    from fempm.particle_basis import dense_operator
+    from fempm.transfer.particle_basis import dense_operator
 
     err = {}
     for domain in ("gimp", "cpdi1"):

@@ -1,10 +1,10 @@
-"""The exact elastic-plastic impact (fempm.plastic_impact): its motion is consistent (finite
+"""The exact elastic-plastic impact (fempm.verification.plastic_impact): its motion is consistent (finite
 differences, the wall, the jump conditions) and its states are those the J2 law gives."""
 
 import numpy as np
 import pytest
 
-from fempm.plastic_impact import PlasticImpact
+from fempm.verification.plastic_impact import PlasticImpact
 
 
 def test_motion_is_continuous_at_rest_on_the_wall_and_differentiates_to_its_velocity_and_F():

@@ -1,8 +1,8 @@
-"""fempm.migration.replace_rows: in-place removal and arrival of particle rows."""
+"""fempm.particles.migration.replace_rows: in-place removal and arrival of particle rows."""
 
 import numpy as np
 
-from fempm.migration import pack, replace_rows, unpack
+from fempm.particles.migration import pack, replace_rows, unpack
 
 
 def test_rows_removed_and_added_keep_every_array_aligned():

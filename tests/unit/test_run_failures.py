@@ -48,13 +48,13 @@ def two_disks(**kw):
 fempm.scenes.SCENES["disks"] = two_disks
 """,
     "frame": """
-import fempm.vtu
-_piece = fempm.vtu.write_piece
+import fempm.io.vtu
+_piece = fempm.io.vtu.write_piece
 def write_piece(path, *args, **kw):
     if MPI.COMM_WORLD.rank == 1 and armed() and "particles_" in str(path):
         raise PermissionError(13, "Permission denied", str(path))  # as in a read-only folder
     return _piece(path, *args, **kw)
-fempm.vtu.write_piece = write_piece
+fempm.io.vtu.write_piece = write_piece
 """,
 }
 

@@ -1,0 +1,28 @@
+"""Grid conditions: fixed, slip, prescribed and frictional walls, and the contact patches of a
+wall that shares its normal impulse by depth."""
+
+from fempm.boundary.walls import (
+    Fixed,
+    Friction,
+    Prescribed,
+    Slip,
+    fixed,
+    fixed_on_facets,
+    friction,
+    locate_dofs,
+    prescribed,
+    slip,
+)
+
+__all__ = [
+    "Fixed",
+    "Friction",
+    "Prescribed",
+    "Slip",
+    "fixed",
+    "fixed_on_facets",
+    "friction",
+    "locate_dofs",
+    "prescribed",
+    "slip",
+]

@@ -1,0 +1,233 @@
+r"""Grid boundary conditions on the velocity dofs of a blocked (vector) space.
+
+* :class:`Fixed`: :math:`v_i = 0` on the dofs.
+* :class:`Slip`: no flow through a wall of unit normal :math:`n` (any direction):
+  :math:`v_i \leftarrow v_i - (v_i \cdot n)\, n`.
+* :class:`Prescribed`: velocity components held at given values (a moving rigid plate).
+* :class:`Friction`: a rigid wall with Coulomb friction; with a ``gap`` it holds only the nodes
+  a body touches and shares the normal momentum it takes over each patch of them by depth
+  (:class:`fempm.boundary.patches.Patches`, :class:`NodalCentres`).
+
+Dofs are located with DOLFINx (``locate_dofs_geometrical`` or, from gmsh facet tags,
+``locate_dofs_topological``); they are block indices of the vector space.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass
+
+import dolfinx.fem
+import dolfinx.mesh
+import numpy as np
+import numpy.typing as npt
+
+from fempm.boundary.patches import Patches, depth_shares
+from fempm.transfer.centres import NodalCentres
+
+
+@dataclass(frozen=True)
+class Fixed:
+    dofs: npt.NDArray[np.int32]
+
+    def apply(self, v: npt.NDArray) -> None:
+        v[self.dofs] = 0.0
+
+
+@dataclass(frozen=True)
+class Slip:
+    dofs: npt.NDArray[np.int32]
+    normal: npt.NDArray  # (d,) or (len(dofs), d), unit
+
+    @property
+    def axis(self) -> int | None:
+        """The coordinate axis of a wall normal to it (then :meth:`apply` zeroes that component), else None."""
+        return _axis(self.normal)
+
+    def apply(self, v: npt.NDArray) -> None:
+        axis = self.axis
+        if axis is not None:  # a wall normal to a coordinate axis: that component is 0
+            v[self.dofs, axis] = 0.0
+            return
+        n = np.broadcast_to(self.normal, (len(self.dofs), v.shape[1]))
+        vn = np.einsum("nd,nd->n", v[self.dofs], n)
+        v[self.dofs] -= vn[:, None] * n
+
+
+@dataclass(frozen=True)
+class Prescribed:
+    """Grid velocity components held at given values at ``dofs`` (a moving rigid plate):
+    ``velocity`` (d,), NaN entries leave that component free."""
+
+    dofs: npt.NDArray[np.int32]
+    velocity: npt.NDArray
+
+    def apply(self, v: npt.NDArray) -> None:
+        held = np.flatnonzero(np.isfinite(self.velocity))
+        v[np.ix_(self.dofs, held)] = self.velocity[held]
+
+
+@dataclass(frozen=True)
+class Friction:
+    r"""A rigid wall with Coulomb friction (coefficient ``mu``) at ``dofs``, outward ``normal``
+    (unit, (d,)). Where the grid velocity moves into the wall (:math:`v_n = v \cdot n > 0`),
+    its normal part is removed and the tangential part reduced by the friction that normal
+    impulse can carry,
+
+    .. math::
+        v_t \leftarrow v_t \max\Big(0,\ 1 - \mu \frac{v_n}{|v_t|}\Big),
+
+    (sticking where that reaches 0); where it leaves the wall the velocity is free (Bardenhagen,
+    Brackbill and Sulsky, Comput. Methods Appl. Mech. Engrg. 187, 2000). Applied to the updated
+    grid velocity of every step: over a step the wall takes the normal momentum
+    :math:`m_i v_n` and at most :math:`\mu m_i v_n` of the tangential one.
+
+    ``gap``: a node also has to *touch* the wall, a position check in the manner of Nairn,
+    Bardenhagen and Smith (2018): the body's centre of mass as the node sees it,
+    :math:`\bar x_i = \sum_p M_p N_{ip} x_p / \sum_p M_p N_{ip}`, lies within ``gap`` of the
+    wall, its depth :math:`\delta_i = \text{gap} - (x_i - \bar x_i) \cdot n > 0` (a body filling
+    the node's cells on a grid of spacing :math:`h` normal to the wall has it at :math:`h/3`;
+    0.375 h with 2 particles per cell). Without it every node whose velocity points into the
+    wall is held, also the nodes a curved body only approaches: a rolling disk then meets a wall
+    across the :math:`\sim\sqrt{8 R h}` of nodes its bottom cells touch, which stops its rotation.
+
+    With a gap the normal momentum the wall takes, :math:`P = \sum_{i \in H} m_i v_{n,i}` over
+    the touching nodes :math:`H` that move into it, is shared by all touching nodes of the same
+    patch :math:`T` (a connected set of them along the wall: one per place a body touches it)
+    in proportion to their mass and depth,
+
+    .. math::
+        \Delta v_{n,i} = P\, \frac{\delta_i}{\sum_{j \in T} m_j \delta_j}, \qquad
+        v_{n,i} \leftarrow v_{n,i} - \Delta v_{n,i}, \qquad
+        v_{t,i} \leftarrow v_{t,i} \max\Big(0,\ 1 - \mu \frac{\Delta v_{n,i}}{|v_{t,i}|}\Big),
+
+    so that the patch takes the same normal momentum as node by node, centred where the body
+    is deepest rather than at the nodes that happen to move into the wall. Node by node, a body
+    that turns on the wall is released behind its contact point and held ahead of it, and the
+    held nodes' normal impulses brake its rotation with a lever arm of about a cell: a disk
+    rolled only from mu = 0.25-0.3 at 8 cells per radius instead of tan(theta)/3 = 0.19
+    (docs/contact.md). A node ahead keeps part of its motion into the wall until its depth
+    takes its share; the gap still frees every node the body does not touch.
+
+    ``points`` are the dofs' coordinates and ``patches`` finds the patches among them
+    (:class:`fempm.boundary.patches.Patches`; ``gap`` needs both). A wall with a gap needs the nodal centres of mass and masses (:attr:`needs_positions`):
+    the solver (the generic or the compiled step) maps them each step and passes them to
+    :meth:`apply` (collective then)."""
+
+    dofs: npt.NDArray[np.int32]
+    normal: npt.NDArray
+    mu: float
+    gap: float | None = None
+    points: npt.NDArray | None = None
+    patches: Patches | None = None
+
+    @property
+    def needs_positions(self) -> bool:
+        return self.gap is not None
+
+    def apply(self, v: npt.NDArray, centroids: NodalCentres | None = None) -> None:
+        """Friction on the velocities ``v`` (dofs, d); ``centroids``: the nodal centres of mass
+        and masses, needed with a ``gap``."""
+        n = self.normal
+        vd = v[self.dofs]
+        vn = vd @ n
+        vt = vd - vn[:, None] * n
+        if self.gap is None:  # each node moving into the wall gives up its normal velocity
+            held, dvn = vn > 0, vn
+        else:  # the touching nodes share the normal momentum of their patch by depth
+            if centroids is None:
+                raise ValueError("a friction wall with a gap needs the nodal centres of mass and masses")
+            depth = self.gap - (self.points - centroids.centre[self.dofs]) @ n  # NaN where no mass
+            held = depth > 0
+            depth = np.where(held, depth, 0.0)
+            t = np.flatnonzero(held)  # every touching node takes a share, those moving in give
+            dvn = np.zeros_like(vn)
+            dvn[t] = depth_shares(self.patches.sums, self.dofs[t], centroids.mass[self.dofs[t]],
+                                  np.maximum(vn[t], 0.0), depth[t])  # collective
+        # Coulomb: at most mu dvn of the tangential velocity (0 where it sticks)
+        speed = np.linalg.norm(vt, axis=1)
+        sliding = speed > 0
+        keep = np.where(sliding, np.maximum(0.0, 1.0 - self.mu * dvn / np.where(sliding, speed, 1.0)), 0.0)
+        v[self.dofs] = np.where(held[:, None], vt * keep[:, None] + (vn - dvn)[:, None] * n, vd)
+
+
+def _axis(normal: npt.NDArray) -> int | None:
+    """The axis of a single unit normal along a coordinate axis, else None."""
+    n = np.asarray(normal)
+    if n.ndim != 1 or np.count_nonzero(n) != 1 or abs(n[np.flatnonzero(n)[0]]) != 1.0:
+        return None
+    return int(np.flatnonzero(n)[0])
+
+
+def locate_dofs(V: dolfinx.fem.FunctionSpace, where: Callable[[npt.NDArray], npt.NDArray]) -> npt.NDArray[np.int32]:
+    """(Block) dofs where ``where(x)`` holds (x of shape (3, n)): at the dof positions for
+    Lagrange spaces with point evaluation; for others (Bernstein), the dofs of every mesh
+    entity (vertex, edge, face, cell) whose vertices all satisfy ``where``."""
+    if V.element.interpolation_ident:  # dofs are point values
+        return np.asarray(dolfinx.fem.locate_dofs_geometrical(V, where), dtype=np.int32)
+    mesh = V.mesh
+    found = []
+    for dim in range(mesh.topology.dim + 1):
+        mesh.topology.create_entities(dim)
+        entities = dolfinx.mesh.locate_entities(mesh, dim, where)
+        mesh.topology.create_connectivity(dim, mesh.topology.dim)
+        found.append(np.asarray(dolfinx.fem.locate_dofs_topological(V, dim, entities), dtype=np.int32))
+    return np.unique(np.concatenate(found))
+
+
+def fixed(V: dolfinx.fem.FunctionSpace, where: Callable[[npt.NDArray], npt.NDArray]) -> Fixed:
+    """All velocity components zero at the dofs where ``where(x)`` holds (x of shape (3, n);
+    see :func:`locate_dofs`)."""
+    return Fixed(locate_dofs(V, where))
+
+
+def _unit_normal(normal, d: int, what: str) -> npt.NDArray:
+    n = np.asarray(normal, dtype=np.float64)
+    if n.shape != (d,) or not np.all(np.isfinite(n)) or not np.linalg.norm(n) > 0:
+        raise ValueError(f"{what} needs a finite, non-zero normal with {d} components (got {normal!r})")
+    return n / np.linalg.norm(n)
+
+
+def slip(V: dolfinx.fem.FunctionSpace, where: Callable[[npt.NDArray], npt.NDArray], normal) -> Slip:
+    """Zero normal velocity at the dofs where ``where(x)`` holds; ``normal`` any direction."""
+    return Slip(locate_dofs(V, where), _unit_normal(normal, V.mesh.geometry.dim, "slip"))
+
+
+def prescribed(V: dolfinx.fem.FunctionSpace, where: Callable[[npt.NDArray], npt.NDArray], velocity) -> Prescribed:
+    """The grid velocity held at ``velocity`` (d,) at the dofs where ``where(x)`` holds; NaN
+    components stay free (``(nan, -0.1)``: a smooth plate moving down at 0.1)."""
+    u = np.asarray(velocity, dtype=np.float64)
+    d = V.mesh.geometry.dim
+    if u.shape != (d,) or np.any(np.isinf(u)) or np.all(np.isnan(u)):
+        raise ValueError(f"prescribed needs a velocity with {d} components, finite or NaN (free), not all NaN "
+                         f"(got {velocity!r})")
+    return Prescribed(locate_dofs(V, where), u)
+
+
+def friction(V: dolfinx.fem.FunctionSpace, where: Callable[[npt.NDArray], npt.NDArray], normal,
+             mu: float, gap: float | None = None) -> Friction:
+    """A wall with Coulomb friction ``mu`` >= 0 at the dofs where ``where(x)`` holds, ``normal``
+    pointing out of the body into the wall (:class:`Friction`; ``mu = 0``: a slip wall that
+    lets the body leave it). ``gap`` > 0: hold only the nodes the body touches (a length;
+    half the cell size normal to the wall is a good value, see :class:`Friction`)."""
+    if not 0.0 <= mu < np.inf:
+        raise ValueError(f"friction needs a finite coefficient mu >= 0 (got {mu!r})")
+    if gap is not None and not 0.0 < gap < np.inf:
+        raise ValueError(f"friction needs a finite gap > 0 or None (got {gap!r})")
+    d = V.mesh.geometry.dim
+    dofs = locate_dofs(V, where)
+    if gap is None:
+        return Friction(dofs, _unit_normal(normal, d, "friction"), float(mu))
+    if not V.element.interpolation_ident:
+        raise ValueError("a friction wall with a gap needs a Lagrange space whose dofs are point values")
+    points = V.tabulate_dof_coordinates()[dofs, :d]
+    return Friction(dofs, _unit_normal(normal, d, "friction"), float(mu), float(gap), points,
+                    Patches.of_space(V, dofs))
+
+
+def fixed_on_facets(V: dolfinx.fem.FunctionSpace, facet_tags: dolfinx.mesh.MeshTags, tag: int) -> Fixed:
+    """Fixed dofs on the facets of a gmsh physical group."""
+    mesh = V.mesh
+    mesh.topology.create_connectivity(mesh.topology.dim - 1, mesh.topology.dim)
+    dofs = dolfinx.fem.locate_dofs_topological(V, mesh.topology.dim - 1, facet_tags.find(tag))
+    return Fixed(np.asarray(dofs, dtype=np.int32))

@@ -1,0 +1,373 @@
+"""Output as a run goes: energies CSV (flushed every row), particle frames and grid fields as
+VTK XML time series written by every rank in parallel (:mod:`fempm.io.vtu`, :class:`FrameSeries`),
+and a JSON summary.
+
+A run's folder holds ``energies.csv``, ``summary.json``, the collections ``particles.pvd``,
+``grid_velocity.pvd`` and ``grid_stress.pvd``, and their pieces in ``particles/`` and ``grid/``.
+Every collection is rewritten with each frame, so that a run killed at any moment leaves series
+that ParaView reads; a continued run (:mod:`fempm.io.checkpoint`) drops what was written after its
+checkpoint and goes on with the same series, so that they equal the uninterrupted run's.
+
+Writing is collective: a rank that cannot write its piece makes every rank raise
+:class:`OutputWriteError` naming it, instead of leaving the others waiting.
+"""
+
+from __future__ import annotations
+
+import csv
+import json
+import os
+import shutil
+from collections.abc import Callable
+from pathlib import Path
+
+import dolfinx.fem
+import dolfinx.plot
+import numpy as np
+import numpy.typing as npt
+from mpi4py import MPI
+
+from fempm.io import vtu
+from fempm.io.plot import plot_particle_frame
+from fempm.particles.particle_set import Particles
+
+__all__ = ["GRID_FIELDS", "OUTPUT_FILES", "OUTPUT_LIMIT", "FrameSeries", "GridField", "OutputFolderError",
+           "OutputSizeError", "OutputWriteError", "RunWriter", "check_output_size", "earlier_outputs", "frame_bytes",
+           "make_folder", "write_json"]
+
+
+def _pad3(a: npt.NDArray) -> npt.NDArray:
+    """Vectors (n, d) -> (n, 3); tensors (n, d, d) -> (n, 3, 3)."""
+    if a.ndim == 2:
+        return np.pad(a, ((0, 0), (0, 3 - a.shape[1])))
+    return np.pad(a, ((0, 0), (0, 3 - a.shape[1]), (0, 3 - a.shape[2])))
+
+
+class OutputFolderError(OSError):
+    """The output folder cannot be created or written (raised on every rank alike)."""
+
+
+class OutputWriteError(OSError):
+    """Writing an output failed on some rank during a run (raised on every rank alike; the
+    message names the failing ranks and their errors)."""
+
+
+#: the grid fields a run can write (:attr:`fempm.scene.Scene.outputs`)
+GRID_FIELDS = ("grid_velocity", "grid_stress")
+
+#: what a run writes into its output folder (glob patterns)
+OUTPUT_FILES = ("summary.json", "energies.csv", "particles", "particles.pvd", "frames", "grid", "grid_velocity*",
+                "grid_stress*", "checkpoint", "checkpoint.prev", "checkpoint.old", "checkpoint.tmp")
+
+
+def earlier_outputs(folder: Path) -> list[Path]:
+    """The outputs of an earlier run in ``folder`` (:data:`OUTPUT_FILES`)."""
+    return sorted(q for pattern in OUTPUT_FILES for q in Path(folder).glob(pattern)) if Path(folder).is_dir() else []
+
+
+def make_folder(folder: Path, comm, *, keep: bool = True, overwrite: bool = False) -> None:
+    """Create ``folder`` (and ``folder/particles``) on rank 0; an :class:`OutputFolderError`
+    on every rank if that fails (collective: no rank is left waiting). Unless ``keep`` (a
+    continued run), the outputs of an earlier run there are an error, or removed with
+    ``overwrite`` (only those: :data:`OUTPUT_FILES`)."""
+    error = None
+    earlier = [] if keep or comm.rank != 0 else earlier_outputs(folder)
+    if earlier and not overwrite:
+        error = (f"the output folder {str(folder)!r} holds the outputs of an earlier run "
+                 f"({', '.join(q.name for q in earlier[:4])}); give --overwrite (overwrite=True) to replace them, or "
+                 f"continue it: python -m fempm resume {folder}")
+    elif comm.rank == 0:
+        try:
+            for q in earlier:
+                shutil.rmtree(q) if q.is_dir() else q.unlink()
+            (folder / "particles").mkdir(parents=True, exist_ok=True)
+            probe = folder / ".fempm-write-test"
+            probe.touch()
+            probe.unlink()
+        except OSError as e:
+            error = f"cannot write the output folder {str(folder)!r}: {e.strerror or e}"
+    error = comm.bcast(error, root=0)
+    if error is not None:
+        raise OutputFolderError(error)
+
+
+def write_json(path: Path, data: dict) -> None:
+    """``data`` as JSON into ``path``, atomically (a complete file or the one before; numpy
+    numbers as plain ones). Local: any rank may call it."""
+    path = Path(path)
+    tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
+    tmp.write_text(json.dumps(data, indent=2, default=float))
+    os.replace(tmp, path)
+
+
+def _everywhere(comm: MPI.Comm, what: str, action: Callable[[], None], *, root_only: bool = False) -> None:
+    """``action`` on every rank (or rank 0 with ``root_only``), then an
+    :class:`OutputWriteError` on every rank if it failed on any. Collective."""
+    error = None
+    if not root_only or comm.rank == 0:
+        try:
+            action()
+        except OSError as e:
+            error = f"rank {comm.rank}: {e}"
+    errors = [e for e in comm.allgather(error) if e] if comm.size > 1 else [error] if error else []
+    if errors:
+        raise OutputWriteError(f"writing {what} failed ({'; '.join(errors)})")
+
+
+def _read_times(path: Path) -> list[tuple[int, float]]:
+    if not path.exists():
+        return []
+    return [(int(k), float(t)) for k, t in (line.split(",") for line in path.read_text().splitlines() if line)]
+
+
+#: a run whose outputs would exceed this many bytes stops before it starts, unless allowed
+#: (:func:`fempm.scene.run`'s ``output_limit``, the command line's ``--force``)
+OUTPUT_LIMIT = 2e9
+
+
+class OutputSizeError(ValueError):
+    """A run's outputs would exceed the allowed size (raised on every rank alike, before the
+    run writes anything)."""
+
+
+def frame_bytes(particles: Particles, V: dolfinx.fem.FunctionSpace | None, outputs: tuple[str, ...]) -> int:
+    """The bytes of one frame of ``outputs`` (:data:`fempm.scene.OUTPUTS`) over all ranks: the
+    particle pieces (position, velocity, stress, J, id, body and the other float fields) and
+    the grid pieces (points, cells and values), base64-encoded as :mod:`fempm.io.vtu` writes them.
+    Collective."""
+    raw = 0
+    if "particles" in outputs:
+        n = len(particles)
+        per = 8 * (3 + 3 + 9 + 1 + 1) + 4
+        per += sum(8 * int(np.prod(a.shape[1:])) for k, a in particles.fields.items()
+                   if k not in ("v", "sigma", "F", "body") and a.ndim in (1, 2) and a.dtype == np.float64)
+        raw += n * (per + 8 + 8 + 1)  # + the vertex cells
+    grids = [name for name in GRID_FIELDS if name in outputs]
+    if grids and V is not None:
+        points = V.dofmap.index_map.size_local + V.dofmap.index_map.num_ghosts
+        cells = V.mesh.topology.index_map(V.mesh.topology.dim).size_local
+        k = V.dofmap.dof_layout.num_dofs
+        for name in grids:
+            raw += points * 8 * (3 + (3 if name == "grid_velocity" else 9)) + cells * (8 * k + 8 + 1)
+    return int(particles.comm.allreduce(raw) * 4 / 3)
+
+
+def check_output_size(particles: Particles, V, outputs: tuple[str, ...], frames: int,
+                      limit: float | None = OUTPUT_LIMIT) -> int:
+    """The estimated bytes of a run's frames (:func:`frame_bytes` times the frames: ``frames``
+    over the run, at least one, and the final state); an :class:`OutputSizeError` above
+    ``limit`` (None: no limit). Collective."""
+    total = frame_bytes(particles, V, outputs) * (max(frames, 1) + 1)
+    if limit is not None and total > limit:
+        raise OutputSizeError(f"the run would write about {total / 1e9:.3g} GB of frames ({max(frames, 1) + 1} frames of "
+                              f"{total / (max(frames, 1) + 1) / 1e6:.3g} MB: {particles.num_global} particles"
+                              f"{' and the grid fields' if any(g in outputs for g in GRID_FIELDS) else ''}), more than "
+                              f"the {limit / 1e9:g} GB allowed: give fewer frames (--frames), or --force "
+                              "(output_limit=None) to write them")
+    return total
+
+
+class FrameSeries:
+    """A time series of one output in VTK XML: each rank's piece ``DIR/STEM_NNNNN_rRRRRR.vtu``
+    (``NNNNN`` the run's frame number), their index ``DIR/STEM_NNNNN.pvtu``, the collection
+    ``OUT/STEM.pvd`` and the frames' times ``times`` (CSV rows ``frame,t``; default
+    ``DIR/STEM_times.csv``). The collection is rewritten with every frame. The folder is made
+    at the first frame."""
+
+    def __init__(self, out: Path, folder: str, stem: str, comm: MPI.Comm, times: Path | None = None):
+        self.out, self.folder, self.stem, self.comm = Path(out), Path(out) / folder, stem, comm
+        self.times_path = times or self.folder / f"{stem}_times.csv"
+        self.frames = _read_times(self.times_path) if comm.rank == 0 else []  # (frame, time) written (rank 0)
+        self._made = False
+
+    def _name(self, frame: int) -> str:
+        return f"{self.stem}_{frame:05d}"
+
+    def write(self, frame: int, t: float, x: npt.NDArray, data: dict[str, npt.NDArray],
+              cells: tuple[npt.NDArray, npt.NDArray] | None = None) -> None:
+        """Frame ``frame`` at time ``t``: this rank's points ``x`` (n, 3), point ``data`` and
+        ``cells`` (:func:`fempm.io.vtu.write_piece`). Ranks without points write no piece (one piece
+        at least, rank 0's). Collective."""
+        name = self._name(frame)
+        if not self._made:  # the allgather after rank 0's mkdir: no rank writes into it before
+            _everywhere(self.comm, f"the folder {self.folder}", lambda: self.folder.mkdir(parents=True, exist_ok=True),
+                        root_only=True)
+            self._made = True
+        ranks = [r for r, c in enumerate(self.comm.allgather(len(x))) if c] or [0]  # ranks holding points
+
+        def piece():
+            if self.comm.rank in ranks:
+                vtu.write_piece(self.folder / f"{name}_r{self.comm.rank:05d}.vtu", x, data, cells)
+
+        _everywhere(self.comm, f"{self.stem} frame {frame}", piece)
+
+        def index():
+            vtu.write_index(self.folder / f"{name}.pvtu", [f"{name}_r{r:05d}.vtu" for r in ranks], x, data)
+            with open(self.times_path, "a", newline="") as fh:
+                fh.write(f"{frame},{float(t)!r}\n")  # a plain number, not np.float64(...)
+            self.frames.append((frame, float(t)))
+            self._collection()
+
+        _everywhere(self.comm, f"the index of {self.stem} frame {frame}", index, root_only=True)
+
+    def _collection(self) -> None:
+        vtu.write_collection(self.out / f"{self.stem}.pvd",
+                             [(t, f"{self.folder.name}/{self._name(k)}.pvtu") for k, t in self.frames])
+
+    def truncate(self, frames: int) -> None:
+        """Drop the frames numbered ``frames`` and later (a continued run's outputs after its
+        checkpoint) and rewrite the times and the collection; rank 0 only."""
+        self.frames = [(k, t) for k, t in _read_times(self.times_path) if k < frames]
+        if self.times_path.exists():
+            self.times_path.write_text("".join(f"{k},{t!r}\n" for k, t in self.frames))
+        for q in self.folder.glob(f"{self.stem}_*.*vtu"):
+            number = q.stem[len(self.stem) + 1:].split("_")[0]
+            if number.isdigit() and int(number) >= frames:
+                q.unlink()
+        if self.frames or (self.out / f"{self.stem}.pvd").exists():
+            self._collection()
+
+
+class GridField:
+    """What the VTK pieces of a Lagrange field of ``V`` need: this rank's cells and dof points
+    (:func:`dolfinx.plot.vtk_mesh`: VTK Lagrange cells of the space's degree) and its values
+    at them. A field of a variant whose dofs are not point values (Bernstein) is interpolated
+    into the standard Lagrange space of the same degree, which holds it exactly."""
+
+    def __init__(self, V: dolfinx.fem.FunctionSpace):
+        self.shape = tuple(V.value_shape)
+        self._source = self._target = None
+        if not V.element.interpolation_ident:
+            el = V.element.basix_element
+            self._target = dolfinx.fem.Function(dolfinx.fem.functionspace(V.mesh, ("Lagrange", el.degree, self.shape)))
+            self._source = dolfinx.fem.Function(V)
+            V = self._target.function_space
+        topology, types, self.points = dolfinx.plot.vtk_mesh(V)
+        self.cells = (topology.reshape(len(types), -1)[:, 1:], types)
+
+    def values(self, local: npt.NDArray) -> npt.NDArray:
+        """The point data (points, 3) of a vector or (points, 9) of a tensor field from its
+        local dof values (owned and ghost, blocked); collective for a Bernstein field."""
+        if self._source is not None:
+            self._source.x.array[:] = np.ravel(local)
+            self._target.interpolate(self._source)
+            local = self._target.x.array
+        a = np.asarray(local).reshape(len(self.points), *self.shape)
+        return _pad3(a).reshape(len(a), -1)
+
+
+class RunWriter:
+    """Writes a run's outputs into ``folder`` as the run goes (nothing kept only in memory)."""
+
+    def __init__(self, folder: Path, particles: Particles, V: dolfinx.fem.FunctionSpace | None = None,
+                 *, png: bool = False, resume: dict | None = None, overwrite: bool = True):
+        """``resume``: the :meth:`state` of the writer of the run being continued (from its
+        checkpoint): the energies and frames written after it are dropped and the series go on
+        from its frame count. Otherwise the outputs of an earlier run in ``folder`` are removed
+        with ``overwrite``, else refused (:func:`make_folder`). Collective."""
+        self.folder = Path(folder)
+        self.png = png
+        x = particles.mesh.geometry.x
+        lo, hi = x.min(axis=0, initial=np.inf), x.max(axis=0, initial=-np.inf)
+        particles.comm.Allreduce(MPI.IN_PLACE, lo, op=MPI.MIN)
+        particles.comm.Allreduce(MPI.IN_PLACE, hi, op=MPI.MAX)
+        self.bounds = np.array([lo, hi])
+        self.comm = particles.comm
+        self.frame = 0  # frames written (particles, grid fields or both: one numbering)
+        self.rows = 0  # energies.csv rows written
+        self._csv = None
+        make_folder(self.folder, self.comm, keep=resume is not None, overwrite=overwrite)
+        self._particles = FrameSeries(self.folder, "particles", "particles", self.comm,
+                                      times=self.folder / "particles" / "times.csv")
+        self._grid = {stem: FrameSeries(self.folder, "grid", stem, self.comm) for stem in GRID_FIELDS}
+        self._fields: dict[str, GridField] = {}  # made on first use: only the fields written
+        self.V = V
+        if resume is not None:
+            self.frame, self.rows = int(resume["frame"]), int(resume["rows"])
+            if self.comm.rank == 0:
+                self._truncate()
+            self.comm.Barrier()
+
+    def _truncate(self) -> None:
+        """Drop what the continued run wrote after its checkpoint: energies.csv rows, frames of
+        every series and PNG frames (rank 0)."""
+        energies = self.folder / "energies.csv"
+        if energies.exists():
+            lines = energies.read_bytes().split(b"\n")
+            energies.write_bytes(b"".join(line + b"\n" for line in lines[: 1 + self.rows] if line))
+        for series in (self._particles, *self._grid.values()):
+            series.truncate(self.frame)
+        for png in (self.folder / "frames").glob("frame_*.png"):
+            if int(png.stem.split("_")[1]) >= self.frame:
+                png.unlink()
+
+    def state(self) -> dict:
+        """What a continuation needs (:mod:`fempm.io.checkpoint`)."""
+        return {"frame": self.frame, "rows": self.rows}
+
+    def energies(self, row: dict) -> None:
+        """One row of ``energies.csv`` (rank 0 writes; LF line ends; flushed)."""
+        self.rows += 1
+        if self.comm.rank != 0:
+            return
+        if self._csv is None:
+            path = self.folder / "energies.csv"
+            append = path.exists() and path.stat().st_size > 0  # a continued run's
+            self._file = open(path, "a" if append else "w", newline="")
+            self._csv = csv.DictWriter(self._file, fieldnames=list(row), lineterminator="\n")
+            if not append:
+                self._csv.writeheader()
+        self._csv.writerow(row)
+        self._file.flush()
+
+    def write_frame(self, t: float, particles: Particles | None = None, velocity: npt.NDArray | None = None,
+                    stress: dolfinx.fem.Function | None = None) -> None:
+        """One frame at time ``t`` of what is given: the particles, the grid velocity (local
+        dof values of the writer's space) and the grid stress. Collective; a frame that fails
+        keeps its number (the next frame takes the next one)."""
+        try:
+            if particles is not None:
+                self._write_particles(particles, t)
+            if velocity is not None and self.V is not None:
+                self._write_grid("grid_velocity", self.V, velocity, t)
+            if stress is not None:
+                stress.x.scatter_forward()
+                self._write_grid("grid_stress", stress.function_space, stress.x.array, t)
+        finally:
+            self.frame += 1
+
+    def _write_grid(self, stem: str, V: dolfinx.fem.FunctionSpace, values: npt.NDArray, t: float) -> None:
+        if stem not in self._fields:
+            self._fields[stem] = GridField(V)
+        field = self._fields[stem]
+        self._grid[stem].write(self.frame, t, field.points, {stem: field.values(values)}, field.cells)
+
+    def _write_particles(self, particles: Particles, t: float) -> None:
+        """The particle frame: point data velocity, stress (9 components), J, id, body and every
+        other scalar or vector field (the laws' internal variables, ``volume0``, ``X0``)."""
+        f = particles.fields
+        n = len(particles)
+        x = _pad3(particles.x)
+        data = {"velocity": _pad3(f["v"]), "stress": _pad3(f["sigma"]).reshape(n, 9), "J": np.linalg.det(f["F"]),
+                "id": particles.ids.astype(np.int64), "body": f["body"].astype(np.int32)}
+        for name, a in f.items():  # the laws' internal variables and other per-particle fields
+            if name not in ("v", "sigma", "F", "body") and a.ndim in (1, 2) and a.dtype == np.float64:
+                data[name] = a
+        self._particles.write(self.frame, t, x, data)
+        if self.png:  # a picture of all particles: gathered
+            parts = self.comm.gather((x, np.linalg.norm(data["velocity"], axis=1)), root=0)
+            if self.comm.rank == 0:
+                plot_particle_frame(np.concatenate([q[0] for q in parts]), np.concatenate([q[1] for q in parts]),
+                                    self.folder / "frames" / f"frame_{self.frame:05d}.png", title=f"t = {t:.4g}",
+                                    label="|velocity|", bounds=self.bounds)
+
+    def summary(self, data: dict) -> None:
+        """``summary.json``, written by rank 0 (atomically); every rank returns once it is on
+        disk (a script on any rank may read it next). Collective."""
+        _everywhere(self.comm, "summary.json", lambda: write_json(self.folder / "summary.json", data), root_only=True)
+
+    def close(self) -> None:
+        """Close the energies file (local: any rank may call it, also after a failure)."""
+        if self._csv is not None:
+            self._file.close()
+            self._csv = None

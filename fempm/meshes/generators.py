@@ -1,0 +1,141 @@
+"""Unstructured meshes from gmsh (optional dependency ``gmsh``, imported lazily).
+
+``read_msh`` reads a ``.msh`` file on rank 0 and distributes it; ``unstructured_rectangle`` and
+``unstructured_box`` generate meshes of a given size for studies. Works with DOLFINx 0.10+
+(``dolfinx.io.gmsh``) and earlier (``dolfinx.io.gmshio``).
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import dolfinx
+from mpi4py import MPI
+
+#: the gmsh meshes that ship with fempm (demos, tests, scenes)
+MESHES = Path(__file__).resolve().parents[2] / "meshes"
+
+
+def _gmshio():
+    try:
+        from dolfinx.io import gmsh as gmshio
+    except ImportError:  # DOLFINx < 0.10
+        from dolfinx.io import gmshio
+    return gmshio
+
+
+def _gmsh():
+    try:
+        import gmsh
+    except ImportError as e:  # pragma: no cover - depends on the installation
+        raise ImportError("unstructured meshes need gmsh: pip install 'fempm[mesh]' (or gmsh)") from e
+    return gmsh
+
+
+class MeshFileError(ValueError):
+    """A file that is not a readable gmsh mesh (raised on every rank alike)."""
+
+
+def read_msh(path: str | Path, comm: MPI.Comm = MPI.COMM_WORLD, gdim: int | None = None):
+    """Read a gmsh ``.msh`` file; returns DOLFINx ``MeshData`` (mesh, cell_tags, facet_tags, ...).
+
+    ``gdim`` defaults to the dimension of the highest-dimensional cells. Rank 0 reads the file;
+    a missing, empty, corrupt or non-mesh file is a :class:`MeshFileError` on every rank that
+    names the file (and what gmsh said), not gmsh's words alone. Collective.
+    """
+    path = Path(path)
+    gmsh = _gmsh()
+    dim, error = 0, None
+    if comm.rank == 0:
+        if not path.is_file():
+            error = f"mesh file {str(path)!r} does not exist"
+        else:
+            _start(gmsh)
+            try:
+                gmsh.open(str(path))
+                dim = gmsh.model.getDimension()
+                if dim < 1 or not len(gmsh.model.mesh.getElements(dim)[0]):
+                    error = f"{str(path)!r} is not a readable gmsh mesh: it holds no cells"
+            except Exception as e:  # noqa: BLE001 - gmsh raises plain Exceptions with its own words
+                error = f"{str(path)!r} is not a readable gmsh mesh (gmsh: {str(e).strip() or type(e).__name__})"
+            if error is not None:
+                gmsh.finalize()
+    dim, error = comm.bcast((dim, error), root=0)
+    if error is not None:
+        raise MeshFileError(error)
+    gdim = dim if gdim is None else gdim
+    data = _gmshio().model_to_mesh(gmsh.model, comm, 0, gdim=gdim)
+    gmsh.finalize() if comm.rank == 0 else None
+    return data
+
+
+def _start(gmsh) -> None:
+    gmsh.initialize()
+    gmsh.option.setNumber("General.Terminal", 0)
+
+
+def _model_to_mesh(gmsh, comm: MPI.Comm, gdim: int) -> dolfinx.mesh.Mesh:
+    data = _gmshio().model_to_mesh(gmsh.model, comm, 0, gdim=gdim)
+    gmsh.finalize() if comm.rank == 0 else None
+    return data[0]
+
+
+def unstructured_rectangle(
+    comm: MPI.Comm, h: float, *, size: tuple[float, float] = (1.0, 1.0), quadrilateral: bool = False, seed: int = 0,
+    origin: tuple[float, float] = (0.0, 0.0), split_y: tuple[float, ...] = (),
+) -> dolfinx.mesh.Mesh:
+    """Frontal-Delaunay triangles (or recombined quadrilaterals) of size ``h`` on the rectangle
+    ``origin + [0, size]``; mesh edges follow the horizontal lines ``y = split_y`` (so a
+    constraint such as "fixed above y = 0" holds on a straight row of vertices)."""
+    gmsh = _gmsh()
+    if comm.rank == 0:
+        _start(gmsh)
+        gmsh.model.add("rectangle")
+        gmsh.option.setNumber("Mesh.RandomSeed", seed)
+        (x0, y0), (w, hgt) = origin, size
+        cuts = sorted(y for y in split_y if y0 < y < y0 + hgt)
+        edges = [y0, *cuts, y0 + hgt]
+        parts = [(2, gmsh.model.occ.addRectangle(x0, a, 0, w, b - a)) for a, b in zip(edges[:-1], edges[1:])]
+        if len(parts) > 1:
+            parts, _ = gmsh.model.occ.fragment(parts[:1], parts[1:])
+        gmsh.model.occ.synchronize()
+        gmsh.model.addPhysicalGroup(2, [t for _, t in parts], 1)
+        gmsh.option.setNumber("Mesh.CharacteristicLengthMax", h)
+        gmsh.option.setNumber("Mesh.Algorithm", 8 if quadrilateral else 6)
+        if quadrilateral:
+            gmsh.option.setNumber("Mesh.RecombineAll", 1)
+            gmsh.option.setNumber("Mesh.RecombinationAlgorithm", 2)
+        gmsh.model.mesh.generate(2)
+    return _model_to_mesh(gmsh, comm, 2)
+
+
+def unstructured_polygon(comm: MPI.Comm, vertices, h: float, *, seed: int = 0) -> dolfinx.mesh.Mesh:
+    """Frontal-Delaunay triangles of size ``h`` on the polygon with ``vertices`` (k, 2), in order."""
+    gmsh = _gmsh()
+    if comm.rank == 0:
+        _start(gmsh)
+        gmsh.model.add("polygon")
+        gmsh.option.setNumber("Mesh.RandomSeed", seed)
+        pts = [gmsh.model.occ.addPoint(float(x), float(y), 0.0) for x, y in vertices]
+        lines = [gmsh.model.occ.addLine(a, b) for a, b in zip(pts, pts[1:] + pts[:1])]
+        surface = gmsh.model.occ.addPlaneSurface([gmsh.model.occ.addCurveLoop(lines)])
+        gmsh.model.occ.synchronize()
+        gmsh.model.addPhysicalGroup(2, [surface], 1)
+        gmsh.option.setNumber("Mesh.CharacteristicLengthMax", h)
+        gmsh.option.setNumber("Mesh.Algorithm", 6)
+        gmsh.model.mesh.generate(2)
+    return _model_to_mesh(gmsh, comm, 2)
+
+
+def unstructured_box(comm: MPI.Comm, h: float, *, size=(1.0, 1.0, 1.0)) -> dolfinx.mesh.Mesh:
+    """Delaunay tetrahedra of size ``h`` on a box."""
+    gmsh = _gmsh()
+    if comm.rank == 0:
+        _start(gmsh)
+        gmsh.model.add("box")
+        v = gmsh.model.occ.addBox(0, 0, 0, *size)
+        gmsh.model.occ.synchronize()
+        gmsh.model.addPhysicalGroup(3, [v], 1)
+        gmsh.option.setNumber("Mesh.CharacteristicLengthMax", h)
+        gmsh.model.mesh.generate(3)
+    return _model_to_mesh(gmsh, comm, 3)

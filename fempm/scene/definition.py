@@ -1,0 +1,136 @@
+"""A scene is data (mesh, particles with a body index, materials, boundary conditions, loads,
+transfer options, outputs), checked as it is made."""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
+
+import basix
+import basix.ufl
+import dolfinx.fem
+import dolfinx.mesh
+import numpy as np
+from mpi4py import MPI
+
+from fempm.particles.particle_set import Particles
+from fempm.stepping.contact import Contact
+from fempm.stepping.health import Health
+from fempm.stepping.loads import Loads
+from fempm.stepping.options import StepOptions
+from fempm.stepping.solver import ExplicitSolver
+
+
+def check_counts(**counts: int) -> None:
+    """Scene builders' counts (cells, particles per cell, frames, ...) must be positive
+    integers: a ValueError naming the first that is not."""
+    for name, value in counts.items():
+        if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < 1:
+            raise ValueError(f"{name}={value!r} must be a positive integer")
+
+
+def check_finite(**values: float) -> None:
+    """Scene builders' physical parameters must be finite real numbers: a ValueError naming the
+    first that is not (NaN would otherwise fail deep inside the mesh set-up)."""
+    for name, value in values.items():
+        if isinstance(value, bool) or not isinstance(value, (int, float, np.integer, np.floating)) \
+                or not np.isfinite(value):
+            raise ValueError(f"{name}={value!r} must be a finite number")
+
+
+def dofs_per_cell(cell_name: str, degree: int) -> int:
+    """The dofs of a scalar Lagrange element of ``degree`` on a cell: the fewest particles in a
+    cell that can determine its consistent mass block."""
+    k = degree
+    return {"interval": k + 1, "triangle": (k + 1) * (k + 2) // 2, "quadrilateral": (k + 1) ** 2,
+            "tetrahedron": (k + 1) * (k + 2) * (k + 3) // 6, "hexahedron": (k + 1) ** 3}[cell_name]
+
+
+def emptiest_cell(particles: Particles) -> int:
+    """The fewest particles in an owned cell of the particles' mesh, over all ranks (collective)."""
+    num = particles.mesh.topology.index_map(particles.mesh.topology.dim).size_local
+    counts = np.bincount(particles.cells[particles.cells < num], minlength=num)
+    return particles.comm.allreduce(int(counts.min(initial=np.iinfo(np.int64).max)), op=MPI.MIN)
+
+
+#: the Lagrange variants a scene's space can take (basix's names, :attr:`Scene.variant`)
+VARIANTS = tuple(v.name for v in basix.LagrangeVariant if v.name != "unset")
+
+#: the frames a scene can ask for (:attr:`Scene.outputs`)
+OUTPUTS = ("particles", "grid_velocity", "grid_stress")
+
+#: more steps than this to the end time is a collapsed time step (a run that would not end)
+MAX_STEPS = 1e9
+
+@dataclass
+class Scene:
+    """Everything a run needs.
+
+    ``bcs`` builds the grid conditions from the vector space (``V -> [Fixed | Slip]``).
+    ``frames`` particle/grid frames are written over ``[0, t_end]``. ``dt``: a fixed time step
+    (the last step is shortened so that the run ends exactly at ``t_end``; a step above the
+    stability limit is an error); None (default) takes the CFL step of
+    :meth:`ExplicitSolver.stable_dt` every step. ``variant``: the Lagrange variant of the
+    velocity space (e.g. ``"bernstein"``, non-negative on simplices), default the DOLFINx one.
+    ``health``: the limits that stop an unhealthy run (:class:`fempm.stepping.health.Health`: energy
+    growth beyond the work of the loads, J bounds, time-step floor). ``outputs``: the frames a
+    run with an output folder writes, of :data:`OUTPUTS` (the energies and the summary always);
+    what is not asked for is not computed (the grid stress is a projection per frame).
+    ``results``: the scene's own measures of the final state, ``results(scene, solver) -> dict``
+    (collective), added to the run's summary. ``contact``: one velocity field per particle
+    group with frictional contact (:class:`fempm.stepping.contact.Contact`); None: one field.
+    ``watch``: called with the solver after every step (collective), for the scene's own
+    histories (a continued run calls it from the checkpoint on).
+    """
+
+    name: str
+    mesh: dolfinx.mesh.Mesh
+    particles: Particles
+    materials: Sequence
+    t_end: float
+    bcs: Callable[[dolfinx.fem.FunctionSpace], Sequence] | None = None
+    loads: Loads = field(default_factory=Loads)
+    options: StepOptions = field(default_factory=StepOptions)
+    degree: int = 1
+    frames: int = 20
+    params: dict = field(default_factory=dict)
+    dt: float | None = None
+    variant: str | None = None
+    health: Health = field(default_factory=Health)
+    outputs: tuple[str, ...] = OUTPUTS
+    results: Callable[[Scene, ExplicitSolver], dict] | None = None
+    contact: Contact | None = None
+    watch: Callable[[ExplicitSolver], None] | None = None
+
+    def __post_init__(self):
+        unknown = set(self.outputs) - set(OUTPUTS)
+        if unknown:
+            raise ValueError(f"unknown output(s) {sorted(unknown)}; expected some of {OUTPUTS}")
+        if not (0.0 < self.t_end < np.inf):
+            raise ValueError(f"t_end={self.t_end} must be a positive, finite time")
+        if isinstance(self.frames, bool) or not isinstance(self.frames, (int, np.integer)) or self.frames < 0:
+            raise ValueError(f"frames={self.frames!r} must be a non-negative integer")
+        if self.dt is not None and not (np.isfinite(self.dt) and self.dt > 0):
+            raise ValueError(f"dt={self.dt} must be a positive number (or None for the CFL step)")
+        check_counts(degree=self.degree)
+        if self.variant is not None and self.variant not in VARIANTS:
+            raise ValueError(f"unknown option variant={self.variant!r}; expected one of {', '.join(VARIANTS)}")
+        if self.degree > 1 and self.variant != "bernstein" and self.options.mass_mode in ("lumped", "fmpm"):
+            raise ValueError(f"mass={self.options.mass!r} needs a non-negative basis (degree 1 or variant='bernstein'): "
+                             f"the vertex functions of degree-{self.degree} Lagrange integrate to zero or less, so their "
+                             "lumped masses vanish; use mass='consistent' or variant='bernstein'")
+
+    def space(self) -> dolfinx.fem.FunctionSpace:
+        """The vector Lagrange velocity space of the scene's degree (and variant)."""
+        d = self.mesh.geometry.dim
+        if self.variant is None:
+            return dolfinx.fem.functionspace(self.mesh, ("Lagrange", self.degree, (d,)))
+        variant = getattr(basix.LagrangeVariant, self.variant)
+        return dolfinx.fem.functionspace(
+            self.mesh, basix.ufl.element("Lagrange", self.mesh.basix_cell(), self.degree, variant, shape=(d,)))
+
+    def solver(self) -> ExplicitSolver:
+        V = self.space()
+        bcs = list(self.bcs(V)) if self.bcs is not None else []
+        return ExplicitSolver(V, self.particles, self.materials, bcs=bcs, loads=self.loads, options=self.options,
+                              contact=self.contact)

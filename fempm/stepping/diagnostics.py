@@ -1,0 +1,79 @@
+r"""Diagnostics of a particle state: the Cauchy stress on the grid and the energies and
+momentum of the particles."""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from typing import Literal
+
+import basix.ufl
+import dolfinx.fem
+import numpy as np
+
+from fempm.particles.particle_set import Particles
+from fempm.stepping.laws import law_state, material_groups
+from fempm.stepping.options import StepOptions
+from fempm.transfer.basis import is_nonnegative
+from fempm.transfer.projection import Projector
+
+__all__ = ["energies", "grid_stress", "stress_space"]
+
+
+def stress_space(V: dolfinx.fem.FunctionSpace) -> dolfinx.fem.FunctionSpace:
+    """The tensor-valued space of ``V``'s element (family, degree, variant) on its mesh."""
+    el = V.element.basix_element
+    d = V.mesh.geometry.dim
+    return dolfinx.fem.functionspace(
+        V.mesh, basix.ufl.element(el.family, el.cell_type, el.degree, el.lagrange_variant, shape=(d, d)))
+
+
+def grid_stress(space: dolfinx.fem.FunctionSpace, particles: Particles, options: StepOptions,
+                mass: Literal["lumped", "consistent"] | None = None) -> dolfinx.fem.Function:
+    r"""The particles' Cauchy stress projected on ``space`` (:func:`stress_space`) as a
+    per-volume field with the particle domains of ``options``: lumped,
+
+    .. math::
+        \sigma_i = \frac{\sum_p V_p \langle N_i \rangle_p \sigma_p}{\sum_p V_p \langle N_i \rangle_p},
+
+    or the volume-weighted least-squares projection (``mass="consistent"``, rim dofs lumped as in
+    the loop). The default is lumped where the basis is non-negative (P1/Q1, Bernstein) and
+    consistent otherwise (P2 Lagrange, whose lumped vertex masses can vanish).
+
+    Note:
+        Collective.
+    """
+    p = particles
+    d = p.gdim
+    if mass is None:
+        mass = "lumped" if is_nonnegative(space.element.basix_element) else "consistent"
+    proj = Projector(space, p, mass=mass, weight="volume", domain=options.particle_domain,
+                     lump_below=options.lump_below if mass == "consistent" else 0.0,
+                     petsc_options_prefix=options.petsc_options_prefix + "stress_")
+    out = proj.project(p.fields["sigma"].reshape(len(p), d * d))
+    out.name = "grid_stress"
+    return out
+
+
+def energies(particles: Particles, materials: Sequence, t: float) -> dict[str, float]:
+    r"""Kinetic energy :math:`\sum_p M_p |v_p|^2 / 2`, strain energy :math:`\sum_p V_p^0 W_p`,
+    their total and the linear momentum :math:`\sum_p M_p v_p`, summed over ranks, at time ``t``.
+
+    Note:
+        Collective.
+    """
+    p = particles
+    f = p.fields
+    kin = 0.5 * np.sum(p.mass * np.einsum("nd,nd->n", f["v"], f["v"]))
+    strain = 0.0
+    for mat, idx in material_groups(f, materials):
+        if getattr(mat, "energy_from_stress", False):  # hypoelastic: the elastic energy of the stress
+            w = mat.energy_density(f["F"][idx], f["sigma"][idx], law_state(mat, f, idx))
+        else:
+            w = mat.energy_density(f["F"][idx])
+        strain += np.sum(f["volume0"][idx] * w)
+    mom = p.mass @ f["v"]
+    kin, strain = p.comm.allreduce(kin), p.comm.allreduce(strain)
+    mom = p.comm.allreduce(mom)
+    out = {"t": t, "kinetic": kin, "strain": strain, "total": kin + strain}
+    out.update({f"momentum_{'xyz'[i]}": float(m) for i, m in enumerate(mom)})
+    return out

@@ -1,0 +1,41 @@
+"""Calling the material laws on the particles of their bodies: the state of their internal
+variables and the checked stress update."""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+
+import numpy as np
+import numpy.typing as npt
+
+
+def law_state(mat, fields: dict, idx: npt.NDArray) -> dict:
+    """The internal variables of law ``mat`` at the particles ``idx`` (copies), by name."""
+    return {h.name: fields[h.name][idx] for h in getattr(mat, "history", ())}
+
+
+def law_stress(mat, F: npt.NDArray, L: npt.NDArray, sigma: npt.NDArray, dt: float, rho: npt.NDArray,
+               fields: dict, idx: npt.NDArray) -> npt.NDArray:
+    """``mat.stress(F, L, sigma, dt, rho)`` of the particles ``idx`` (and, for a law with
+    internal variables, their ``state`` from ``fields``, updated there), checked to be one
+    (d, d) stress per particle."""
+    history = getattr(mat, "history", ())
+    if history:
+        state = law_state(mat, fields, idx)
+        new = np.asarray(mat.stress(F, L, sigma, dt, rho, state))
+        for h in history:
+            fields[h.name][idx] = state[h.name]
+    else:
+        new = np.asarray(mat.stress(F, L, sigma, dt, rho))
+    if new.shape != sigma.shape:
+        raise ValueError(f"{type(mat).__name__}.stress returned an array of shape {new.shape} for {len(F)} "
+                         f"particle(s); expected {sigma.shape}")
+    return new
+
+
+def material_groups(fields: dict, materials: Sequence):
+    """(law, indices of its particles) for each law of ``materials``, by the particles' body
+    index ``fields["body"]``."""
+    body = fields["body"]
+    for b, mat in enumerate(materials):
+        yield mat, np.flatnonzero(body == b)

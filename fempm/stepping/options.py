@@ -1,0 +1,94 @@
+"""The options of the explicit step (:class:`StepOptions`) and the step's error."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Literal
+
+from fempm.arguments import check_numbers
+from fempm.transfer.domains import GIMP_NAMES, make_domain
+from fempm.transfer.fmpm import parse_mass
+
+Scheme = Literal["USL", "USF", "MUSL"]
+
+#: consistent mass: CG steps of the lambda_min(M_L^-1 M_C) estimate, and the factor on it (the
+#: Lanczos estimate lies above the true value)
+MASS_RATIO_ITERATIONS = 30
+MASS_RATIO_SAFETY = 0.8
+
+
+class SimulationError(RuntimeError):
+    """The state became invalid (non-finite values, J <= 0, unstable time step)."""
+
+
+@dataclass
+class StepOptions:
+    r"""Transfer and time-stepping options.
+
+    scheme: USL, USF or MUSL (default: the stability catalogue, ``python -m fempm study
+    stability``, found MUSL lumped stable in 9 of its 13 hard cases and at every CFL number up
+    to 1 on the colliding disks, where USL was stable in 3 and only up to CFL 0.25; see
+    ``docs/error-vs-time-and-stability.md``). flip: PIC/FLIP blend alpha (1 = FLIP, 0 = PIC).
+    mass: lumped, consistent or FMPM(k) (``"fmpm"`` with ``fmpm_order`` k, or ``"fmpmK"``;
+    :mod:`fempm.transfer.fmpm`: k - 1 extra G2P/P2G sweeps, a step :math:`1/\sqrt{k}` of the lumped
+    one unless ``lumped_forces``). cfl: Courant number in (0, 1]. mass_cutoff: nodes whose
+    lumped mass (for P2 Lagrange: :math:`\sum_p M_p |N_{ip}|`) is below this fraction of the
+    largest get no force update (they keep the
+    mapped particle velocity, a bounded weighted average, instead of :math:`+\Delta t f_i/m_i`). position:
+    move particles with the grid velocity (default) or their own updated velocity (the seed's
+    :math:`x_p^+ = x_p + \Delta t\, v_p^+`). lumped_forces: with consistent mass, map the
+    velocity with the consistent matrix but divide the forces by the lumped mass (stable with
+    the CFL step when weakly supported boundary nodes make the consistent matrix nearly
+    singular). lump_below: with consistent mass, lump the rows of dofs whose lumped mass is
+    below this fraction of the largest (free-surface rims; raises the stable step). domain:
+    point (standard MPM), gimp (box average, integrated exactly over the box's pieces in the
+    cells, or with ``gimp_order`` Gauss points per axis; boxes of the initial size (uGIMP), or
+    stretched by the diagonal of F with ``gimp_deform``), ugimp and cpgimp (the same with the
+    box kept or stretched, whatever ``gimp_deform`` says), cpdi1
+    (parallelograms that follow F) or cpdi2 (domains tracked by their corners
+    ``fields["corners"]``, moved with the grid velocity; the particle sits at its domain's
+    centroid and has its volume), see :mod:`fempm.transfer.domains`. damping: mass-proportional
+    damping rate :math:`c` (1/s) of the grid acceleration, :math:`a_i \leftarrow a_i - c\, v_i`
+    (it leaves a static solution unchanged; :math:`c \approx 2\omega_1` damps the lowest mode
+    critically, for loading to a static state).
+    """
+
+    scheme: Scheme = "MUSL"
+    flip: float = 1.0
+    mass: str = "lumped"
+    cfl: float = 0.4
+    mass_cutoff: float = 1e-9
+    position: Literal["grid", "particle"] = "grid"
+    lumped_forces: bool = False
+    lump_below: float = 0.1
+    domain: str = "point"
+    gimp_order: int | None = None
+    gimp_deform: bool = False
+    petsc_options_prefix: str = "fempm_step_"
+    damping: float = 0.0
+    fmpm_order: int | None = None
+
+    def __post_init__(self):
+        check_numbers(self)
+        if self.scheme not in ("USL", "USF", "MUSL"):
+            raise ValueError(f"unknown option scheme={self.scheme!r}; expected USL, USF or MUSL")
+        self.mass_mode, self.mass_order = parse_mass(self.mass, self.fmpm_order)
+        if self.position not in ("grid", "particle"):
+            raise ValueError(f"unknown option position={self.position!r}; expected grid or particle")
+        if not 0.0 <= self.flip <= 1.0:
+            raise ValueError(f"flip={self.flip} must lie in [0, 1]")
+        if self.domain == "cpdi2" and self.position == "particle":
+            raise ValueError("domain='cpdi2' moves the particle domains' corners with the grid velocity and the "
+                             "particle with its domain's centroid: position='particle' would detach them")
+        gimp = {"order": self.gimp_order, **({"deform": self.gimp_deform} if self.domain == "gimp" else {})}
+        self.particle_domain = make_domain(self.domain, **(gimp if self.domain in GIMP_NAMES else {}))
+        if not self.damping >= 0.0:
+            raise ValueError(f"damping={self.damping} must be >= 0")
+        if not 0.0 < self.cfl <= 1.0:
+            raise ValueError(f"cfl={self.cfl} must lie in (0, 1]: a CFL number above 1 is unstable")
+        if not 0.0 <= self.mass_cutoff < 1.0:
+            raise ValueError(f"mass_cutoff={self.mass_cutoff} must lie in [0, 1): a fraction of the largest nodal mass")
+        if not 0.0 <= self.lump_below < 1.0:
+            raise ValueError(f"lump_below={self.lump_below} must lie in [0, 1): a fraction of the largest lumped mass")
+        if self.gimp_order is not None and self.gimp_order < 1:
+            raise ValueError(f"gimp_order={self.gimp_order} must be a positive number of Gauss points (or None)")

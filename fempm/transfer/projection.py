@@ -1,0 +1,339 @@
+r"""Particle-to-grid (P2G) and grid-to-particle (G2P) transfers; the Galerkin projection.
+
+The mass-weighted least-squares fit :math:`F = \sum_j F_j N_j` of particle data :math:`f_p`
+minimises :math:`\int (F - f)^2 \rho\, dV`, which with particle quadrature gives
+
+.. math::
+    \sum_j m_{ij} F_j = b_i, \qquad m_{ij} = \sum_p M_p N_i(x_p) N_j(x_p), \qquad
+    b_i = \sum_p M_p f_p N_i(x_p)
+
+(seed 000, eqs. 16.6-16.17). *Consistent* mode assembles :math:`m_{ij}` as a PETSc matrix and
+solves with KSP (CG + Jacobi by default) on the dofs that particles support. *Lumped* mode
+replaces :math:`m_{ij}` by its row sum :math:`m_i = \sum_p M_p N_i(x_p)` (eqs. 16.21-16.23):
+:math:`F_i = b_i / m_i`, which needs a non-negative basis (P1/Q1 or Bernstein). *FMPM(k)*
+(``mass="fmpm3"`` or ``mass="fmpm", fmpm_order=3``) lies between them: the first k terms of
+the series of :math:`m^{-1}`-preconditioned corrections that sums to the consistent solve
+(:mod:`fempm.transfer.fmpm`).
+"""
+
+from __future__ import annotations
+
+import logging
+from collections.abc import Callable, Sequence
+from typing import Any, Literal
+
+import dolfinx
+import dolfinx.fem
+import dolfinx.la
+import numpy as np
+import numpy.typing as npt
+from mpi4py import MPI
+
+from fempm import petsc as fpetsc
+from fempm.particles.location import as_points3
+from fempm.particles.particle_set import Particles
+from fempm.transfer.basis import ParticleBasis
+from fempm.transfer.fmpm import fmpm_solve, mass_label, parse_mass
+from fempm.transfer.mapping import (
+    SUPPORT_TOL,
+    cell_blocks,
+    consistent_mass_matrix,
+    p2g,
+    particle_weights,
+)
+from fempm.transfer.mass_span import (
+    check_nonsingular,
+    mass_ratio_estimate,
+    mass_ratio_ksp,
+    mass_ratio_rhs,
+)
+
+log = logging.getLogger("fempm")
+
+MassMode = Literal["consistent", "lumped", "fmpm"] | str  # also "fmpmK", "fmpm(K)"
+
+
+def _particle_values(values: npt.ArrayLike | Callable, particles: Particles, bs: int) -> npt.NDArray:
+    if callable(values):  # DOLFINx convention: f(x) with x of shape (3, n)
+        values = np.asarray(values(as_points3(particles.x).T), dtype=np.float64)
+        values = values.reshape(bs, len(particles)).T  # (n, bs)
+    f = np.asarray(values, dtype=np.float64)
+    f = f[:, None] if f.ndim == 1 else f.reshape(f.shape[0], int(np.prod(f.shape[1:])))
+    if f.shape[0] != len(particles):
+        raise ValueError(f"values have {f.shape[0]} rows for {len(particles)} particles")
+    if f.shape[1] != bs:
+        raise ValueError(f"values have {f.shape[1]} component(s) per particle; the space has {bs}")
+    if not np.all(np.isfinite(f)):
+        raise ValueError(f"{np.count_nonzero(~np.isfinite(f))} particle value(s) are not finite")
+    return f
+
+
+class Projector:
+    r"""Projection of particle data onto ``V`` with a fixed set of particles.
+
+    Assembles the mass (consistent matrix + KSP, or lumped vector) once; :meth:`project` then
+    costs one P2G and one solve per value component. ``exclude`` lists (block) dofs held at 0
+    (Dirichlet); ``exclude_components[c]`` lists dofs whose component ``c`` only is held at 0
+    (a slip wall normal to axis c): component c is then solved on its own active set, the
+    constrained least-squares fit, instead of being zeroed after an unconstrained solve.
+    ``domain``: particle domains, a name (``"gimp"``, ``"cpdi1"``, ... as in
+    :class:`fempm.stepping.StepOptions`) or a domain object (:mod:`fempm.transfer.domains`; default the
+    point).
+    ``lump_dofs`` (consistent mode and FMPM): a mask over owned + ghost dofs whose rows are
+    lumped as well (those of conditions that act node by node, :mod:`fempm.stepping.contact`,
+    :class:`fempm.boundary.Friction`).
+    ``lump_below`` (consistent mode): dofs whose lumped mass is below this
+    fraction of the largest get lumped rows and columns (see :func:`consistent_mass_matrix`),
+    so that the solve does not extrapolate into nodes that particles barely reach (FMPM: those
+    dofs keep the lumped solve, see :func:`fempm.transfer.fmpm.fmpm_solve`). It applies
+    to non-negative bases only: with P2 Lagrange, row sums can be zero or negative and moving
+    the (signed) couplings to the diagonal can make the matrix indefinite.
+
+    ``weight``: "mass" (default) fits :math:`\min_F \sum_p M_p (\langle F \rangle_p - f_p)^2`,
+    for per-mass (intensive) fields such as velocity; "volume" weights by :math:`V_p`, for
+    per-volume fields such as stress; ``weights`` (one per particle) replaces either, e.g. the
+    masses of one body and zeros for the others, which gives that body's own mass (the
+    per-body fields of :mod:`fempm.stepping.contact`). This is seed 001's density-ratio kernel: dividing a
+    per-volume :math:`\sigma_p` by :math:`\rho_p = M_p / V_p`, mapping it with the mass
+    weights and multiplying the grid value by :math:`m_i / V_i` gives, for the lumped map,
+    :math:`\sigma_i = \sum_p \beta_{pi} \sigma_p = \sum_p V_p v_{ip} \sigma_p / V_i` with
+    :math:`V_i = \sum_p V_p v_{ip}`: the volume-weighted map, which conserves
+    :math:`\int \sigma` (:math:`\sum_i V_i \sigma_i = \sum_p V_p \sigma_p`) where the
+    mass-weighted one would not across a density jump.
+
+    Attributes
+    ----------
+    active:
+        Mask over owned + ghost dofs that particles support; other dofs are excluded from the
+        solve and set to 0.
+    num_inactive:
+        Global number of unsupported dofs (also logged).
+    iterations:
+        KSP iterations of the last :meth:`project`, per component.
+    """
+
+    def __init__(
+        self,
+        V: dolfinx.fem.FunctionSpace,
+        particles: Particles,
+        *,
+        mass: MassMode = "consistent",
+        petsc_options_prefix: str = "fempm_projection_",
+        petsc_options: dict[str, Any] | None = None,
+        basis: ParticleBasis | None = None,
+        exclude: npt.NDArray[np.int32] | None = None,
+        exclude_components: Sequence[npt.NDArray[np.int32]] | None = None,
+        lump_below: float = 0.0,
+        domain=None,
+        weight: str = "mass",
+        fmpm_order: int | None = None,
+        weights: npt.NDArray | None = None,
+        lump_dofs: npt.NDArray[np.bool_] | None = None,
+    ):
+        self.weights = particle_weights(particles, weight) if weights is None else np.asarray(weights, dtype=np.float64)
+        self.weight = weight
+        mass, self.fmpm_order = parse_mass(mass, fmpm_order)
+        self.label = mass_label(mass, self.fmpm_order)
+        self.V, self.particles, self.mass = V, particles, mass
+        self.basis = basis if basis is not None else ParticleBasis(V, particles, domain=domain)
+        imap = self.basis.index_map
+        self.num_owned = imap.size_local
+        comm = particles.comm
+        self.iterations: list[int] = []
+        self.lumped: npt.NDArray | None = None
+        if mass in ("lumped", "fmpm"):
+            if not self.basis.nonnegative:
+                raise ValueError(
+                    f"{self.label} mass needs a non-negative basis (degree 1 or Bernstein); this "
+                    f"Lagrange space of degree {self.basis.element.degree} has lumped vertex masses "
+                    "that can be zero or negative: use mass='consistent' or a Bernstein variant"
+                )
+            measure = self.lumped_masses()
+        else:
+            measure = p2g(self.basis, self.weights, values=self.basis.values**2)[:, 0]
+        top = comm.allreduce(float(measure[: self.num_owned].max(initial=0.0)), op=MPI.MAX)
+        self.active = measure > SUPPORT_TOL * top
+        if exclude is not None:  # constrained dofs (e.g. fixed velocity): value 0, not solved for
+            self.active[exclude] = False
+        self.num_inactive = comm.allreduce(int(np.count_nonzero(~self.active[: self.num_owned])))
+        if self.num_inactive:
+            log.info("fempm: %d dof(s) without particle support excluded and set to 0", self.num_inactive)
+        lump = None
+        if mass != "lumped" and lump_below > 0.0 and self.basis.nonnegative:  # P2 Lagrange: lumping can make it indefinite
+            m = self.lumped_masses()
+            lump = m < lump_below * comm.allreduce(float(m[: self.num_owned].max(initial=0.0)), op=MPI.MAX)
+        if mass != "lumped" and lump_dofs is not None and self.basis.nonnegative:
+            extra = np.zeros(len(self.active), dtype=np.bool_)
+            extra[: len(lump_dofs)] = lump_dofs[: len(self.active)]
+            lump = extra if lump is None else lump | extra
+        self.lump = lump
+        if mass == "consistent":
+            blocks = None
+            if self.basis.cells is not None:  # point particles: the cell blocks, once for the test and the matrix
+                blocks = cell_blocks(self.basis, self.weights)
+
+            weighted = particles.num_global if weights is None else comm.allreduce(int(np.count_nonzero(self.weights)))
+            check_nonsingular(imap, weighted, self.active, lump, blocks)
+            A = consistent_mass_matrix(self.basis, particles, lump, weight, blocks, self.weights)
+            iset = fpetsc.owned_index_set(imap, self.active[: self.num_owned])
+            self.matrix = A.createSubMatrix(iset, iset)
+            self.ksp = fpetsc.create_ksp(comm, petsc_options_prefix, petsc_options)
+            self.ksp.setOperators(self.matrix)
+            self._x, self._b = self.matrix.createVecs()
+            base = (self.active[: self.num_owned], self.ksp, self._x, self._b)
+            self._systems = [base] * len(exclude_components or ())
+            for c, dofs in enumerate(exclude_components or ()):  # a system per constrained component
+                act = self.active.copy()
+                act[np.asarray(dofs, dtype=np.int32)] = False
+                if comm.allreduce(int(np.count_nonzero(act != self.active))):
+                    sub_is = fpetsc.owned_index_set(imap, act[: self.num_owned])
+                    M = A.createSubMatrix(sub_is, sub_is)
+                    ksp = fpetsc.create_ksp(comm, petsc_options_prefix, petsc_options)
+                    ksp.setOperators(M)
+                    self._systems[c] = (act[: self.num_owned], ksp, *M.createVecs())
+            A.destroy()
+            ones, rows = self.matrix.createVecs()
+            ones.set(1.0)
+            self.matrix.mult(ones, rows)
+            self.row_mass = np.zeros(self.num_owned)
+            self.row_mass[self.active[: self.num_owned]] = rows.array
+        else:  # lumped and FMPM: the rows of the consistent matrix sum to the lumped masses
+            self.row_mass = np.where(self.active, self.lumped, 0.0)[: self.num_owned]
+        self.exclude_components = [np.asarray(d, dtype=np.int32) for d in (exclude_components or ())]
+
+    def mass_ratio_min(self, iterations: int = 40) -> float:
+        r"""Estimate of :math:`\lambda_{min}(M_L^{-1} M_C) \in (0, 1]` (consistent mode).
+
+        The critical explicit step scales as :math:`1/\omega_{max}` and
+        :math:`\omega_{max}^2(M_C) \le \omega_{max}^2(M_L) / \lambda_{min}`, so the lumped-mass
+        CFL step times :math:`\sqrt{\lambda_{min}}` is stable with the consistent matrix.
+        Estimated from the Lanczos coefficients of ``iterations`` CG steps preconditioned by the
+        lumped mass (PETSc Jacobi of type rowsum) on a pseudo-random right-hand side; for a
+        basis that is not non-negative (P2 Lagrange), whose row sums can vanish, of
+        :math:`\lambda_{min}(D^{-1} M_C)` with the diagonal :math:`D` instead. Ritz
+        values lie inside the spectrum, so the estimate is an upper bound that tightens with
+        ``iterations``; callers should keep a safety factor.
+        """
+        if self.mass != "consistent":
+            return 1.0
+
+        ksp = mass_ratio_ksp(self.particles.comm, iterations, rowsum=self.basis.nonnegative)
+        x, b = self.matrix.createVecs()
+        act = self.active[: self.num_owned]
+        b.array[:] = mass_ratio_rhs(self.V, act) * np.abs(self.row_mass[act])  # the same on any partition
+        ratio = mass_ratio_estimate(ksp, self.matrix, b, x)
+        for obj in (ksp, x, b):
+            obj.destroy()
+        return ratio
+
+    def support_masses(self) -> npt.NDArray:
+        r"""How much particle mass each dof sees, :math:`\sum_p M_p |\langle N_i \rangle_p|` on
+        owned + ghost dofs: the lumped mass for a non-negative basis, and a positive measure of
+        support where lumped masses can vanish or be negative (P2 Lagrange)."""
+        if self.basis.nonnegative:
+            return self.lumped_masses()
+        return p2g(self.basis, self.weights, values=np.abs(self.basis.values))[:, 0]
+
+    def lumped_masses(self) -> npt.NDArray:
+        """Lumped nodal masses on owned + ghost dofs (computed once)."""
+        if self.lumped is None:
+            self.lumped = p2g(self.basis, self.weights)[:, 0]
+        return self.lumped
+
+    def grid_total(self, u: dolfinx.fem.Function) -> npt.NDArray:
+        r"""Grid total :math:`\sum_{ij} m_{ij} F_j` (lumped: :math:`\sum_i m_i F_i`) per component,
+        summed over ranks. For ``u`` the projection of :math:`f_p` it equals
+        :math:`\sum_p M_p f_p` (conservation; :math:`\sum_p V_p f_p` with ``weight="volume"``);
+        for ``u = 1`` the total mass (volume)."""
+        F = u.x.array.reshape(-1, self.basis.bs)[: self.num_owned]
+        return self.particles.comm.allreduce(self.row_mass @ F)
+
+    def rhs(self, f: npt.NDArray) -> npt.NDArray:
+        r""":math:`b_i = \sum_p M_p f_p N_i(x_p)` on owned + ghost dofs, (ndofs, bs)."""
+        return p2g(self.basis, self.weights[:, None] * f)
+
+    def project(
+        self, values: npt.ArrayLike | Callable, out: dolfinx.fem.Function | None = None
+    ) -> dolfinx.fem.Function:
+        """Project particle values (n,) / (n, bs), or a function of x, onto ``V``."""
+        bs = self.basis.bs
+        f = _particle_values(values, self.particles, bs)
+        b = self.rhs(f)
+        u = out if out is not None else dolfinx.fem.Function(self.V)
+        u.x.array[:] = self.solve(b)[: self.basis.num_dofs_space].ravel()
+        return u
+
+    def solve(self, b: npt.NDArray, guess: npt.NDArray | None = None) -> npt.NDArray:
+        """Solve ``m F = b`` on the active dofs for (owned + ghost dofs, k) right-hand sides;
+        returns (owned + ghost dofs, k) with ghosts updated and 0 on inactive dofs.
+        ``guess`` (same shape) warm-starts the KSP."""
+        base = self.active[: self.num_owned]
+        n, k = self.num_owned, b.shape[1]
+        F = np.zeros((n, k))
+        if self.mass in ("lumped", "fmpm"):
+            free = np.repeat(base[:, None], k, axis=1)
+            for c, dofs in enumerate(self.exclude_components[:k]):
+                free[dofs[dofs < n], c] = False
+            if self.mass == "lumped":
+                F[free] = (b[:n] / np.where(base, self.lumped[:n], 1.0)[:, None])[free]
+            else:
+                F = fmpm_solve(self.basis, self.weights, self.lumped, b, free, self.fmpm_order, self._ghosted,
+                               lump=None if self.lump is None else self.lump[:n])
+        else:
+            self.iterations = []
+            for c in range(k):
+                act, ksp, x, rhs = self._systems[c] if c < len(self._systems) else (base, self.ksp, self._x, self._b)
+                rhs.array[:] = b[:n][act, c]
+                if guess is None:
+                    x.set(0.0)
+                else:
+                    x.array[:] = guess[:n][act, c]
+                reason = fpetsc.solve_from(ksp, rhs, x, guess is not None)
+                if reason < 0:
+                    raise RuntimeError(
+                        f"consistent projection: KSP did not converge ({fpetsc.converged_reason_name(reason)}, "
+                        f"{ksp.getIterationNumber()} iterations); the particle mass matrix may be "
+                        "singular: too few particles per cell for this space?"
+                    )
+                self.iterations.append(ksp.getIterationNumber())
+                F[act, c] = x.array
+        return self._ghosted(F)
+
+    def _ghosted(self, F: npt.NDArray) -> npt.NDArray:
+        """Owned values (owned dofs, k) -> (owned + ghost dofs, k), ghosts from their owners."""
+        k = F.shape[1]
+        vec = dolfinx.la.vector(self.basis.index_map, bs=k)
+        vec.array[: F.size] = F.ravel()
+        vec.scatter_forward()
+        return vec.array.reshape(-1, k)
+
+
+def project(
+    V: dolfinx.fem.FunctionSpace,
+    particles: Particles,
+    values: npt.ArrayLike | Callable,
+    *,
+    mass: MassMode = "consistent",
+    petsc_options_prefix: str = "fempm_projection_",
+    petsc_options: dict[str, Any] | None = None,
+    domain=None,
+    weight: str = "mass",
+    fmpm_order: int | None = None,
+) -> dolfinx.fem.Function:
+    """Galerkin projection of particle ``values`` onto ``V`` (see :class:`Projector`;
+    ``weight="volume"`` for per-volume fields such as stress; ``mass="fmpmK"`` for FMPM(K))."""
+    projector = Projector(
+        V, particles, mass=mass, petsc_options_prefix=petsc_options_prefix, petsc_options=petsc_options,
+        domain=domain, weight=weight, fmpm_order=fmpm_order,
+    )
+    return projector.project(values)
+
+
+def interpolate(u: dolfinx.fem.Function, particles: Particles, basis: ParticleBasis | None = None) -> npt.NDArray:
+    r"""G2P: values :math:`u(x_p) = \sum_i u_i N_i(x_p)` at the particles, (n,) or (n, bs).
+
+    Ghost values of ``u`` must be up to date (as after any DOLFINx interpolation or solve).
+    """
+    basis = basis if basis is not None else ParticleBasis(u.function_space, particles)
+    vals = basis.gather(u.x.array.reshape(-1, basis.bs))
+    return vals[:, 0] if basis.bs == 1 else vals
