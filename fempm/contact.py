@@ -2,8 +2,7 @@
 
 from fempm.stepping.contact import (
     Contact,
-    check_options,
-    contact_step,
+    ContactGrid,
     correct,
     shared_cells,
 )
@@ -12,6 +11,5 @@ __all__ = [
     "Contact",
     "correct",
     "shared_cells",
-    "contact_step",
-    "check_options",
+    "ContactGrid",
 ]

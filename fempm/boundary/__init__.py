@@ -1,6 +1,7 @@
 """Grid conditions: fixed, slip, prescribed and frictional walls, and the contact patches of a
 wall that shares its normal impulse by depth."""
 
+from fempm.boundary.conditions import GridConditions
 from fempm.boundary.walls import (
     Fixed,
     Friction,
@@ -15,6 +16,7 @@ from fempm.boundary.walls import (
 )
 
 __all__ = [
+    "GridConditions",
     "Fixed",
     "Friction",
     "Prescribed",

@@ -16,35 +16,54 @@ from __future__ import annotations
 
 from collections.abc import Callable
 from dataclasses import dataclass
+from typing import ClassVar
 
 import dolfinx.fem
 import dolfinx.mesh
 import numpy as np
 import numpy.typing as npt
 
+from fempm.boundary.coulomb import coulomb
 from fempm.boundary.patches import Patches, depth_shares
 from fempm.transfer.centres import NodalCentres
 
 
 @dataclass(frozen=True)
 class Fixed:
-    dofs: npt.NDArray[np.int32]
+    """Every velocity component 0 at ``dofs``."""
 
-    def apply(self, v: npt.NDArray) -> None:
+    dofs: npt.NDArray[np.int32]
+    #: whether the condition needs the step's nodal centres of mass (:class:`NodalCentres`)
+    needs_positions: ClassVar[bool] = False
+
+    @property
+    def zero_components(self) -> bool:
+        """Whether the condition only holds velocity components at 0 (the compiled grid update
+        then fuses it into its pass)."""
+        return True
+
+    def apply(self, v: npt.NDArray, centroids: NodalCentres | None = None) -> None:
         v[self.dofs] = 0.0
 
 
 @dataclass(frozen=True)
 class Slip:
+    """No flow through a wall of unit ``normal`` at ``dofs``."""
+
     dofs: npt.NDArray[np.int32]
     normal: npt.NDArray  # (d,) or (len(dofs), d), unit
+    needs_positions: ClassVar[bool] = False
 
     @property
     def axis(self) -> int | None:
         """The coordinate axis of a wall normal to it (then :meth:`apply` zeroes that component), else None."""
         return _axis(self.normal)
 
-    def apply(self, v: npt.NDArray) -> None:
+    @property
+    def zero_components(self) -> bool:
+        return self.axis is not None
+
+    def apply(self, v: npt.NDArray, centroids: NodalCentres | None = None) -> None:
         axis = self.axis
         if axis is not None:  # a wall normal to a coordinate axis: that component is 0
             v[self.dofs, axis] = 0.0
@@ -61,8 +80,10 @@ class Prescribed:
 
     dofs: npt.NDArray[np.int32]
     velocity: npt.NDArray
+    needs_positions: ClassVar[bool] = False
+    zero_components: ClassVar[bool] = False
 
-    def apply(self, v: npt.NDArray) -> None:
+    def apply(self, v: npt.NDArray, centroids: NodalCentres | None = None) -> None:
         held = np.flatnonzero(np.isfinite(self.velocity))
         v[np.ix_(self.dofs, held)] = self.velocity[held]
 
@@ -121,6 +142,8 @@ class Friction:
     points: npt.NDArray | None = None
     patches: Patches | None = None
 
+    zero_components: ClassVar[bool] = False
+
     @property
     def needs_positions(self) -> bool:
         return self.gap is not None
@@ -144,11 +167,7 @@ class Friction:
             dvn = np.zeros_like(vn)
             dvn[t] = depth_shares(self.patches.sums, self.dofs[t], centroids.mass[self.dofs[t]],
                                   np.maximum(vn[t], 0.0), depth[t])  # collective
-        # Coulomb: at most mu dvn of the tangential velocity (0 where it sticks)
-        speed = np.linalg.norm(vt, axis=1)
-        sliding = speed > 0
-        keep = np.where(sliding, np.maximum(0.0, 1.0 - self.mu * dvn / np.where(sliding, speed, 1.0)), 0.0)
-        v[self.dofs] = np.where(held[:, None], vt * keep[:, None] + (vn - dvn)[:, None] * n, vd)
+        v[self.dofs] = np.where(held[:, None], coulomb(vt, vn, n, dvn, self.mu), vd)
 
 
 def _axis(normal: npt.NDArray) -> int | None:

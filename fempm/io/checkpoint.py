@@ -25,7 +25,7 @@ scene, parameter, option, health limit, mesh, particle count, or fields) is a
 Restoring on the same number of ranks puts every array back as it was, in the same order, so
 that the continued run is bit for bit the uninterrupted one. With consistent mass the compiled
 step's kept systems go in too
-(:meth:`fempm.stepping.consistent.ConsistentPointStep.checkpoint_arrays`: the sparsity's cells,
+(:meth:`fempm.stepping.consistent.ConsistentNodalMass.checkpoint_state`: the sparsity's cells,
 the matrix values each preconditioner was set up from, the warm starts and counters), and the
 preconditioners are set up again from those values. On another number of ranks the particles
 are distributed anew by their cells (:class:`fempm.particles.Particles`) and the warm starts
@@ -137,12 +137,11 @@ def write(out: Path, scene, solver, monitor, writer_state: dict, rebuild: dict |
         tmp.mkdir(parents=True)
     comm.Barrier()
     p = solver.particles
-    arrays = {"x": p.x, "cells": p.cells, "X": p.X, **p._arrays()}
+    arrays = {"x": p.x, "cells": p.cells, "X": p.X, **p.data_arrays()}
     if solver.grid_velocity is not None:
         arrays["solver:grid_velocity"] = solver.grid_velocity
-    step = solver._lumped_step
-    if hasattr(step, "checkpoint_arrays"):  # the consistent step's warm starts and kept systems
-        arrays.update({f"solver:{k}": v for k, v in step.checkpoint_arrays().items()})
+    counters, grid_arrays = solver.checkpoint_state()  # e.g. the consistent step's warm starts and kept systems
+    arrays.update({f"solver:{k}": v for k, v in grid_arrays.items()})
     name = f"rank_{comm.rank:05d}.npz"
     error, record = None, None
     try:
@@ -163,8 +162,8 @@ def write(out: Path, scene, solver, monitor, writer_state: dict, rebuild: dict |
         "particles": p.num_global,
         "solver": {"extended_steps": solver.extended_steps, "mass_ratio": solver.mass_ratio,
                    "j_range": list(solver.j_range) if solver.j_range is not None else None,
-                   "terms": dict(solver.terms), "since_sort": getattr(step, "_since_sort", None),
-                   "ratio_age": getattr(step, "_ratio_age", None)},
+                   "terms": dict(solver.terms), "since_sort": counters.get("since_sort"),
+                   "ratio_age": counters.get("ratio_age")},
         "monitor": _scalar_state(monitor, MONITOR_STATE),
         "writer": writer_state,
     }
@@ -305,7 +304,7 @@ def restore_particles(out: Path, scene, comm: MPI.Comm) -> tuple[dict, dict]:
     if comm.size == data["ranks"]:  # the same layout: every array back in place and order
         arrays = _load(path / f"rank_{comm.rank:05d}.npz", data)
         solver_arrays = {k[7:]: arrays.pop(k) for k in list(arrays) if k.startswith("solver:")}
-        scene.particles._set_arrays(arrays)
+        scene.particles.set_arrays(arrays)
     else:  # read a share of the files, then let each particle go to the rank owning its cell
         parts = [_load(path / f"rank_{r:05d}.npz", data) for r in range(comm.rank, data["ranks"], comm.size)]
         if not parts:  # more ranks than files: none here, of the right shapes and types
@@ -341,15 +340,8 @@ def restore_solver(solver, monitor, data: dict, solver_arrays: dict) -> None:
     solver.j_range = tuple(s["j_range"]) if s["j_range"] is not None else None
     solver.terms = Counter(s["terms"])
     solver.grid_velocity = solver_arrays.get("grid_velocity")
-    step = solver._compiled_step() if solver.compiled is not False else None
-    if step is not None:
-        if s["since_sort"] is not None:
-            step._since_sort = int(s["since_sort"])
-        if hasattr(step, "restore_arrays"):
-            if s["ratio_age"] is not None:
-                step._ratio_age = int(s["ratio_age"])
-            # collective: on another number of ranks every rank passes {} (no solver arrays)
-            step.restore_arrays(solver_arrays)
+    # collective: on another number of ranks every rank passes {} (no solver arrays)
+    solver.restore_state({"since_sort": s["since_sort"], "ratio_age": s["ratio_age"]}, solver_arrays)
     for k, v in data["monitor"].items():
         setattr(monitor, k, np.asarray(v) if isinstance(v, list) else v)
 

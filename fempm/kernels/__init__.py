@@ -8,7 +8,7 @@ the reference to round-off (``tests/unit/test_kernels.py``). :data:`COMPILED`
 Two modules work on whole passes rather than single operations: :mod:`fempm.kernels.shape`
 (the degree-1 basis in closed form and the affine pull-back; basix and
 :class:`fempm.meshes.geometry.CellGeometry` are their references) and :mod:`fempm.kernels.lumped`
-(the passes of :class:`fempm.stepping.lumped.LumpedPointStep`, whose reference is the generic
+(the passes of :class:`fempm.stepping.lumped.PointGrid`, whose reference is the generic
 :meth:`fempm.stepping.ExplicitSolver.step`, ``tests/mpi/test_compiled_step.py``).
 """
 

@@ -1,5 +1,5 @@
 r"""Compiled pieces of the consistent mass for point particles on affine degree-1 cells
-(:class:`fempm.stepping.consistent.ConsistentPointStep` drives them; :func:`fempm.transfer.cell_blocks`
+(:class:`fempm.stepping.consistent.ConsistentNodalMass` drives them; :func:`fempm.transfer.cell_blocks`
 and :func:`fempm.transfer.consistent_mass_matrix` are their reference).
 
 :func:`cell_mass` (one particle pass): the local matrices, the diagonal and the occupancy,

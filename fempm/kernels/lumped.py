@@ -1,5 +1,5 @@
 r"""The lumped-mass explicit step for point particles on affine degree-1 cells, in four
-compiled passes (:class:`fempm.stepping.lumped.LumpedPointStep` drives them; the generic
+compiled passes (:class:`fempm.stepping.lumped.PointGrid` drives them; the generic
 :meth:`fempm.stepping.ExplicitSolver.step` is their reference). The basis is evaluated on the
 fly (:func:`fempm.kernels.shape.shape`), never stored.
 

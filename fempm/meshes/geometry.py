@@ -58,6 +58,10 @@ class CellGeometry:
         self.x = mesh.geometry.x[:, : self.gdim]
         self.num_owned = mesh.topology.index_map(self.tdim).size_local
         self.affine = False
+        #: affine cells: the first vertex x0 (cells, gdim) and the inverse Jacobian K (cells, tdim, gdim)
+        #: of each cell's map x = x0 + J X (None for other cells)
+        self.x0: npt.NDArray | None = None
+        self.K: npt.NDArray | None = None
         if cmap.degree == 1:
             # the map is affine when every geometry node is x0 + J X_node with J from the nodes at
             # the reference unit points (simplices always; parallelogram quads, parallelepiped
@@ -81,7 +85,7 @@ class CellGeometry:
                     K[cells] = np.linalg.inv(J)
             self.affine = bool(mesh.comm.allreduce(worst <= 1e-13 * scale, op=MPI.LAND))
             if self.affine:
-                self._x0, self._K = x0, K
+                self.x0, self.K = x0, K
 
     def _nodal_jacobian(self, nodes: npt.NDArray) -> npt.NDArray:
         """``J[c, g, t]`` of affine cells from their geometry nodes (c, nnodes, gdim)."""
@@ -107,7 +111,7 @@ class CellGeometry:
     def push_forward(self, cells: npt.NDArray[np.int32], X: npt.NDArray) -> npt.NDArray:
         """Physical coordinates ``x(X)`` of reference points ``X`` (n, tdim) in ``cells``."""
         if self.affine:
-            return self._x0[cells] + np.einsum("ngt,nt->ng", self.jacobian(cells, X), X)
+            return self.x0[cells] + np.einsum("ngt,nt->ng", self.jacobian(cells, X), X)
         phi = self._tabulate(0, X)[0]  # (n, ndofs)
         return np.einsum("nk,nkg->ng", phi, self.x[self.dofmap[cells]])
 
@@ -121,7 +125,7 @@ class CellGeometry:
     def inverse_jacobian(self, cells: npt.NDArray[np.int32], X: npt.NDArray) -> npt.NDArray:
         """``K = J^{-1}``, shape (n, tdim, gdim), so that ``grad N = dN/dX @ K``."""
         if self.affine:
-            return self._K[cells]
+            return self.K[cells]
         return np.linalg.inv(self.jacobian(cells, X))
 
     def detJ(self, cells: npt.NDArray[np.int32], X: npt.NDArray) -> npt.NDArray:
@@ -137,7 +141,7 @@ class CellGeometry:
         """
         x = np.asarray(x, dtype=np.float64)[:, : self.gdim]
         if self.affine:
-            return np.einsum("ntg,ng->nt", self._K[cells], x - self._x0[cells])
+            return np.einsum("ntg,ng->nt", self.K[cells], x - self.x0[cells])
         nodes = self.x[self.dofmap[cells]]  # (n, ndofs, gdim)
         X = np.tile(basix.geometry(self.basix_cell).mean(axis=0), (len(cells), 1))
         active = np.arange(len(cells))

@@ -185,7 +185,7 @@ class CellLocator:
         if cand.size == 0:
             return cells, X
         if geo.affine and shape_kernels.AVAILABLE:
-            Xc, inside = shape_kernels.affine_pull_back(cand, x[pidx], geo._x0, geo._K, geo.cell_name in SIMPLICES,
+            Xc, inside = shape_kernels.affine_pull_back(cand, x[pidx], geo.x0, geo.K, geo.cell_name in SIMPLICES,
                                                         self.tol)
         else:
             Xc = geo.pull_back(cand, x[pidx])
@@ -235,7 +235,7 @@ class CellLocator:
         vmap = self.mesh.topology.index_map(0)
         local = vmap.global_to_local(np.ascontiguousarray(global_vertices, dtype=np.int64).ravel())
         local = np.asarray(local, dtype=np.int32).reshape(global_vertices.shape)
-        return shape_kernels.vertex_star_pull_back(x, local, geo._x0, geo._K, v_offsets, v_cells, owned,
+        return shape_kernels.vertex_star_pull_back(x, local, geo.x0, geo.K, v_offsets, v_cells, owned,
                                                    geo.cell_name in SIMPLICES, self.tol)
 
     def locate_near(self, x: npt.NDArray, previous: npt.NDArray[np.int32], *,
@@ -252,7 +252,7 @@ class CellLocator:
             return self.locate(x)
         c2v, v_offsets, v_cells, owned = self.vertex_star()
         cells, X = shape_kernels.near_pull_back(np.asarray(previous, dtype=np.int32), np.ascontiguousarray(x),
-                                                geo._x0, geo._K, c2v, v_offsets, v_cells,
+                                                geo.x0, geo.K, c2v, v_offsets, v_cells,
                                                 len(c2v) if ghosts else owned, geo.cell_name in SIMPLICES, self.tol)
         miss = np.flatnonzero(cells < 0)
         if len(miss) and not ghosts:
@@ -271,7 +271,7 @@ class CellLocator:
         valid = np.flatnonzero(cells >= 0)
         if geo.affine and shape_kernels.AVAILABLE:  # closed form, one compiled pass
             new_cells = cells.copy()
-            X, stay = shape_kernels.affine_pull_back(cells, x, geo._x0, geo._K, geo.cell_name in SIMPLICES, self.tol)
+            X, stay = shape_kernels.affine_pull_back(cells, x, geo.x0, geo.K, geo.cell_name in SIMPLICES, self.tol)
             new_cells[~stay] = -1
         elif valid.size:
             Xv = self.geometry.pull_back(cells[valid], np.asarray(x)[valid])

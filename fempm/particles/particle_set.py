@@ -148,15 +148,18 @@ class Particles:
 
     def _assign(self, d, outside: OutsidePolicy) -> None:
         self._check_outside(d.outside, outside)
-        self._set_arrays({"x": d.x, "cells": d.cells, "X": d.X, **d.data})
+        self.set_arrays({"x": d.x, "cells": d.cells, "X": d.X, **d.data})
 
-    def _set_arrays(self, arrays: dict[str, npt.NDArray]) -> None:
-        """Positions, cells, reference coordinates and the :meth:`_arrays` data, by name."""
+    def set_arrays(self, arrays: dict[str, npt.NDArray]) -> None:
+        """Positions, cells, reference coordinates and the :meth:`data_arrays` data, by name."""
         self.x, self.cells, self.X = arrays["x"], arrays["cells"], arrays["X"]
         self.mass, self.volume, self.ids = arrays["mass"], arrays["volume"], arrays["ids"]
         self.fields = {k[6:]: v for k, v in arrays.items() if k.startswith("field:")}
 
-    def _arrays(self) -> dict[str, npt.NDArray]:
+    def data_arrays(self) -> dict[str, npt.NDArray]:
+        """The per-particle arrays besides positions, cells and reference coordinates, by name:
+        ``mass``, ``volume``, ``ids`` and every field as ``field:<name>`` (what migrates and
+        what a checkpoint keeps)."""
         data = {"mass": self.mass, "volume": self.volume, "ids": self.ids}
         data.update({"field:" + k: v for k, v in self.fields.items()})
         return data
@@ -246,12 +249,12 @@ class Particles:
             return
         if outside not in _OUTSIDE:  # before anything moves
             raise ValueError(f"unknown option outside={outside!r}; expected one of {_OUTSIDE}")
-        arrays = {"x": self.x, "cells": cells, "X": X, **self._arrays()}
+        arrays = {"x": self.x, "cells": cells, "X": X, **self.data_arrays()}
         arrays, gone = migrate(self.locator, arrays, rows, previous if ghosts else None,
                                counts=(int(counts[0]), int(counts[1])))  # in place, O(leavers)
         if gone is not None:  # some rank searched beyond its ghost cells
             self._check_outside(gone, outside)
-        self._set_arrays(arrays)
+        self.set_arrays(arrays)
 
     def sort_by_cell(self) -> None:
         """Order the particles by cell (stable), for memory locality in the particle passes.

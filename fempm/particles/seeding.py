@@ -123,7 +123,11 @@ def create_particles(
     chosen = np.arange(ncell, dtype=np.int32)
     if callable(cells):
         mid = dolfinx.mesh.compute_midpoints(mesh, geom.tdim, chosen)
-        chosen = chosen[np.asarray(cells(mid.T), dtype=bool)]
+        keep = np.asarray(cells(mid.T), dtype=bool)
+        if keep.shape != (ncell,):
+            raise ValueError(f"cells(x) must return one boolean per cell: x holds the {ncell} cell midpoints as "
+                             f"columns, shape (3, {ncell}) (DOLFINx's convention), and it returned shape {keep.shape}")
+        chosen = chosen[keep]
     elif cells is not None:
         chosen = np.asarray(cells, dtype=np.int32)
         if np.any((chosen < 0) | (chosen >= ncell)):

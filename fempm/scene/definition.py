@@ -115,7 +115,7 @@ class Scene:
         check_counts(degree=self.degree)
         if self.variant is not None and self.variant not in VARIANTS:
             raise ValueError(f"unknown option variant={self.variant!r}; expected one of {', '.join(VARIANTS)}")
-        if self.degree > 1 and self.variant != "bernstein" and self.options.mass_mode in ("lumped", "fmpm"):
+        if self.degree > 1 and self.variant != "bernstein" and not self.options.mass_model.matrix:
             raise ValueError(f"mass={self.options.mass!r} needs a non-negative basis (degree 1 or variant='bernstein'): "
                              f"the vertex functions of degree-{self.degree} Lagrange integrate to zero or less, so their "
                              "lumped masses vanish; use mass='consistent' or variant='bernstein'")

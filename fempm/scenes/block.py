@@ -15,6 +15,7 @@ from fempm.particles.seeding import per_direction
 from fempm.scene.definition import Scene, check_counts
 from fempm.stepping.loads import Loads
 from fempm.stepping.options import StepOptions
+from fempm.transfer.domains import step_domain
 
 
 def hanging_block(
@@ -49,7 +50,7 @@ def hanging_block(
     lattice = np.column_stack(np.unravel_index(np.arange(n * n), (n, n))) if comm.rank == 0 else np.zeros((0, 2))
     vol = (1.0 / n) ** 2
     fields = {"lattice": lattice.astype(float), "lp": np.full((len(x), 2), 0.5 / n)}
-    if domain == "cpdi2":  # each particle is its lattice square, tracked by its four corners
+    if step_domain(domain).tracks_corners:  # each particle is its lattice square, tracked by its four corners
         fields["corners"] = box_corners(x, fields["lp"])
     p = Particles(m, x, rho * vol, vol, fields=fields)
     params = dict(cells=cells, ppc=ppc, domain=domain, mesh=mesh, scheme=scheme, flip=flip, mass=mass, cfl=cfl, g=g, E=E,

@@ -13,6 +13,8 @@ from fempm.particles.seeding import create_particles, per_direction
 from fempm.scene.definition import Scene, check_counts, check_finite, dofs_per_cell
 from fempm.stepping.loads import Loads
 from fempm.stepping.options import StepOptions
+from fempm.transfer.domains import step_domain
+from fempm.transfer.mass_models import mass_model
 
 
 def cantilever_reference(L: float = 0.7, H: float = 0.047, E: float = 6e7, rho: float = 1000.0,
@@ -63,7 +65,7 @@ def cantilever(
     check_counts(cells=cells, ppc=ppc, degree=degree)
     check_finite(t_end=t_end, L=L, H=H, E=E, nu=nu, rho=rho, g=g)
     per_direction(ppc, 2)
-    if mass == "consistent" and ppc < dofs_per_cell("quadrilateral", degree):
+    if mass_model(mass).matrix and ppc < dofs_per_cell("quadrilateral", degree):
         raise ValueError(f"ppc={ppc} particles per cell cannot determine the consistent mass of degree {degree} "
                          f"({dofs_per_cell('quadrilateral', degree)} dofs per quadrilateral): give ppc="
                          f"{(degree + 1) ** 2} or more, or leave it unset")
@@ -78,7 +80,7 @@ def cantilever(
     mesh = dm.create_rectangle(comm, [[-hx, -below * hy], [(nl + 2) * hx, H + 2 * hy]], [nl + 3, below + cells + 2],
                                dm.CellType.quadrilateral)
     p = create_particles(mesh, ppc, density=rho, cells=lambda x: (x[0] > 0) & (x[0] < L) & (x[1] > 0) & (x[1] < H),
-                         corners=domain == "cpdi2")  # CPDI2: each particle is its sub-cell
+                         corners=step_domain(domain).tracks_corners)  # CPDI2: each particle is its sub-cell
     p.fields["X0"] = p.x.copy()
     params = dict(cells=cells, ppc=ppc, scheme=scheme, flip=flip, mass=mass, cfl=cfl, L=L, H=H, E=E, nu=nu, rho=rho,
                   g=g, hx=hx, material=material, degree=degree, mass_cutoff=mass_cutoff, domain=domain, **cantilever_reference(L, H, E, rho, g))

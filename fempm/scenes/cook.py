@@ -29,6 +29,8 @@ from fempm.particles.particle_set import Particles
 from fempm.scene.definition import Scene, check_counts, dofs_per_cell, emptiest_cell
 from fempm.stepping.loads import Loads
 from fempm.stepping.options import StepOptions
+from fempm.transfer.domains import step_domain
+from fempm.transfer.mass_models import mass_model
 
 CORNERS = np.array([[0.0, 0.0], [48.0, 44.0], [48.0, 60.0], [0.0, 44.0]])  # A, B, C, D
 EDGE = 16.0  # length of the loaded edge BC
@@ -68,7 +70,7 @@ def cook_membrane(
         raise ValueError(f"spacing={spacing} must be a positive length")
     mesh = unstructured_polygon(comm, CORNERS, h)
     # consistent mass of degree >= 2 needs every triangle to hold as many particles as dofs
-    needed = dofs_per_cell("triangle", degree) if mass == "consistent" and degree > 1 else 0
+    needed = dofs_per_cell("triangle", degree) if mass_model(mass).matrix and degree > 1 else 0
     s = h / 2 if spacing is None else spacing
     while True:
         p, nx, ny = _lattice_particles(mesh, s, rho, domain, comm)
@@ -105,7 +107,7 @@ def _lattice_particles(mesh, s: float, rho: float, domain: str, comm) -> tuple[P
     if comm.rank != 0:
         x, area, corners, column = x[:0], area[:0], corners[:0], column[:0]
     fields = {"area": np.where(column == nx - 1, EDGE / ny, 0.0), "loaded": (column == nx - 1).astype(float)}
-    if domain == "cpdi2":
+    if step_domain(domain).tracks_corners:
         fields["corners"] = corners
     return Particles(mesh, x, rho * area, area, fields=fields), nx, ny
 

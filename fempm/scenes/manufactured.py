@@ -22,6 +22,7 @@ from fempm.particles.seeding import create_particles
 from fempm.scene.definition import Scene
 from fempm.stepping.loads import Loads
 from fempm.stepping.options import StepOptions
+from fempm.transfer.domains import step_domain
 
 MESH_KINDS = ("structured", "triangles", "unstructured")
 
@@ -76,14 +77,14 @@ def _body_particles(problem, mesh, h: float, ppc: int, domain: str) -> Particles
         X, vol, C = annulus_lattice(problem.r_in, problem.r_out, spacing)
         if comm.rank != 0:
             X, vol, C = X[:0], vol[:0], C[:0]
-        fields = {"corners": C} if domain == "cpdi2" else {}
+        fields = {"corners": C} if step_domain(domain).tracks_corners else {}
         return Particles(mesh, X, problem.rho0 * vol, vol, fields=fields)
     lo, hi = np.array(problem.lower), np.array(problem.upper)
 
     def in_body(x):
         return np.all((x[: problem.dim].T >= lo - 1e-12) & (x[: problem.dim].T <= hi + 1e-12), axis=1)
 
-    return create_particles(mesh, ppc, density=problem.rho0, cells=in_body, corners=domain == "cpdi2")
+    return create_particles(mesh, ppc, density=problem.rho0, cells=in_body, corners=step_domain(domain).tracks_corners)
 
 
 def _start_displaced(problem, particles: Particles) -> None:

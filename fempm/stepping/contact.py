@@ -1,103 +1,51 @@
 r"""Contact between bodies: one grid velocity field per body, corrected where bodies meet.
 
-With one velocity field the bodies of a scene interact through shared nodes: they stick and,
-at speed, interpenetrate. With :class:`Contact` (``ExplicitSolver(contact=Contact(...))``)
-every particle group :math:`g` (the values of ``fields[contact.field]``, by default the
-material index ``body``) maps to its own nodal mass, momentum and force (Bardenhagen,
-Brackbill and Sulsky 2000; Bardenhagen et al. 2001),
+With :class:`Contact` (``ExplicitSolver(contact=Contact(...))``) every particle group :math:`g`
+(the values of ``fields[contact.field]``, by default the material index ``body``) maps to its
+own nodal mass, momentum and force (Bardenhagen, Brackbill and Sulsky 2000; Bardenhagen et al.
+2001),
 
 .. math::
     m_i^g = \sum_{p \in g} M_p N_{ip}, \quad p_i^g = \sum_{p \in g} M_p v_p N_{ip}, \quad
     f_i^g = \sum_{p \in g} \big(-V_p \sigma_p \nabla N_{ip} + N_{ip} f^{ext}_p\big),
 
-and moves with its own velocity :math:`v_i^g`. A node is a *contact node* where two or more
-groups have mass. There the outward normal of group :math:`g` comes from the mass gradients
-:math:`g_i^g = \sum_{p \in g} M_p \nabla N_i(x_p)` (which point from the group's particles
-to the node, out of the group at its boundary),
-:math:`\hat n_i^g = (g_i^g - \sum_{h \ne g} g_i^h) / |\cdot|` (for two groups the normals
-are opposite, :math:`\hat n^1 = -\hat n^2`, which conserves momentum), and
-:func:`correct` applies non-penetration and Coulomb friction against the centre-of-mass
-velocity :math:`v_i^{cm} = \sum_g m_i^g v_i^g / \sum_g m_i^g`: with
-:math:`w = v^g - v^{cm}`, :math:`w_n = w \cdot \hat n^g` and :math:`w_t = w - w_n \hat n^g`,
-a group approaching the others (:math:`w_n > 0`) takes
+and moves with its own velocity :math:`v_i^g` (:class:`ContactGrid`). At a *contact node*
+(two or more groups with mass) the outward normal of group :math:`g` comes from the mass
+gradients :math:`g_i^g = \sum_{p \in g} M_p \nabla N_i(x_p)`,
+:math:`\hat n_i^g = (g_i^g - \sum_{h \ne g} g_i^h) / |\cdot|`, and :func:`correct` applies
+non-penetration and Coulomb friction against the centre-of-mass velocity
+:math:`v_i^{cm} = \sum_g m_i^g v_i^g / \sum_g m_i^g`: with :math:`w = v^g - v^{cm}`,
+:math:`w_n = w \cdot \hat n^g`, :math:`w_t = w - w_n \hat n^g`, a group approaching the others
+(:math:`w_n > 0`) takes
 
 .. math::
     v^g \leftarrow v^{cm} \ \text{(stick, } \mu w_n \ge |w_t|\text{)}, \qquad
     v^g \leftarrow v^g - w_n \hat n^g - \mu w_n \frac{w_t}{|w_t|} \ \text{(slip)},
 
-and a separating group is left free. For two groups the corrections
-:math:`m^1 \Delta v^1 = -m^2 \Delta v^2` cancel, so the node's momentum is unchanged to
-round-off. The correction is applied to the updated velocities, not to the mapped ones (nor,
-with MUSL, to the re-mapped ones): the FLIP increment :math:`v^g_{new} - v^g_{old}` then
-carries the whole contact impulse to the particles, and each particle takes its own group's
-field in G2P.
-Every particle domain (a CPDI2 particle's corners move with its own group's field, a rigid
-body's with its velocity), USL and MUSL, any number of ranks (the nodal sums are summed
-over ranks as in the single-field step, and the correction is node-local), lumped or
-consistent mass (and FMPM). With consistent mass each group has its own mass matrix
-:math:`M^g_{ij} = \sum_{p \in g} M_p N_{ip} N_{jp}` and its velocity and acceleration are
-the solves :math:`M^g v^g = p^g` and :math:`M^g a^g = f^g`, with lumped rows at the contact
-nodes (where two or more groups have mass) when the contact has friction; the correction stays
-node-local and weighs the groups by their lumped masses :math:`m^g_i = \sum_j M^g_{ij}`.
-Coulomb friction acts on each node's own tangential velocity, and consistently solved
-velocities oscillate from node to node: without the lumped rows some contact nodes moved
-slower than mu times their normal velocity change, the friction there was cut short, and a
-block on a rigid plane at 30 degrees slid 19 % faster than g (sin - mu cos) at mu = 0.5 and
-slid at mu = 0.6 (FLIP 0.8, 8 cells; with the lumped rows and PIC: -0.16 % and at rest). (Frictionless contact keeps the consistent rows: two
-elastic bars rebound at 95.7 % of their speed with them, 89.7 % with lumped contact rows.) Since
-:math:`\sum_{ij} M^g_{ij} v^g_j = \sum_i m^g_i v^g_i`, conserving
-:math:`\sum_g m^g_i v^g_i` at every node conserves the total momentum of the consistent
-fields, and the FLIP increments carry it to the particles. The stable step is the lumped one
-times :math:`\sqrt{0.8 \min_g \lambda_{min}(M_L^{g,-1} M^g)}`.
+and a separating group is left free; for two groups the corrections cancel, so every node's
+momentum is kept. The correction acts on the updated velocities, not on the mapped (or
+MUSL's re-mapped) ones, so that the FLIP increment :math:`v^g_{new} - v^g_{old}` carries the
+whole contact impulse to the particles; each particle takes its own group's field in G2P.
 
-Velocities alone put bodies in contact one cell early: every node where two groups have mass
-and approach each other is corrected, also where their surfaces are still apart, and a curved
-body meets a flat one across several nodes. With ``gap`` a group is corrected only where it
-touches the others, by the position check of Nairn, Bardenhagen and Smith (2018): the others'
-nodal centre of mass lies less than ``gap`` ahead of the group's own along its normal at the
-end of the step, :math:`(\bar x_i^{o} - \bar x_i^{g}) \cdot \hat n_i^g - \Delta t\, \dot\delta_i
-< \text{gap}` (:math:`\dot\delta_i` the normal speed at which the group approaches the others), with
-:math:`\bar x_i^g = \sum_{p \in g} M_p N_{ip} x_p / m_i^g` (two bodies filling the cells on
-either side of a node have them :math:`2h/3` apart on a grid of spacing :math:`h`; 0.8 h is a
-good gap). For two groups the test is the same for both, and momentum stays conserved.
+* ``gap``: a group is corrected only where it touches the others, the position check of Nairn,
+  Bardenhagen and Smith (2018): the others' nodal centre of mass lies less than ``gap`` ahead
+  of the group's own along its normal at the end of the step,
+  :math:`(\bar x_i^{o} - \bar x_i^{g}) \cdot \hat n_i^g - \Delta t\, \dot\delta_i < \text{gap}`.
+* ``rigid`` groups: prescribed motion and infinite mass; their velocity replaces
+  :math:`v^{cm}` and their own normal :math:`-g^r/|g^r|` the mass-gradient one. With a gap,
+  the nodes of a group touching a rigid body and approaching it share the normal momentum
+  it takes over each patch of touching nodes by depth (:class:`fempm.boundary.patches.Patches`),
+  :math:`\Delta w_{n,i} = P \delta_i / \sum_{j \in A} m^g_j \delta_j`, as a frictional wall does.
+* Consistent mass and FMPM: each group's own mass (its particles only) with lumped rows at
+  the contact nodes when the contact has friction; the correction stays node-local with the
+  groups' lumped masses. The stable step is the lumped one times
+  :math:`\sqrt{0.8 \min_g \lambda_{min}(M_L^{g,-1} M^g)}`.
+* ``mass_cutoff``: a node where a group has less than this fraction of the largest nodal mass
+  gives that group no force update there.
 
-A group listed in ``rigid`` is a rigid body of prescribed motion and infinite mass: its
-particles keep their velocity (``fields["v"]``, which the scene may change between steps),
-their deformation and stress, take no forces and move with that velocity; at a node where it
-has mass its velocity replaces :math:`v^{cm}`, the normal is its own, :math:`\hat n = -g^r / |g^r|`
-(a deformable body's mass gradient tilts at its corners, and a block's front corner then
-brakes on a flat plane; Nairn's codes bias the normal to the rigid material for the same
-reason), and only the other groups are corrected (the momentum they lose there goes into the
-rigid body). Grid conditions do not act on it. With a ``gap`` the nodes of a group that touch a
-rigid body and approach it share the normal momentum it takes over each patch of touching
-nodes (a connected set, :class:`fempm.boundary.patches.Patches`, over all ranks) by depth, much as a
-frictional wall does (:class:`fempm.boundary.Friction`): with :math:`w = v^g - v^r`, the depth
-:math:`\delta_i = \text{gap} - ((\bar x^r_i - \bar x^g_i) \cdot \hat n - \Delta t\, w_n) > 0`
-and :math:`P = \sum_j m^g_j w_{n,j}` over the patch's approaching nodes :math:`A`,
-
-.. math::
-    \Delta w_{n,i} = P\, \frac{\delta_i}{\sum_{j \in A} m^g_j \delta_j}, \qquad
-    w_{n,i} \leftarrow w_{n,i} - \Delta w_{n,i}, \qquad
-    w_{t,i} \leftarrow w_{t,i} \max\Big(0,\ 1 - \mu \frac{\Delta w_{n,i}}{|w_{t,i}|}\Big)
-    \quad (i \in A),
-
-and a separating node stays free. The patch takes the normal momentum it takes node by node,
-centred where the body is deepest: node by node a disk turning on a rigid plane is braked by the
-nodes ahead of its contact point and slid at mu = 0.2, 4 % above its rolling threshold (-1.5 %
-and -2.0 % at 8 and 16 cells, docs/contact.md). Shared over every touching node (the grid
-wall's rule), separating ones too, the disk rolled as well, but separating nodes were pushed off
-the rigid body, and USL with GIMP domains, stable node by node, gained 20 % energy within 161
-steps. Between deformable groups the correction stays node by node, which conserves every
-node's momentum.
-
-A node where a group has less than ``mass_cutoff`` (default 1 %) of the largest nodal mass
-gives that group no force update there (it keeps the mapped velocity): in a single field such
-a node shares the other body's mass and :math:`f/m` stays bounded; per group it does not, and
-on the colliding disks USL at CFL 0.4 blows up with the single field's cut-off (1e-9) and is
-stable with 1 %. With MUSL the re-mapped velocities are not corrected again (a correction the
-particles' momenta do not carry adds energy, 20 % on the disks); MUSL with contact still gains
-17 % energy on the disks at CFL 0.4 (11 % with a gap of 0.8 cells, 8 % with consistent mass)
-and none at CFL 0.1; USL loses 14 % (3 % with consistent mass).
+USL and MUSL, every particle domain (CPDI2 corners move with their own body's field), any
+number of ranks. What each choice above was measured to do (the rolling disk, the sliding
+block, the colliding disks, the energy of MUSL with contact) is in ``docs/contact.md``.
 """
 
 from __future__ import annotations
@@ -110,8 +58,9 @@ import numpy as np
 import numpy.typing as npt
 from mpi4py import MPI
 
+from fempm.boundary.coulomb import coulomb
 from fempm.boundary.patches import Patches, depth_shares
-from fempm.stepping.loads import external_forces
+from fempm.stepping.grid import BasisGrid
 from fempm.transfer import g2p
 from fempm.transfer.centres import NodalCentres
 from fempm.transfer.mapping import SUPPORT_TOL, mass_centres, p2g, p2g_gradients
@@ -192,7 +141,6 @@ def correct(m: npt.NDArray, v: npt.NDArray, grad: npt.NDArray, friction: float,
         w = v[g, at] - vcm[at]
         wn = np.einsum("nd,nd->n", w, n)
         wt = w - wn[:, None] * n
-        twt = np.linalg.norm(wt, axis=1)
         held = wn > 0.0  # approaching: gives up its normal velocity wn (node by node) ...
         dwn = wn.copy()
         if gap is not None:  # ... where it touches: the others' centre of mass within gap of its own
@@ -210,13 +158,8 @@ def correct(m: npt.NDArray, v: npt.NDArray, grad: npt.NDArray, friction: float,
                 r = r[depth[r] > 0.0]  # the touching nodes: a patch is a connected set of them
                 dwn[r] = depth_shares(patches, at[r], m[g, at[r]], np.where(held[r], wn[r], 0.0),
                                       np.where(held[r], depth[r], 0.0))  # separating ones take no share
-        stick = held & (friction * dwn >= twt)
-        slip = held & ~stick
-        new = v[g, at]
-        new[stick] = vcm[at[stick]] + (wn - dwn)[stick, None] * n[stick]  # wn - dwn: 0 node by node
-        s = np.flatnonzero(slip)
-        new[s] -= dwn[s, None] * n[s] + friction * dwn[s, None] * wt[s] / twt[s, None]
-        v[g, at] = new
+        h = np.flatnonzero(held)  # stick or slip against the centre of mass (wn - dwn: 0 node by node)
+        v[g, at[h]] = vcm[at[h]] + coulomb(wt[h], wn[h], n[h], dwn[h], friction)
     return contact
 
 
@@ -228,127 +171,142 @@ def shared_cells(particles, field: str) -> int:
     return particles.comm.allreduce(int(np.count_nonzero(groups > 1)))
 
 
-def contact_step(solver: ExplicitSolver, dt: float | None, dt_max: float) -> float:
-    """One explicit step of ``solver`` with its :class:`Contact` (see the module); returns
-    ``dt``."""
-    opts = solver.options
-    contact = solver.contact
-    p = solver.particles
-    fld = p.fields
-    comm = p.comm
-    basis = solver._open_step()
-    if contact.field not in fld:
-        raise ValueError(f"contact: the particles have no field {contact.field!r} naming their groups")
-    group = np.asarray(fld[contact.field])
-    bad = comm.allreduce(int(np.count_nonzero((group < 0) | (group != np.round(group)))) if group.ndim == 1 else 1)
-    if bad:
-        raise ValueError(f"contact: fields[{contact.field!r}] must hold one non-negative integer group per particle")
-    group = group.astype(np.int64)
-    G = comm.allreduce(int(group.max(initial=-1)) + 1, op=MPI.MAX)
-    present = np.zeros(max(G, max(contact.rigid, default=-1) + 1), dtype=np.int64)
-    present[:G] = np.bincount(group, minlength=G)
-    comm.Allreduce(MPI.IN_PLACE, present, op=MPI.SUM)
-    absent = [g for g in contact.rigid if present[g] == 0]
-    if absent:
-        raise ValueError(f"contact: rigid group(s) {absent} hold no particle (fields[{contact.field!r}] has the groups "
-                         f"{np.flatnonzero(present).tolist()})")
-    masks = [group == g for g in range(G)]
-    rigid = np.isin(np.arange(G), contact.rigid)
-    deformable = np.flatnonzero(~rigid)
-    m = np.stack([p2g(basis, (p.mass * k)[:, None])[:, 0] for k in masks])
-    total = m.sum(axis=0)
-    top = comm.allreduce(float(total[: basis.index_map.size_local].max(initial=0.0)), op=MPI.MAX)
-    has = m > SUPPORT_TOL * top
-    # consistent mass or FMPM: each deformable group's own mass (its masses, zeros elsewhere), with
-    # lumped rows at the contact nodes where friction acts (see the module)
-    shared = np.count_nonzero(has, axis=0) >= 2 if contact.friction > 0.0 else None
-    ops = {} if opts.mass_mode == "lumped" else {g: solver._mass_operator(basis, p.mass * masks[g], lump_dofs=shared)
-                                                 for g in deformable}
-    dt = solver._time_step(solver._stable_with(list(ops.values())), dt, dt_max)
-    d = p.gdim
-    eye = np.eye(d)
-    grad = np.stack([p2g_gradients(basis, (p.mass * k)[:, None, None] * eye) for k in masks])
-    solver._count_terms()
-    fext = external_forces(solver.loads, p, solver.t)
-    force = np.zeros_like(grad)
-    for g in deformable:  # rigid groups take no forces
-        k = masks[g]
-        force[g] = p2g_gradients(basis, -(p.volume * k)[:, None, None] * fld["sigma"]) + p2g(basis, fext * k[:, None])
-    m_has = np.where(has, m, 0.0)
-    inv = np.where(has, 1.0 / np.where(has, m, 1.0), 0.0)[:, :, None]
-    # per group: a node with a sliver of one body's mass keeps its mapped velocity (a_g = f_g / m_g
-    # there is large where the other body's mass keeps the node from counting as weak)
-    weak = m <= max(opts.mass_cutoff, contact.mass_cutoff) * top
+class ContactGrid(BasisGrid):
+    """A velocity field per particle group of ``solver.contact``, corrected where groups meet
+    (see the module); numpy stages on the particle basis, the schemes USL and MUSL."""
 
-    # walls that check contact by position see each group's own centre of mass
-    moments = None
-    centroids = [None] * G
-    if solver.needs_positions or contact.gap is not None:  # each group's first mass moment
-        moments = np.stack([p2g(basis, (p.mass * k)[:, None] * p.x) for k in masks])
-        if solver.needs_positions:
-            centroids = [NodalCentres(c, mg) for c, mg in zip(mass_centres(m, moments), m)]
+    def __init__(self, solver: ExplicitSolver):
+        super().__init__(solver)
+        if not self.options.stages.forces_with_map:
+            raise ValueError(f"contact supports the schemes USL and MUSL (got {self.options.stages})")
+        self.contact = solver.contact
 
-    def constrain(v: npt.NDArray) -> npt.NDArray:
+    def groups(self) -> npt.NDArray[np.int64]:
+        """Each particle's group, checked: non-negative integers, every rigid group present."""
+        contact, p = self.contact, self.solver.particles
+        fld, comm = p.fields, p.comm
+        if contact.field not in fld:
+            raise ValueError(f"contact: the particles have no field {contact.field!r} naming their groups")
+        group = np.asarray(fld[contact.field])
+        bad = comm.allreduce(int(np.count_nonzero((group < 0) | (group != np.round(group)))) if group.ndim == 1 else 1)
+        if bad:
+            raise ValueError(f"contact: fields[{contact.field!r}] must hold one non-negative integer group per particle")
+        group = group.astype(np.int64)
+        G = comm.allreduce(int(group.max(initial=-1)) + 1, op=MPI.MAX)
+        present = np.zeros(max(G, max(contact.rigid, default=-1) + 1), dtype=np.int64)
+        present[:G] = np.bincount(group, minlength=G)
+        comm.Allreduce(MPI.IN_PLACE, present, op=MPI.SUM)
+        absent = [g for g in contact.rigid if present[g] == 0]
+        if absent:
+            raise ValueError(f"contact: rigid group(s) {absent} hold no particle (fields[{contact.field!r}] has the "
+                             f"groups {np.flatnonzero(present).tolist()})")
+        self.num_groups = G
+        return group
+
+    def open(self, dt: float | None) -> float:
+        s, opts, contact = self.solver, self.options, self.contact
+        p = s.particles
+        self.basis = basis = self.open_basis()
+        group = self.groups()
+        G = self.num_groups
+        self.masks = masks = [group == g for g in range(G)]
+        self.rigid = rigid = np.isin(np.arange(G), contact.rigid)
+        self.deformable = deformable = np.flatnonzero(~rigid)
+        m = np.stack([p2g(basis, (p.mass * k)[:, None])[:, 0] for k in masks])
+        self.total = total = m.sum(axis=0)
+        top = p.comm.allreduce(float(total[: basis.index_map.size_local].max(initial=0.0)), op=MPI.MAX)
+        has = m > SUPPORT_TOL * top
+        # consistent mass or FMPM: each deformable group's own mass (its masses, zeros elsewhere), with
+        # lumped rows at the contact nodes where friction acts (see the module)
+        shared = np.count_nonzero(has, axis=0) >= 2 if contact.friction > 0.0 else None
+        self.ops = {} if not opts.mass_model.couples_dofs else {
+            g: self.mass_operator(basis, p.mass * masks[g], lump_dofs=shared) for g in deformable}
+        stable = self.stable_with(list(self.ops.values()))
+        d = p.gdim
+        self.grad = np.stack([p2g_gradients(basis, (p.mass * k)[:, None, None] * np.eye(d)) for k in masks])
+        s.count_terms()
+        self.force = np.zeros_like(self.grad)
+        for g in deformable:  # rigid groups take no forces
+            self.force[g] = self.internal_and_external(basis, masks[g].astype(np.float64))
+        self.m_has = np.where(has, m, 0.0)
+        self.inv = np.where(has, 1.0 / np.where(has, m, 1.0), 0.0)[:, :, None]
+        # per group: a node with a sliver of one body's mass keeps its mapped velocity (a_g = f_g / m_g
+        # there is large where the other body's mass keeps the node from counting as weak)
+        self.weak = m <= max(opts.mass_cutoff, contact.mass_cutoff) * top
+        # walls that check contact by position see each group's own centre of mass
+        self.moments = None
+        self.centroids = [None] * G
+        if s.conditions.needs_positions or contact.gap is not None:  # each group's first mass moment
+            self.moments = np.stack([p2g(basis, (p.mass * k)[:, None] * p.x) for k in masks])
+            if s.conditions.needs_positions:
+                self.centroids = [NodalCentres(c, mg) for c, mg in zip(mass_centres(m, self.moments), m)]
+        return stable
+
+    def constrain(self, v: npt.NDArray) -> npt.NDArray:
         """Each deformable group's grid conditions, and the ghost values, in place."""
-        for g in range(G):
-            if not rigid[g]:
-                solver._apply_bcs(v[g], centroids[g])
-            v[g] = basis.update_ghosts(v[g])
+        for g in range(self.num_groups):
+            if not self.rigid[g]:
+                self.solver.conditions.apply(v[g], self.centroids[g])
+            v[g] = self.basis.update_ghosts(v[g])
         return v
 
-    def mapped() -> npt.NDArray:
-        """Each group's velocity from its particles' momenta (its mass solve)."""
-        mom = [p2g(basis, (p.mass * k)[:, None] * fld["v"]) for k in masks]
-        return constrain(np.stack([ops[g].solve(mom[g]) if g in ops else mom[g] * inv[g] for g in range(G)]))
+    def velocity(self, remapped: bool = False) -> npt.NDArray:
+        """Each group's velocity from its particles' momenta (its mass solve). The mapped
+        velocities are not corrected: the FLIP increment v_new - v_old then carries the whole
+        contact impulse of the step to the particles (and MUSL's re-mapped ones are not
+        corrected again)."""
+        p = self.solver.particles
+        mom = [p2g(self.basis, (p.mass * k)[:, None] * p.fields["v"]) for k in self.masks]
+        return self.constrain(np.stack([self.ops[g].solve(mom[g]) if g in self.ops else mom[g] * self.inv[g]
+                                        for g in range(self.num_groups)]))
 
-    # the mapped velocities are not corrected: the FLIP increment v_new - v_old then carries the
-    # whole contact impulse of the step to the particles
-    v_old = mapped()
-    a = force * inv
-    for g, op in ops.items():
-        a[g] = solver._accelerations(op, force[g])
-    if opts.damping > 0.0:
-        a -= opts.damping * v_old
-    a[weak] = 0.0
-    a[rigid] = 0.0
-    v_new = v_old + dt * a
-    patches = Patches.of_space(basis.V, index_map=basis.index_map).sums if rigid.any() else None
-    correct(m_has, v_new, grad, contact.friction, rigid, moments, contact.gap, dt, patches)
-    constrain(v_new)
-    # rigid particles keep their velocity and deformation (L = 0) and move with that velocity
-    vp = fld["v"].copy()
-    vp_grid = fld["v"].copy()
-    L = np.zeros((len(p), d, d))
-    for g in deformable:  # every particle takes its own group's field
-        k = masks[g]
-        blended, at_grid, grads = g2p.blend(basis, v_new[g], v_old[g], fld["v"], opts.flip)
-        vp[k], vp_grid[k], L[k] = blended[k], at_grid[k], grads[k]
-    fld["v"] = vp
-    if opts.scheme == "MUSL":
-        v_new = mapped()
-        for g in deformable:
-            k = masks[g]
-            at_grid, grads = g2p.velocity_and_gradient(basis, v_new[g])
-            vp_grid[k], L[k] = at_grid[k], grads[k]
-    solver._update_stress(L, dt)
-    if opts.domain == "cpdi2":  # each body's corners move with its own field, rigid ones rigidly
+    def advance(self, v_old: npt.NDArray, dt: float) -> npt.NDArray:
+        opts, contact = self.options, self.contact
+        a = self.force * self.inv
+        for g, op in self.ops.items():
+            a[g] = self.accelerations(op, self.force[g])
+        if opts.damping > 0.0:
+            a -= opts.damping * v_old
+        a[self.weak] = 0.0
+        a[self.rigid] = 0.0
+        v_new = v_old + dt * a
+        patches = Patches.of_space(self.basis.V, index_map=self.basis.index_map).sums if self.rigid.any() else None
+        correct(self.m_has, v_new, self.grad, contact.friction, self.rigid, self.moments, contact.gap, dt, patches)
+        return self.constrain(v_new)
+
+    def to_particles(self, v_new: npt.NDArray, v_old: npt.NDArray, dt: float, *, blend: bool = False,
+                     kinematics: bool = False, move: bool = False, remap: bool = False) -> None:
+        """Every particle takes its own group's field; rigid particles keep their velocity and
+        deformation (L = 0) and move with that velocity."""
+        p = self.solver.particles
+        fld = p.fields
+        d = p.gdim
+        vp, at_grid, L = fld["v"].copy(), fld["v"].copy(), np.zeros((len(p), d, d))
+        for g in self.deformable:
+            k = self.masks[g]
+            if blend:
+                blended, grid_v, grads = g2p.blend(self.basis, v_new[g], v_old[g], fld["v"], self.options.flip)
+                vp[k] = blended[k]
+            else:
+                grid_v, grads = g2p.velocity_and_gradient(self.basis, v_new[g])
+            at_grid[k], L[k] = grid_v[k], grads[k]
+        if blend:
+            fld["v"] = vp
+        if kinematics:
+            self.update_kinematics(L, dt)
+        if move:
+            self.move(at_grid, lambda: self.corner_velocity(v_new), dt)
+
+    def corner_velocity(self, v_new: npt.NDArray) -> npt.NDArray:
+        """Each body's corners move with its own field, rigid ones rigidly."""
+        fld = self.solver.particles.fields
         corner_velocity = np.repeat(fld["v"][:, None, :], fld["corners"].shape[1], axis=1)
-        for g in deformable:
-            k = masks[g]
-            corner_velocity[k] = basis.gather_samples(v_new[g])[k]
-        solver._move_corners(basis, corner_velocity, dt)
-    else:
-        p.x = p.x + dt * (fld["v"] if opts.position == "particle" else vp_grid)
-    solver._check_finite()
-    solver.t += dt
-    solver.step_count += 1
-    p.relocate()
-    mom = np.einsum("gn,gnd->nd", m_has, v_new)
-    solver.grid_velocity = (mom / np.where(total > 0, total, 1.0)[:, None])[: basis.num_dofs_space]
-    return dt
+        for g in self.deformable:
+            k = self.masks[g]
+            corner_velocity[k] = self.basis.gather_samples(v_new[g])[k]
+        return corner_velocity
 
-
-def check_options(options) -> None:
-    """What :func:`contact_step` supports: USL or MUSL."""
-    if options.scheme == "USF":
-        raise ValueError("contact supports the schemes USL and MUSL (got USF)")
+    def nodal(self, v: npt.NDArray) -> npt.NDArray:
+        """The centre-of-mass velocity of the groups at each node (the space's dofs)."""
+        mom = np.einsum("gn,gnd->nd", self.m_has, v)
+        return (mom / np.where(self.total > 0, self.total, 1.0)[:, None])[: self.basis.num_dofs_space]

@@ -140,14 +140,14 @@ class HealthMonitor:
         if h.energy_tolerance is not None:
             scale = self.e0 + abs(self.work) if self.e0 + abs(self.work) > 0 else self.e_max  # from rest: the peak
             if e > budget + h.energy_tolerance * scale and scale > 0:
-                s._fail(f"energy growth: the total energy {e:.6g} exceeds the initial energy {self.e0:.6g} plus the "
+                s.fail(f"energy growth: the total energy {e:.6g} exceeds the initial energy {self.e0:.6g} plus the "
                         f"work of the loads {self.work:.6g} by {100 * (e - budget) / scale:.3g} % (tolerance "
                         f"{100 * h.energy_tolerance:g} %): the run is unstable")
         if lo < h.j_min or hi > h.j_max:
-            s._fail(f"volume ratio J = det F = {lo if lo < h.j_min else hi:.3g} left the bounds [{h.j_min:g}, {h.j_max:g}]")
+            s.fail(f"volume ratio J = det F = {lo if lo < h.j_min else hi:.3g} left the bounds [{h.j_min:g}, {h.j_max:g}]")
         stalled, self._t_prev = s.t <= self._t_prev, s.t
         if not final and (dt < h.dt_floor * self.first_dt or stalled):
-            s._fail(f"time step collapse: dt = {dt:.3g} is below {h.dt_floor:g} of the first step "
+            s.fail(f"time step collapse: dt = {dt:.3g} is below {h.dt_floor:g} of the first step "
                     f"{self.first_dt:.3g} or no longer advances time")
 
     def summary(self) -> dict:

@@ -1,10 +1,12 @@
-r"""The lumped-mass step for point particles on affine degree-1 cells, in compiled passes.
+r"""The grid of point particles on affine degree-1 cells, in compiled passes (:class:`PointGrid`).
 
-This is :meth:`fempm.stepping.ExplicitSolver.step` (same equations, options and checks; that
-generic step is the reference it is tested against to round-off) for the common case: standard
-MPM particles, lumped mass, a P1/Q1 vector space on a mesh of simplices, parallelograms or
-parallelepipeds. Nothing per particle is stored between the passes; the basis is evaluated on
-the fly in each pass (:mod:`fempm.kernels.shape`):
+The stages of :mod:`fempm.stepping.grid` (same equations, options and checks; the numpy
+:class:`~fempm.stepping.grid.SingleFieldGrid` is the reference it is tested against to
+round-off) for the common case: standard MPM particles, lumped or consistent mass
+(:class:`LumpedNodalMass`, :class:`~fempm.stepping.consistent.ConsistentNodalMass`), a P1/Q1
+vector space on a mesh of simplices, parallelograms or parallelepipeds. Nothing per particle
+is stored between the passes; the basis is evaluated on the fly in each pass
+(:mod:`fempm.kernels.shape`):
 
 1. P2G: mass, momentum and force in one pass into one nodal array (ghosts summed once), with
    the stable step of the state, :math:`\Delta t = \mathrm{CFL} \min_p h_{c(p)} / (c_p + |v_p|)`;
@@ -16,7 +18,7 @@ the fly in each pass (:mod:`fempm.kernels.shape`):
 4. relocation: the DOLFINx tree (and migration) only for the particles not found there.
 
 USF splits 1 (forces after the stress update) and MUSL adds a momentum re-map between the
-blend and the kinematics, as in the generic step. Laws other than :class:`~fempm.materials.NeoHookean`
+blend and the kinematics (:mod:`fempm.stepping.schemes`). Laws other than :class:`~fempm.materials.NeoHookean`
 and :class:`~fempm.materials.LinearElastic` keep their own ``stress`` (given :math:`L_p`) and
 ``wave_speed``, called after the pass (:class:`~fempm.materials.VonMises` runs the compiled
 kernels of :mod:`fempm.kernels.plasticity` there).
@@ -30,17 +32,20 @@ import numpy as np
 import numpy.typing as npt
 from mpi4py import MPI
 
-from fempm.boundary.walls import Fixed, Slip
 from fempm.kernels import lumped as kl
 from fempm.kernels.shape import AVAILABLE
 from fempm.materials.base import IsotropicElastic
 from fempm.materials.linear_elastic import LinearElastic
 from fempm.materials.neo_hookean import NeoHookean
-from fempm.stepping.laws import law_stress
+from fempm.stepping.consistent import ConsistentNodalMass
+from fempm.stepping.grid import Grid
+from fempm.stepping.laws import law_stress, material_groups
 from fempm.stepping.loads import external_forces
 from fempm.stepping.nodal import kept_nodal_array, sum_ghosts
 from fempm.transfer.centres import NodalCentres
+from fempm.transfer.domains import Point
 from fempm.transfer.mapping import SUPPORT_TOL, mass_centres
+from fempm.transfer.mass_models import Consistent, Lumped
 
 if TYPE_CHECKING:
     from fempm.stepping.solver import ExplicitSolver
@@ -59,7 +64,7 @@ def supported(solver: ExplicitSolver) -> bool:
     opts, V = solver.options, solver.V
     el = V.element.basix_element
     geo = solver.particles.locator.geometry
-    return (AVAILABLE and opts.mass_mode in ("lumped", "consistent") and getattr(opts.particle_domain, "name", "") == "point"
+    return (AVAILABLE and type(opts.mass_model) in NODAL_MASSES and isinstance(opts.particle_domain, Point)
             and el.degree == 1 and V.dofmap.index_map_bs == solver.particles.gdim and geo.affine)
 
 
@@ -73,26 +78,24 @@ def _law(mat) -> tuple[int, float, float, float]:
     return code, lam, mu, modulus
 
 
-class LumpedPointStep:
-    """The compiled lumped step of an :class:`~fempm.stepping.ExplicitSolver` (see the module)."""
+class PointGrid(Grid):
+    """The stages of the explicit step in compiled passes, for point particles on affine
+    degree-1 cells (see the module); the grid mass, lumped or consistent, is a
+    :class:`LumpedNodalMass` or a :class:`fempm.stepping.consistent.ConsistentNodalMass`."""
 
     def __init__(self, solver: ExplicitSolver):
-        self.solver = solver
-        self.options = solver.options
+        super().__init__(solver)
         p, V = solver.particles, solver.V
         geo = p.locator.geometry
-        self.K = geo._K
+        self.K = geo.K
         self.kernels = kl.kernels_for(geo.cell_name)
         self.cell_dofs = np.ascontiguousarray(V.dofmap.list, dtype=np.int32)
         self.index_map = V.dofmap.index_map
         self.num_owned = self.index_map.size_local
         self.num_dofs = self.num_owned + self.index_map.num_ghosts
         d = self.d = p.gdim
-        self.free = np.ones((self.num_dofs, d), dtype=np.bool_)  # (dof, component) solved for
-        if solver._fixed_dofs is not None:
-            self.free[solver._fixed_dofs] = False
-        for c, dofs in enumerate(solver._slip_components or ()):
-            self.free[dofs, c] = False
+        self.conditions = solver.conditions
+        self.free = self.conditions.free(d)  # (dof, component) solved for
         laws = [_law(m) for m in solver.materials]
         self.law = np.array([a[0] for a in laws], dtype=np.int64)
         self.lam = np.array([a[1] for a in laws])
@@ -100,19 +103,20 @@ class LumpedPointStep:
         self.modulus = np.array([a[3] for a in laws])
         self.all_modulus = bool(np.all(self.modulus > 0))
         self.any_external = bool(np.any(self.law == 0))
-        self.x0 = geo._x0
-        self._since_sort = SORT_EVERY  # sort on the first step
-        # every boundary condition a zero component, held by `free`: one fused grid pass
-        self.fused = all(isinstance(bc, Fixed) or (isinstance(bc, Slip) and bc.axis is not None)
-                         for bc in solver.bcs)
-        self._nodal = self._nodal_array(1 + 2 * d)  # [m | m v | f]
-        self._nodal_d = self._nodal_array(d)  # USF's forces, MUSL's re-mapped momenta
+        self.x0 = geo.x0
+        self.since_sort = SORT_EVERY  # steps since the particles were sorted by cell (sort on the first step)
+        self._nodal = self.nodal_array(1 + 2 * d)  # [m | m v | f]
+        self._nodal_d = self.nodal_array(d)  # USF's forces, MUSL's re-mapped momenta
         # walls that check contact by position: the first mass moments sum_p M_p N_ip x_p
-        self._moments = self._nodal_array(d) if solver.needs_positions else None
+        self._moments = self.nodal_array(d) if self.conditions.needs_positions else None
         self._checked: tuple | None = None  # identities of the state arrays checked finite
+        self.mass = NODAL_MASSES[type(self.options.mass_model)](self)
+        # every boundary condition a zero component, held by `free`, and a lumped mass: one fused grid pass
+        self.fused = self.conditions.zero_components and self.mass.fusable
 
     # -- pieces -------------------------------------------------------------------------------
-    def _nodal_array(self, k: int):
+    def nodal_array(self, k: int):
+        """A nodal (owned + ghost dofs, k) array kept for the run: (vector or None, array)."""
         return kept_nodal_array(self.index_map, k)
 
     def _wave_speeds(self) -> npt.NDArray:
@@ -123,7 +127,7 @@ class LumpedPointStep:
             return np.zeros(0)
         c = np.zeros(len(p))
         rho = p.mass / p.volume
-        for b, (mat, idx) in enumerate(s._material_loop()):
+        for b, (mat, idx) in enumerate(material_groups(p.fields, s.materials)):
             if self.modulus[b] <= 0:
                 c[idx] = mat.wave_speed(p.fields["F"][idx], rho[idx])
         return c
@@ -132,7 +136,7 @@ class LumpedPointStep:
         """(constant body force g (d,), per-particle external forces (n or 0, d))."""
         s = self.solver
         loads = s.loads
-        s._count_terms()
+        s.count_terms()
         if loads.traction is None and (loads.body_force is None or not callable(loads.body_force)):
             g = np.zeros(self.d) if loads.body_force is None else np.asarray(loads.body_force, dtype=np.float64)
             if g.shape != (self.d,):
@@ -201,47 +205,17 @@ class LumpedPointStep:
             flags = np.array([nonfinite_j, inverted, -jmin, jmax], dtype=float)
             p.comm.Allreduce(MPI.IN_PLACE, flags, op=MPI.MAX)
             if flags[0]:
-                s._fail(f"non-finite state (deformation gradient) at particle(s) {s._ids(~np.isfinite(p.volume))}")
+                s.fail(f"non-finite state (deformation gradient) at particle(s) {s.particle_ids(~np.isfinite(p.volume))}")
             if flags[1]:
-                s._fail(f"inverted deformation J <= 0 at particle(s) {s._ids(p.volume <= 0)}")
-            s.j_range = (-float(flags[2]), float(flags[3]))
+                s.fail(f"inverted deformation J <= 0 at particle(s) {s.particle_ids(p.volume <= 0)}")
+            s.record.j_range = (-float(flags[2]), float(flags[3]))
             if external:  # laws without a compiled kernel
                 rho = p.mass / p.volume
-                for b, (mat, idx) in enumerate(s._material_loop()):
+                for b, (mat, idx) in enumerate(material_groups(f, s.materials)):
                     if self.law[b] == 0 and len(idx):
                         f["sigma"][idx] = law_stress(mat, f["F"][idx], L[idx], f["sigma"][idx], dt, rho[idx], f, idx)
                         nonfinite += int(np.count_nonzero(~np.isfinite(f["sigma"][idx]).all(axis=(1, 2))))
         return nonfinite, left
-
-    # -- the grid: lumped here, consistent in fempm.stepping.consistent ----------------------------
-    def _stable_factor(self, nodal, need: bool) -> float:
-        """Called after P2G: what the stable time of the state is multiplied by (1: lumped)."""
-        return 1.0
-
-    def _grid_velocity(self, mass, mom, cv: int, active_min: float, guess=None, centroids=None) -> npt.NDArray:
-        """Grid velocity from the nodal momenta ``mom[:, cv:cv+d]``, constrained (``centroids``:
-        the nodal centres of mass for the walls that need them)."""
-        v = np.empty((self.num_dofs, self.d))
-        kl.grid_velocity(mass, mom, cv, self.free, active_min, v)
-        self.solver._apply_bcs(v, centroids)
-        return v
-
-    def _advance(self, mass, force, cf: int, active_min: float, weak_max: float, dt: float,
-                 v_old: npt.NDArray, centroids=None) -> npt.NDArray:
-        r""":math:`v^+ = v + \Delta t\, a` from the nodal forces ``force[:, cf:cf+d]``, constrained."""
-        v_new = np.empty((self.num_dofs, self.d))
-        kl.grid_advance(mass, force[:, cf:cf + self.d], self.free, active_min, weak_max, float(dt),
-                        float(self.solver.options.damping), v_old, v_new)
-        self.solver._apply_bcs(v_new, centroids)
-        return v_new
-
-    def _grid_update(self, nodal, cf: int, active_min: float, weak_max: float, dt: float) -> tuple:
-        """(v, v^+): :meth:`_grid_velocity` and :meth:`_advance` in one pass over the dofs, where
-        every boundary condition is a zero component (:attr:`fused`)."""
-        v_old, v_new = np.empty((self.num_dofs, self.d)), np.empty((self.num_dofs, self.d))
-        kl.grid_update(nodal, 1, cf, self.free, active_min, weak_max, float(dt), float(self.options.damping),
-                       v_old, v_new)
-        return v_old, v_new
 
     def _state(self) -> tuple:
         """Identities of the particle arrays the passes read and check."""
@@ -249,61 +223,128 @@ class LumpedPointStep:
         f = p.fields
         return id(p.x), id(f["v"]), id(f["sigma"]), id(f["F"]), id(f["body"])
 
-    # -- the step -----------------------------------------------------------------------------
-    def step(self, dt: float | None, dt_max: float) -> float:
+    # -- the stages ---------------------------------------------------------------------------
+    def open(self, dt: float | None) -> float:
         s = self.solver
-        opts = s.options
+        opts = self.options
         p = s.particles
         d = self.d
         if p.comm.allreduce(self._state() != self._checked, op=MPI.LOR):  # arrays set from outside (any rank)
-            s._check_fields()  # collective; the passes check their own results
-            s._check_finite()
-            s._check_bodies()
-        if self._since_sort >= SORT_EVERY:
+            s.check_state()  # collective; the passes check their own results
+        if self.since_sort >= SORT_EVERY:
             p.sort_by_cell()
-            self._since_sort = 0
-        self._since_sort += 1
-        g, fext = self._external(s.t)
-        usf = opts.scheme == "USF"
+            self.since_sort = 0
+        self.since_sort += 1
+        self.g, self.fext = self._external(s.t)
         # a given dt is checked against a lower bound of the stable time, and against the time
         # itself only where the bound does not show it stable
-        nodal, local = self._scatter(self._nodal, g, fext, 0, 1, -1 if usf else 1 + d,
+        nodal, local = self._scatter(self._nodal, self.g, self.fext, 0, 1, 1 + d if opts.stages.forces_with_map else -1,
                                      stable="exact" if dt is None else "bound")
         top = np.array([nodal[: self.num_owned, 0].max(initial=0.0), -local])
         p.comm.Allreduce(MPI.IN_PLACE, top, op=MPI.MAX)  # one collective: the largest mass and the stable time
         top, state = float(top[0]), -float(top[1])
-        factor = self._stable_factor(nodal, dt is None)
+        factor = self.mass.stable_factor(nodal, dt is None)
         if dt is not None and not dt <= state * BOUND_SAFETY * factor:
             state = self._stable_time()
-        dt = s._time_step(opts.cfl * state * factor, dt, dt_max)
-        active_min, weak_max = SUPPORT_TOL * top, opts.mass_cutoff * top
-        centroids = self._centroids(nodal)
-        if self.fused and not usf:
-            v_old, v_new = self._grid_update(nodal, 1 + d, active_min, weak_max, dt)
-        else:
-            v_old = self._grid_velocity(nodal[:, :1], nodal, 1, active_min, s.grid_velocity, centroids)
-            force, cf = nodal, 1 + d
-            if usf:  # stress from the mapped velocity, then the forces
-                nonfinite = self._g2p(v_old, v_old, dt, blend=False, kinematics=True, move=False)[0]
-                force, cf = self._scatter(self._nodal_d, g, fext, -1, -1, 0)[0], 0
-            v_new = self._advance(nodal[:, :1], force, cf, active_min, weak_max, dt, v_old, centroids)
-        if opts.scheme == "MUSL":  # blend, re-map the momenta, then the kinematics and motion
+        self.active_min, self.weak_max = SUPPORT_TOL * top, opts.mass_cutoff * top
+        self.centroids = self._centroids(nodal)
+        self.force, self.cf = nodal, 1 + d
+        self.nonfinite, self.left = 0, None
+        return opts.cfl * state * factor
+
+    def update(self, dt: float) -> tuple[npt.NDArray, npt.NDArray]:
+        if not self.fused:
+            return super().update(dt)
+        v_old, v_new = np.empty((self.num_dofs, self.d)), np.empty((self.num_dofs, self.d))
+        kl.grid_update(self._nodal[1], 1, 1 + self.d, self.free, self.active_min, self.weak_max, float(dt),
+                       float(self.options.damping), v_old, v_new)
+        return v_old, v_new
+
+    def velocity(self, remapped: bool = False) -> npt.NDArray:
+        nodal = self._nodal[1]
+        if remapped:
+            return self.mass.velocity(nodal[:, :1], self._nodal_d[1], 0, self.active_min, None, self.centroids)
+        return self.mass.velocity(nodal[:, :1], nodal, 1, self.active_min, self.solver.grid_velocity, self.centroids)
+
+    def forces(self) -> None:
+        self.force, self.cf = self._scatter(self._nodal_d, self.g, self.fext, -1, -1, 0)[0], 0
+
+    def advance(self, v_old: npt.NDArray, dt: float) -> npt.NDArray:
+        return self.mass.advance(self._nodal[1][:, :1], self.force, self.cf, self.active_min, self.weak_max, dt,
+                                 v_old, self.centroids)
+
+    def to_particles(self, v_new: npt.NDArray, v_old: npt.NDArray, dt: float, *, blend: bool = False,
+                     kinematics: bool = False, move: bool = False, remap: bool = False) -> None:
+        if remap:  # the blended particle momenta into the kept nodal array, for velocity(remapped=True)
             vec, mom = self._nodal_d
             mom.fill(0.0)
-            self._g2p(v_new, v_old, dt, blend=True, kinematics=False, move=False, remap=mom)
+            self._g2p(v_new, v_old, dt, blend=blend, kinematics=kinematics, move=move, remap=mom)
             sum_ghosts(vec)
-            v_new = self._grid_velocity(nodal[:, :1], mom, 0, active_min, None, centroids)
-            nonfinite, left = self._g2p(v_new, v_new, dt, blend=False, kinematics=True, move=True)
-        elif usf:
-            more, left = self._g2p(v_new, v_old, dt, blend=True, kinematics=False, move=True)
-            nonfinite += more
-        else:
-            nonfinite, left = self._g2p(v_new, v_old, dt, blend=True, kinematics=True, move=True)
-        if p.comm.allreduce(nonfinite):
-            s._check_finite()  # names the particles
-        s.t += dt
-        s.step_count += 1
-        p.relocate(left=left)
+            return
+        nonfinite, left = self._g2p(v_new, v_old, dt, blend=blend, kinematics=kinematics, move=move)
+        self.nonfinite += nonfinite
+        if move:
+            self.left = left
+
+    def close(self) -> None:
+        if self.solver.particles.comm.allreduce(self.nonfinite):
+            self.solver.check_finite()  # names the particles
+
+    def relocate(self) -> None:
+        self.solver.particles.relocate(left=self.left)
         self._checked = self._state()
-        s.grid_velocity = v_new[: self.num_dofs]
-        return dt
+
+    def nodal(self, v: npt.NDArray) -> npt.NDArray:
+        return v[: self.num_dofs]
+
+    def checkpoint_state(self) -> tuple[dict, dict[str, npt.NDArray]]:
+        counters, arrays = self.mass.checkpoint_state()
+        return {"since_sort": self.since_sort, **counters}, arrays
+
+    def restore_state(self, counters: dict, arrays: dict[str, npt.NDArray]) -> None:
+        if counters.get("since_sort") is not None:
+            self.since_sort = int(counters["since_sort"])
+        self.mass.restore_state(counters, arrays)
+
+
+class LumpedNodalMass:
+    r"""The lumped grid mass of a :class:`PointGrid`: :math:`v = (mv)/m`,
+    :math:`v^+ = v + \Delta t f/m` on the free components, fused into one pass where the
+    conditions allow."""
+
+    fusable = True
+
+    def __init__(self, grid: PointGrid):
+        self.grid = grid
+
+    def stable_factor(self, nodal, need: bool) -> float:
+        """Called after P2G: the factor on the stable time of the state."""
+        return 1.0
+
+    def velocity(self, mass, mom, cv: int, active_min: float, guess=None, centroids=None) -> npt.NDArray:
+        """Grid velocity from the nodal momenta ``mom[:, cv:cv+d]``, constrained."""
+        g = self.grid
+        v = np.empty((g.num_dofs, g.d))
+        kl.grid_velocity(mass, mom, cv, g.free, active_min, v)
+        g.conditions.apply(v, centroids)
+        return v
+
+    def advance(self, mass, force, cf: int, active_min: float, weak_max: float, dt: float, v_old: npt.NDArray,
+                centroids=None) -> npt.NDArray:
+        r""":math:`v^+ = v + \Delta t\, a` from the nodal forces ``force[:, cf:cf+d]``, constrained."""
+        g = self.grid
+        v_new = np.empty((g.num_dofs, g.d))
+        kl.grid_advance(mass, force[:, cf:cf + g.d], g.free, active_min, weak_max, float(dt),
+                        float(g.options.damping), v_old, v_new)
+        g.conditions.apply(v_new, centroids)
+        return v_new
+
+    def checkpoint_state(self) -> tuple[dict, dict[str, npt.NDArray]]:
+        return {}, {}
+
+    def restore_state(self, counters: dict, arrays: dict[str, npt.NDArray]) -> None:
+        pass
+
+
+#: the compiled grid mass of each mass model
+NODAL_MASSES = {Lumped: LumpedNodalMass, Consistent: ConsistentNodalMass}

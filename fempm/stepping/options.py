@@ -6,15 +6,12 @@ from dataclasses import dataclass
 from typing import Literal
 
 from fempm.arguments import check_numbers
-from fempm.transfer.domains import GIMP_NAMES, make_domain
-from fempm.transfer.fmpm import parse_mass
+from fempm.stepping.schemes import scheme
+from fempm.transfer.domains import step_domain
+from fempm.transfer.mass_models import mass_model
 
 Scheme = Literal["USL", "USF", "MUSL"]
 
-#: consistent mass: CG steps of the lambda_min(M_L^-1 M_C) estimate, and the factor on it (the
-#: Lanczos estimate lies above the true value)
-MASS_RATIO_ITERATIONS = 30
-MASS_RATIO_SAFETY = 0.8
 
 
 class SimulationError(RuntimeError):
@@ -70,18 +67,17 @@ class StepOptions:
 
     def __post_init__(self):
         check_numbers(self)
-        if self.scheme not in ("USL", "USF", "MUSL"):
-            raise ValueError(f"unknown option scheme={self.scheme!r}; expected USL, USF or MUSL")
-        self.mass_mode, self.mass_order = parse_mass(self.mass, self.fmpm_order)
+        #: the options parsed once into objects: the stages' order, the grid mass, the particle domain
+        self.stages = scheme(self.scheme)
+        self.mass_model = mass_model(self.mass, self.fmpm_order)
         if self.position not in ("grid", "particle"):
             raise ValueError(f"unknown option position={self.position!r}; expected grid or particle")
         if not 0.0 <= self.flip <= 1.0:
             raise ValueError(f"flip={self.flip} must lie in [0, 1]")
-        if self.domain == "cpdi2" and self.position == "particle":
-            raise ValueError("domain='cpdi2' moves the particle domains' corners with the grid velocity and the "
-                             "particle with its domain's centroid: position='particle' would detach them")
-        gimp = {"order": self.gimp_order, **({"deform": self.gimp_deform} if self.domain == "gimp" else {})}
-        self.particle_domain = make_domain(self.domain, **(gimp if self.domain in GIMP_NAMES else {}))
+        self.particle_domain = step_domain(self.domain, self.gimp_order, self.gimp_deform)
+        if self.particle_domain.tracks_corners and self.position == "particle":
+            raise ValueError(f"domain={self.domain!r} moves the particle domains' corners with the grid velocity and "
+                             "the particle with its domain's centroid: position='particle' would detach them")
         if not self.damping >= 0.0:
             raise ValueError(f"damping={self.damping} must be >= 0")
         if not 0.0 < self.cfl <= 1.0:

@@ -1,21 +1,10 @@
-r"""The explicit MPM step (seed 002): P2G, grid update, G2P with PIC/FLIP blend, kinematics,
-constitutive update, position update.
+r"""The explicit MPM solver: the particle state's owner, and the step as the stages of the cycle.
 
-Grid equations (lumped mass :math:`m_i = \sum_p M_p N_{ip}`, or the consistent matrix):
-
-.. math::
-    m_i v_i = \sum_p M_p v_p N_{ip}, \qquad
-    f_i = -\sum_p V_p \sigma_p \nabla N_{ip} + \sum_p M_p b_p N_{ip}
-          + \sum_p N_{ip} \bar t_p h^{-1} V_p, \qquad
-    v_i^{+} = v_i + \Delta t\, f_i / m_i .
-
-G2P: :math:`v_p^{+} = \alpha (v_p + \sum_i N_{ip}(v_i^{+} - v_i)) + (1-\alpha) \sum_i N_{ip} v_i^{+}`,
-:math:`L_p = \sum_i v_i^{+} \otimes \nabla N_{ip}`, :math:`F_p^{+} = (I + \Delta t L_p) F_p`,
-:math:`V_p = J_p V_p^0`, :math:`x_p^{+} = x_p + \Delta t \sum_i N_{ip} v_i^{+}`.
-
-Schemes: USL (stress after G2P), USF (stress from the momentum velocity before the force),
-MUSL (USL, with the grid velocity re-mapped from the updated particle momenta before the
-strain and position update).
+:meth:`ExplicitSolver.step` opens the grid (P2G and the stable time step), chooses the time step,
+runs the stages of the scheme (:mod:`fempm.stepping.schemes`: grid update, G2P, kinematics,
+stress, motion) on the grid (:mod:`fempm.stepping.grid`: one velocity field, a field per body
+with contact, or compiled passes for point particles on affine degree-1 cells), closes it and
+advances the time. The equations are in :mod:`fempm.stepping.grid`.
 """
 
 from __future__ import annotations
@@ -26,38 +15,41 @@ from dataclasses import dataclass, field
 from typing import Literal
 
 import dolfinx.fem
-import dolfinx.mesh
 import numpy as np
 import numpy.typing as npt
 from mpi4py import MPI
 
-from fempm import kernels
-from fempm.boundary.constraints import axis_slip_dofs, fixed_dofs, friction_dofs
+from fempm.boundary.conditions import GridConditions
 from fempm.materials.base import identity
 from fempm.meshes.cell_sizes import cell_sizes
-from fempm.particles.corners import domain_geometry
 from fempm.particles.particle_set import Particles
-from fempm.stepping import consistent as consistent_step
-from fempm.stepping import diagnostics
-from fempm.stepping import lumped as lumped_step
-from fempm.stepping.contact import Contact, contact_step
-from fempm.stepping.contact import check_options as check_contact_options
-from fempm.stepping.laws import law_stress, material_groups
-from fempm.stepping.loads import (  # Loads: re-exported, scenes build it from here
-    Loads,
-    external_forces,
-)
-from fempm.stepping.options import (
-    MASS_RATIO_ITERATIONS,
-    MASS_RATIO_SAFETY,
-    SimulationError,
-    StepOptions,
-)
-from fempm.transfer import g2p
-from fempm.transfer.basis import ParticleBasis
-from fempm.transfer.centres import NodalCentres
-from fempm.transfer.mapping import nodal_centroids, p2g, p2g_gradients, sum_over_ranks
-from fempm.transfer.projection import Projector
+from fempm.stepping import checks, diagnostics
+from fempm.stepping.contact import Contact, ContactGrid
+from fempm.stepping.grid import Grid, SingleFieldGrid
+from fempm.stepping.laws import material_groups
+from fempm.stepping.loads import Loads
+from fempm.stepping.lumped import PointGrid
+from fempm.stepping.lumped import supported as point_grid_supported
+from fempm.stepping.options import SimulationError, StepOptions
+
+__all__ = ["ExplicitSolver", "StepRecord"]
+
+
+@dataclass
+class StepRecord:
+    r"""What the steps report, kept by the solver and written by its grid.
+
+    Attributes:
+        terms: how often each force term was assembled.
+        j_range: the global (min, max) of J after the last step (None before the first).
+        mass_ratio: the last estimate of :math:`\lambda_{min}(M_L^{-1} M_C)` (consistent mass).
+        extended_steps: steps whose particle domains reached beyond this rank's ghost cells.
+    """
+
+    terms: Counter = field(default_factory=Counter)
+    j_range: tuple[float, float] | None = None
+    mass_ratio: float = 1.0
+    extended_steps: int = 0
 
 
 @dataclass
@@ -107,150 +99,108 @@ class ExplicitSolver:
                 if np.shape(f.setdefault(h.name, h.allocate(n, d))) != expected:
                     raise ValueError(f"internal variable {h.name!r} of {type(mat).__name__} has shape "
                                      f"{np.shape(f[h.name])}; expected {expected}")
-        self._check_fields()
+        checks.check_fields(p, self.materials)
         self.h_cell = cell_sizes(p.mesh)
-        self.terms: Counter = Counter()  # how often each force term was assembled
+        self.conditions = GridConditions(self.V, self.bcs)
+        self.record = StepRecord()
         self.grid_velocity: npt.NDArray | None = None  # last step's, also the CG warm start
-        self.extended_steps = 0  # steps whose particle domains reached beyond this rank's ghost cells
-        self.j_range: tuple[float, float] | None = None  # global (min, max) of J after the last step
-        self.mass_ratio = 1.0  # last lambda_min(M_L^-1 M_C) estimate (consistent mass)
         self._stress_space: dolfinx.fem.FunctionSpace | None = None  # tensor space of grid_stress, on first use
-        self._fixed_dofs = fixed_dofs(self.bcs)
-        self._slip_components = axis_slip_dofs(self.bcs, d)
-        index_map = self.V.dofmap.index_map
-        self.node_local_dofs = friction_dofs(self.bcs, index_map.size_local + index_map.num_ghosts)
-        self._lumped_step = None
-        #: some wall checks contact by position (the step then maps the nodal centres of mass)
-        self.needs_positions = any(getattr(bc, "needs_positions", False) for bc in self.bcs)
+        self._grid: Grid | None = None
+        self._grid_key: tuple | None = None
 
-    # -- helpers ------------------------------------------------------------------------------
-    def _material_loop(self):
-        return material_groups(self.particles.fields, self.materials)
+    # the record's entries, read and set as the solver's (checkpoints restore them)
+    terms = property(lambda self: self.record.terms, lambda self, v: setattr(self.record, "terms", v))
+    j_range = property(lambda self: self.record.j_range, lambda self, v: setattr(self.record, "j_range", v))
+    mass_ratio = property(lambda self: self.record.mass_ratio, lambda self, v: setattr(self.record, "mass_ratio", v))
+    extended_steps = property(lambda self: self.record.extended_steps,
+                              lambda self, v: setattr(self.record, "extended_steps", v))
 
+    # -- the state's checks -------------------------------------------------------------------
+    def particle_ids(self, mask: npt.NDArray[np.bool_]) -> list[int]:
+        """The ids of the first (up to 5) particles of ``mask`` over all ranks (collective)."""
+        ids = np.concatenate(self.particles.comm.allgather(self.particles.ids[mask][:5]))
+        return ids[:5].tolist()
+
+    def fail(self, what: str):
+        """Raise a :class:`SimulationError` naming this step and time."""
+        raise SimulationError(f"step {self.step_count}, t = {self.t:.6g}: {what}")
+
+    def check_state(self) -> None:
+        """The particle fields' shapes, a finite state and every body index a material (collective)."""
+        checks.check_fields(self.particles, self.materials)
+        self.check_finite()
+        checks.check_bodies(self.particles, self.materials, self.particle_ids)
+
+    def check_finite(self) -> None:
+        """Positions, stresses and the kinetic energy density :math:`v_p \\cdot v_p` (hence the
+        velocities) finite at every particle, else a :class:`SimulationError` (collective)."""
+        bad = checks.nonfinite_particles(self.particles)
+        if self.particles.comm.allreduce(int(bad.sum())):
+            self.fail(f"non-finite state at particle(s) {self.particle_ids(bad)}")
+
+    def count_terms(self) -> None:
+        """Count the force terms assembled this step (:attr:`terms`)."""
+        self.record.terms["internal"] += 1
+        self.record.terms.update(k for k in ("body_force", "traction") if getattr(self.loads, k) is not None)
+
+    # -- the step -----------------------------------------------------------------------------
     def stable_dt(self) -> float:
         r""":math:`\Delta t = \mathrm{CFL}\, \min_p h_{c(p)} / (c_p + |v_p|)` over all ranks: the
-        lumped-mass step. With consistent mass :meth:`step` multiplies it by
-        :math:`\sqrt{0.8\, \lambda_{min}(M_L^{-1} M_C)}` (1/4 in 1D and 1/16 on a full 2D Q1 grid
-        with 2 particles per cell and direction), see :meth:`fempm.transfer.Projector.mass_ratio_min`."""
+        lumped-mass step. The grid multiplies it by its mass model's factor
+        (:meth:`fempm.transfer.mass_models.MassModel.stable_factor`). Collective."""
         p = self.particles
         f = p.fields
         rho = p.mass / p.volume
         c = np.zeros(len(p))
-        for mat, idx in self._material_loop():
+        for mat, idx in material_groups(f, self.materials):
             c[idx] = mat.wave_speed(f["F"][idx], rho[idx])
         speed = c + np.linalg.norm(f["v"], axis=1)
         moving = ~(speed <= 0)  # particles at rest with no wave speed set no limit (NaN stays)
         local = np.min(self.h_cell[p.cells][moving] / speed[moving], initial=np.inf)
         return self.options.cfl * p.comm.allreduce(local, op=MPI.MIN)
 
-    def _compiled_step(self):
-        """The compiled step (:mod:`fempm.stepping.lumped`, :mod:`fempm.stepping.consistent`) when these
-        options, space and mesh take it (made on first use, remade when the options change),
-        else None."""
+    @property
+    def grid(self) -> Grid:
+        """The grid of the step (made on first use, remade when the options, ``compiled`` or
+        ``contact`` change): a :class:`~fempm.stepping.contact.ContactGrid` with contact, a
+        :class:`~fempm.stepping.lumped.PointGrid` where the compiled passes apply (unless
+        ``compiled=False``), else a :class:`~fempm.stepping.grid.SingleFieldGrid`."""
+        key = (id(self.options), self.compiled, id(self.contact))
+        if self._grid is None or self._grid_key != key:
+            self._grid, self._grid_key = self._make_grid(), key
+        return self._grid
 
-        if not lumped_step.supported(self):
+    def _make_grid(self) -> Grid:
+        if self.contact is not None:  # one velocity field per body
+            grid = ContactGrid(self)
             if self.compiled:
-                raise ValueError("compiled=True needs lumped or consistent mass, point particles and a degree-1 space "
-                                 "on an affine mesh (simplices, parallelograms) with numba installed")
-            return None
-        if self._lumped_step is None or self._lumped_step.options is not self.options:
-            kind = consistent_step.ConsistentPointStep if self.options.mass_mode == "consistent" else \
-                lumped_step.LumpedPointStep
-            self._lumped_step = kind(self)
-        return self._lumped_step
+                raise ValueError("compiled=True: the compiled step has one velocity field; contact takes the generic step")
+            return grid
+        if self.compiled is not False and point_grid_supported(self):
+            return PointGrid(self)
+        if self.compiled:
+            raise ValueError("compiled=True needs lumped or consistent mass, point particles and a degree-1 space "
+                             "on an affine mesh (simplices, parallelograms) with numba installed")
+        return SingleFieldGrid(self)
 
-    def _apply_bcs(self, v: npt.NDArray, centroids: NodalCentres | None = None) -> None:
-        """The grid conditions on ``v``, in place; walls that check contact by position
-        (:attr:`fempm.boundary.Friction.needs_positions`) take ``centroids``, the step's nodal
-        centres of mass and masses (:meth:`_wall_centroids`)."""
-        for bc in self.bcs:
-            if getattr(bc, "needs_positions", False):
-                bc.apply(v, centroids)
-            else:
-                bc.apply(v)
+    def step(self, dt: float | None = None, *, dt_max: float = np.inf) -> float:
+        """Advance one step; returns the ``dt`` used. ``dt`` defaults to the stable step
+        (at most ``dt_max``); a given ``dt`` above the stability limit (CFL > 1) is an error.
 
-    def _wall_centroids(self, basis: ParticleBasis) -> NodalCentres | None:
-        """The nodal centres of mass and masses of the step for the walls that need them, else None."""
-        if not self.needs_positions:
-            return None
-        p = self.particles
-        return nodal_centroids(basis, p.mass, p.x)
-
-    def _mass_operator(self, basis: ParticleBasis, weights: npt.NDArray | None = None,
-                       lump_dofs: npt.NDArray[np.bool_] | None = None) -> Projector:
-        """The step's mass (lumped, consistent or FMPM) with its constraints, on ``basis``;
-        ``weights``: per-particle masses in place of the particles' (one body's mass);
-        ``lump_dofs``: further dofs (owned + ghost) whose rows are lumped, besides the walls'
-        (:attr:`node_local_dofs`)."""
-        opts = self.options
-        lumped = self.node_local_dofs
-        if lump_dofs is not None:
-            lumped = lump_dofs if lumped is None else lumped | lump_dofs[: len(lumped)]
-        return Projector(
-            self.V, self.particles, mass=opts.mass_mode, fmpm_order=opts.mass_order, basis=basis,
-            petsc_options_prefix=opts.petsc_options_prefix,
-            exclude=self._fixed_dofs, exclude_components=self._slip_components, lump_below=opts.lump_below,
-            weights=weights, lump_dofs=lumped,
-        )
-
-    def mapped_velocity(self) -> npt.NDArray:
-        """The grid velocity of the present particle state, (owned + ghost dofs, d): P2G of the
-        momenta and the step's mass solve and constraints (the first stage of a step), nothing
-        advanced. The grid frame at t = 0 of :func:`fempm.scene.run`."""
-        basis = ParticleBasis(self.V, self.particles, gradients=False, domain=self.options.particle_domain)
-        centroids = self._wall_centroids(basis)
-        return self._map_velocity(basis, self._mass_operator(basis), None, centroids)[: basis.num_dofs_space]
-
-    def _map_velocity(self, basis: ParticleBasis, mass_op: Projector, guess: npt.NDArray | None,
-                      centroids: NodalCentres | None = None) -> npt.NDArray:
-        """Grid velocity from the particle momenta (P2G + mass solve), constrained (``centroids``:
-        the nodal centres of mass for the walls that need them)."""
-        p = self.particles
-        v = mass_op.solve(p2g(basis, p.mass[:, None] * p.fields["v"]), guess=guess)
-        self._apply_bcs(v, centroids)
-        return basis.update_ghosts(v)  # extra ghosts (remote domain samples) take their owners' values
-
-    def _update_stress(self, L: npt.NDArray, dt: float) -> None:
-        p = self.particles
-        f = p.fields
-        F, J = kernels.deform(f["F"], L, dt)
-        nonfinite = ~np.isfinite(J)
-        bad = J <= 0
-        finite = J[~nonfinite]
-        flags = np.array([nonfinite.any(), bad.any(), -finite.min(initial=np.inf), finite.max(initial=-np.inf)], dtype=float)
-        p.comm.Allreduce(MPI.IN_PLACE, flags, op=MPI.MAX)  # one collective: both checks and the J range
-        if flags[0]:
-            self._fail(f"non-finite state (deformation gradient) at particle(s) {self._ids(nonfinite)}")
-        if flags[1]:
-            self._fail(f"inverted deformation J <= 0 at particle(s) {self._ids(bad)}")
-        self.j_range = (-float(flags[2]), float(flags[3]))
-        f["F"] = F
-        p.volume = J * f["volume0"]
-        rho = p.mass / p.volume
-        for mat, idx in self._material_loop():
-            f["sigma"][idx] = law_stress(mat, F[idx], L[idx], f["sigma"][idx], dt, rho[idx], f, idx)
-
-    def _ids(self, mask):
-        ids = np.concatenate(self.particles.comm.allgather(self.particles.ids[mask][:5]))
-        return ids[:5].tolist()
-
-    def _fail(self, what: str):
-        raise SimulationError(f"step {self.step_count}, t = {self.t:.6g}: {what}")
-
-    def _forces(self, basis: ParticleBasis, t: float) -> npt.NDArray:
-        r"""Nodal forces :math:`f_i = \sum_p (-V_p \sigma_p \nabla N_{ip} + N_{ip} f^{ext}_p)`,
-        summed over ranks; point particles in one compiled scatter (:mod:`fempm.kernels`)."""
-        p = self.particles
-        self._count_terms()
-        fext = external_forces(self.loads, p, t)
-        if basis.cells is not None and not basis.extended:
-            local = kernels.nodal_forces(basis.dofs, basis.values, basis.gradients, p.volume, p.fields["sigma"],
-                                         fext, basis.num_dofs_local)
-            return sum_over_ranks(basis.index_map, local)
-        f = p2g_gradients(basis, -p.volume[:, None, None] * p.fields["sigma"])
-        if self.loads.body_force is not None or self.loads.traction is not None:
-            f += p2g(basis, fext)
-        return f
+        Note:
+            Collective.
+        """
+        checks.check_step_arguments(self.particles, dt, dt_max)
+        grid = self.grid
+        stable = grid.open(dt)
+        dt = self._time_step(stable, dt, dt_max)
+        v_new = self.options.stages.update(grid, dt)
+        grid.close()
+        self.t += dt
+        self.step_count += 1
+        grid.relocate()
+        self.grid_velocity = grid.nodal(v_new)
+        return dt
 
     def _time_step(self, stable: float, dt: float | None, dt_max: float) -> float:
         """The step: ``dt`` if given (an error above the stability limit, CFL > 1), else the
@@ -261,149 +211,26 @@ class ExplicitSolver:
                 raise ValueError("no stable time step: every particle is at rest and its law has wave speed 0; "
                                  "give dt or dt_max")
         elif dt > stable / self.options.cfl:
-            self._fail(f"time step {dt:.3g} exceeds the stability limit {stable / self.options.cfl:.3g} (CFL > 1)")
+            self.fail(f"time step {dt:.3g} exceeds the stability limit {stable / self.options.cfl:.3g} (CFL > 1)")
         if not self.t + dt > self.t:  # e.g. a particle at 1e200 m/s: the stable step underflows
-            self._check_finite()  # collective: names a non-finite velocity first
-            self._fail(f"time step collapse: dt = {dt:.3g} does not advance t = {self.t:.6g}")
+            self.check_finite()  # collective: names a non-finite velocity first
+            self.fail(f"time step collapse: dt = {dt:.3g} does not advance t = {self.t:.6g}")
         return dt
 
-    def _check_fields(self) -> None:
-        """Every particle array has a row per particle, and the fields the step reads their
-        shapes (collective)."""
-        d = self.particles.gdim
-        shapes = {"v": (d,), "F": (d, d), "sigma": (d, d), "volume0": (), "body": (), "X0": (d,)}
-        for mat in self.materials:
-            shapes.update({h.name: h.shape_for(d) for h in getattr(mat, "history", ())})
-        self.particles.check_fields(shapes)
+    def mapped_velocity(self) -> npt.NDArray:
+        """The grid velocity of the present particle state, (owned + ghost dofs, d): P2G of the
+        momenta and the step's mass solve and constraints (the first stage of a step), nothing
+        advanced. The grid frame at t = 0 of :func:`fempm.scene.run`. Collective."""
+        return SingleFieldGrid(self).initial_velocity()
 
-    def _check_bodies(self) -> None:
-        """Every particle's body indexes a material (collective)."""
-        body = self.particles.fields["body"]
-        bad = (body < 0) | (body >= len(self.materials))
-        if self.particles.comm.allreduce(int(np.count_nonzero(bad))):
-            raise ValueError(f"particle body index outside the {len(self.materials)} material(s) at particle(s) "
-                             f"{self._ids(bad)}")
+    def checkpoint_state(self) -> tuple[dict, dict[str, npt.NDArray]]:
+        """(counters, arrays) of the grid that a resumed run needs to repeat the next steps bit
+        for bit (:meth:`fempm.stepping.grid.Grid.checkpoint_state`; none before the first step)."""
+        return self._grid.checkpoint_state() if self._grid is not None else ({}, {})
 
-    def _check_step_arguments(self, dt: float | None, dt_max: float) -> None:
-        """A given ``dt`` positive and finite, ``dt_max`` positive, particles on some rank."""
-        if dt is not None and not (0.0 < dt < np.inf):
-            raise ValueError(f"step: dt={dt} must be a positive, finite time step (or None for the stable one)")
-        if not dt_max > 0.0:
-            raise ValueError(f"step: dt_max={dt_max} must be positive")
-        if self.particles.num_global == 0:
-            raise ValueError("step: there are no particles (the particle set is empty on every rank)")
-
-    def _count_terms(self) -> None:
-        """Count the force terms assembled this step (:attr:`terms`)."""
-        self.terms["internal"] += 1
-        self.terms.update(k for k in ("body_force", "traction") if getattr(self.loads, k) is not None)
-
-    # -- the step -----------------------------------------------------------------------------
-    def step(self, dt: float | None = None, *, dt_max: float = np.inf) -> float:
-        """Advance one step; returns the ``dt`` used. ``dt`` defaults to the stable step
-        (at most ``dt_max``); a given ``dt`` above the stability limit (CFL > 1) is an error."""
-        self._check_step_arguments(dt, dt_max)
-        if self.contact is not None:  # one velocity field per body (fempm.stepping.contact)
-            check_contact_options(self.options)
-            if self.compiled:
-                raise ValueError("compiled=True: the compiled step has one velocity field; contact takes the generic step")
-            return contact_step(self, dt, dt_max)
-        if self.compiled is not False and self._compiled_step() is not None:
-            return self._lumped_step.step(dt, dt_max)
-        opts = self.options
-        p = self.particles
-        fld = p.fields
-        basis = self._open_step()
-        centroids = self._wall_centroids(basis)  # (the contact step maps each body's own)
-        mass_op = self._mass_operator(basis)
-        dt = self._time_step(self._stable_with([mass_op]), dt, dt_max)
-        support = mass_op.support_masses()
-        weak = support <= opts.mass_cutoff * p.comm.allreduce(float(support.max(initial=0.0)), op=MPI.MAX)
-        v_old = self._map_velocity(basis, mass_op, self.grid_velocity, centroids)
-        if opts.scheme == "USF":
-            self._update_stress(g2p.velocity_gradient(basis, v_old), dt)
-        f_grid = self._forces(basis, self.t)
-        a = self._accelerations(mass_op, f_grid)
-        if opts.damping > 0.0:
-            a -= opts.damping * v_old[: len(a)]
-        a[weak] = 0.0  # nodes with a tiny share of mass keep their mapped velocity, no force update
-        v_new = v_old + dt * a
-        self._apply_bcs(v_new, centroids)
-        v_new = basis.update_ghosts(v_new)
-        # G2P
-        fld["v"], vp_grid, L = g2p.blend(basis, v_new, v_old, fld["v"], opts.flip)
-        if opts.scheme == "MUSL":
-            v_new = self._map_velocity(basis, mass_op, None, centroids)
-            vp_grid, L = g2p.velocity_and_gradient(basis, v_new)
-        if opts.scheme != "USF":
-            self._update_stress(L, dt)
-        if opts.domain == "cpdi2":
-            self._move_corners(basis, basis.gather_samples(v_new), dt)
-        else:
-            p.x = p.x + dt * (fld["v"] if self.options.position == "particle" else vp_grid)
-        self._check_finite()
-        self.t += dt
-        self.step_count += 1
-        p.relocate()
-        self.grid_velocity = v_new[: basis.num_dofs_space]
-        return dt
-
-    def _stable_with(self, mass_ops: Sequence[Projector]) -> float:
-        r"""The stable step of the state with these mass operators: :meth:`stable_dt` (lumped),
-        times :math:`\sqrt{0.8\, \lambda_{min}}` (the smallest over the operators) with consistent
-        mass, over :math:`\sqrt{k}` with FMPM(k) (:math:`\|M_k^{-1} m\| \le k`, :mod:`fempm.transfer.fmpm`);
-        with lumped forces the lumped step."""
-        opts = self.options
-        stable = self.stable_dt()
-        if opts.mass == "consistent" and not opts.lumped_forces:  # omega_max^2 <= omega_L^2 / lambda_min
-            self.mass_ratio = min((op.mass_ratio_min(MASS_RATIO_ITERATIONS) for op in mass_ops), default=1.0)
-            stable *= np.sqrt(MASS_RATIO_SAFETY * self.mass_ratio)
-        elif opts.mass_mode == "fmpm" and not opts.lumped_forces:
-            stable /= np.sqrt(opts.mass_order)
-        return stable
-
-    def _accelerations(self, mass_op: Projector, f_grid: npt.NDArray) -> npt.NDArray:
-        """Nodal accelerations from the forces: the mass solve, or with ``lumped_forces`` the
-        lumped division on the operator's active dofs."""
-        if self.options.mass_mode != "lumped" and self.options.lumped_forces:
-            m = mass_op.lumped_masses()
-            return np.where(mass_op.active[:, None], f_grid / np.where(m > 0, m, 1.0)[:, None], 0.0)
-        return mass_op.solve(f_grid)
-
-    def _open_step(self) -> ParticleBasis:
-        """The checks that open a generic step, and its particle basis (values and gradients)."""
-        self._check_fields()
-        self._check_finite()
-        self._check_bodies()
-        basis = ParticleBasis(self.V, self.particles, gradients=True, domain=self.options.particle_domain)
-        self.extended_steps += basis.extended
-        return basis
-
-    def _move_corners(self, basis: ParticleBasis, corner_velocity: npt.NDArray, dt: float) -> None:
-        r"""CPDI2: corners :math:`y_c^+ = y_c + \Delta t\, u_c` with the corners' velocities
-        ``corner_velocity`` (n, corners, d), the grid velocity at them,
-        :math:`u_c = \sum_i N_i(y_c) v_i^+` (``basis.gather_samples``; with contact each body's
-        own field); the particle moves to its domain's centroid and takes its volume (for
-        simplices the centroid moves by :math:`\Delta t \sum_i \langle N_i \rangle_p v_i^+` and
-        :math:`|\Omega_p| = J_p V_p^0`, since :math:`L_p` is the gradient of the corner
-        velocities' linear interpolant)."""
-        p = self.particles
-        corners = p.fields["corners"] + dt * corner_velocity
-        try:
-            _, _, volume, centroid = domain_geometry(corners, p.comm)  # collective error
-        except ValueError as e:
-            self._fail(f"inverted particle domain: {e}")
-        p.fields["corners"], p.x, p.volume = corners, centroid, volume
-
-    def _check_finite(self) -> None:
-        """Positions, stresses and the kinetic energy density :math:`v_p \\cdot v_p` (hence the
-        velocities) finite at every particle, else a :class:`SimulationError` (collective)."""
-        p = self.particles
-        f = p.fields
-        speed2 = np.einsum("nd,nd->n", f["v"], f["v"]) if len(p) else np.zeros(0)
-        bad = ~(np.isfinite(p.x).all(1) & np.isfinite(speed2) & np.isfinite(f["sigma"]).all((1, 2)))
-        if p.comm.allreduce(int(bad.sum())):
-            self._fail(f"non-finite state at particle(s) {self._ids(bad)}")
+    def restore_state(self, counters: dict, arrays: dict[str, npt.NDArray]) -> None:
+        """Restore :meth:`checkpoint_state` (collective)."""
+        self.grid.restore_state(counters, arrays)
 
     # -- diagnostics --------------------------------------------------------------------------
     def grid_stress(self, mass: Literal["lumped", "consistent"] | None = None) -> dolfinx.fem.Function:

@@ -37,6 +37,7 @@ from mpi4py import MPI
 from fempm.io.plot import plot_convergence
 from fempm.scene.loop import run as run_scene
 from fempm.scenes.manufactured import manufactured_scene
+from fempm.transfer.mass_models import mass_model
 from fempm.verification import manufactured as mf
 from fempm.verification.errors import ErrorHistory
 from fempm.verification.plastic_impact import plastic_impact
@@ -166,7 +167,7 @@ def run_case(name: str, config: Config, cells: int, comm: MPI.Comm = MPI.COMM_WO
                                    variant=None if config.variant == "default" else config.variant, mass=config.mass,
                                    domain=config.domain, scheme=config.scheme, comm=comm)
         h = scene.params["h"]
-        cfl = spec.consistent_cfl if config.mass == "consistent" and spec.consistent_cfl else spec.cfl
+        cfl = spec.consistent_cfl if mass_model(config.mass).matrix and spec.consistent_cfl else spec.cfl
         dt = cfl * h / (config.degree * max_speed(problem))
         scene.dt = dt
         row.update(h=h, dt=dt)

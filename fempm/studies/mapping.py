@@ -41,7 +41,7 @@ from fempm.io.plot import plot_error_vs_time
 from fempm.meshes.generators import unstructured_rectangle
 from fempm.particles.seeding import create_particles
 from fempm.transfer.basis import ParticleBasis
-from fempm.transfer.domains import half_widths, make_domain
+from fempm.transfer.domains import half_widths, make_domain, step_domain
 from fempm.transfer.mapping import SingularMassError
 from fempm.transfer.projection import Projector
 from fempm.verification.errors import l2_error
@@ -135,7 +135,7 @@ def run(
         ncells = mesh.topology.index_map(2).size_global
         h = 1.0 / np.sqrt(ncells / (2 if "tri" in kind else 1))  # equivalent structured size
         for ppc, domain in itertools.product(ppcs, domains):
-            if domain == "cpdi2":  # the particles are their sub-cells
+            if step_domain(domain).tracks_corners:  # the particles are their sub-cells
                 particles = create_particles(mesh, ppc, corners=True)
             else:
                 particles = create_particles(mesh, ppc, jitter=jitter, seed=1)

@@ -71,7 +71,7 @@ class ParticleBasis:
             geo = particles.locator.geometry
             if element.degree == 1 and geo.affine and shape_kernels.AVAILABLE:  # closed form (fempm.kernels.shape)
                 self.values, G, self.dofs = shape_kernels.affine_basis(
-                    cells, X, geo._K, np.asarray(V.dofmap.list), geo.cell_name)
+                    cells, X, geo.K, np.asarray(V.dofmap.list), geo.cell_name)
                 self.gradients = G if gradients else None
                 return
             tab = element.tabulate(1 if gradients else 0, np.ascontiguousarray(X))[..., 0]

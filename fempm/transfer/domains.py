@@ -49,7 +49,9 @@ which a DOLFINx mesh does not have.
 from __future__ import annotations
 
 import itertools
+from collections.abc import Callable
 from dataclasses import dataclass
+from typing import ClassVar
 
 import numpy as np
 import numpy.typing as npt
@@ -88,8 +90,29 @@ def half_widths(particles: Particles, deform: bool = False) -> npt.NDArray:
     return ell
 
 
+class Domain:
+    """What every particle domain declares: its samples (:meth:`samples`), whether it is tracked
+    by its corners, and how it moves."""
+
+    #: whether the domain is tracked by its corners (``fields["corners"]``), moved with the grid
+    #: velocity; the particle then sits at its domain's centroid
+    tracks_corners: ClassVar[bool] = False
+
+    def samples(self, particles: Particles) -> Samples:
+        """The domain's sample points and weights (:class:`Samples`)."""
+        raise NotImplementedError
+
+    def move(self, particles: Particles, at_grid: npt.NDArray, corner_velocity: Callable[[], npt.NDArray], dt: float,
+             by_particle_velocity: bool = False) -> None:
+        r"""Move the particles over ``dt``: :math:`x_p^+ = x_p + \Delta t\, u_p` with the grid
+        velocity at them ``at_grid`` (or their own updated velocity, ``by_particle_velocity``).
+        ``corner_velocity()``: the grid velocity at the domains' corners (n, corners, d), for
+        domains tracked by their corners."""
+        particles.x = particles.x + dt * (particles.fields["v"] if by_particle_velocity else at_grid)
+
+
 @dataclass(frozen=True)
-class Point:
+class Point(Domain):
     """Standard MPM: the particle is a point."""
 
     name: str = "point"
@@ -100,7 +123,7 @@ class Point:
 
 
 @dataclass(frozen=True)
-class GIMP:
+class GIMP(Domain):
     """Average over the particle's axis-aligned box: exact (``order=None``, the default) or by a
     tensor Gauss rule of ``order`` points per axis; ``deform`` stretches the box by diag(F)
     (cpGIMP) instead of keeping its initial size (uGIMP)."""
@@ -108,7 +131,6 @@ class GIMP:
     order: int | None = None
     deform: bool = False
     name: str = "gimp"
-
     def __post_init__(self):
         if self.order is not None and self.order < 1:
             raise ValueError(f"GIMP order must be >= 1 or None (exact) (got {self.order})")
@@ -135,7 +157,7 @@ class GIMP:
 
 
 @dataclass(frozen=True)
-class CPDI1:
+class CPDI1(Domain):
     """Parallelogram / parallelepiped domains that follow F (corner interpolation)."""
 
     name: str = "cpdi1"
@@ -159,11 +181,12 @@ class CPDI1:
 
 
 @dataclass(frozen=True)
-class CPDI2:
+class CPDI2(Domain):
     """Domains tracked by their corners ``fields["corners"]`` (n, k, d): simplices (k = d + 1)
     or quadrilaterals / hexahedra (k = 2^d), moved with the grid velocity."""
 
     name: str = "cpdi2"
+    tracks_corners: ClassVar[bool] = True
 
     @staticmethod
     def corners(particles: Particles) -> npt.NDArray:
@@ -179,6 +202,17 @@ class CPDI2:
         c = self.corners(particles)
         w, g, _, _ = domain_geometry(c, particles.comm)
         return Samples(c.copy(), w, g, grad_from_values=False)
+
+    def move(self, particles: Particles, at_grid: npt.NDArray, corner_velocity: Callable[[], npt.NDArray], dt: float,
+             by_particle_velocity: bool = False) -> None:
+        r"""Corners :math:`y_c^+ = y_c + \Delta t\, u_c` with the grid velocity at them; the
+        particle moves to its domain's centroid and takes its volume (for simplices the centroid
+        moves by :math:`\Delta t \sum_i \langle N_i \rangle_p v_i^+` and
+        :math:`|\Omega_p| = J_p V_p^0`). A degenerate or twisted domain is a ValueError on
+        every rank (collective)."""
+        corners = particles.fields["corners"] + dt * corner_velocity()
+        _, _, volume, centroid = domain_geometry(corners, particles.comm)
+        particles.fields["corners"], particles.x, particles.volume = corners, centroid, volume
 
 
 def _ugimp(order: int | None = None) -> GIMP:
@@ -200,3 +234,14 @@ def make_domain(name: str, **kwargs):
     if name not in DOMAINS:
         raise ValueError(f"unknown option domain={name!r}; expected one of {', '.join(DOMAINS)}")
     return DOMAINS[name](**kwargs)
+
+
+def step_domain(name: str | Domain, gimp_order: int | None = None, gimp_deform: bool = False) -> Domain:
+    """The domain of the step options (:class:`fempm.stepping.StepOptions`): a :class:`Domain`,
+    or a name with ``gimp_order`` for the GIMP domains and ``gimp_deform`` for ``gimp``
+    (``ugimp`` and ``cpgimp`` fix it)."""
+    if isinstance(name, Domain):
+        return name
+    if name not in GIMP_NAMES:
+        return make_domain(name)
+    return make_domain(name, order=gimp_order, **({"deform": gimp_deform} if name == "gimp" else {}))

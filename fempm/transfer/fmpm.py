@@ -25,34 +25,10 @@ factor :math:`1/\sqrt{k}` on the lumped one: :math:`M_k^{-1} = m^{-1/2} P(B) m^{
 
 from __future__ import annotations
 
-import re
-
 import numpy as np
 import numpy.typing as npt
 
 from fempm.transfer.mapping import p2g
-
-#: largest FMPM order accepted (beyond it the series gains nothing the consistent solve lacks)
-MAX_ORDER = 10
-
-
-def parse_mass(mass: str, fmpm_order: int | None = None) -> tuple[str, int]:
-    """("lumped" | "consistent" | "fmpm", order) from a mass option: ``"lumped"``,
-    ``"consistent"``, ``"fmpm"`` (with ``fmpm_order``, default 5), ``"fmpm3"`` or ``"fmpm(3)"``."""
-    if mass in ("lumped", "consistent"):
-        return mass, 0
-    m = re.fullmatch(r"fmpm(?:\((\d+)\)|(\d+))?", str(mass))
-    if m is None:
-        raise ValueError(f"unknown option mass={mass!r}; expected lumped, consistent, fmpm or fmpmK (K = 1 ... {MAX_ORDER})")
-    k = int(m.group(1) or m.group(2) or (fmpm_order if fmpm_order is not None else 5))
-    if not 1 <= k <= MAX_ORDER:
-        raise ValueError(f"FMPM order {k} must lie in 1 ... {MAX_ORDER}")
-    return "fmpm", k
-
-
-def mass_label(mode: str, order: int) -> str:
-    """The mass option's name in tables: lumped, consistent or fmpmK."""
-    return f"fmpm{order}" if mode == "fmpm" else mode
 
 
 def fmpm_solve(basis, weights: npt.NDArray, lumped: npt.NDArray, b: npt.NDArray, free: npt.NDArray[np.bool_],

@@ -33,7 +33,7 @@ from fempm import petsc as fpetsc
 from fempm.particles.location import as_points3
 from fempm.particles.particle_set import Particles
 from fempm.transfer.basis import ParticleBasis
-from fempm.transfer.fmpm import fmpm_solve, mass_label, parse_mass
+from fempm.transfer.fmpm import fmpm_solve
 from fempm.transfer.mapping import (
     SUPPORT_TOL,
     cell_blocks,
@@ -41,6 +41,7 @@ from fempm.transfer.mapping import (
     p2g,
     particle_weights,
 )
+from fempm.transfer.mass_models import MassModel, mass_model
 from fempm.transfer.mass_span import (
     check_nonsingular,
     mass_ratio_estimate,
@@ -117,7 +118,7 @@ class Projector:
         V: dolfinx.fem.FunctionSpace,
         particles: Particles,
         *,
-        mass: MassMode = "consistent",
+        mass: MassMode | MassModel = "consistent",
         petsc_options_prefix: str = "fempm_projection_",
         petsc_options: dict[str, Any] | None = None,
         basis: ParticleBasis | None = None,
@@ -132,16 +133,16 @@ class Projector:
     ):
         self.weights = particle_weights(particles, weight) if weights is None else np.asarray(weights, dtype=np.float64)
         self.weight = weight
-        mass, self.fmpm_order = parse_mass(mass, fmpm_order)
-        self.label = mass_label(mass, self.fmpm_order)
-        self.V, self.particles, self.mass = V, particles, mass
+        self.model = model = mass_model(mass, fmpm_order)
+        self.label = model.label
+        self.V, self.particles = V, particles
         self.basis = basis if basis is not None else ParticleBasis(V, particles, domain=domain)
         imap = self.basis.index_map
         self.num_owned = imap.size_local
         comm = particles.comm
         self.iterations: list[int] = []
         self.lumped: npt.NDArray | None = None
-        if mass in ("lumped", "fmpm"):
+        if not model.matrix:  # lumped and FMPM divide by the lumped masses
             if not self.basis.nonnegative:
                 raise ValueError(
                     f"{self.label} mass needs a non-negative basis (degree 1 or Bernstein); this "
@@ -159,15 +160,15 @@ class Projector:
         if self.num_inactive:
             log.info("fempm: %d dof(s) without particle support excluded and set to 0", self.num_inactive)
         lump = None
-        if mass != "lumped" and lump_below > 0.0 and self.basis.nonnegative:  # P2 Lagrange: lumping can make it indefinite
+        if model.couples_dofs and lump_below > 0.0 and self.basis.nonnegative:  # P2 Lagrange: lumping can make it indefinite
             m = self.lumped_masses()
             lump = m < lump_below * comm.allreduce(float(m[: self.num_owned].max(initial=0.0)), op=MPI.MAX)
-        if mass != "lumped" and lump_dofs is not None and self.basis.nonnegative:
+        if model.couples_dofs and lump_dofs is not None and self.basis.nonnegative:
             extra = np.zeros(len(self.active), dtype=np.bool_)
             extra[: len(lump_dofs)] = lump_dofs[: len(self.active)]
             lump = extra if lump is None else lump | extra
         self.lump = lump
-        if mass == "consistent":
+        if model.matrix:
             blocks = None
             if self.basis.cells is not None:  # point particles: the cell blocks, once for the test and the matrix
                 blocks = cell_blocks(self.basis, self.weights)
@@ -214,7 +215,7 @@ class Projector:
         values lie inside the spectrum, so the estimate is an upper bound that tightens with
         ``iterations``; callers should keep a safety factor.
         """
-        if self.mass != "consistent":
+        if not self.model.matrix:
             return 1.0
 
         ksp = mass_ratio_ksp(self.particles.comm, iterations, rowsum=self.basis.nonnegative)
@@ -270,14 +271,14 @@ class Projector:
         base = self.active[: self.num_owned]
         n, k = self.num_owned, b.shape[1]
         F = np.zeros((n, k))
-        if self.mass in ("lumped", "fmpm"):
+        if not self.model.matrix:
             free = np.repeat(base[:, None], k, axis=1)
             for c, dofs in enumerate(self.exclude_components[:k]):
                 free[dofs[dofs < n], c] = False
-            if self.mass == "lumped":
+            if not self.model.couples_dofs:  # lumped
                 F[free] = (b[:n] / np.where(base, self.lumped[:n], 1.0)[:, None])[free]
             else:
-                F = fmpm_solve(self.basis, self.weights, self.lumped, b, free, self.fmpm_order, self._ghosted,
+                F = fmpm_solve(self.basis, self.weights, self.lumped, b, free, self.model.order, self._ghosted,
                                lump=None if self.lump is None else self.lump[:n])
         else:
             self.iterations = []

@@ -17,6 +17,9 @@ from fempm.boundary import fixed, slip
 from fempm.materials import LinearElastic, NeoHookean
 from fempm.materials.newtonian_eos import NewtonianTait
 from fempm.stepping import ExplicitSolver, Loads, SimulationError, StepOptions
+from fempm.stepping.grid import SingleFieldGrid
+from fempm.stepping.lumped import PointGrid
+from fempm.transfer.basis import ParticleBasis
 
 comm = MPI.COMM_WORLD
 
@@ -94,10 +97,9 @@ def test_compiled_step_with_a_numpy_law_callable_loads_and_particle_motion(cell)
 
 
 def test_compiled_step_is_taken_only_where_it_applies():
-    assert make_solver("triangle", StepOptions())._compiled_step() is not None
-    assert type(make_solver("triangle", StepOptions(mass="consistent"))._compiled_step()).__name__ == \
-        "ConsistentPointStep"
-    assert make_solver("triangle", StepOptions(domain="gimp"))._compiled_step() is None
+    assert isinstance(make_solver("triangle", StepOptions()).grid, PointGrid)
+    assert type(make_solver("triangle", StepOptions(mass="consistent")).grid.mass).__name__ == "ConsistentNodalMass"
+    assert isinstance(make_solver("triangle", StepOptions(domain="gimp")).grid, SingleFieldGrid)
     with pytest.raises(ValueError, match="compiled=True needs lumped or consistent mass"):
         make_solver("triangle", StepOptions(mass="fmpm2"), compiled=True).step()
 
@@ -135,7 +137,7 @@ def test_compiled_consistent_step_keeps_its_systems_and_rebuilds_them_as_particl
         out.append((state(solver), np.array(dts), solver.j_range, solver.t))
         solvers.append(solver)
     assert_close(*out)
-    systems = solvers[1]._lumped_step.systems
+    systems = solvers[1].grid.mass.systems
     assert systems.rebuilds > 1
     assert systems.tests >= systems.rebuilds
     assert 0 < max(systems.iterations) < 40  # CG or GCR + incomplete Cholesky
@@ -152,7 +154,7 @@ def test_a_warm_start_far_worse_than_zero_restarts_the_mass_solve(compiled):
     d = solver.V.mesh.geometry.dim
     rng = np.random.default_rng(1)
     if compiled:
-        systems = solver._lumped_step.systems
+        systems = solver.grid.mass.systems
         num = systems.num_dofs
         rhs = np.zeros((num, 1 + d))
         rhs[:n, 1:] = 1e-12 * rng.standard_normal((n, d))
@@ -161,9 +163,8 @@ def test_a_warm_start_far_worse_than_zero_restarts_the_mass_solve(compiled):
         systems.solve(rhs, 1, cold)
         systems.solve(rhs, 1, warm, guess)
     else:
-        from fempm.transfer.basis import ParticleBasis
-
-        proj = solver._mass_operator(ParticleBasis(solver.V, solver.particles, gradients=False))
+        grid = SingleFieldGrid(solver)
+        proj = grid.mass_operator(ParticleBasis(solver.V, solver.particles, gradients=False))
         m = proj.num_owned + solver.V.dofmap.index_map.num_ghosts
         b = np.zeros((m, d))
         b[:n] = 1e-12 * rng.standard_normal((n, d))
@@ -190,7 +191,7 @@ def test_compiled_step_with_a_wall_that_checks_contact_by_position(scheme, mass)
         solver = scene.solver()
         solver.compiled = compiled
         dts = [solver.step() for _ in range(60)]
-        assert (solver._lumped_step is not None) == compiled
+        assert isinstance(solver.grid, PointGrid) == compiled
         return state(solver), np.array(dts), solver.j_range, solver.t
 
     ref, got = run(False), run(True)

@@ -8,7 +8,7 @@ import pytest
 from mpi4py import MPI
 
 import fempm
-from fempm.transfer.fmpm import parse_mass
+from fempm.transfer.mass_models import FMPM, Consistent, Lumped, mass_model
 from fempm.scene import run
 from fempm.scenes import two_disks, vibrating_bar
 
@@ -47,11 +47,13 @@ def test_every_order_conserves_momentum(setup, k):
 
 
 def test_mass_option_parsing():
-    assert parse_mass("fmpm3") == ("fmpm", 3) == parse_mass("fmpm(3)") == parse_mass("fmpm", 3)
-    assert parse_mass("lumped") == ("lumped", 0)
+    assert mass_model("fmpm3") == FMPM(3) == mass_model("fmpm(3)") == mass_model("fmpm", 3)
+    assert mass_model("fmpm").label == "fmpm5" and mass_model("lumped") == Lumped()
+    assert mass_model("consistent") == Consistent() and mass_model(FMPM(2)) == FMPM(2)
+    assert [m.stable_factor(lambda: 0.5) for m in (Lumped(), Consistent(), FMPM(4))] == [1.0, np.sqrt(0.4), 0.5]
     for bad in ("fmpm0", "fmpm11", "fmpmx", "full"):
         with pytest.raises(ValueError):
-            parse_mass(bad)
+            mass_model(bad)
 
 
 def test_loop_fmpm1_equals_lumped_and_fmpm_runs_stably():

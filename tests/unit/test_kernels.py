@@ -89,15 +89,15 @@ def test_closed_form_basis_and_pull_back_equal_basix(cell):
     V = dolfinx.fem.functionspace(mesh, ("Lagrange", 1, (d,)))
     geo = p.locator.geometry
     assert geo.affine
-    S, G, dofs = shape.affine_basis(p.cells, p.X, geo._K, np.asarray(V.dofmap.list), cell)
+    S, G, dofs = shape.affine_basis(p.cells, p.X, geo.K, np.asarray(V.dofmap.list), cell)
     tab = V.element.basix_element.tabulate(1, p.X)[..., 0]
     assert np.abs(S - tab[0]).max() < 1e-14
-    assert np.abs(G - np.transpose(tab[1:], (1, 2, 0)) @ geo._K[p.cells]).max() < 1e-12
+    assert np.abs(G - np.transpose(tab[1:], (1, 2, 0)) @ geo.K[p.cells]).max() < 1e-12
     assert np.array_equal(dofs, np.asarray(V.dofmap.list)[p.cells])
-    X, inside = shape.affine_pull_back(p.cells, p.x, geo._x0, geo._K, cell in ("interval", "triangle", "tetrahedron"),
+    X, inside = shape.affine_pull_back(p.cells, p.x, geo.x0, geo.K, cell in ("interval", "triangle", "tetrahedron"),
                                        1e-10)
     assert inside.all() and np.abs(X - p.X).max() < 1e-14
-    X, inside = shape.affine_pull_back(p.cells, p.x + 2.0, geo._x0, geo._K, cell in ("interval", "triangle",
+    X, inside = shape.affine_pull_back(p.cells, p.x + 2.0, geo.x0, geo.K, cell in ("interval", "triangle",
                                                                                      "tetrahedron"), 1e-10)
     assert not inside.any()
 

@@ -1,0 +1,283 @@
+r"""The grid of an explicit step: the stages a :class:`~fempm.stepping.schemes.Scheme` orders.
+
+A step (:meth:`fempm.stepping.ExplicitSolver.step`) opens the grid (the P2G of mass and
+momentum, and of the forces when the scheme maps them with them, and the stable time step),
+chooses the time step, runs the scheme's stages and closes the grid:
+
+.. math::
+    m_i v_i = \sum_p M_p v_p N_{ip}, \qquad
+    f_i = -\sum_p V_p \sigma_p \nabla N_{ip} + \sum_p N_{ip} f^{ext}_p, \qquad
+    v_i^{+} = v_i + \Delta t\, f_i / m_i,
+
+then G2P: :math:`v_p^{+} = \alpha (v_p + \sum_i N_{ip}(v_i^{+} - v_i)) + (1-\alpha) \sum_i N_{ip} v_i^{+}`,
+:math:`L_p = \sum_i v_i^{+} \otimes \nabla N_{ip}`, :math:`F_p^{+} = (I + \Delta t L_p) F_p`,
+:math:`V_p = J_p V_p^0`, the stress of the particle's law, :math:`x_p^{+} = x_p + \Delta t \sum_i N_{ip} v_i^{+}`
+(with the lumped mass :math:`m_i = \sum_p M_p N_{ip}`; the consistent mass and FMPM solve
+instead, :mod:`fempm.transfer.mass_models`).
+
+Grids: :class:`SingleFieldGrid` (one velocity field; numpy, every particle domain, mass model
+and space: the reference of the compiled passes), :class:`fempm.stepping.contact.ContactGrid`
+(a field per body, corrected where bodies meet) and :class:`fempm.stepping.lumped.PointGrid`
+(point particles on affine degree-1 cells in compiled passes).
+"""
+
+from __future__ import annotations
+
+from typing import TYPE_CHECKING
+
+import numpy as np
+import numpy.typing as npt
+from mpi4py import MPI
+
+from fempm import kernels
+from fempm.stepping.laws import law_stress, material_groups
+from fempm.stepping.loads import external_forces
+from fempm.transfer import g2p
+from fempm.transfer.basis import ParticleBasis
+from fempm.transfer.mapping import nodal_centroids, p2g, p2g_gradients, sum_over_ranks
+from fempm.transfer.mass_models import MASS_RATIO_ITERATIONS
+from fempm.transfer.projection import Projector
+
+if TYPE_CHECKING:
+    from fempm.stepping.solver import ExplicitSolver
+
+__all__ = ["BasisGrid", "Grid", "SingleFieldGrid"]
+
+
+class Grid:
+    """The stages of an explicit step on the background grid of ``solver``.
+
+    Velocities are (owned + ghost dofs, d) arrays. A grid reads the solver's particles,
+    options, loads and conditions, and reports to its :class:`~fempm.stepping.solver.StepRecord`;
+    the solver alone advances its time and step count.
+    """
+
+    def __init__(self, solver: ExplicitSolver):
+        self.solver = solver
+        self.options = solver.options
+
+    def open(self, dt: float | None) -> float:
+        """P2G of mass and momentum (and of the forces when the scheme maps them then); returns
+        the stable time step of the state (the CFL number times the stable time, times the
+        mass model's factor). ``dt``: the step the caller gives, None for the stable one
+        (a grid may then check a cheaper bound first). Collective."""
+        raise NotImplementedError
+
+    def velocity(self, remapped: bool = False) -> npt.NDArray:
+        """The grid velocity of the mapped momenta (``remapped``: of the particles' updated
+        momenta, mapped again), constrained. Collective."""
+        raise NotImplementedError
+
+    def forces(self) -> None:
+        """P2G of the forces, when the scheme maps them after the stress update. Collective."""
+        raise NotImplementedError
+
+    def advance(self, v_old: npt.NDArray, dt: float) -> npt.NDArray:
+        r""":math:`v^+ = v + \Delta t\, a` from the mapped forces, constrained. Collective."""
+        raise NotImplementedError
+
+    def update(self, dt: float) -> tuple[npt.NDArray, npt.NDArray]:
+        """(v, v^+): :meth:`velocity` then :meth:`advance` (a grid may fuse them)."""
+        v_old = self.velocity()
+        return v_old, self.advance(v_old, dt)
+
+    def to_particles(self, v_new: npt.NDArray, v_old: npt.NDArray, dt: float, *, blend: bool = False,
+                     kinematics: bool = False, move: bool = False, remap: bool = False) -> None:
+        """G2P: ``blend`` the particle velocities (PIC/FLIP of ``v_new`` and ``v_old``), update
+        their ``kinematics`` (:math:`L_p`, F, J and its checks, the stress) with ``v_new``,
+        ``move`` them with ``v_new`` (or their own velocity), ``remap`` their momenta for
+        :meth:`velocity` with ``remapped``. Collective."""
+        raise NotImplementedError
+
+    def close(self) -> None:
+        """The checks after the particle update (finite state). Collective."""
+        raise NotImplementedError
+
+    def relocate(self) -> None:
+        """Locate the moved particles (migration between ranks). Collective."""
+        raise NotImplementedError
+
+    def checkpoint_state(self) -> tuple[dict, dict[str, npt.NDArray]]:
+        """(counters, arrays) a resumed run needs to repeat the next steps bit for bit."""
+        return {}, {}
+
+    def restore_state(self, counters: dict, arrays: dict[str, npt.NDArray]) -> None:
+        """Restore :meth:`checkpoint_state` (arrays from a run on another number of ranks: {})."""
+
+
+class BasisGrid(Grid):
+    """The numpy stages on a :class:`~fempm.transfer.basis.ParticleBasis` (every particle domain,
+    mass model and space): the reference of the compiled passes."""
+
+    def open_basis(self) -> ParticleBasis:
+        """The checks that open a step and its particle basis (values and gradients). Collective."""
+        s = self.solver
+        s.check_state()
+        basis = ParticleBasis(s.V, s.particles, gradients=True, domain=self.options.particle_domain)
+        s.record.extended_steps += basis.extended
+        return basis
+
+    def mass_operator(self, basis: ParticleBasis, weights: npt.NDArray | None = None,
+                      lump_dofs: npt.NDArray[np.bool_] | None = None) -> Projector:
+        """The step's mass with its constraints on ``basis``; ``weights``: per-particle masses in
+        place of the particles' (one body's mass); ``lump_dofs``: further dofs (owned + ghost)
+        whose rows are lumped, besides the frictional walls'."""
+        s, opts = self.solver, self.options
+        cond = s.conditions
+        lumped = cond.friction_dofs
+        if lump_dofs is not None:
+            lumped = lump_dofs if lumped is None else lumped | lump_dofs[: len(lumped)]
+        return Projector(s.V, s.particles, mass=opts.mass_model, basis=basis,
+                         petsc_options_prefix=opts.petsc_options_prefix, exclude=cond.fixed_dofs,
+                         exclude_components=cond.slip_components, lump_below=opts.lump_below, weights=weights,
+                         lump_dofs=lumped)
+
+    def stable_with(self, mass_ops) -> float:
+        """The CFL stable step of the state with these mass operators (the smallest factor of the
+        mass model over them; the lumped step with ``lumped_forces``)."""
+        s, opts = self.solver, self.options
+        stable = s.stable_dt()
+        if opts.lumped_forces:
+            return stable
+
+        def ratio() -> float:
+            s.record.mass_ratio = min((op.mass_ratio_min(MASS_RATIO_ITERATIONS) for op in mass_ops), default=1.0)
+            return s.record.mass_ratio
+
+        return stable * opts.mass_model.stable_factor(ratio)
+
+    def accelerations(self, mass_op: Projector, f_grid: npt.NDArray) -> npt.NDArray:
+        """Nodal accelerations from the forces: the mass solve, or with ``lumped_forces`` the
+        lumped division on the operator's active dofs."""
+        if self.options.lumped_forces and self.options.mass_model.couples_dofs:
+            m = mass_op.lumped_masses()
+            return np.where(mass_op.active[:, None], f_grid / np.where(m > 0, m, 1.0)[:, None], 0.0)
+        return mass_op.solve(f_grid)
+
+    def internal_and_external(self, basis: ParticleBasis, weights: npt.NDArray | None = None) -> npt.NDArray:
+        r"""Nodal forces :math:`f_i = \sum_p (-V_p \sigma_p \nabla N_{ip} + N_{ip} f^{ext}_p)`,
+        summed over ranks (``weights``: a 0/1 factor per particle, one body's forces); point
+        particles in one compiled scatter (:mod:`fempm.kernels`)."""
+        s = self.solver
+        p = s.particles
+        fext = external_forces(s.loads, p, s.t)
+        volume = p.volume if weights is None else p.volume * weights
+        if weights is not None:
+            fext = fext * weights[:, None]
+        if weights is None and basis.cells is not None and not basis.extended:
+            local = kernels.nodal_forces(basis.dofs, basis.values, basis.gradients, p.volume, p.fields["sigma"],
+                                         fext, basis.num_dofs_local)
+            return sum_over_ranks(basis.index_map, local)
+        f = p2g_gradients(basis, -volume[:, None, None] * p.fields["sigma"])
+        if s.loads.body_force is not None or s.loads.traction is not None:
+            f += p2g(basis, fext)
+        return f
+
+    def update_kinematics(self, L: npt.NDArray, dt: float) -> None:
+        r""":math:`F_p^+ = (I + \Delta t L_p) F_p`, :math:`V_p = J_p V_p^0` and the laws' stress,
+        with the checks of J (one collective)."""
+        s = self.solver
+        p = s.particles
+        f = p.fields
+        F, J = kernels.deform(f["F"], L, dt)
+        nonfinite = ~np.isfinite(J)
+        bad = J <= 0
+        finite = J[~nonfinite]
+        flags = np.array([nonfinite.any(), bad.any(), -finite.min(initial=np.inf), finite.max(initial=-np.inf)],
+                         dtype=float)
+        p.comm.Allreduce(MPI.IN_PLACE, flags, op=MPI.MAX)  # one collective: both checks and the J range
+        if flags[0]:
+            s.fail(f"non-finite state (deformation gradient) at particle(s) {s.particle_ids(nonfinite)}")
+        if flags[1]:
+            s.fail(f"inverted deformation J <= 0 at particle(s) {s.particle_ids(bad)}")
+        s.record.j_range = (-float(flags[2]), float(flags[3]))
+        f["F"] = F
+        p.volume = J * f["volume0"]
+        rho = p.mass / p.volume
+        for mat, idx in material_groups(f, s.materials):
+            f["sigma"][idx] = law_stress(mat, F[idx], L[idx], f["sigma"][idx], dt, rho[idx], f, idx)
+
+    def move(self, at_grid: npt.NDArray, corner_velocity, dt: float) -> None:
+        """The particle domain's motion (:meth:`fempm.transfer.domains.Domain.move`) with the grid
+        velocity at the particles ``at_grid`` and at the corners ``corner_velocity()``."""
+        s = self.solver
+        try:
+            self.options.particle_domain.move(s.particles, at_grid, corner_velocity, dt,
+                                              self.options.position == "particle")
+        except ValueError as e:  # collective
+            s.fail(f"inverted particle domain: {e}")
+
+    def close(self) -> None:
+        self.solver.check_finite()
+
+    def relocate(self) -> None:
+        self.solver.particles.relocate()
+
+
+class SingleFieldGrid(BasisGrid):
+    """One velocity field for every particle, numpy stages (see :class:`BasisGrid`)."""
+
+    def open(self, dt: float | None) -> float:
+        s, opts = self.solver, self.options
+        p = s.particles
+        self.basis = basis = self.open_basis()
+        self.centroids = nodal_centroids(basis, p.mass, p.x) if s.conditions.needs_positions else None
+        self.mass_op = self.mass_operator(basis)
+        stable = self.stable_with([self.mass_op])
+        support = self.mass_op.support_masses()
+        self.weak = support <= opts.mass_cutoff * p.comm.allreduce(float(support.max(initial=0.0)), op=MPI.MAX)
+        s.count_terms()
+        self.f_grid = None
+        return stable
+
+    def map_velocity(self, guess: npt.NDArray | None) -> npt.NDArray:
+        """Grid velocity from the particle momenta (P2G + mass solve), constrained."""
+        p = self.solver.particles
+        v = self.mass_op.solve(p2g(self.basis, p.mass[:, None] * p.fields["v"]), guess=guess)
+        self.solver.conditions.apply(v, self.centroids)
+        return self.basis.update_ghosts(v)  # extra ghosts (remote domain samples) take their owners' values
+
+    def velocity(self, remapped: bool = False) -> npt.NDArray:
+        return self.map_velocity(None if remapped else self.solver.grid_velocity)
+
+    def initial_velocity(self) -> npt.NDArray:
+        """The grid velocity of the present state (P2G of the momenta, the mass solve and the
+        conditions) on the space's dofs, nothing advanced or recorded. Collective."""
+        s = self.solver
+        p = s.particles
+        self.basis = ParticleBasis(s.V, p, gradients=False, domain=self.options.particle_domain)
+        self.centroids = nodal_centroids(self.basis, p.mass, p.x) if s.conditions.needs_positions else None
+        self.mass_op = self.mass_operator(self.basis)
+        return self.map_velocity(None)[: self.basis.num_dofs_space]
+
+    def forces(self) -> None:
+        self.f_grid = self.internal_and_external(self.basis)
+
+    def advance(self, v_old: npt.NDArray, dt: float) -> npt.NDArray:
+        opts = self.options
+        if self.f_grid is None:
+            self.forces()
+        a = self.accelerations(self.mass_op, self.f_grid)
+        if opts.damping > 0.0:
+            a -= opts.damping * v_old[: len(a)]
+        a[self.weak] = 0.0  # nodes with a tiny share of mass keep their mapped velocity, no force update
+        v_new = v_old + dt * a
+        self.solver.conditions.apply(v_new, self.centroids)
+        return self.basis.update_ghosts(v_new)
+
+    def to_particles(self, v_new: npt.NDArray, v_old: npt.NDArray, dt: float, *, blend: bool = False,
+                     kinematics: bool = False, move: bool = False, remap: bool = False) -> None:
+        fld = self.solver.particles.fields
+        basis = self.basis
+        if blend:
+            fld["v"], at_grid, L = g2p.blend(basis, v_new, v_old, fld["v"], self.options.flip)
+        elif kinematics or move:
+            at_grid, L = g2p.velocity_and_gradient(basis, v_new)
+        if kinematics:
+            self.update_kinematics(L, dt)
+        if move:
+            self.move(at_grid, lambda: basis.gather_samples(v_new), dt)
+
+    def nodal(self, v: npt.NDArray) -> npt.NDArray:
+        """The grid velocity kept after the step (the space's dofs)."""
+        return v[: self.basis.num_dofs_space]

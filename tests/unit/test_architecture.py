@@ -1,0 +1,94 @@
+"""The examples of docs/architecture.md ("Where things plug in") run: a law, a mass model, a
+particle domain, a scheme and a grid condition, each defined outside the package and taken by
+the one step skeleton as given."""
+
+import re
+from pathlib import Path
+
+import dolfinx.fem as fem
+import dolfinx.mesh as dm
+import numpy as np
+import pytest
+from mpi4py import MPI
+
+import fempm
+from fempm.boundary import fixed
+from fempm.materials import LinearElastic
+from fempm.stepping import ExplicitSolver, StepOptions
+
+comm = MPI.COMM_WORLD
+PAGE = Path(__file__).resolve().parents[2] / "docs" / "architecture.md"
+
+
+@pytest.fixture(scope="module")
+def examples() -> dict:
+    """The page's python blocks after "## Where things plug in", run in one namespace."""
+    text = PAGE.read_text().split("## Where things plug in", 1)[1]
+    blocks = re.findall(r"```python\n(.*?)```", text, re.S)
+    assert len(blocks) == 5
+    for block in blocks:  # each example is short: under 30 lines
+        assert len(block.strip().splitlines()) < 30
+    namespace: dict = {}
+    for block in blocks:
+        exec(compile(block, str(PAGE), "exec"), namespace)
+    return namespace
+
+
+def solver(options=StepOptions(), law=None, bcs=None, cells=6):
+    """A small elastic square moving and shearing, on triangles."""
+    mesh = dm.create_rectangle(comm, [[0.0, 0.0], [2.0, 2.0]], [2 * cells, 2 * cells], dm.CellType.triangle)
+    V = fem.functionspace(mesh, ("Lagrange", 1, (2,)))
+    p = fempm.create_particles(mesh, 4, density=1000.0, cells=lambda x: (x[0] > 0.5) & (x[0] < 1.5)
+                               & (x[1] > 0.5) & (x[1] < 1.5))
+    p.fields["v"] = np.column_stack([0.1 + 0.2 * p.x[:, 1], -0.1 * p.x[:, 0]])
+    law = law or LinearElastic(1e5, 0.3)
+    return ExplicitSolver(V, p, [law], bcs=bcs(V) if bcs else (), options=options)
+
+
+def run(s, steps=3, dt=None):
+    for _ in range(steps):
+        s.step(dt)
+    return s
+
+
+def total_momentum(s):
+    return s.particles.comm.allreduce(s.particles.mass @ s.particles.fields["v"])
+
+
+def test_a_law_plugs_in(examples):
+    toy = run(solver(law=examples["SmallStrain"](1e5, 0.3), options=StepOptions(scheme="USL")), dt=1e-3)
+    elastic = run(solver(options=StepOptions(scheme="USL")), dt=1e-3)
+    assert np.abs(toy.particles.fields["sigma"] - elastic.particles.fields["sigma"]).max() < 1e-9 * 1e5
+
+
+def test_a_mass_model_plugs_in(examples):
+    cautious = solver(StepOptions(mass=examples["CautiousLumped"]()))
+    assert cautious.options.mass_model.label == "lumped/2"
+    plain = solver()
+    assert np.isclose(cautious.step(), 0.5 * plain.step(), rtol=1e-12)
+
+
+def test_a_particle_domain_plugs_in(examples):
+    s = solver(StepOptions(domain=examples["TwoPoints"]()))
+    before = total_momentum(s)
+    run(s)
+    assert np.abs(total_momentum(s) - before).max() < 1e-10 * np.abs(before).max()  # no load, no condition
+    assert np.isfinite(s.particles.fields["sigma"]).all() and s.step_count == 3
+
+
+def test_a_scheme_plugs_in(examples):
+    split = run(solver(StepOptions(scheme=examples["SplitUSL"]())), dt=1e-3)
+    usl = run(solver(StepOptions(scheme="USL")), dt=1e-3)
+    for field in ("v", "sigma", "F"):
+        assert np.abs(split.particles.fields[field] - usl.particles.fields[field]).max() < 1e-12
+    assert np.abs(split.particles.x - usl.particles.x).max() < 1e-14
+
+
+def test_a_grid_condition_plugs_in(examples):
+    def held(V):  # every dof scaled by 0: the grid stands still, and the particles with it
+        return [examples["Damper"](fixed(V, lambda x: np.full(x.shape[1], True)).dofs, keep=0.0)]
+
+    s = solver(StepOptions(scheme="USL", flip=0.0), bcs=held)
+    x0 = s.particles.x.copy()
+    run(s, dt=1e-3)
+    assert np.abs(s.particles.x - x0).max() == 0.0 and np.abs(s.particles.fields["v"]).max() == 0.0
