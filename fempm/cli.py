@@ -26,6 +26,8 @@ import math
 import sys
 from pathlib import Path
 
+from mpi4py import MPI
+
 from fempm import __version__
 from fempm.abort import abort_on_error
 from fempm.io.checkpoint import CheckpointError, RunInterrupted, choose
@@ -40,7 +42,7 @@ from fempm.scene.loop import run
 from fempm.scenes import SCENES
 from fempm.stepping.health import Health
 from fempm.stepping.options import SimulationError
-from fempm.studies import mapping, particle_basis
+from fempm.studies import convergence, error_vs_time, mapping, particle_basis, stability
 from fempm.transfer.mapping import SingularMassError
 
 
@@ -56,14 +58,14 @@ def main(argv: list[str] | None = None) -> int:
         with abort_on_error():
             return _main(argv)
     except UsageError as e:
-        from mpi4py import MPI
-
         if MPI.COMM_WORLD.rank == 0:
             print(e, file=sys.stderr)
         return 2
 
 
-def _main(argv: list[str] | None) -> int:
+def _parser() -> argparse.ArgumentParser:
+    """The command line's parser: ``study``, ``run`` (its scene options parsed later,
+    :func:`_scene_options`) and ``resume``."""
     parser = argparse.ArgumentParser(prog="python -m fempm", description="fempm: MPM on DOLFINx meshes", allow_abbrev=False)
     parser.add_argument("--version", action="version", version=f"fempm {__version__}")
     sub = parser.add_subparsers(dest="command", required=True)
@@ -93,56 +95,53 @@ def _main(argv: list[str] | None) -> int:
     resume.add_argument("--t-end", type=float, default=None, help="run to this time (default: the run's own t_end)")
     resume.add_argument("--checkpoint-every", type=int, default=None, metavar="N",
                         help="checkpoint every N steps (default: as the run did)")
+    return parser
+
+
+def _main(argv: list[str] | None) -> int:
+    parser = _parser()
     args, rest = parser.parse_known_args(argv)
     if args.command != "run" and rest:
         parser.error(f"unrecognized arguments: {' '.join(rest)}")
-
     if args.command == "run":
         return _run(args, rest)
     if args.command == "resume":
         return _resume(args)
+    try:
+        return _study(args)
+    except ValueError as e:  # a study's options that do not fit
+        parser.error(str(e))
 
-    if args.command == "study" and args.name == "particle-basis":
-        from mpi4py import MPI
 
+def _study(args) -> int:
+    """``python -m fempm study NAME``: run the study and say what it wrote."""
+    rank0 = MPI.COMM_WORLD.rank == 0
+    if args.name == "particle-basis":
         out = args.out or Path("output/study-particle-basis")
-        if MPI.COMM_WORLD.rank == 0:  # dense operators on small bodies: one rank
+        if rank0:  # dense operators on small bodies: one rank
             particle_basis.run(out)
             print(f"wrote {out}/properties.md, properties.csv, particle_basis_*.png")
         return 0
-
-    sized = {  # the studies with --quick: (how to run, what they write)
-        "convergence": (lambda m, out: m.run(out, quick=args.quick, problems=args.problems),
-                        "convergence.csv, convergence.md, convergence_*.png"),
-        "stability": (lambda m, out: m.run_study(out, quick=args.quick, cases=args.cases),
-                      "stability.csv, stability.md, stability.png"),
-        "error-vs-time": (lambda m, out: m.run_study(out, quick=args.quick, problems=args.problems),
-                          "error_vs_time.csv, error_vs_time.md, error_vs_time_*.png"),
-    }
-    if args.command == "study" and args.name in sized:
-        import importlib
-
-        from mpi4py import MPI
-
-        runner, outputs = sized[args.name]
-        out = args.out or Path(f"output/study-{args.name}")
-        try:
-            runner(importlib.import_module("fempm.studies." + args.name.replace("-", "_")), out)
-        except ValueError as e:
-            parser.error(str(e))
-        if MPI.COMM_WORLD.rank == 0:
-            print(f"wrote {out}/: {outputs}")
-        return 0
-
-    if args.command == "study" and args.name == "mapping":
+    if args.name == "mapping":
         sizes = args.sizes or ((8, 16, 32, 64, 128) if args.full else (8, 16, 32))
         ppcs = args.ppc or ((1, 4, 9, 16) if args.full else (4, 9))
         out = args.out or Path("output/study-mapping")
         mapping.run(sizes=sizes, ppcs=ppcs, out=out, domains=tuple(args.domains))
-        from mpi4py import MPI
-
-        if MPI.COMM_WORLD.rank == 0:
+        if rank0:
             print(f"wrote {out}/mapping.csv, mapping.md, mapping.png")
+        return 0
+    out = args.out or Path(f"output/study-{args.name}")
+    if args.name == "convergence":
+        convergence.run(out, quick=args.quick, problems=args.problems)
+        written = "convergence.csv, convergence.md, convergence_*.png"
+    elif args.name == "stability":
+        stability.run_study(out, quick=args.quick, cases=args.cases)
+        written = "stability.csv, stability.md, stability.png"
+    else:  # error-vs-time
+        error_vs_time.run_study(out, quick=args.quick, problems=args.problems)
+        written = "error_vs_time.csv, error_vs_time.md, error_vs_time_*.png"
+    if rank0:
+        print(f"wrote {out}/: {written}")
     return 0
 
 
@@ -283,8 +282,6 @@ def _build(rebuild: dict):
 def _execute(scene, out: Path, name: str, **kwargs) -> int:
     """Run (or continue) ``scene`` into ``out``; the exit code: 0 done, 3 stopped by a failed
     step or a health limit, 128 + the signal when interrupted (after a checkpoint)."""
-    from mpi4py import MPI
-
     rank0 = MPI.COMM_WORLD.rank == 0
     try:
         run(scene, out, **kwargs)
@@ -312,8 +309,6 @@ def _execute(scene, out: Path, name: str, **kwargs) -> int:
 def _resume(args) -> int:
     """``python -m fempm resume OUT``: rebuild the scene from the checkpoint's command line and
     continue it (to ``--t-end`` if given)."""
-    from mpi4py import MPI
-
     try:
         data = choose(args.out, MPI.COMM_WORLD)[1]
     except (CheckpointError, OSError) as e:

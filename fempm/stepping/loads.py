@@ -142,7 +142,6 @@ def boundary_shares(particles, loaded: npt.NDArray[np.bool_]) -> npt.NDArray:
     layer that wraps round an edge of the body adds the facets it covers there (give
     ``fields["area"]``, :func:`surface_areas`, to load exactly a layer of any shape)."""
     mesh = particles.mesh
-    d = mesh.geometry.dim
     tdim, fdim = mesh.topology.dim, mesh.topology.dim - 1
     mesh.topology.create_entities(fdim)
     for a, b in ((tdim, fdim), (fdim, tdim), (fdim, 0)):
@@ -160,8 +159,25 @@ def boundary_shares(particles, loaded: npt.NDArray[np.bool_]) -> npt.NDArray:
     loaded_rows = np.flatnonzero(loaded)
     loaded_rows = loaded_rows[np.argsort(cells[loaded_rows], kind="stable")]
     by_cell = np.split(loaded_rows, np.flatnonzero(np.diff(cells[loaded_rows])) + 1) if len(loaded_rows) else []
+    cand_cell, cand_facet, cand_normal, cand_measure = _loaded_facets(particles, loaded, links, by_cell, surface, across)
+    parallel = _continued(particles, f2v, cand_facet, cand_normal)
+    share = np.where(loaded, 0.0, -1.0)
+    for rows in by_cell:
+        keep = (cand_cell == cells[rows[0]]) & parallel
+        if keep.any():
+            v = particles.volume[rows]
+            share[rows] = float(cand_measure[keep].sum()) * v / v.sum()
+    return share
+
+
+def _loaded_facets(particles, loaded: npt.NDArray[np.bool_], links: npt.NDArray, by_cell: list, surface: npt.NDArray,
+                   across: npt.NDArray) -> tuple[npt.NDArray, npt.NDArray, npt.NDArray, npt.NDArray]:
+    """(cell, facet, outward normal, measure) of the surface facets the loaded particles of each
+    cell (``by_cell``: their rows, cell by cell) lie next to (:func:`boundary_shares`)."""
+    mesh, cells = particles.mesh, particles.cells
+    d = mesh.geometry.dim
     members = np.argsort(cells, kind="stable")
-    starts = np.searchsorted(cells[members], np.arange(num_cells + 1))
+    starts = np.searchsorted(cells[members], np.arange(mesh.topology.index_map(mesh.topology.dim).size_local + 1))
     cand_cell, cand_facet, cand_normal, cand_measure = [], [], [], []
     for rows in by_cell:
         c = int(cells[rows[0]])
@@ -188,8 +204,16 @@ def boundary_shares(particles, loaded: npt.NDArray[np.bool_]) -> npt.NDArray:
             cand_facet.append(facets[k])
             cand_normal.append(normal[k])
             cand_measure.append(measure[k])
-    cand_facet = np.asarray(cand_facet, dtype=np.int64)
-    cand_normal = np.asarray(cand_normal, dtype=np.float64).reshape(-1, d)
+    return (np.asarray(cand_cell, dtype=np.int64), np.asarray(cand_facet, dtype=np.int64),
+            np.asarray(cand_normal, dtype=np.float64).reshape(-1, d), np.asarray(cand_measure))
+
+
+def _continued(particles, f2v, cand_facet: npt.NDArray, cand_normal: npt.NDArray) -> npt.NDArray[np.bool_]:
+    """Which candidate facets the loaded surface goes on from: another candidate of about their
+    orientation (normals within 60 degrees) shares a vertex with them, over the ranks (all of
+    them where no candidate anywhere has such a neighbour: a load on one facet). Collective."""
+    mesh = particles.mesh
+    d = mesh.geometry.dim
     # the sums of the candidates' outward normals at each vertex, over the ranks
     sums = dolfinx.la.vector(mesh.topology.index_map(0), d, dtype=np.float64)
     width = len(f2v.links(0)) if len(f2v.array) else 1
@@ -202,14 +226,7 @@ def boundary_shares(particles, loaded: npt.NDArray[np.bool_]) -> npt.NDArray:
     parallel = (np.einsum("fvd,fd->fv", at[vertices] - cand_normal[:, None, :], cand_normal) > 0.5).any(axis=1)
     if not particles.comm.allreduce(bool(parallel.any()), op=MPI.LOR):
         parallel[:] = True  # one loaded facet (on no rank another beside it)
-    share = np.where(loaded, 0.0, -1.0)
-    cand_cell, cand_measure = np.asarray(cand_cell, dtype=np.int64), np.asarray(cand_measure)
-    for rows in by_cell:
-        keep = (cand_cell == cells[rows[0]]) & parallel
-        if keep.any():
-            v = particles.volume[rows]
-            share[rows] = float(cand_measure[keep].sum()) * v / v.sum()
-    return share
+    return parallel
 
 
 def surface_shares(particles, loaded: npt.NDArray[np.bool_]) -> npt.NDArray:

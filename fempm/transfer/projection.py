@@ -139,9 +139,21 @@ class Projector:
         self.basis = basis if basis is not None else ParticleBasis(V, particles, domain=domain)
         imap = self.basis.index_map
         self.num_owned = imap.size_local
-        comm = particles.comm
         self.iterations: list[int] = []
         self.lumped: npt.NDArray | None = None
+        self._find_support(exclude)
+        self.lump = self._lumped_rows(lump_below, lump_dofs)
+        if model.matrix:
+            self._assemble(weights, weight, exclude_components, petsc_options_prefix, petsc_options)
+        else:  # lumped and FMPM: the rows of the consistent matrix sum to the lumped masses
+            self.row_mass = np.where(self.active, self.lumped, 0.0)[: self.num_owned]
+        self.exclude_components = [np.asarray(d, dtype=np.int32) for d in (exclude_components or ())]
+
+    def _find_support(self, exclude: npt.NDArray[np.int32] | None) -> None:
+        r"""The active dofs: those the particles support (their lumped mass, or for a matrix
+        :math:`\sum_p M_p \langle N_i \rangle_p^2`, above :data:`SUPPORT_TOL` of the largest),
+        less the dofs ``exclude``. Collective."""
+        model, comm = self.model, self.particles.comm
         if not model.matrix:  # lumped and FMPM divide by the lumped masses
             if not self.basis.nonnegative:
                 raise ValueError(
@@ -159,6 +171,12 @@ class Projector:
         self.num_inactive = comm.allreduce(int(np.count_nonzero(~self.active[: self.num_owned])))
         if self.num_inactive:
             log.info("fempm: %d dof(s) without particle support excluded and set to 0", self.num_inactive)
+
+    def _lumped_rows(self, lump_below: float, lump_dofs: npt.NDArray[np.bool_] | None) -> npt.NDArray[np.bool_] | None:
+        """The dofs whose rows and columns are lumped: lumped mass below ``lump_below`` of the
+        largest, and ``lump_dofs`` (a non-negative basis only: for P2 Lagrange lumping can make
+        the matrix indefinite). Collective."""
+        model, comm = self.model, self.particles.comm
         lump = None
         if model.couples_dofs and lump_below > 0.0 and self.basis.nonnegative:  # P2 Lagrange: lumping can make it indefinite
             m = self.lumped_masses()
@@ -167,40 +185,42 @@ class Projector:
             extra = np.zeros(len(self.active), dtype=np.bool_)
             extra[: len(lump_dofs)] = lump_dofs[: len(self.active)]
             lump = extra if lump is None else lump | extra
-        self.lump = lump
-        if model.matrix:
-            blocks = None
-            if self.basis.cells is not None:  # point particles: the cell blocks, once for the test and the matrix
-                blocks = cell_blocks(self.basis, self.weights)
+        return lump
 
-            weighted = particles.num_global if weights is None else comm.allreduce(int(np.count_nonzero(self.weights)))
-            check_nonsingular(imap, weighted, self.active, lump, blocks)
-            A = consistent_mass_matrix(self.basis, particles, lump, weight, blocks, self.weights)
-            iset = fpetsc.owned_index_set(imap, self.active[: self.num_owned])
-            self.matrix = A.createSubMatrix(iset, iset)
-            self.ksp = fpetsc.create_ksp(comm, petsc_options_prefix, petsc_options)
-            self.ksp.setOperators(self.matrix)
-            self._x, self._b = self.matrix.createVecs()
-            base = (self.active[: self.num_owned], self.ksp, self._x, self._b)
-            self._systems = [base] * len(exclude_components or ())
-            for c, dofs in enumerate(exclude_components or ()):  # a system per constrained component
-                act = self.active.copy()
-                act[np.asarray(dofs, dtype=np.int32)] = False
-                if comm.allreduce(int(np.count_nonzero(act != self.active))):
-                    sub_is = fpetsc.owned_index_set(imap, act[: self.num_owned])
-                    M = A.createSubMatrix(sub_is, sub_is)
-                    ksp = fpetsc.create_ksp(comm, petsc_options_prefix, petsc_options)
-                    ksp.setOperators(M)
-                    self._systems[c] = (act[: self.num_owned], ksp, *M.createVecs())
-            A.destroy()
-            ones, rows = self.matrix.createVecs()
-            ones.set(1.0)
-            self.matrix.mult(ones, rows)
-            self.row_mass = np.zeros(self.num_owned)
-            self.row_mass[self.active[: self.num_owned]] = rows.array
-        else:  # lumped and FMPM: the rows of the consistent matrix sum to the lumped masses
-            self.row_mass = np.where(self.active, self.lumped, 0.0)[: self.num_owned]
-        self.exclude_components = [np.asarray(d, dtype=np.int32) for d in (exclude_components or ())]
+    def _assemble(self, weights, weight: str, exclude_components, petsc_options_prefix: str, petsc_options) -> None:
+        """The consistent matrix on the active dofs, its KSP, a system per constrained velocity
+        component, and its row sums. Collective."""
+        particles, imap, lump = self.particles, self.basis.index_map, self.lump
+        comm = particles.comm
+        blocks = None
+        if self.basis.cells is not None:  # point particles: the cell blocks, once for the test and the matrix
+            blocks = cell_blocks(self.basis, self.weights)
+
+        weighted = particles.num_global if weights is None else comm.allreduce(int(np.count_nonzero(self.weights)))
+        check_nonsingular(imap, weighted, self.active, lump, blocks)
+        A = consistent_mass_matrix(self.basis, particles, lump, weight, blocks, self.weights)
+        iset = fpetsc.owned_index_set(imap, self.active[: self.num_owned])
+        self.matrix = A.createSubMatrix(iset, iset)
+        self.ksp = fpetsc.create_ksp(comm, petsc_options_prefix, petsc_options)
+        self.ksp.setOperators(self.matrix)
+        self._x, self._b = self.matrix.createVecs()
+        base = (self.active[: self.num_owned], self.ksp, self._x, self._b)
+        self._systems = [base] * len(exclude_components or ())
+        for c, dofs in enumerate(exclude_components or ()):  # a system per constrained component
+            act = self.active.copy()
+            act[np.asarray(dofs, dtype=np.int32)] = False
+            if comm.allreduce(int(np.count_nonzero(act != self.active))):
+                sub_is = fpetsc.owned_index_set(imap, act[: self.num_owned])
+                M = A.createSubMatrix(sub_is, sub_is)
+                ksp = fpetsc.create_ksp(comm, petsc_options_prefix, petsc_options)
+                ksp.setOperators(M)
+                self._systems[c] = (act[: self.num_owned], ksp, *M.createVecs())
+        A.destroy()
+        ones, rows = self.matrix.createVecs()
+        ones.set(1.0)
+        self.matrix.mult(ones, rows)
+        self.row_mass = np.zeros(self.num_owned)
+        self.row_mass[self.active[: self.num_owned]] = rows.array
 
     def mass_ratio_min(self, iterations: int = 40) -> float:
         r"""Estimate of :math:`\lambda_{min}(M_L^{-1} M_C) \in (0, 1]` (consistent mode).
