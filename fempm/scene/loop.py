@@ -17,6 +17,7 @@ from fempm.io import checkpoint
 from fempm.io.writers import OUTPUT_LIMIT, RunWriter, check_output_size, write_json
 from fempm.particles.location import OutsideMeshError
 from fempm.scene.definition import MAX_STEPS, Scene
+from fempm.scene.observers import Checkpoints, Energies, Frames, HealthChecks, Observer, Progress, Watch
 from fempm.stepping.health import HealthMonitor
 from fempm.stepping.options import SimulationError
 from fempm.stepping.solver import ExplicitSolver
@@ -109,12 +110,12 @@ def run(
     if checkpoint_every is not None and (isinstance(checkpoint_every, bool) or int(checkpoint_every) != checkpoint_every
                                          or checkpoint_every < 1):
         raise ValueError(f"checkpoint_every={checkpoint_every!r} must be a positive number of steps")
-    return _Run(scene, None if out is None else Path(out), png=png, resume=resume, overwrite=overwrite,
+    return Run(scene, None if out is None else Path(out), png=png, resume=resume, overwrite=overwrite,
                 checkpoint_every=checkpoint_every, rebuild=rebuild, output_limit=output_limit,
                 progress=progress).execute(progress, callback)
 
 
-class _Run:
+class Run:
     """One call of :func:`run`: the solver, the writer and the monitor of a scene, the loop and
     how it ends."""
 
@@ -135,12 +136,11 @@ class _Run:
                                  overwrite=overwrite) if out is not None else None)
         self.monitor = HealthMonitor(solver, scene.health)
         self.history = [solver.energies()]
-        self.frame_interval = scene.t_end / max(scene.frames, 1)
-        self.next_frame = 0.0
+        self.frames = Frames(scene.t_end / max(scene.frames, 1))
         if saved is not None:
             checkpoint.restore_solver(solver, self.monitor, saved, arrays)
             self.history[0] = saved["writer"]["initial"]
-            self.next_frame, self.frame_interval = saved["writer"]["next_frame"], saved["writer"]["frame_interval"]
+            self.frames = Frames(saved["writer"]["frame_interval"], saved["writer"]["next_frame"])
             if solver.t >= scene.t_end:
                 raise ValueError(f"the run in {out} is already at t = {solver.t:.6g}: give a later t_end")
         self.num_particles = scene.particles.num_global
@@ -150,7 +150,7 @@ class _Run:
     def save(self) -> Path:
         """A checkpoint of the state now (collective)."""
 
-        state = {**self.writer.state(), "next_frame": self.next_frame, "frame_interval": self.frame_interval,
+        state = {**self.writer.state(), "next_frame": self.frames.next_frame, "frame_interval": self.frames.interval,
                  "initial": self.history[0]}
         return checkpoint.write(self.out, self.scene, self.solver, self.monitor, state, self.rebuild)
 
@@ -171,33 +171,27 @@ class _Run:
             solver.t = scene.t_end
         return dt
 
-    def loop(self, bar, stop, callback) -> None:
-        """Step to ``t_end``: frames, energies, health, the scene's watch, checkpoints, signals."""
+    def write_frame(self) -> None:
+        """The frames the scene asks for at the solver's time (collective)."""
+        write_frame(self.writer, self.scene, self.solver)
 
-        scene, solver, writer = self.scene, self.solver, self.writer
+    def observers(self, bar, stop, callback) -> list[Observer]:
+        """The loop's observers, in the order they are called."""
+        watches = [Watch(fn) for fn in (self.scene.watch, callback) if fn is not None]
+        checkpoints = Checkpoints(self.every, self.every is not None or self.resumed, stop)
+        return [self.frames, Energies(), HealthChecks(), *watches, checkpoints, Progress(bar)]
+
+    def loop(self, observers: list[Observer]) -> None:
+        """Step to ``t_end``, the observers before and after every step."""
+        scene, solver = self.scene, self.solver
         while solver.t < scene.t_end:
-            if writer is not None and solver.t >= self.next_frame:
-                write_frame(writer, scene, solver)
-                self.next_frame += self.frame_interval
+            for observer in observers:
+                observer.before_step(self)
             dt = self.step()
             final = solver.t >= scene.t_end
             row = {"step": solver.step_count, "dt": dt, **solver.energies()}
-            self.history.append(row)
-            if writer is not None:
-                writer.energies(row)
-            self.monitor.after_step(dt, row, final=final)
-            if scene.watch is not None:
-                scene.watch(solver)
-            if callback is not None:
-                callback(solver)
-            if (self.every is not None and solver.step_count % self.every == 0) or \
-                    ((self.every is not None or self.resumed) and final):
-                self.save()  # every checkpoint_every steps, and at the end of a checkpointed or resumed run
-            if self.out is not None and (signum := checkpoint.requested(stop, self.comm)):
-                raise checkpoint.RunInterrupted(signum, solver.t, self.save())
-            if not bar.disable:
-                bar.set_postfix_str(f"step {solver.step_count}, dt = {dt:.3g}", refresh=False)
-                bar.update(solver.t - bar.n)
+            for observer in observers:
+                observer.after_step(self, dt, row, final)
 
     def execute(self, progress: bool, callback) -> dict:
         """The loop, then the final frame and the summary, also when the loop raised (the error
@@ -212,7 +206,7 @@ class _Run:
                    leave=False)
         try:
             with bar, checkpoint.stop_requests(comm) if self.out is not None else contextlib.nullcontext([0]) as stop:
-                self.loop(bar, stop, callback)
+                self.loop(self.observers(bar, stop, callback))
             self.monitor.outcome = "completed"
         except (Exception, KeyboardInterrupt) as e:
             failure = e

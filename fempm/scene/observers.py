@@ -1,0 +1,92 @@
+"""The run loop's observers: each part of a run that is not the step itself (frames, the
+energies file, the health checks, the scene's watch and the caller's callback, checkpoints and
+signals, the progress bar) is an :class:`Observer` called before and after every step, in the
+order :func:`fempm.scene.run` lists them."""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from typing import TYPE_CHECKING
+
+from fempm.io import checkpoint
+
+if TYPE_CHECKING:
+    from fempm.scene.loop import Run
+
+__all__ = ["Checkpoints", "Energies", "Frames", "HealthChecks", "Observer", "Progress", "Watch"]
+
+
+class Observer:
+    """A part of the run loop (the default does nothing)."""
+
+    def before_step(self, run: Run) -> None:
+        """Called before each step (the state at ``run.solver.t``)."""
+
+    def after_step(self, run: Run, dt: float, row: dict, final: bool) -> None:
+        """Called after each step of ``dt``; ``row``: the step's energies row; ``final``: the
+        step reached ``t_end``."""
+
+
+class Frames(Observer):
+    """The frames the scene asks for, every ``t_end / frames`` (collective)."""
+
+    def __init__(self, interval: float, next_frame: float = 0.0):
+        self.interval, self.next_frame = interval, next_frame
+
+    def before_step(self, run: Run) -> None:
+        if run.writer is not None and run.solver.t >= self.next_frame:
+            run.write_frame()
+            self.next_frame += self.interval
+
+
+class Energies(Observer):
+    """The energies row of every step into the run's history and ``energies.csv``."""
+
+    def after_step(self, run: Run, dt: float, row: dict, final: bool) -> None:
+        run.history.append(row)
+        if run.writer is not None:
+            run.writer.energies(row)
+
+
+class HealthChecks(Observer):
+    """The scene's health limits (:class:`fempm.stepping.health.HealthMonitor`; collective)."""
+
+    def after_step(self, run: Run, dt: float, row: dict, final: bool) -> None:
+        run.monitor.after_step(dt, row, final=final)
+
+
+class Watch(Observer):
+    """A callable of the solver after every step (the scene's ``watch``, the caller's ``callback``)."""
+
+    def __init__(self, fn: Callable):
+        self.fn = fn
+
+    def after_step(self, run: Run, dt: float, row: dict, final: bool) -> None:
+        self.fn(run.solver)
+
+
+class Checkpoints(Observer):
+    """A checkpoint every ``every`` steps and at the end of a checkpointed or resumed run; a
+    requested stop (SIGTERM, SIGINT: ``stop``) ends the run after a checkpoint (collective)."""
+
+    def __init__(self, every: int | None, at_end: bool, stop):
+        self.every, self.at_end, self.stop = every, at_end, stop
+
+    def after_step(self, run: Run, dt: float, row: dict, final: bool) -> None:
+        step = run.solver.step_count
+        if (self.every is not None and step % self.every == 0) or (self.at_end and final):
+            run.save()
+        if run.out is not None and (signum := checkpoint.requested(self.stop, run.comm)):
+            raise checkpoint.RunInterrupted(signum, run.solver.t, run.save())
+
+
+class Progress(Observer):
+    """The progress bar (rank 0, on a terminal)."""
+
+    def __init__(self, bar):
+        self.bar = bar
+
+    def after_step(self, run: Run, dt: float, row: dict, final: bool) -> None:
+        if not self.bar.disable:
+            self.bar.set_postfix_str(f"step {run.solver.step_count}, dt = {dt:.3g}", refresh=False)
+            self.bar.update(run.solver.t - self.bar.n)
