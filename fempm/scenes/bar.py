@@ -1,4 +1,4 @@
-"""Vibrating bar (VERIFICATION.md section 1), 1D or as a 2D strip."""
+"""Vibrating bar (docs/verification.md), 1D or as a 2D strip."""
 
 from __future__ import annotations
 

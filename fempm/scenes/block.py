@@ -1,4 +1,4 @@
-"""Hanging block under extreme self-weight (VERIFICATION.md section 6) and its continuity measure."""
+"""Hanging block under extreme self-weight (docs/verification.md) and its continuity measure."""
 
 from __future__ import annotations
 
@@ -23,7 +23,7 @@ def hanging_block(
     flip: float = 0.99, mass: str = "lumped", cfl: float = 0.4, t_end: float = 0.5, g: float = 1000.0,
     E: float = 1e6, nu: float = 0.3, rho: float = 1050.0, frames: int = 10, comm: MPI.Comm = MPI.COMM_WORLD,
 ) -> Scene:
-    r"""Unit block hanging from its top under extreme self-weight (VERIFICATION.md section 6):
+    r"""Unit block hanging from its top under extreme self-weight (docs/verification.md):
     neo-Hookean, :math:`\rho g L / E \approx 1`, so the block stretches to several times its
     length. The block is :math:`[0, 1] \times [-1, 0]`, the grid velocity is zero at y > -h/2
     (one clamped row of cells above the block), and the mesh reaches down to y = -4.

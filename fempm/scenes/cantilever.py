@@ -1,4 +1,4 @@
-"""Cantilever under self-weight (VERIFICATION.md section 5) and its beam-theory reference."""
+"""Cantilever under self-weight (docs/verification.md) and its beam-theory reference."""
 
 from __future__ import annotations
 
@@ -43,7 +43,7 @@ def cantilever(
     domain: str = "point", frames: int = 20,
     comm: MPI.Comm = MPI.COMM_WORLD,
 ) -> Scene:
-    r"""Cantilever under suddenly applied self-weight (VERIFICATION.md section 5).
+    r"""Cantilever under suddenly applied self-weight (docs/verification.md).
 
     Beam :math:`[0, L] \times [0, H]`, clamped at x = 0 (all grid velocities zero at x <= 0; the
     mesh has one cell column behind the clamp), ``cells`` cells through the thickness (cells as close to square as

@@ -1,4 +1,4 @@
-r"""Cook's membrane (VERIFICATION.md section 8) on an unstructured triangle mesh, loaded to a
+r"""Cook's membrane (docs/verification.md) on an unstructured triangle mesh, loaded to a
 static state, and its small-strain finite element reference.
 
 The tapered panel :math:`A(0, 0), B(48, 44), C(48, 60), D(0, 44)` is clamped on its left edge

@@ -1,4 +1,4 @@
-"""Dam break with Tait water (VERIFICATION.md section 9) and Martin and Moyce's surge front."""
+"""Dam break with Tait water (docs/verification.md) and Martin and Moyce's surge front."""
 
 from __future__ import annotations
 
@@ -35,7 +35,7 @@ def dam_break(
     kappa: float = 2.0e4, gamma: float = 7.0, viscosity: float = 1.0e-3, g: float = 9.81, frames: int = 22,
     comm: MPI.Comm = MPI.COMM_WORLD,
 ) -> Scene:
-    r"""Dam break (VERIFICATION.md section 9): a water column ``a`` wide and ``2 a`` high
+    r"""Dam break (docs/verification.md): a water column ``a`` wide and ``2 a`` high
     (n^2 = 2) at the left of a box ``box`` wide, slip walls left, right and at the bottom, open
     top; Tait water :math:`p = \kappa((\rho/\rho_0)^\gamma - 1)`.
 

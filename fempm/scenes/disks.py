@@ -1,4 +1,4 @@
-"""Two colliding elastic disks (VERIFICATION.md section 4)."""
+"""Two colliding elastic disks (docs/verification.md)."""
 
 from __future__ import annotations
 

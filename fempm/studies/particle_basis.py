@@ -8,13 +8,13 @@ Run ``python -m fempm study particle-basis [--out DIR]`` (one rank). It writes
   domains, under pure translation and under uniform stretching; each panel shows the chosen
   particle's top hat (light), its :math:`\Phi_p` (dark, nodal values as dots) and the other
   particles' basis functions (lines); the last row the grid fields of constant and linear
-  particle data (seed 001's figures, as frames instead of animations);
+  particle data (as frames instead of animations);
 * ``particle_basis_2d_<option>.png``: :math:`\Phi_p` of one particle on a quadrilateral grid
   (4, 2, 1 and 1/2 particles per cell and direction; reference, translated and stretched
   bodies) and on an unstructured triangle mesh;
-* ``properties.md`` / ``properties.csv``: the properties (i)-(xiv) of seed 000 section 16
+* ``properties.md`` / ``properties.csv``: the properties (i)-(xiv) of docs/particle_basis_properties.md
   measured for each option and domain (point, GIMP, CPDI1, CPDI2 lattice cells) on a 1D body (2 particles per
-  cell) and on a 2D body on unstructured triangles (2 x 2 per cell), and the seed 001 claims
+  cell) and on a 2D body on unstructured triangles (2 x 2 per cell), and the claims
   on support and linear fields.
 
 Everything is measured with dense operators (:func:`fempm.transfer.particle_basis.dense_operator`),
@@ -65,7 +65,7 @@ def _integrals(b: Body) -> np.ndarray:
 
 
 def measure(make: Callable, option: str, domain_name: str, dim: int) -> dict[str, tuple[bool, str]]:
-    """Properties (i)-(xiv) and the seed 001 claims for one option and domain. ``make(**kw)``
+    """Properties (i)-(xiv) and the claims for one option and domain. ``make(**kw)``
     builds the body (``shift``, ``A``, ``grid_moves``). Returns {key: (holds, number text)}."""
     dom = DOMAINS[domain_name]
     b = make(dom)
@@ -135,7 +135,7 @@ def measure(make: Callable, option: str, domain_name: str, dim: int) -> dict[str
         r["xiv"] = (err < ALG_TOL, f"{err:.2g}")
     except Exception as ex:  # e.g. a singular consistent mass matrix
         r["xiv"] = (False, f"{type(ex).__name__}")
-    # seed 001: support of an interior particle's basis
+    # support of an interior particle's basis
     k = inner[len(inner) // 2]
     supp = np.mean(np.abs(P[touched, k]) > 1e-10 * np.abs(P[:, k]).max())
     r["support"] = (supp < 0.5, f"nonzero on {100 * supp:.0f} % of dofs")
@@ -220,7 +220,7 @@ PROPERTIES = [
     ("xii", "integral of Phi_p constant under translation"),
     ("xiii", "Lagrangian invariant under homogeneous deformation with the grid (not without)"),
     ("xiv", "Phi_p = projection of f_q = delta_pq"),
-    ("support", "compact support (seed 001: option 2 is not)"),
+    ("support", "compact support (option 2 is not)"),
 ]
 
 
@@ -275,7 +275,7 @@ def linear_fields(out: Path) -> list[dict]:
 
 
 def write_markdown(out: Path, rows: list[dict], lin: list[dict]) -> None:
-    lines = ["# Implied particle basis functions: properties (seed 000 section 16, seed 001)", "",
+    lines = ["# Implied particle basis functions: properties", "",
              "Measured by `python -m fempm study particle-basis`. 1D: a body of 20 particles (2 per cell) "
              "on a 16-cell line; 2D: 2 x 2 particles per unit cell, 6 x 6 cells, on an unstructured triangle "
              "mesh of size 1. Both bodies sit at a generic offset from the grid. "

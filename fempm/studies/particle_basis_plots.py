@@ -1,5 +1,5 @@
-"""Figures of the particle-basis study (:mod:`fempm.studies.particle_basis`), drawn like the
-figures of seed 001: top hat, particle basis function with its nodal values, the other
+"""Figures of the particle-basis study (:mod:`fempm.studies.particle_basis`), drawn as in
+docs/particle_basis.md: top hat, particle basis function with its nodal values, the other
 particles' basis functions, and the grid fields of constant and linear particle data."""
 
 from __future__ import annotations

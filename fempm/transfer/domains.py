@@ -1,4 +1,4 @@
-r"""Particle domains: where the basis is averaged (seed 000 eq. 16.16; seed 001).
+r"""Particle domains: where the basis is averaged (docs/particle_basis.md).
 
 A domain turns each particle into sample points :math:`y_{pq}` with value weights
 :math:`w_{pq}` (:math:`\sum_q w_{pq} = 1`) and gradient weights, so that

@@ -69,7 +69,7 @@ WEIGHTS = ("mass", "volume")
 
 def particle_weights(particles: Particles, weight: str) -> npt.NDArray:
     r"""The least-squares weights :math:`w_p`: the masses :math:`M_p` (per-mass fields such as
-    velocity) or the volumes :math:`V_p` (per-volume fields such as stress, seed 001)."""
+    velocity) or the volumes :math:`V_p` (per-volume fields such as stress)."""
     if weight == "mass":
         return particles.mass
     if weight == "volume":

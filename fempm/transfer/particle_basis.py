@@ -1,4 +1,4 @@
-r"""Implied particle basis functions (seed 000 eq. 16.29-16.31; seed 001).
+r"""Implied particle basis functions (docs/particle_basis.md).
 
 The particle-to-grid map of fempm takes particle values :math:`f_p` to grid values
 :math:`F_i = \sum_p \psi_{ip} f_p`, so the grid field is

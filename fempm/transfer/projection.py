@@ -7,7 +7,7 @@ minimises :math:`\int (F - f)^2 \rho\, dV`, which with particle quadrature gives
     \sum_j m_{ij} F_j = b_i, \qquad m_{ij} = \sum_p M_p N_i(x_p) N_j(x_p), \qquad
     b_i = \sum_p M_p f_p N_i(x_p)
 
-(seed 000, eqs. 16.6-16.17). *Consistent* mode assembles :math:`m_{ij}` as a PETSc matrix and
+*Consistent* mode assembles :math:`m_{ij}` as a PETSc matrix and
 solves with KSP (CG + Jacobi by default) on the dofs that particles support. *Lumped* mode
 replaces :math:`m_{ij}` by its row sum :math:`m_i = \sum_p M_p N_i(x_p)` (eqs. 16.21-16.23):
 :math:`F_i = b_i / m_i`, which needs a non-negative basis (P1/Q1 or Bernstein). *FMPM(k)*
@@ -94,7 +94,7 @@ class Projector:
     for per-mass (intensive) fields such as velocity; "volume" weights by :math:`V_p`, for
     per-volume fields such as stress; ``weights`` (one per particle) replaces either, e.g. the
     masses of one body and zeros for the others, which gives that body's own mass (the
-    per-body fields of :mod:`fempm.stepping.contact`). This is seed 001's density-ratio kernel: dividing a
+    per-body fields of :mod:`fempm.stepping.contact`). This is the density-ratio kernel: dividing a
     per-volume :math:`\sigma_p` by :math:`\rho_p = M_p / V_p`, mapping it with the mass
     weights and multiplying the grid value by :math:`m_i / V_i` gives, for the lumped map,
     :math:`\sigma_i = \sum_p \beta_{pi} \sigma_p = \sum_p V_p v_{ip} \sigma_p / V_i` with

@@ -14,7 +14,7 @@ from fempm.verification.problem import Problem, as_columns
 @dataclass(frozen=True)
 class VibratingBar(Problem):
     r"""First mode of a bar fixed at :math:`X = 0` and free at :math:`X = L`
-    (VERIFICATION.md section 1):
+    (docs/verification.md):
 
     .. math::
         u = \frac{v_0}{\omega} \sin(\beta X) \sin(\omega t), \qquad

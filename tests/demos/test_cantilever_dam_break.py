@@ -1,4 +1,4 @@
-"""Cantilever against Euler-Bernoulli (VERIFICATION.md section 5) and dam break against Martin
+"""Cantilever against Euler-Bernoulli (docs/verification.md) and dam break against Martin
 and Moyce (section 9), at the demos' default resolution."""
 
 import numpy as np

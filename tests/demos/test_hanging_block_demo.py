@@ -1,4 +1,4 @@
-"""The hanging-block demo (VERIFICATION.md section 6) on both meshes, up to t = 0.08 (near
+"""The hanging-block demo (docs/verification.md) on both meshes, up to t = 0.08 (near
 the largest stretch): standard MPM and GIMP separate, CPDI1 and CPDI2 stay continuous."""
 
 from test_demos import load

@@ -1,4 +1,4 @@
-"""Vibrating bar against the exact solution (VERIFICATION.md section 1)."""
+"""Vibrating bar against the exact solution (docs/verification.md)."""
 
 import numpy as np
 import pytest

@@ -1,5 +1,5 @@
 """Grid stress (``ExplicitSolver.grid_stress``): stress is projected as a per-volume field,
-so the grid stress does not depend on the particles' densities (seed 001's density-ratio
+so the grid stress does not depend on the particles' densities (the density-ratio
 kernel), on 1 and 2 ranks, with point and CPDI2 domains; a mass-weighted map would lean towards
 the heavy side of a density jump."""
 

@@ -1,4 +1,4 @@
-"""Hanging block (VERIFICATION.md section 6) with CPDI1 and CPDI2 domains on 1 and 2 ranks, structured
+"""Hanging block (docs/verification.md) with CPDI1 and CPDI2 domains on 1 and 2 ranks, structured
 quadrilaterals and unstructured triangles: the block stretches to over twice its length and
 stays continuous, and the parallel run equals the serial one. On triangles the stretched
 domains reach cells beyond the ghost layer of the other rank (:mod:`fempm.particles.halo`)."""

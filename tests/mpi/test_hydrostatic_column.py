@@ -1,4 +1,4 @@
-"""Hydrostatic column (VERIFICATION.md section 7): gravity, slip walls along two normals,
+"""Hydrostatic column (docs/verification.md): gravity, slip walls along two normals,
 PIC damping to rest; sigma_yy = -rho g (H - Y), base value -rho g H = -1765.8 Pa."""
 
 import dolfinx.mesh as dm

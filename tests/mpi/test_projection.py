@@ -158,7 +158,7 @@ def test_parallel_equals_serial(name, degree, mass):
 @pytest.mark.parametrize("mass", ["lumped", "consistent"])
 def test_per_volume_fields_are_volume_weighted(mass):
     """Stress-like (per-volume) data across a density jump (rho = 1 | 10): the volume-weighted
-    map (seed 001's density-ratio kernel) conserves the integral sum_p V_p sigma_p; the
+    map (the density-ratio kernel) conserves the integral sum_p V_p sigma_p; the
     mass-weighted one does not. Both reproduce constants; the consistent one linear fields."""
     import dolfinx.mesh as dm
 

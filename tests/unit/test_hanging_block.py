@@ -1,4 +1,4 @@
-"""Hanging block under extreme self-weight (VERIFICATION.md section 6), structured quads,
+"""Hanging block under extreme self-weight (docs/verification.md), structured quads,
 3x3 particles per cell: standard MPM separates, CPDI1 stretches continuously."""
 
 from fempm.scenes import hanging_block, largest_neighbour_gap

@@ -1,4 +1,4 @@
-"""Implied particle basis functions (seed 000 eq. 16.30; seed 001): the properties that hold
+"""Implied particle basis functions (docs/particle_basis.md): the properties that hold
 exactly, the ones that do not, and the PETSc projection against the dense formula."""
 
 import numpy as np
