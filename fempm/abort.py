@@ -31,6 +31,8 @@ from typing import TYPE_CHECKING, NoReturn
 if TYPE_CHECKING:  # mpi4py is imported where it is used: the command line imports this module first
     from mpi4py import MPI
 
+__all__ = ["AGREE_TIMEOUT", "GRACE", "FailureAgreement", "abort", "abort_on_error"]
+
 #: seconds between the failing rank's message and MPI_Abort
 GRACE = 1.0
 #: seconds the ranks that caught an exception wait for the others to catch one as well

@@ -45,6 +45,8 @@ from fempm.stepping.options import SimulationError
 from fempm.studies import convergence, error_vs_time, mapping, particle_basis, stability
 from fempm.transfer.mapping import SingularMassError
 
+__all__ = ["UsageError", "main"]
+
 
 class UsageError(SystemExit):
     """A mistake in the command line: its message on one line, exit code 2, no traceback."""

@@ -11,6 +11,11 @@ import numpy as np
 import numpy.typing as npt
 from petsc4py import PETSc
 
+__all__ = [
+    "DEFAULT_KSP_OPTIONS", "converged_reason_name", "coo_matrix", "coo_pattern", "create_ksp",
+    "local_to_global_map", "owned_index_set", "set_up_now", "solve_from", "sub_ksps", "temporary_options",
+]
+
 
 def local_to_global_map(index_map: dolfinx.common.IndexMap) -> PETSc.LGMap:
     n = index_map.size_local + index_map.num_ghosts

@@ -26,6 +26,8 @@ import numpy as np
 import numpy.typing as npt
 from mpi4py import MPI
 
+__all__ = ["Patches", "components", "depth_shares"]
+
 
 @dataclass(frozen=True)
 class Patches:

@@ -27,6 +27,11 @@ from fempm.boundary.coulomb import coulomb
 from fempm.boundary.patches import Patches, depth_shares
 from fempm.transfer.centres import NodalCentres
 
+__all__ = [
+    "Fixed", "Friction", "Prescribed", "Slip", "fixed", "fixed_on_facets", "friction", "locate_dofs",
+    "prescribed", "slip",
+]
+
 
 @dataclass(frozen=True)
 class Fixed:

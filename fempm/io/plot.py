@@ -11,6 +11,11 @@ import numpy.typing as npt
 
 from fempm.particles.particle_set import Particles
 
+__all__ = [
+    "plot_convergence", "plot_curves", "plot_energies", "plot_error_vs_time", "plot_pareto",
+    "plot_particle_frame", "plot_projection", "plot_stability",
+]
+
 
 def _gather(comm, a: npt.NDArray) -> npt.NDArray:
     parts = comm.gather(a, root=0)

@@ -15,6 +15,8 @@ from xml.sax.saxutils import quoteattr
 import numpy as np
 import numpy.typing as npt
 
+__all__ = ["write_collection", "write_index", "write_piece"]
+
 _TYPES = {np.dtype(np.float64): "Float64", np.dtype(np.int64): "Int64", np.dtype(np.int32): "Int32",
           np.dtype(np.uint8): "UInt8"}
 _ORDER = "LittleEndian" if sys.byteorder == "little" else "BigEndian"

@@ -6,6 +6,8 @@ from __future__ import annotations
 import os
 from collections.abc import Callable
 
+__all__ = ["pick"]
+
 try:
     import numba  # noqa: F401
 

@@ -22,6 +22,8 @@ import numpy as np
 
 from fempm.kernels.shape import AVAILABLE, CELLS
 
+__all__ = ["cell_mass"]
+
 if AVAILABLE:
     from numba import njit
 

@@ -20,6 +20,8 @@ import numpy.typing as npt
 
 from fempm.kernels.choice import pick
 
+__all__ = ["g2p_point", "g2p_point_numpy", "velocity_and_gradient", "velocity_and_gradient_numpy"]
+
 
 def g2p_point_numpy(dofs, S, G, v_new, v_old, vp, flip):
     """Reference: (v_p^+, grid velocity at the particles, L_p)."""

@@ -18,6 +18,11 @@ import numpy.typing as npt
 
 from fempm.kernels.choice import pick
 
+__all__ = [
+    "deform", "deform_numpy", "linear_elastic_stress", "linear_elastic_stress_numpy", "neo_hookean_stress",
+    "neo_hookean_stress_numpy", "skew", "sym",
+]
+
 
 def sym(A: npt.NDArray) -> npt.NDArray:
     """(A + A^T) / 2 for a batch A (n, d, d)."""

@@ -46,6 +46,8 @@ from fempm.kernels.particle_checks import (
 )
 from fempm.kernels.shape import AVAILABLE, CELLS
 
+__all__ = ["kernels_for"]
+
 if AVAILABLE:
     from numba import njit
 

@@ -14,6 +14,8 @@ import numpy.typing as npt
 
 from fempm.kernels.choice import pick
 
+__all__ = ["nodal_forces", "nodal_forces_numpy"]
+
 
 def nodal_forces_numpy(dofs, S, G, volume, sigma, fext, ndofs):
     contrib = -volume[:, None, None] * np.einsum("nae,nce->nac", G, sigma) + S[:, :, None] * fext[:, None, :]

@@ -24,6 +24,8 @@ import numpy as np
 from fempm.kernels.particle_checks import LINEAR_ELASTIC, NEO_HOOKEAN
 from fempm.kernels.shape import AVAILABLE
 
+__all__ = ["g2p_kernel", "scatter_kernel"]
+
 if AVAILABLE:
     from numba import njit
 

@@ -26,6 +26,11 @@ import numpy.typing as npt
 from fempm.kernels.choice import pick
 from fempm.kernels.kinematics import skew, sym
 
+__all__ = [
+    "drucker_prager_return", "drucker_prager_return_numpy", "jaumann_trial", "jaumann_trial_numpy", "split",
+    "to3", "von_mises_return", "von_mises_return_numpy",
+]
+
 
 def to3(sigma: npt.NDArray, zz: npt.NDArray | None) -> npt.NDArray:
     """(n, d, d) stresses as (n, 3, 3), with ``zz`` the out-of-plane stress in 2D."""

@@ -26,6 +26,8 @@ import numpy.typing as npt
 
 from fempm.kernels.choice import COMPILED
 
+__all__ = ["AVAILABLE", "CELLS", "affine_basis", "affine_pull_back", "near_pull_back", "vertex_star_pull_back"]
+
 try:
     from numba import njit
 except ImportError:  # pragma: no cover - numba is a dependency

@@ -11,6 +11,8 @@ import numpy.typing as npt
 from fempm.arguments import check_numbers
 from fempm.kernels.kinematics import skew, sym  # noqa: F401  (the materials' tensor helpers)
 
+__all__ = ["Internal", "IsotropicElastic", "Material", "identity", "lame", "trace"]
+
 
 @dataclass(frozen=True)
 class Internal:

@@ -59,6 +59,8 @@ from fempm.kernels.plasticity import drucker_prager_return, split
 from fempm.materials.base import Internal
 from fempm.materials.hypoelastic import SIGMA_ZZ, HypoelasticPlastic
 
+__all__ = ["DruckerPrager", "cone", "plane_strain_cone"]
+
 
 def cone(angle_deg: float, d: int) -> tuple[float, float]:
     """(eta, xi) of the Mohr-Coulomb match of associated flow for an angle in degrees: plane

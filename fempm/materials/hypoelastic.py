@@ -25,6 +25,8 @@ import numpy.typing as npt
 from fempm.kernels.plasticity import jaumann_trial, split, to3
 from fempm.materials.base import Internal, IsotropicElastic
 
+__all__ = ["SIGMA_ZZ", "HypoelasticPlastic"]
+
 #: the out-of-plane stress of a plane-strain state
 SIGMA_ZZ = Internal("sigma_zz")
 

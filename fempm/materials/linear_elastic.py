@@ -15,6 +15,8 @@ import numpy.typing as npt
 from fempm.kernels.kinematics import linear_elastic_stress, sym
 from fempm.materials.base import IsotropicElastic, identity, trace
 
+__all__ = ["LinearElastic"]
+
 
 @dataclass(frozen=True)
 class LinearElastic(IsotropicElastic):

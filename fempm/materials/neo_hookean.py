@@ -13,6 +13,8 @@ import numpy.typing as npt
 from fempm.kernels.kinematics import neo_hookean_stress
 from fempm.materials.base import IsotropicElastic, identity
 
+__all__ = ["NeoHookean"]
+
 
 @dataclass(frozen=True)
 class NeoHookean(IsotropicElastic):

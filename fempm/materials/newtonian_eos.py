@@ -15,6 +15,8 @@ from fempm.arguments import check_numbers
 from fempm.kernels.kinematics import sym
 from fempm.materials.base import identity, trace
 
+__all__ = ["NewtonianTait"]
+
 
 @dataclass(frozen=True)
 class NewtonianTait:

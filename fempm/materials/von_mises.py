@@ -27,6 +27,8 @@ from fempm.kernels.plasticity import split, von_mises_return
 from fempm.materials.base import Internal
 from fempm.materials.hypoelastic import SIGMA_ZZ, HypoelasticPlastic
 
+__all__ = ["VonMises"]
+
 
 @dataclass(frozen=True)
 class VonMises(HypoelasticPlastic):

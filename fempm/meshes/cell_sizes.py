@@ -7,6 +7,8 @@ import numpy.typing as npt
 
 from fempm.meshes.geometry import CHUNK, coordinate_map
 
+__all__ = ["cell_sizes"]
+
 
 def cell_sizes(mesh) -> npt.NDArray:
     """Smallest vertex-to-vertex distance of each local cell (the CFL length)."""

@@ -12,6 +12,8 @@ from pathlib import Path
 import dolfinx
 from mpi4py import MPI
 
+__all__ = ["MESHES", "MeshFileError", "read_msh", "unstructured_box", "unstructured_polygon", "unstructured_rectangle"]
+
 #: the gmsh meshes that ship with fempm (demos, tests, scenes)
 MESHES = Path(__file__).resolve().parents[2] / "meshes"
 

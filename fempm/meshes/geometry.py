@@ -19,6 +19,8 @@ import numpy as np
 import numpy.typing as npt
 from mpi4py import MPI
 
+__all__ = ["CHUNK", "SIMPLICES", "CellGeometry", "coordinate_map"]
+
 SIMPLICES = {"interval", "triangle", "tetrahedron"}
 #: cells per chunk of the whole-mesh set-up (bounds its temporaries)
 CHUNK = 65536

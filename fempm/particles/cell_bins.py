@@ -8,6 +8,8 @@ import numpy.typing as npt
 
 from fempm.meshes.geometry import CellGeometry
 
+__all__ = ["CellBins"]
+
 
 class CellBins:
     """Bounding boxes of a set of cells, hashed into a uniform grid of bins of about one cell

@@ -8,6 +8,8 @@ import itertools
 import numpy as np
 import numpy.typing as npt
 
+__all__ = ["box_corners", "corner_signs", "domain_geometry"]
+
 
 def corner_signs(d: int) -> npt.NDArray:
     """The :math:`2^d` corner sign vectors :math:`s \\in \\{\\pm 1\\}^d`, the first axis slowest."""

@@ -29,6 +29,8 @@ import numpy.typing as npt
 
 from fempm.particles.location import CellLocator, lowest_finding_rank
 
+__all__ = ["RemoteBoxRows", "RemoteRows", "extend_index_map", "remote_box_rows", "remote_rows"]
+
 #: MPI tag of the extended index map's neighbourhood set-up
 _TAG = 7411
 

@@ -19,6 +19,8 @@ from fempm.kernels import shape as shape_kernels
 from fempm.meshes.geometry import SIMPLICES, CellGeometry
 from fempm.particles.cell_bins import CellBins
 
+__all__ = ["LOCATE_CHUNK", "CellLocator", "OutsideMeshError", "as_points3", "lowest_finding_rank", "outside_message"]
+
 #: points located at a time (bounds the memory of the candidate lists)
 LOCATE_CHUNK = 65536
 

@@ -18,6 +18,8 @@ import numpy.typing as npt
 from fempm.kernels.shape import AVAILABLE
 from fempm.particles.location import CellLocator, lowest_finding_rank
 
+__all__ = ["SLACK", "Distributed", "distribute", "migrate", "pack", "replace_rows", "unpack", "with_room"]
+
 #: spare rows, as a fraction, of particle arrays that grow (:func:`replace_rows`) or are rebuilt
 #: (:meth:`fempm.particles.Particles.sort_by_cell`)
 SLACK = 0.05

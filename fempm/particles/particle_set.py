@@ -19,6 +19,8 @@ from mpi4py import MPI
 from fempm.particles.location import CellLocator, OutsideMeshError, outside_message
 from fempm.particles.migration import distribute, migrate, with_room
 
+__all__ = ["OutsidePolicy", "Particles"]
+
 log = logging.getLogger("fempm")
 
 OutsidePolicy = Literal["raise", "remove"]

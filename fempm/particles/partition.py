@@ -27,6 +27,8 @@ from mpi4py import MPI
 
 from fempm.meshes.geometry import coordinate_map
 
+__all__ = ["BISECTIONS", "particle_balanced", "rcb_parts"]
+
 #: bisection steps of each cut (the cut is then within 2^-50 of the box's side)
 BISECTIONS = 50
 

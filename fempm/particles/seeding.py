@@ -26,6 +26,8 @@ from fempm.particles.corners import box_corners, domain_geometry
 from fempm.particles.location import CellLocator, as_points3
 from fempm.particles.particle_set import Particles
 
+__all__ = ["create_particles", "hashed_uniform", "per_direction", "reference_pattern"]
+
 _TDIM = {"interval": 1, "triangle": 2, "quadrilateral": 2, "tetrahedron": 3, "hexahedron": 3}
 
 

@@ -20,6 +20,11 @@ from fempm.stepping.loads import Loads
 from fempm.stepping.options import StepOptions
 from fempm.stepping.solver import ExplicitSolver
 
+__all__ = [
+    "MAX_STEPS", "OUTPUTS", "VARIANTS", "Scene", "check_counts", "check_finite", "dofs_per_cell",
+    "emptiest_cell",
+]
+
 
 def check_counts(**counts: int) -> None:
     """Scene builders' counts (cells, particles per cell, frames, ...) must be positive

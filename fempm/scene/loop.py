@@ -23,6 +23,8 @@ from fempm.stepping.options import SimulationError
 from fempm.stepping.solver import ExplicitSolver
 from fempm.transfer.mapping import SingularMassError
 
+__all__ = ["RUN_STATS", "Run", "outcome_of", "run", "run_stats", "write_frame"]
+
 #: the run summary's cost figures that demos report with their own results
 RUN_STATS = ("steps", "particles", "particle_steps_per_s", "terms_assembled")
 

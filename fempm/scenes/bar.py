@@ -12,6 +12,8 @@ from fempm.particles.seeding import create_particles, per_direction
 from fempm.scene.definition import Scene, check_counts
 from fempm.stepping.options import StepOptions
 
+__all__ = ["vibrating_bar"]
+
 
 def vibrating_bar(
     cells: int = 16, ppc: int | None = None, scheme: str = "MUSL", flip: float = 1.0, mass: str = "lumped",

@@ -17,6 +17,8 @@ from fempm.stepping.loads import Loads
 from fempm.stepping.options import StepOptions
 from fempm.transfer.domains import step_domain
 
+__all__ = ["hanging_block", "largest_neighbour_gap"]
+
 
 def hanging_block(
     cells: int = 10, ppc: int = 9, domain: str = "point", mesh: str = "structured", scheme: str = "MUSL",

@@ -16,6 +16,8 @@ from fempm.stepping.options import StepOptions
 from fempm.transfer.domains import step_domain
 from fempm.transfer.mass_models import mass_model
 
+__all__ = ["cantilever", "cantilever_reference", "cantilever_tip"]
+
 
 def cantilever_reference(L: float = 0.7, H: float = 0.047, E: float = 6e7, rho: float = 1000.0,
                          g: float = 10.0) -> dict[str, float]:

@@ -26,6 +26,8 @@ from fempm.scene.definition import Scene, check_counts
 from fempm.stepping.loads import Loads
 from fempm.stepping.options import StepOptions
 
+__all__ = ["RUNOUT_LAWS", "column_collapse", "deposit", "published_runout"]
+
 #: the experimental runout laws :math:`(L_\infty - L_0)/L_0 = c_1 a` for :math:`a < a_1` and
 #: :math:`c_2 a^{2/3}` for :math:`a > a_2` of quasi-two-dimensional columns in channels: Lube,
 #: Huppert, Sparks and Freundt (2005), Phys. Rev. E 72, 041301, and Lajeunesse, Monnier and

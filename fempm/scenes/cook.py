@@ -32,6 +32,11 @@ from fempm.stepping.options import StepOptions
 from fempm.transfer.domains import step_domain
 from fempm.transfer.mass_models import mass_model
 
+__all__ = [
+    "CORNERS", "EDGE", "cook_membrane", "corner_displacement", "fe_reference", "first_frequency",
+    "panel_lattice", "panel_map",
+]
+
 CORNERS = np.array([[0.0, 0.0], [48.0, 44.0], [48.0, 60.0], [0.0, 44.0]])  # A, B, C, D
 EDGE = 16.0  # length of the loaded edge BC
 

@@ -14,6 +14,8 @@ from fempm.stepping.health import Health
 from fempm.stepping.loads import Loads
 from fempm.stepping.options import StepOptions
 
+__all__ = ["MARTIN_MOYCE", "dam_break", "surge_front"]
+
 #: Martin and Moyce (1952), n^2 = 2: surge front Z = x / a against T = t sqrt(2 g / a)
 #: (their Table 2, as tabulated in the dam-break literature).
 MARTIN_MOYCE = np.array([

@@ -13,6 +13,8 @@ from fempm.scene.definition import Scene, check_counts
 from fempm.stepping.contact import Contact
 from fempm.stepping.options import StepOptions
 
+__all__ = ["two_disks"]
+
 
 def two_disks(
     mesh: str = "structured", cells: int = 20, ppc: int = 4, scheme: str = "MUSL", flip: float = 1.0,

@@ -36,6 +36,8 @@ from fempm.scene.definition import Scene, check_counts
 from fempm.stepping.contact import Contact, shared_cells
 from fempm.stepping.options import StepOptions
 
+__all__ = ["PLATE", "disk_impact"]
+
 PLATE = (0.1, 0.9, 0.2)  # x from, x to, thickness
 
 

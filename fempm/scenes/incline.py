@@ -73,6 +73,11 @@ from fempm.stepping.contact import Contact
 from fempm.stepping.loads import Loads
 from fempm.stepping.options import StepOptions
 
+__all__ = [
+    "BLOCK_FLIP", "BODIES", "PLANES", "RIGID_MASS_CUTOFF", "analytic_acceleration", "incline",
+    "slope_acceleration",
+]
+
 BODIES = ("block", "disk")
 #: the PIC/FLIP blend of the block by default: pure FLIP lets the frictional sliding of the
 #: elastic block go unstable (see the module)

@@ -24,6 +24,8 @@ from fempm.stepping.loads import Loads
 from fempm.stepping.options import StepOptions
 from fempm.transfer.domains import step_domain
 
+__all__ = ["MESH_KINDS", "annulus_lattice", "background_mesh", "manufactured_scene"]
+
 MESH_KINDS = ("structured", "triangles", "unstructured")
 
 

@@ -36,6 +36,8 @@ from fempm.transfer.mass_models import MASS_RATIO_ITERATIONS
 if TYPE_CHECKING:
     from fempm.stepping.lumped import PointGrid
 
+__all__ = ["RATIO_EVERY", "ConsistentNodalMass"]
+
 #: steps between two refreshes of the stable-step estimate when ``dt`` is given
 RATIO_EVERY = 20
 

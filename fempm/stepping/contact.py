@@ -68,6 +68,8 @@ from fempm.transfer.mapping import SUPPORT_TOL, mass_centres, p2g, p2g_gradients
 if TYPE_CHECKING:
     from fempm.stepping.solver import ExplicitSolver
 
+__all__ = ["Contact", "ContactGrid", "correct", "shared_cells"]
+
 
 @dataclass(frozen=True)
 class Contact:

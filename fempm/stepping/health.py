@@ -36,6 +36,8 @@ from mpi4py import MPI
 
 from fempm.stepping.loads import external_forces
 
+__all__ = ["Health", "HealthMonitor"]
+
 
 @dataclass(frozen=True)
 class Health:

@@ -8,6 +8,8 @@ from collections.abc import Sequence
 import numpy as np
 import numpy.typing as npt
 
+__all__ = ["law_state", "law_stress", "material_groups"]
+
 
 def law_state(mat, fields: dict, idx: npt.NDArray) -> dict:
     """The internal variables of law ``mat`` at the particles ``idx`` (copies), by name."""

@@ -17,6 +17,11 @@ import numpy as np
 import numpy.typing as npt
 from mpi4py import MPI
 
+__all__ = [
+    "Loads", "body_force_at", "boundary_shares", "external_forces", "surface_areas", "surface_shares",
+    "takes_reference_positions",
+]
+
 
 @dataclass
 class Loads:

@@ -50,6 +50,8 @@ from fempm.transfer.mass_models import Consistent, Lumped
 if TYPE_CHECKING:
     from fempm.stepping.solver import ExplicitSolver
 
+__all__ = ["BOUND_SAFETY", "NODAL_MASSES", "SORT_EVERY", "LumpedNodalMass", "PointGrid", "supported"]
+
 
 #: steps between two sorts of the particles by cell
 SORT_EVERY = 100

@@ -49,6 +49,8 @@ from fempm.transfer.mass_span import (
     share_flags,
 )
 
+__all__ = ["KSP_OPTIONS", "KSP_OPTIONS_PARALLEL", "REFRESH_GROWTH", "SIMPLEX_OPTIONS", "ConsistentSystems"]
+
 #: KSP defaults of the kept systems on one rank (the options prefix overrides them): CG with
 #: incomplete Cholesky, 5-10 iterations where Jacobi takes 50-60 (P1/Q1, 4 particles per cell).
 #: CG stops on the true residual, :math:`\|b - m u\|_2 \le` rtol :math:`\|b\|_2` (unless

@@ -10,6 +10,8 @@ import numpy as np
 if TYPE_CHECKING:
     pass
 
+__all__ = ["kept_nodal_array", "sum_ghosts"]
+
 
 def sum_ghosts(vec) -> None:
     """Ghost contributions of a kept nodal vector to their owners, then the owners' sums back

@@ -10,6 +10,8 @@ from fempm.stepping.schemes import scheme
 from fempm.transfer.domains import step_domain
 from fempm.transfer.mass_models import mass_model
 
+__all__ = ["Scheme", "SimulationError", "StepOptions"]
+
 Scheme = Literal["USL", "USF", "MUSL"]
 
 

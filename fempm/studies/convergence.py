@@ -42,6 +42,11 @@ from fempm.verification import manufactured as mf
 from fempm.verification.errors import ErrorHistory
 from fempm.verification.plastic_impact import plastic_impact
 
+__all__ = [
+    "COLUMNS", "DOMAINS", "FAILURE_COLUMNS", "FIT_SIZES", "PROBLEMS", "SERIES", "Config", "ProblemSpec",
+    "fitted_rates", "max_speed", "read_csv", "run", "run_case", "write_csv", "write_markdown", "write_report",
+]
+
 COLUMNS = ["problem", "mesh", "degree", "variant", "mass", "domain", "scheme", "cells", "h", "dt", "steps",
            "error_max", "error_rms", "error_l2", "wall_s", "status"]
 #: the number of finest ok sizes a rate is fitted over

@@ -36,6 +36,11 @@ from fempm.studies import convergence, mapping
 from fempm.studies.convergence import Config
 from fempm.transfer.domains import half_widths
 
+__all__ = [
+    "COLUMNS", "REPEAT_BELOW_S", "SWEEPS", "Sweep", "pareto", "read_csv", "run_case", "run_study", "threads",
+    "write_csv", "write_report",
+]
+
 COLUMNS = ["problem", "mesh", "degree", "mass", "domain", "scheme", "cells", "ppc", "error", "wall_s", "repeats",
            "threads", "pareto"]
 #: runs faster than this are repeated (3 times) and their median time kept

@@ -46,6 +46,11 @@ from fempm.transfer.mapping import SingularMassError
 from fempm.transfer.projection import Projector
 from fempm.verification.errors import l2_error
 
+__all__ = [
+    "COLUMNS", "MESH_KINDS", "SPACES", "convergence_rates", "domain_average", "make_mesh", "random_fe_function",
+    "run", "run_case", "smooth", "smooth_ufl", "write",
+]
+
 MESH_KINDS = ("structured-tri", "structured-quad", "unstructured-tri")
 SPACES = ((1, "lumped"), (1, "consistent"), (2, "consistent"))
 

@@ -49,6 +49,8 @@ from fempm.transfer.particle_basis import (
     particle_basis_functions,
 )
 
+__all__ = ["BASE_SHIFT", "PROPERTIES", "linear_fields", "measure", "property_table", "run", "write_markdown"]
+
 # -- properties ---------------------------------------------------------------------------------
 
 def _interior_particles(b: Body, margin: float) -> np.ndarray:

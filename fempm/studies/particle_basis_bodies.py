@@ -21,6 +21,11 @@ from fempm.transfer.particle_basis import (
     psi,
 )
 
+__all__ = [
+    "ALG_TOL", "COMM", "DENSITIES", "DOMAINS", "OPTIONS", "OPTION_NAMES", "TOL", "Body", "body", "line_body",
+    "line_mesh", "quad_body", "quad_mesh", "tri_body", "tri_mesh",
+]
+
 COMM = MPI.COMM_SELF
 OPTIONS = ("lumped", "consistent", "partial")
 DOMAINS = {"point": Point(), "gimp": GIMP(order=4, deform=True), "cpdi1": CPDI1(), "cpdi2": CPDI2()}

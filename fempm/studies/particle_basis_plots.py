@@ -18,6 +18,8 @@ from fempm.studies.particle_basis_bodies import (
     tri_body,
 )
 
+__all__ = ["MOTIONS", "figures_1d", "figures_2d"]
+
 MOTIONS = {
     "translation": [dict(shift=0.0), dict(shift=0.25), dict(shift=0.5)],
     "stretching": [dict(A=[[1.0]]), dict(A=[[1.25]]), dict(A=[[1.5]])],

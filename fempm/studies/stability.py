@@ -36,6 +36,11 @@ from fempm.stepping.options import SimulationError
 from fempm.studies.stability_cases import CASES
 from fempm.transfer.mapping import SingularMassError
 
+__all__ = [
+    "BASE", "CFLS", "COLUMNS", "MUSL_VARIATIONS", "VARIATIONS", "label", "options_for", "read_csv", "run_one",
+    "run_study", "write_csv", "write_markdown", "write_report",
+]
+
 COLUMNS = ["case", "option", "outcome", "reason", "energy_ratio", "momentum_drift", "j_min", "j_max", "steps", "wall_s"]
 
 #: the transfer options every case runs with: one factor at a time from the default

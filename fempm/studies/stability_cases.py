@@ -57,6 +57,12 @@ from fempm.scenes.disks import two_disks
 from fempm.scenes.impact import disk_impact
 from fempm.scenes.incline import incline
 
+__all__ = [
+    "CASES", "cfl_case", "column", "contact_disks", "contact_impact", "contact_rolling", "high_velocity",
+    "homogeneous", "long_run", "near_empty_cells", "nearly_incompressible", "plastic_impact", "sliver_cells",
+    "sliver_mesh", "sparse_disks", "two_body_bar",
+]
+
 
 def _disks(quick: bool, comm, **kw) -> Scene:
     kw = {"cells": 10 if quick else 20, "t_end": 2.5 if quick else 3.0, **kw}

@@ -26,6 +26,8 @@ from fempm.particles.particle_set import Particles
 from fempm.transfer.box_average import BoxIntegrator
 from fempm.transfer.domains import make_domain
 
+__all__ = ["ParticleBasis", "is_nonnegative"]
+
 
 def is_nonnegative(element: basix.finite_element.FiniteElement) -> bool:
     """Whether every basis function is non-negative (linear Lagrange or Bernstein)."""

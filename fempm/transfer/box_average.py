@@ -34,6 +34,8 @@ import numpy.typing as npt
 from fempm.meshes.geometry import CellGeometry
 from fempm.particles.cell_bins import CellBins
 
+__all__ = ["BoxIntegrals", "BoxIntegrator", "clip_simplices"]
+
 #: the simplices of one reference cell, as indices into its geometry nodes (DOLFINx order)
 _SPLIT = {
     "interval": [[0, 1]],

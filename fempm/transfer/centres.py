@@ -6,6 +6,8 @@ from typing import NamedTuple
 
 import numpy.typing as npt
 
+__all__ = ["NodalCentres"]
+
 
 class NodalCentres(NamedTuple):
     r"""What a wall that checks contact by position needs of the step: the nodal centres of mass

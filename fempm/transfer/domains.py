@@ -59,6 +59,11 @@ import numpy.typing as npt
 from fempm.particles.corners import corner_signs, domain_geometry
 from fempm.particles.particle_set import Particles
 
+__all__ = [
+    "CPDI1", "CPDI2", "DOMAINS", "GIMP", "GIMP_NAMES", "Domain", "Point", "Samples", "half_widths",
+    "make_domain", "step_domain",
+]
+
 
 @dataclass
 class Samples:

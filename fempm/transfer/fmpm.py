@@ -30,6 +30,8 @@ import numpy.typing as npt
 
 from fempm.transfer.mapping import p2g
 
+__all__ = ["fmpm_solve"]
+
 
 def fmpm_solve(basis, weights: npt.NDArray, lumped: npt.NDArray, b: npt.NDArray, free: npt.NDArray[np.bool_],
                order: int, full, lump: npt.NDArray[np.bool_] | None = None) -> npt.NDArray:

@@ -15,6 +15,11 @@ from fempm.particles.particle_set import Particles
 from fempm.transfer.basis import ParticleBasis
 from fempm.transfer.centres import NodalCentres
 
+__all__ = [
+    "SUPPORT_TOL", "WEIGHTS", "SingularMassError", "cell_blocks", "consistent_mass_matrix", "lumped_mass",
+    "mass_centres", "nodal_centroids", "p2g", "p2g_gradients", "particle_weights", "sum_over_ranks",
+]
+
 #: a dof is supported when its diagonal (consistent) or lumped mass exceeds this fraction
 #: of the largest one
 SUPPORT_TOL = 1e-14

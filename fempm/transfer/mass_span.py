@@ -34,6 +34,11 @@ from fempm import petsc as fpetsc
 from fempm.kernels.shape import AVAILABLE
 from fempm.transfer.mapping import SingularMassError, sum_over_ranks
 
+__all__ = [
+    "DENSE_LIMIT", "RANK_TOL", "check_nonsingular", "mass_ratio_estimate", "mass_ratio_ksp", "mass_ratio_rhs",
+    "share_flags", "singular_dofs",
+]
+
 if AVAILABLE:
     from fempm.kernels.consistent import adjacency, eigenvalue_bounds, propagate
 

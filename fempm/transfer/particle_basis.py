@@ -31,6 +31,8 @@ from fempm.particles.particle_set import Particles
 from fempm.transfer.basis import ParticleBasis
 from fempm.transfer.projection import Projector
 
+__all__ = ["OPTIONS", "dense_operator", "partially_lumped_psi", "particle_basis_functions", "psi"]
+
 OPTIONS = {"lumped": "option 1", "consistent": "option 2"}
 
 

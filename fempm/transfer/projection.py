@@ -49,6 +49,8 @@ from fempm.transfer.mass_span import (
     mass_ratio_rhs,
 )
 
+__all__ = ["MassMode", "Projector", "interpolate", "project"]
+
 log = logging.getLogger("fempm")
 
 MassMode = Literal["consistent", "lumped", "fmpm"] | str  # also "fmpmK", "fmpm(K)"

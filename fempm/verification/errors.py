@@ -7,6 +7,8 @@ import numpy as np
 import ufl
 from mpi4py import MPI
 
+__all__ = ["ErrorHistory", "l2_error", "particle_errors"]
+
 
 def l2_error(uh: dolfinx.fem.Function, exact) -> float:
     r""":math:`\|u_h - u\|_{L^2}` with ``exact`` a UFL expression (use

@@ -44,6 +44,8 @@ import numpy.typing as npt
 from fempm.materials.von_mises import VonMises
 from fempm.verification.problem import Problem, as_columns
 
+__all__ = ["PlasticImpact", "plastic_impact"]
+
 
 @dataclass(frozen=True)
 class PlasticImpact(Problem):

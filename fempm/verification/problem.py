@@ -7,6 +7,8 @@ from dataclasses import dataclass, field
 import numpy as np
 import numpy.typing as npt
 
+__all__ = ["Problem", "as_columns"]
+
 
 def as_columns(X: npt.ArrayLike, dim: int) -> npt.NDArray:
     X = np.asarray(X, dtype=np.float64)

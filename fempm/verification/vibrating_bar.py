@@ -10,6 +10,8 @@ import numpy.typing as npt
 from fempm.materials.linear_elastic import LinearElastic
 from fempm.verification.problem import Problem, as_columns
 
+__all__ = ["VibratingBar", "vibrating_bar"]
+
 
 @dataclass(frozen=True)
 class VibratingBar(Problem):

@@ -183,3 +183,24 @@ def test_the_reader_sees_imports_in_functions_and_skips_type_checking(source, ex
     visitor = Imports("fempm.x", False)
     visitor.visit(ast.parse(source))
     assert visitor.in_functions == expected
+
+
+def test_every_module_declares_its_public_names():
+    """``__all__`` in every module that defines public names, and every name in it defined."""
+    import importlib
+
+    missing, undefined = [], []
+    for name, path in MODULES.items():
+        if name == "fempm.__main__":
+            continue
+        tree = ast.parse(path.read_text())
+        declared = [n for n in tree.body if isinstance(n, ast.Assign)
+                    and any(isinstance(t, ast.Name) and t.id == "__all__" for t in n.targets)]
+        defines = any(isinstance(n, (ast.FunctionDef, ast.ClassDef)) and not n.name.startswith("_") for n in tree.body)
+        if not declared:
+            if defines:
+                missing.append(name)
+            continue
+        module = importlib.import_module(name)
+        undefined += [f"{name}.{n}" for n in module.__all__ if not hasattr(module, n)]
+    assert missing == [] and undefined == []
