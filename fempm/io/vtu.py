@@ -8,6 +8,7 @@ build)."""
 from __future__ import annotations
 
 import base64
+import os
 import sys
 from pathlib import Path
 from xml.sax.saxutils import quoteattr
@@ -15,7 +16,7 @@ from xml.sax.saxutils import quoteattr
 import numpy as np
 import numpy.typing as npt
 
-__all__ = ["write_collection", "write_index", "write_piece"]
+__all__ = ["write_atomic", "write_collection", "write_index", "write_piece"]
 
 _TYPES = {np.dtype(np.float64): "Float64", np.dtype(np.int64): "Int64", np.dtype(np.int32): "Int32",
           np.dtype(np.uint8): "UInt8"}
@@ -70,12 +71,23 @@ def write_index(path: Path, pieces: list[str], x: npt.NDArray, data: dict[str, n
     out += ["</PPointData>\n<PPoints>\n", _declare(np.asarray(x, dtype=np.float64)), "</PPoints>\n"]
     out += [f"<Piece Source={quoteattr(p)}/>\n" for p in pieces]
     out += ["</PUnstructuredGrid>\n</VTKFile>\n"]
-    Path(path).write_text("".join(out))
+    write_atomic(path, "".join(out))
 
 
 def write_collection(path: Path, frames: list[tuple[float, str]]) -> None:
-    """The ``.pvd`` time collection of (time, file relative to ``path``'s folder) frames."""
+    """The ``.pvd`` time collection of (time, file relative to ``path``'s folder) frames,
+    written atomically (:func:`write_atomic`): a run killed while it rewrites the collection
+    leaves the one before."""
     out = [_HEADER.format("Collection"), "<Collection>\n"]
     out += [f'<DataSet timestep="{float(t)!r}" part="0" file={quoteattr(f)}/>\n' for t, f in frames]
     out += ["</Collection>\n</VTKFile>\n"]
-    Path(path).write_text("".join(out))
+    write_atomic(path, "".join(out))
+
+
+def write_atomic(path: Path, text: str) -> None:
+    """``text`` into ``path`` through a temporary file beside it and ``os.replace``: the file
+    holds the new text or the old one, never part of either. Local: any rank may call it."""
+    path = Path(path)
+    tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
+    tmp.write_text(text)
+    os.replace(tmp, path)

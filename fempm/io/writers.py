@@ -16,7 +16,6 @@ from __future__ import annotations
 
 import csv
 import json
-import os
 import shutil
 from collections.abc import Callable
 from pathlib import Path
@@ -94,10 +93,7 @@ def make_folder(folder: Path, comm, *, keep: bool = True, overwrite: bool = Fals
 def write_json(path: Path, data: dict) -> None:
     """``data`` as JSON into ``path``, atomically (a complete file or the one before; numpy
     numbers as plain ones). Local: any rank may call it."""
-    path = Path(path)
-    tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
-    tmp.write_text(json.dumps(data, indent=2, default=float))
-    os.replace(tmp, path)
+    vtu.write_atomic(path, json.dumps(data, indent=2, default=float))
 
 
 def _everywhere(comm: MPI.Comm, what: str, action: Callable[[], None], *, root_only: bool = False) -> None:
@@ -115,9 +111,13 @@ def _everywhere(comm: MPI.Comm, what: str, action: Callable[[], None], *, root_o
 
 
 def _read_times(path: Path) -> list[tuple[int, float]]:
+    """The (frame, time) rows of a times file; a last line a kill cut short (no newline yet) is
+    not one."""
     if not path.exists():
         return []
-    return [(int(k), float(t)) for k, t in (line.split(",") for line in path.read_text().splitlines() if line)]
+    text = path.read_text()
+    complete = text[: text.rfind("\n") + 1]
+    return [(int(k), float(t)) for k, t in (line.split(",") for line in complete.splitlines() if line)]
 
 
 #: a run whose outputs would exceed this many bytes stops before it starts, unless allowed
@@ -219,7 +219,7 @@ class FrameSeries:
         checkpoint) and rewrite the times and the collection; rank 0 only."""
         self.frames = [(k, t) for k, t in _read_times(self.times_path) if k < frames]
         if self.times_path.exists():
-            self.times_path.write_text("".join(f"{k},{t!r}\n" for k, t in self.frames))
+            vtu.write_atomic(self.times_path, "".join(f"{k},{t!r}\n" for k, t in self.frames))
         for q in self.folder.glob(f"{self.stem}_*.*vtu"):
             number = q.stem[len(self.stem) + 1:].split("_")[0]
             if number.isdigit() and int(number) >= frames:
