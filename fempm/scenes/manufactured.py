@@ -74,19 +74,20 @@ def annulus_lattice(r_in: float, r_out: float, spacing: float) -> tuple[np.ndarr
 def _body_particles(problem, mesh, h: float, ppc: int, domain: str) -> Particles:
     """The problem's body at its reference positions (particles not yet displaced)."""
     comm = mesh.comm
+    corners = step_domain(domain).tracks_corners  # each particle its domain, tracked by its corners
     if problem.name == "generalized_vortex":
         spacing = h / round(ppc ** (1 / problem.dim))
         X, vol, C = annulus_lattice(problem.r_in, problem.r_out, spacing)
         if comm.rank != 0:
             X, vol, C = X[:0], vol[:0], C[:0]
-        fields = {"corners": C} if step_domain(domain).tracks_corners else {}
+        fields = {"corners": C} if corners else {}
         return Particles(mesh, X, problem.rho0 * vol, vol, fields=fields)
     lo, hi = np.array(problem.lower), np.array(problem.upper)
 
     def in_body(x):
         return np.all((x[: problem.dim].T >= lo - 1e-12) & (x[: problem.dim].T <= hi + 1e-12), axis=1)
 
-    return create_particles(mesh, ppc, density=problem.rho0, cells=in_body, corners=step_domain(domain).tracks_corners)
+    return create_particles(mesh, ppc, density=problem.rho0, cells=in_body, corners=corners)
 
 
 def _start_displaced(problem, particles: Particles) -> None:

@@ -228,8 +228,9 @@ class ContactGrid(BasisGrid):
         self.grad = np.stack([p2g_gradients(basis, (p.mass * k)[:, None, None] * np.eye(d)) for k in masks])
         s.count_terms()
         self.force = np.zeros_like(self.grad)
+        fext = self.external()  # once for every group
         for g in deformable:  # rigid groups take no forces
-            self.force[g] = self.internal_and_external(basis, masks[g].astype(np.float64))
+            self.force[g] = self.internal_and_external(basis, fext, masks[g].astype(np.float64))
         self.m_has = np.where(has, m, 0.0)
         self.inv = np.where(has, 1.0 / np.where(has, m, 1.0), 0.0)[:, :, None]
         # per group: a node with a sliver of one body's mass keeps its mapped velocity (a_g = f_g / m_g

@@ -47,7 +47,7 @@ def grid_stress(space: dolfinx.fem.FunctionSpace, particles: Particles, options:
     if mass is None:
         mass = "lumped" if is_nonnegative(space.element.basix_element) else "consistent"
     proj = Projector(space, p, mass=mass, weight="volume", domain=options.particle_domain,
-                     lump_below=options.lump_below if mass == "consistent" else 0.0,
+                     lump_below=options.lump_below,  # only a mass that couples dofs lumps rows
                      petsc_options_prefix=options.petsc_options_prefix + "stress_")
     out = proj.project(p.fields["sigma"].reshape(len(p), d * d))
     out.name = "grid_stress"

@@ -154,13 +154,19 @@ class BasisGrid(Grid):
             return np.where(mass_op.active[:, None], f_grid / np.where(m > 0, m, 1.0)[:, None], 0.0)
         return mass_op.solve(f_grid)
 
-    def internal_and_external(self, basis: ParticleBasis, weights: npt.NDArray | None = None) -> npt.NDArray:
-        r"""Nodal forces :math:`f_i = \sum_p (-V_p \sigma_p \nabla N_{ip} + N_{ip} f^{ext}_p)`,
-        summed over ranks (``weights``: a 0/1 factor per particle, one body's forces); point
-        particles in one compiled scatter (:mod:`fempm.kernels`)."""
+    def external(self) -> npt.NDArray:
+        """The external forces on the particles now (:func:`fempm.stepping.loads.external_forces`)."""
+        s = self.solver
+        return external_forces(s.loads, s.particles, s.t)
+
+    def internal_and_external(self, basis: ParticleBasis, fext: npt.NDArray,
+                              weights: npt.NDArray | None = None) -> npt.NDArray:
+        r"""Nodal forces :math:`f_i = \sum_p (-V_p \sigma_p \nabla N_{ip} + N_{ip} f^{ext}_p)`
+        with the particles' external forces ``fext`` (:meth:`external`), summed over ranks
+        (``weights``: a 0/1 factor per particle, one body's forces); point particles in one
+        compiled scatter (:mod:`fempm.kernels`)."""
         s = self.solver
         p = s.particles
-        fext = external_forces(s.loads, p, s.t)
         volume = p.volume if weights is None else p.volume * weights
         if weights is not None:
             fext = fext * weights[:, None]
@@ -220,15 +226,21 @@ class SingleFieldGrid(BasisGrid):
     def open(self, dt: float | None) -> float:
         s, opts = self.solver, self.options
         p = s.particles
-        self.basis = basis = self.open_basis()
-        self.centroids = nodal_centroids(basis, p.mass, p.x) if s.conditions.needs_positions else None
-        self.mass_op = self.mass_operator(basis)
+        self.use_basis(self.open_basis())
         stable = self.stable_with([self.mass_op])
         support = self.mass_op.support_masses()
         self.weak = support <= opts.mass_cutoff * p.comm.allreduce(float(support.max(initial=0.0)), op=MPI.MAX)
         s.count_terms()
         self.f_grid = None
         return stable
+
+    def use_basis(self, basis: ParticleBasis) -> None:
+        """Map with ``basis``: its nodal centres of mass where a condition needs them, and the
+        step's mass on it (collective)."""
+        p = self.solver.particles
+        self.basis = basis
+        self.centroids = nodal_centroids(basis, p.mass, p.x) if self.solver.conditions.needs_positions else None
+        self.mass_op = self.mass_operator(basis)
 
     def map_velocity(self, guess: npt.NDArray | None) -> npt.NDArray:
         """Grid velocity from the particle momenta (P2G + mass solve), constrained."""
@@ -244,14 +256,11 @@ class SingleFieldGrid(BasisGrid):
         """The grid velocity of the present state (P2G of the momenta, the mass solve and the
         conditions) on the space's dofs, nothing advanced or recorded. Collective."""
         s = self.solver
-        p = s.particles
-        self.basis = ParticleBasis(s.V, p, gradients=False, domain=self.options.particle_domain)
-        self.centroids = nodal_centroids(self.basis, p.mass, p.x) if s.conditions.needs_positions else None
-        self.mass_op = self.mass_operator(self.basis)
+        self.use_basis(ParticleBasis(s.V, s.particles, gradients=False, domain=self.options.particle_domain))
         return self.map_velocity(None)[: self.basis.num_dofs_space]
 
     def forces(self) -> None:
-        self.f_grid = self.internal_and_external(self.basis)
+        self.f_grid = self.internal_and_external(self.basis, self.external())
 
     def advance(self, v_old: npt.NDArray, dt: float) -> npt.NDArray:
         opts = self.options
