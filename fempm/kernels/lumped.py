@@ -99,6 +99,50 @@ if AVAILABLE:
                 v_old[i, j] = vo
                 v_new[i, j] = vo + dt * a
 
+    @njit(inline="always")
+    def gather(N, G, cell_dofs, c, v_new, v_old, blend, kinematics, D, NK, vg, dv, Lp):  # pragma: no cover
+        r"""The sums over the dofs of cell ``c``, each loaded once: :math:`\sum_a N_a v_a^+` into
+        ``vg``, with ``blend`` :math:`\sum_a N_a (v_a^+ - v_a)` into ``dv``, with ``kinematics``
+        :math:`L_p = \sum_a v_a^+ \otimes \nabla N_a` into ``Lp``."""
+        for j in range(D):
+            vg[j] = 0.0
+            dv[j] = 0.0
+            for e in range(D):
+                Lp[j, e] = 0.0
+        for a in range(NK):
+            i = cell_dofs[c, a]
+            w = N[a]
+            for j in range(D):
+                vij = v_new[i, j]
+                vg[j] += w * vij
+                if blend:
+                    dv[j] += w * (vij - v_old[i, j])
+                if kinematics:
+                    for e in range(D):
+                        Lp[j, e] += vij * G[a, e]
+
+    @njit(inline="always")
+    def deform_at(F, p, dt, Lp, D, Fn):  # pragma: no cover - compiled
+        r""":math:`F_p \leftarrow (I + \Delta t L_p) F_p` (``Fn`` scratch); returns :math:`\det F_p`."""
+        for i in range(D):
+            for j in range(D):
+                t = F[p, i, j]
+                for q in range(D):
+                    t += dt * Lp[i, q] * F[p, q, j]
+                Fn[i, j] = t
+        for i in range(D):
+            for j in range(D):
+                F[p, i, j] = Fn[i, j]
+        return _det(F, p)
+
+    @njit(inline="always")
+    def law_at(code, F, p, D, J, lam, mu, sigma):  # pragma: no cover - compiled
+        """``sigma[p]`` of the compiled law ``code`` (else left as it is) from ``F[p]``, J > 0."""
+        if code == NEO_HOOKEAN:
+            neo_hookean_at(F, p, D, J, lam, mu, sigma)
+        elif code == LINEAR_ELASTIC:
+            linear_elastic_at(F, p, D, lam, mu, sigma)
+
 
 @functools.cache
 def kernels_for(cell: str) -> SimpleNamespace:
@@ -227,22 +271,7 @@ def _g2p_kernel(cell: str, blend: bool, kinematics: bool, move: bool, remap: boo
         for p in range(n):
             c = cells[p]
             shape(X, p, K, c, SIMPLEX, D, NK, N, G)
-            for j in range(D):  # sums over the cell's dofs a, each loaded once
-                vg[j] = 0.0
-                dv[j] = 0.0
-                for e in range(D):
-                    Lp[j, e] = 0.0
-            for a in range(NK):
-                i = cell_dofs[c, a]
-                w = N[a]
-                for j in range(D):
-                    vij = v_new[i, j]
-                    vg[j] += w * vij
-                    if blend:
-                        dv[j] += w * (vij - v_old[i, j])
-                    if kinematics:
-                        for e in range(D):
-                            Lp[j, e] += vij * G[a, e]
+            gather(N, G, cell_dofs, c, v_new, v_old, blend, kinematics, D, NK, vg, dv, Lp)
             if blend:
                 for j in range(D):
                     v[p, j] = flip * (v[p, j] + dv[j]) + (1.0 - flip) * vg[j]
@@ -252,24 +281,15 @@ def _g2p_kernel(cell: str, blend: bool, kinematics: bool, move: bool, remap: boo
                     for j in range(D):
                         mom[i, j] += N[a] * (mass[p] * v[p, j])
             if kinematics:
-                for i in range(D):
-                    for j in range(D):
-                        t = F[p, i, j]
-                        for q in range(D):
-                            t += dt * Lp[i, q] * F[p, q, j]
-                        Fn[i, j] = t
-                for i in range(D):
-                    for j in range(D):
-                        F[p, i, j] = Fn[i, j]
-                        if keep_L:
+                J = deform_at(F, p, dt, Lp, D, Fn)
+                if keep_L:
+                    for i in range(D):
+                        for j in range(D):
                             L[p, i, j] = Lp[i, j]
-                J = _det(F, p)
                 volume[p] = J * volume0[p]
                 ok, nonfinite_j, inverted, jmin, jmax = count_j(J, nonfinite_j, inverted, jmin, jmax)
-                if ok and law[body[p]] == NEO_HOOKEAN:
-                    neo_hookean_at(F, p, D, J, lam[body[p]], mu[body[p]], sigma)
-                elif ok and law[body[p]] == LINEAR_ELASTIC:
-                    linear_elastic_at(F, p, D, lam[body[p]], mu[body[p]], sigma)
+                if ok:
+                    law_at(law[body[p]], F, p, D, J, lam[body[p]], mu[body[p]], sigma)
             if move:
                 ok = True
                 speed2 = 0.0

@@ -48,6 +48,52 @@ if AVAILABLE:
                 -X1 * k00 + Y0 * k10, -X1 * k01 + Y0 * k11,
                 X1 * k00 + X0 * k10, X1 * k01 + X0 * k11)
 
+    @njit(inline="always")
+    def add_pair(out, col, i0, i1, i2, i3, N0, N1, N2, N3, q0, q1, quad):  # pragma: no cover - compiled
+        """``out[i_a, col:col+2] += N_a (q0, q1)`` over the cell's dofs (the fourth on a
+        quadrilateral only)."""
+        out[i0, col] += N0 * q0
+        out[i0, col + 1] += N0 * q1
+        out[i1, col] += N1 * q0
+        out[i1, col + 1] += N1 * q1
+        out[i2, col] += N2 * q0
+        out[i2, col + 1] += N2 * q1
+        if quad:
+            out[i3, col] += N3 * q0
+            out[i3, col + 1] += N3 * q1
+
+    @njit(inline="always")
+    def deform(F, p, dt, L00, L01, L10, L11):  # pragma: no cover - compiled
+        r""":math:`F_p \leftarrow (I + \Delta t L) F_p`; returns the new entries and
+        :math:`J = \det F_p`."""
+        f00, f01, f10, f11 = F[p, 0, 0], F[p, 0, 1], F[p, 1, 0], F[p, 1, 1]
+        n00 = f00 + dt * L00 * f00 + dt * L01 * f10
+        n01 = f01 + dt * L00 * f01 + dt * L01 * f11
+        n10 = f10 + dt * L10 * f00 + dt * L11 * f10
+        n11 = f11 + dt * L10 * f01 + dt * L11 * f11
+        F[p, 0, 0], F[p, 0, 1], F[p, 1, 0], F[p, 1, 1] = n00, n01, n10, n11
+        return n00, n01, n10, n11, n00 * n11 - n01 * n10
+
+    @njit(inline="always")
+    def law_stress(sigma, p, code, lam, mu, n00, n01, n10, n11, J):  # pragma: no cover - compiled
+        r"""``sigma[p]`` of the compiled law ``code`` (else left as it is) for
+        :math:`F = [[n_{00}, n_{01}], [n_{10}, n_{11}]]`, :math:`J = \det F > 0`."""
+        if code == NEO_HOOKEAN:
+            inv = 1.0 / J
+            vol = lam * np.log(J)
+            s01 = mu * (n00 * n10 + n01 * n11) * inv
+            sigma[p, 0, 0] = (mu * (n00 * n00 + n01 * n01 - 1.0) + vol) * inv
+            sigma[p, 0, 1] = s01
+            sigma[p, 1, 0] = s01
+            sigma[p, 1, 1] = (mu * (n10 * n10 + n11 * n11 - 1.0) + vol) * inv
+        elif code == LINEAR_ELASTIC:
+            tr = (n00 - 1.0) + (n11 - 1.0)
+            s01 = 2.0 * mu * (0.5 * (n01 + n10))
+            sigma[p, 0, 0] = lam * tr + 2.0 * mu * (n00 - 1.0)
+            sigma[p, 0, 1] = s01
+            sigma[p, 1, 0] = s01
+            sigma[p, 1, 1] = lam * tr + 2.0 * mu * (n11 - 1.0)
+
 
 @functools.cache
 def scatter_kernel(simplex: bool, with_mass: bool, with_momentum: bool, with_force: bool, with_dt: bool,
@@ -79,16 +125,7 @@ def scatter_kernel(simplex: bool, with_mass: bool, with_momentum: bool, with_for
                 if QUAD:
                     out[i3, 0] += N3 * m
             if with_momentum:
-                mv0, mv1 = m * v0, m * v1
-                out[i0, CV] += N0 * mv0
-                out[i0, CV + 1] += N0 * mv1
-                out[i1, CV] += N1 * mv0
-                out[i1, CV + 1] += N1 * mv1
-                out[i2, CV] += N2 * mv0
-                out[i2, CV + 1] += N2 * mv1
-                if QUAD:
-                    out[i3, CV] += N3 * mv0
-                    out[i3, CV + 1] += N3 * mv1
+                add_pair(out, CV, i0, i1, i2, i3, N0, N1, N2, N3, m * v0, m * v1, QUAD)
             if with_force:
                 fe0, fe1 = m * g[0], m * g[1]
                 if has_fext:
@@ -143,16 +180,7 @@ def g2p_kernel(simplex: bool, blend: bool, kinematics: bool, move: bool, remap: 
                 v[p, 0] = flip * (v[p, 0] + dv0) + (1.0 - flip) * vg0
                 v[p, 1] = flip * (v[p, 1] + dv1) + (1.0 - flip) * vg1
             if remap:  # MUSL: the blended momenta back to the grid, in the same pass
-                mv0, mv1 = mass[p] * v[p, 0], mass[p] * v[p, 1]
-                mom[i0, 0] += N0 * mv0
-                mom[i0, 1] += N0 * mv1
-                mom[i1, 0] += N1 * mv0
-                mom[i1, 1] += N1 * mv1
-                mom[i2, 0] += N2 * mv0
-                mom[i2, 1] += N2 * mv1
-                if QUAD:
-                    mom[i3, 0] += N3 * mv0
-                    mom[i3, 1] += N3 * mv1
+                add_pair(mom, 0, i0, i1, i2, i3, N0, N1, N2, N3, mass[p] * v[p, 0], mass[p] * v[p, 1], QUAD)
             if kinematics:
                 L00 = a0 * g0x + a1 * g1x + a2 * g2x
                 L01 = a0 * g0y + a1 * g1y + a2 * g2y
@@ -163,35 +191,14 @@ def g2p_kernel(simplex: bool, blend: bool, kinematics: bool, move: bool, remap: 
                     L01 += a3 * g3y
                     L10 += b3 * g3x
                     L11 += b3 * g3y
-                f00, f01, f10, f11 = F[p, 0, 0], F[p, 0, 1], F[p, 1, 0], F[p, 1, 1]
-                n00 = f00 + dt * L00 * f00 + dt * L01 * f10
-                n01 = f01 + dt * L00 * f01 + dt * L01 * f11
-                n10 = f10 + dt * L10 * f00 + dt * L11 * f10
-                n11 = f11 + dt * L10 * f01 + dt * L11 * f11
-                F[p, 0, 0], F[p, 0, 1], F[p, 1, 0], F[p, 1, 1] = n00, n01, n10, n11
+                n00, n01, n10, n11, J = deform(F, p, dt, L00, L01, L10, L11)
                 if keep_L:
                     L[p, 0, 0], L[p, 0, 1], L[p, 1, 0], L[p, 1, 1] = L00, L01, L10, L11
-                J = n00 * n11 - n01 * n10
                 volume[p] = J * volume0[p]
                 b = body[p]
                 ok, nonfinite_j, inverted, jmin, jmax = count_j(J, nonfinite_j, inverted, jmin, jmax)
-                if ok and law[b] == NEO_HOOKEAN:
-                    inv = 1.0 / J
-                    vol = lam[b] * np.log(J)
-                    m = mu[b]
-                    s01 = m * (n00 * n10 + n01 * n11) * inv
-                    sigma[p, 0, 0] = (m * (n00 * n00 + n01 * n01 - 1.0) + vol) * inv
-                    sigma[p, 0, 1] = s01
-                    sigma[p, 1, 0] = s01
-                    sigma[p, 1, 1] = (m * (n10 * n10 + n11 * n11 - 1.0) + vol) * inv
-                elif ok and law[b] == LINEAR_ELASTIC:
-                    m = mu[b]
-                    tr = (n00 - 1.0) + (n11 - 1.0)
-                    s01 = 2.0 * m * (0.5 * (n01 + n10))
-                    sigma[p, 0, 0] = lam[b] * tr + 2.0 * m * (n00 - 1.0)
-                    sigma[p, 0, 1] = s01
-                    sigma[p, 1, 0] = s01
-                    sigma[p, 1, 1] = lam[b] * tr + 2.0 * m * (n11 - 1.0)
+                if ok:
+                    law_stress(sigma, p, law[b], lam[b], mu[b], n00, n01, n10, n11, J)
             if move:
                 y0 = x[p, 0] + dt * (v[p, 0] if by_particle else vg0)
                 y1 = x[p, 1] + dt * (v[p, 1] if by_particle else vg1)
