@@ -149,21 +149,10 @@ def incline(
     contact with the body
     (:class:`fempm.stepping.contact.Contact` with ``rigid=(1,)``, the gap measured from the layer's own
     nodal centre of mass, which lies :func:`_depth` cells under its surface)."""
-    if body not in BODIES:
-        raise ValueError(f"unknown option body={body!r}; expected one of {', '.join(BODIES)}")
     ppc = (16 if body == "disk" else 4) if ppc is None else ppc
     flip = (1.0 if body == "disk" else BLOCK_FLIP) if flip is None else flip
     gap = (0.5 if body == "disk" else 0.0) if gap is None else gap
-    check_counts(cells=cells, ppc=ppc)
-    per_direction(ppc, 2)
-    if not 0.0 < angle < 90.0:
-        raise ValueError(f"angle={angle} must lie in (0, 90) degrees")
-    if not 0.0 <= friction < np.inf:
-        raise ValueError(f"friction={friction} must be >= 0")
-    if plane not in PLANES:
-        raise ValueError(f"unknown option plane={plane!r}; expected one of {', '.join(PLANES)}")
-    if not 0.0 <= gap < np.inf:
-        raise ValueError(f"gap={gap} must be >= 0 (cells)")
+    _check(body, angle, friction, plane, gap, cells, ppc)
     th = np.radians(angle)
     if t_end is None:
         t_end = max(float(np.sqrt(2.0 * 3.0 * size / (g * np.sin(th)))), 0.2)
@@ -175,31 +164,15 @@ def incline(
     ny = int(np.ceil(1.5 * (2.0 * size if body == "disk" else size) / h)) + 2
     below = 3 if plane == "rigid" else 0  # cells under the plane: the rigid layer and one empty row
     mesh = dm.create_rectangle(comm, [[0.0, -below * h], [nx * h, ny * h]], [nx, ny + below], dm.CellType.quadrilateral)
-    if body == "block":
-        def inside(x):
-            return (x[0] > x0) & (x[0] < x0 + length) & (x[1] < size)
-    else:
-        def inside(x):
-            return np.hypot(x[0] - x0 - size, x[1] - size) < size
-    p = create_particles(mesh, ppc, density=rho, where=inside if plane == "grid" else
-                         lambda x: inside(x) | ((x[1] < 0.0) & (x[1] > -2.0 * h)))
-    group = (p.x[:, 1] < 0.0).astype(np.int32)  # 0 the body, 1 the rigid plane (at rest)
-    p.fields["plane"] = group
-    if body == "block":  # at rest on the slope: the stress of a layer carrying its weight
-        depth = np.where(group == 0, size - p.x[:, 1], 0.0)
-        sigma = np.zeros((len(p), 2, 2))
-        sigma[:, 1, 1] = -rho * g * np.cos(th) * depth
-        sigma[:, 0, 1] = sigma[:, 1, 0] = rho * g * np.sin(th) * depth
-        p.fields["sigma"] = sigma
-        p.fields["sigma_zz"] = nu * sigma[:, 1, 1]  # plane strain
+    p = _particles(mesh, body, plane, ppc, (x0, length, size, h), rho, g * np.cos(th), g * np.sin(th), nu)
     track = _Track()
 
     def results(scene, solver) -> dict:
         return {"acceleration": slope_acceleration(track, scene.t_end),
                 "analytic": analytic_acceleration(body, angle, friction, g)}
 
-    params = dict(body=body, angle=angle, friction=friction, cells=cells, ppc=ppc, size=size, E=E, nu=nu, rho=rho,
-                  g=g, scheme=scheme, flip=flip, cfl=cfl, plane=plane, gap=gap)
+    params = {"body": body, "angle": angle, "friction": friction, "cells": cells, "ppc": ppc, "size": size, "E": E,
+              "nu": nu, "rho": rho, "g": g, "scheme": scheme, "flip": flip, "cfl": cfl, "plane": plane, "gap": gap}
 
     def walls(V):
         if plane == "rigid":
@@ -214,3 +187,45 @@ def incline(
         watch=track, contact=Contact(friction=friction, field="plane", rigid=(1,), mass_cutoff=RIGID_MASS_CUTOFF,
                                      gap=(gap + _depth(ppc)) * h if gap > 0 else None) if plane == "rigid" else None,
     )
+
+
+def _check(body: str, angle: float, friction: float, plane: str, gap: float, cells: int, ppc: int) -> None:
+    """Refuse the options of :func:`incline` it cannot run, naming them."""
+    if body not in BODIES:
+        raise ValueError(f"unknown option body={body!r}; expected one of {', '.join(BODIES)}")
+    check_counts(cells=cells, ppc=ppc)
+    per_direction(ppc, 2)
+    if not 0.0 < angle < 90.0:
+        raise ValueError(f"angle={angle} must lie in (0, 90) degrees")
+    if not 0.0 <= friction < np.inf:
+        raise ValueError(f"friction={friction} must be >= 0")
+    if plane not in PLANES:
+        raise ValueError(f"unknown option plane={plane!r}; expected one of {', '.join(PLANES)}")
+    if not 0.0 <= gap < np.inf:
+        raise ValueError(f"gap={gap} must be >= 0 (cells)")
+
+
+def _particles(mesh, body: str, plane: str, ppc: int, place: tuple[float, float, float, float], rho: float,
+               g_normal: float, g_slope: float, nu: float):
+    """The body's particles (group 0 of the field ``plane``; ``place``: its left end, length, size
+    and the cell size) and, with ``plane="rigid"``, the rigid layer's (group 1). A block starts
+    with the stress of a layer carrying its weight on the slope (plane strain)."""
+    x0, length, size, h = place
+    if body == "block":
+        def inside(x):
+            return (x[0] > x0) & (x[0] < x0 + length) & (x[1] < size)
+    else:
+        def inside(x):
+            return np.hypot(x[0] - x0 - size, x[1] - size) < size
+    p = create_particles(mesh, ppc, density=rho, where=inside if plane == "grid" else
+                         lambda x: inside(x) | ((x[1] < 0.0) & (x[1] > -2.0 * h)))
+    group = (p.x[:, 1] < 0.0).astype(np.int32)  # 0 the body, 1 the rigid plane (at rest)
+    p.fields["plane"] = group
+    if body == "block":  # at rest on the slope: the stress of a layer carrying its weight
+        depth = np.where(group == 0, size - p.x[:, 1], 0.0)
+        sigma = np.zeros((len(p), 2, 2))
+        sigma[:, 1, 1] = -rho * g_normal * depth
+        sigma[:, 0, 1] = sigma[:, 1, 0] = rho * g_slope * depth
+        p.fields["sigma"] = sigma
+        p.fields["sigma_zz"] = nu * sigma[:, 1, 1]  # plane strain
+    return p

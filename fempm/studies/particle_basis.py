@@ -100,17 +100,7 @@ def measure(make: Callable, option: str, domain_name: str, dim: int) -> dict[str
     gx = np.abs(bt.psi(option) - P).max()
     r["x"] = (gx < ALG_TOL, f"{gx:.2g}")
     # (xi) particles translated relative to the grid, and the rate dv_ip/dt = G_i . xdot_p
-    bs = make(dom, shift=s)
-    pts = b.xd[idofs]
-    change = np.abs(bs.at(pts + s) @ bs.psi(option) - b.at(pts) @ P)[:, inner].max()
-    eps = 1e-6 * h
-    e = np.zeros(dim)
-    e[0] = 1.0
-    Sp, Sm = make(dom, shift=0.2 * h * e + eps * e).S, make(dom, shift=0.2 * h * e - eps * e).S
-    b2 = make(dom, shift=0.2 * h * e)
-    _, G = dense_operator(b2.V, b2.particles, dom, gradients=True)
-    rate = np.abs((Sp - Sm) / (2 * eps) - G[:, :, 0]).max() / np.abs(G[:, :, 0]).max()
-    r["xi"] = (change > 1e-6 and rate < 1e-5, f"change {change:.3g}; rate error {rate:.2g}")
+    r["xi"] = _moving_relative(make, dom, option, b, P, idofs, inner, s)
     # (xii) integral of Phi_p constant under translation relative to the grid
     ints = []
     for t in np.linspace(0.0, h, 7, endpoint=False):
@@ -124,19 +114,12 @@ def measure(make: Callable, option: str, domain_name: str, dim: int) -> dict[str
     bd = make(dom, A=A, grid_moves=True)
     lag = np.abs(bd.psi(option) - P).max()
     bf = make(dom, A=A)
+    pts = b.xd[idofs]
     c = 0.5 * (b.xd.min(axis=0) + b.xd.max(axis=0))
     not_lag = np.abs(bf.at(c + (pts - c) @ A.T) @ bf.psi(option) - b.at(pts) @ P)[:, inner].max()
     r["xiii"] = (lag < ALG_TOL, f"with the grid {lag:.2g}; grid fixed {not_lag:.3g}")
     # (xiv) Phi_p is the projection of f_q = delta_pq (PETSc path against the dense formula)
-    pick = inner[:: max(1, len(inner) // 3)][:3]
-    ids = np.sort(b.particles.ids)[pick]
-    try:
-        funcs = particle_basis_functions(b.V, b.particles, ids, option="consistent" if option == "partial" else option,
-                                         domain=dom, lump_below=0.1 if option == "partial" else 0.0)
-        err = max(np.abs(u.x.array - P[:, k]).max() for u, k in zip(funcs, pick))
-        r["xiv"] = (err < ALG_TOL, f"{err:.2g}")
-    except Exception as ex:  # e.g. a singular consistent mass matrix
-        r["xiv"] = (False, f"{type(ex).__name__}")
+    r["xiv"] = _projection_of_delta(b, dom, option, P, inner)
     # support of an interior particle's basis
     k = inner[len(inner) // 2]
     supp = np.mean(np.abs(P[touched, k]) > 1e-10 * np.abs(P[:, k]).max())
@@ -147,6 +130,38 @@ def measure(make: Callable, option: str, domain_name: str, dim: int) -> dict[str
         for key in ("v", "vi", "ix"):
             r[key] = (None, "1D only")
     return r
+
+
+def _moving_relative(make: Callable, dom, option: str, b: Body, P, idofs, inner, s) -> tuple[bool, str]:
+    r"""(xi): translated by ``s`` relative to the grid the basis changes, at the rate
+    :math:`\dot v_{ip} = G_i \cdot \dot x_p` (central differences against the gradients)."""
+    dim = len(s)
+    h = b.h
+    bs = make(dom, shift=s)
+    pts = b.xd[idofs]
+    change = np.abs(bs.at(pts + s) @ bs.psi(option) - b.at(pts) @ P)[:, inner].max()
+    eps = 1e-6 * h
+    e = np.zeros(dim)
+    e[0] = 1.0
+    Sp, Sm = make(dom, shift=0.2 * h * e + eps * e).S, make(dom, shift=0.2 * h * e - eps * e).S
+    b2 = make(dom, shift=0.2 * h * e)
+    _, G = dense_operator(b2.V, b2.particles, dom, gradients=True)
+    rate = np.abs((Sp - Sm) / (2 * eps) - G[:, :, 0]).max() / np.abs(G[:, :, 0]).max()
+    return (change > 1e-6 and rate < 1e-5, f"change {change:.3g}; rate error {rate:.2g}")
+
+
+def _projection_of_delta(b: Body, dom, option: str, P, inner) -> tuple[bool, str]:
+    """(xiv): :math:`\\Phi_p` is the projection of :math:`f_q = \\delta_{pq}` (the PETSc path of
+    :func:`fempm.transfer.particle_basis.particle_basis_functions` against the dense formula)."""
+    pick = inner[:: max(1, len(inner) // 3)][:3]
+    ids = np.sort(b.particles.ids)[pick]
+    try:
+        funcs = particle_basis_functions(b.V, b.particles, ids, option="consistent" if option == "partial" else option,
+                                         domain=dom, lump_below=0.1 if option == "partial" else 0.0)
+        err = max(np.abs(u.x.array - P[:, k]).max() for u, k in zip(funcs, pick))
+        return (err < ALG_TOL, f"{err:.2g}")
+    except Exception as ex:  # e.g. a singular consistent mass matrix
+        return (False, f"{type(ex).__name__}")
 
 
 def _same_cell_supports(b: Body, dom, P) -> tuple[bool, str]:

@@ -1,0 +1,36 @@
+"""The package's sizes, read from the source with ``ast``: no function over 80 lines and no
+module over 400 lines in ``fempm/`` (a longer one does more than one thing; split it into named
+parts)."""
+
+from __future__ import annotations
+
+import ast
+from pathlib import Path
+
+import pytest
+
+PACKAGE = Path(__file__).resolve().parents[2] / "fempm"
+MAX_FUNCTION, MAX_MODULE = 80, 400
+FILES = sorted(PACKAGE.rglob("*.py"))
+
+
+def functions(tree: ast.AST):
+    for node in ast.walk(tree):
+        if isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef)):
+            yield node
+
+
+@pytest.mark.parametrize("path", FILES, ids=lambda p: str(p.relative_to(PACKAGE.parent)))
+def test_functions_and_modules_are_short(path):
+    source = path.read_text()
+    lines = len(source.splitlines())
+    assert lines <= MAX_MODULE, f"{path.name}: {lines} lines (at most {MAX_MODULE})"
+    long = [f"{f.name} ({f.end_lineno - f.lineno + 1} lines, line {f.lineno})" for f in functions(ast.parse(source))
+            if f.end_lineno - f.lineno + 1 > MAX_FUNCTION]
+    assert not long, f"{path.name}: over {MAX_FUNCTION} lines: {', '.join(long)}"
+
+
+def test_the_measure_counts_a_long_function():
+    body = "\n".join(f"    x{i} = {i}" for i in range(MAX_FUNCTION))
+    (f,) = functions(ast.parse(f"def f():\n{body}\n"))
+    assert f.end_lineno - f.lineno + 1 == MAX_FUNCTION + 1
