@@ -8,7 +8,9 @@ option into an object.
 * :class:`FMPM`: the first k terms of the series of :math:`m^{-1}`-preconditioned corrections
   that sums to the consistent solve (:mod:`fempm.transfer.fmpm`), matrix-free.
 
-Each knows its label in tables and its factor on the explicit stable step (:meth:`MassModel.stable_factor`):
+Each makes its grid solve for the projection (:meth:`MassModel.grid_solve`,
+:mod:`fempm.transfer.grid_solves`), and knows its label in tables and its factor on the explicit
+stable step (:meth:`MassModel.stable_factor`):
 with the lumped step :math:`\Delta t_L`, the consistent mass allows
 :math:`\Delta t_L \sqrt{0.8\, \lambda_{min}(M_L^{-1} M_C)}` (the Lanczos estimate lies above
 the true value) and FMPM(k) :math:`\Delta t_L / \sqrt{k}`
@@ -23,6 +25,10 @@ from dataclasses import dataclass
 from typing import ClassVar
 
 import numpy as np
+import numpy.typing as npt
+
+from fempm.transfer.basis import ParticleBasis
+from fempm.transfer.grid_solves import FMPMSolve, GridSolve, LumpedSolve, MatrixSolve
 
 __all__ = ["FMPM", "MASS_RATIO_ITERATIONS", "MASS_RATIO_SAFETY", "MAX_ORDER", "Consistent", "Lumped", "MassModel",
            "mass_model"]
@@ -64,6 +70,12 @@ class MassModel:
         :math:`\\lambda_{min}(M_L^{-1} M_C)` when the model needs it (collective)."""
         raise NotImplementedError
 
+    def grid_solve(self, basis: ParticleBasis, weights: npt.NDArray, particles, weight: str,
+                   given_weights: bool) -> GridSolve:
+        """The solve of :math:`m F = b` for a projection with these particle ``weights``
+        (``weight``: their kind, "mass" or "volume"; ``given_weights``: given per particle)."""
+        raise NotImplementedError
+
 
 @dataclass(frozen=True)
 class Lumped(MassModel):
@@ -75,6 +87,9 @@ class Lumped(MassModel):
     def stable_factor(self, ratio_min: Callable[[], float]) -> float:
         return 1.0
 
+    def grid_solve(self, basis, weights, particles, weight, given_weights):
+        return LumpedSolve(basis, weights, self.label)
+
 
 @dataclass(frozen=True)
 class Consistent(MassModel):
@@ -85,6 +100,9 @@ class Consistent(MassModel):
 
     def stable_factor(self, ratio_min: Callable[[], float]) -> float:
         return float(np.sqrt(MASS_RATIO_SAFETY * ratio_min()))
+
+    def grid_solve(self, basis, weights, particles, weight, given_weights):
+        return MatrixSolve(basis, weights, self.label, particles, weight, given_weights)
 
 
 @dataclass(frozen=True)
@@ -108,6 +126,9 @@ class FMPM(MassModel):
 
     def stable_factor(self, ratio_min: Callable[[], float]) -> float:
         return 1.0 / float(np.sqrt(self.k))
+
+    def grid_solve(self, basis, weights, particles, weight, given_weights):
+        return FMPMSolve(basis, weights, self.label, self.k)
 
 
 def mass_model(mass: str | MassModel, fmpm_order: int | None = None) -> MassModel:

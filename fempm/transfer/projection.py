@@ -29,25 +29,11 @@ import numpy as np
 import numpy.typing as npt
 from mpi4py import MPI
 
-from fempm import petsc as fpetsc
 from fempm.particles.location import as_points3
 from fempm.particles.particle_set import Particles
 from fempm.transfer.basis import ParticleBasis
-from fempm.transfer.fmpm import fmpm_solve
-from fempm.transfer.mapping import (
-    SUPPORT_TOL,
-    cell_blocks,
-    consistent_mass_matrix,
-    p2g,
-    particle_weights,
-)
+from fempm.transfer.mapping import SUPPORT_TOL, p2g, particle_weights
 from fempm.transfer.mass_models import MassModel, mass_model
-from fempm.transfer.mass_span import (
-    check_nonsingular,
-    mass_ratio_estimate,
-    mass_ratio_ksp,
-    mass_ratio_rhs,
-)
 
 __all__ = ["MassMode", "Projector", "interpolate", "project"]
 
@@ -139,33 +125,27 @@ class Projector:
         self.label = model.label
         self.V, self.particles = V, particles
         self.basis = basis if basis is not None else ParticleBasis(V, particles, domain=domain)
-        imap = self.basis.index_map
-        self.num_owned = imap.size_local
-        self.iterations: list[int] = []
+        self.num_owned = self.basis.index_map.size_local
         self.lumped: npt.NDArray | None = None
+        self.grid_solve = model.grid_solve(self.basis, self.weights, particles, weight, weights is not None)
         self._find_support(exclude)
         self.lump = self._lumped_rows(lump_below, lump_dofs)
-        if model.matrix:
-            self._assemble(weights, weight, exclude_components, petsc_options_prefix, petsc_options)
-        else:  # lumped and FMPM: the rows of the consistent matrix sum to the lumped masses
-            self.row_mass = np.where(self.active, self.lumped, 0.0)[: self.num_owned]
         self.exclude_components = [np.asarray(d, dtype=np.int32) for d in (exclude_components or ())]
+        self.grid_solve.set_up(self.active, self.lump, self.exclude_components, self.lumped_masses,
+                               petsc_options_prefix, petsc_options)
+        self.row_mass = self.grid_solve.row_mass
+
+    @property
+    def iterations(self) -> list[int]:
+        """The KSP iterations of the last :meth:`project`, per component (empty without a matrix)."""
+        return self.grid_solve.iterations
 
     def _find_support(self, exclude: npt.NDArray[np.int32] | None) -> None:
-        r"""The active dofs: those the particles support (their lumped mass, or for a matrix
-        :math:`\sum_p M_p \langle N_i \rangle_p^2`, above :data:`SUPPORT_TOL` of the largest),
-        less the dofs ``exclude``. Collective."""
-        model, comm = self.model, self.particles.comm
-        if not model.matrix:  # lumped and FMPM divide by the lumped masses
-            if not self.basis.nonnegative:
-                raise ValueError(
-                    f"{self.label} mass needs a non-negative basis (degree 1 or Bernstein); this "
-                    f"Lagrange space of degree {self.basis.element.degree} has lumped vertex masses "
-                    "that can be zero or negative: use mass='consistent' or a Bernstein variant"
-                )
-            measure = self.lumped_masses()
-        else:
-            measure = p2g(self.basis, self.weights, values=self.basis.values**2)[:, 0]
+        r"""The active dofs: those the particles support (as the mass model measures it,
+        :meth:`fempm.transfer.grid_solves.GridSolve.support_measure`) above :data:`SUPPORT_TOL`
+        of the largest, less the dofs ``exclude``. Collective."""
+        comm = self.particles.comm
+        measure = self.grid_solve.support_measure(self.lumped_masses)
         top = comm.allreduce(float(measure[: self.num_owned].max(initial=0.0)), op=MPI.MAX)
         self.active = measure > SUPPORT_TOL * top
         if exclude is not None:  # constrained dofs (e.g. fixed velocity): value 0, not solved for
@@ -177,55 +157,22 @@ class Projector:
     def _lumped_rows(self, lump_below: float, lump_dofs: npt.NDArray[np.bool_] | None) -> npt.NDArray[np.bool_] | None:
         """The dofs whose rows and columns are lumped: lumped mass below ``lump_below`` of the
         largest, and ``lump_dofs`` (a non-negative basis only: for P2 Lagrange lumping can make
-        the matrix indefinite). Collective."""
-        model, comm = self.model, self.particles.comm
+        the matrix indefinite; a lumped mass has nothing to lump). Collective."""
+        if not (self.model.couples_dofs and self.basis.nonnegative):
+            return None
         lump = None
-        if model.couples_dofs and lump_below > 0.0 and self.basis.nonnegative:  # P2 Lagrange: lumping can make it indefinite
+        if lump_below > 0.0:
             m = self.lumped_masses()
-            lump = m < lump_below * comm.allreduce(float(m[: self.num_owned].max(initial=0.0)), op=MPI.MAX)
-        if model.couples_dofs and lump_dofs is not None and self.basis.nonnegative:
+            lump = m < lump_below * self.particles.comm.allreduce(float(m[: self.num_owned].max(initial=0.0)),
+                                                                  op=MPI.MAX)
+        if lump_dofs is not None:
             extra = np.zeros(len(self.active), dtype=np.bool_)
             extra[: len(lump_dofs)] = lump_dofs[: len(self.active)]
             lump = extra if lump is None else lump | extra
         return lump
 
-    def _assemble(self, weights, weight: str, exclude_components, petsc_options_prefix: str, petsc_options) -> None:
-        """The consistent matrix on the active dofs, its KSP, a system per constrained velocity
-        component, and its row sums. Collective."""
-        particles, imap, lump = self.particles, self.basis.index_map, self.lump
-        comm = particles.comm
-        blocks = None
-        if self.basis.cells is not None:  # point particles: the cell blocks, once for the test and the matrix
-            blocks = cell_blocks(self.basis, self.weights)
-
-        weighted = particles.num_global if weights is None else comm.allreduce(int(np.count_nonzero(self.weights)))
-        check_nonsingular(imap, weighted, self.active, lump, blocks)
-        A = consistent_mass_matrix(self.basis, particles, lump, weight, blocks, self.weights)
-        iset = fpetsc.owned_index_set(imap, self.active[: self.num_owned])
-        self.matrix = A.createSubMatrix(iset, iset)
-        self.ksp = fpetsc.create_ksp(comm, petsc_options_prefix, petsc_options)
-        self.ksp.setOperators(self.matrix)
-        self._x, self._b = self.matrix.createVecs()
-        base = (self.active[: self.num_owned], self.ksp, self._x, self._b)
-        self._systems = [base] * len(exclude_components or ())
-        for c, dofs in enumerate(exclude_components or ()):  # a system per constrained component
-            act = self.active.copy()
-            act[np.asarray(dofs, dtype=np.int32)] = False
-            if comm.allreduce(int(np.count_nonzero(act != self.active))):
-                sub_is = fpetsc.owned_index_set(imap, act[: self.num_owned])
-                M = A.createSubMatrix(sub_is, sub_is)
-                ksp = fpetsc.create_ksp(comm, petsc_options_prefix, petsc_options)
-                ksp.setOperators(M)
-                self._systems[c] = (act[: self.num_owned], ksp, *M.createVecs())
-        A.destroy()
-        ones, rows = self.matrix.createVecs()
-        ones.set(1.0)
-        self.matrix.mult(ones, rows)
-        self.row_mass = np.zeros(self.num_owned)
-        self.row_mass[self.active[: self.num_owned]] = rows.array
-
     def mass_ratio_min(self, iterations: int = 40) -> float:
-        r"""Estimate of :math:`\lambda_{min}(M_L^{-1} M_C) \in (0, 1]` (consistent mode).
+        r"""Estimate of :math:`\lambda_{min}(M_L^{-1} M_C) \in (0, 1]` (1 for the lumped mass and FMPM).
 
         The critical explicit step scales as :math:`1/\omega_{max}` and
         :math:`\omega_{max}^2(M_C) \le \omega_{max}^2(M_L) / \lambda_{min}`, so the lumped-mass
@@ -236,18 +183,11 @@ class Projector:
         :math:`\lambda_{min}(D^{-1} M_C)` with the diagonal :math:`D` instead. Ritz
         values lie inside the spectrum, so the estimate is an upper bound that tightens with
         ``iterations``; callers should keep a safety factor.
-        """
-        if not self.model.matrix:
-            return 1.0
 
-        ksp = mass_ratio_ksp(self.particles.comm, iterations, rowsum=self.basis.nonnegative)
-        x, b = self.matrix.createVecs()
-        act = self.active[: self.num_owned]
-        b.array[:] = mass_ratio_rhs(self.V, act) * np.abs(self.row_mass[act])  # the same on any partition
-        ratio = mass_ratio_estimate(ksp, self.matrix, b, x)
-        for obj in (ksp, x, b):
-            obj.destroy()
-        return ratio
+        Note:
+            Collective.
+        """
+        return self.grid_solve.mass_ratio_min(iterations)
 
     def support_masses(self) -> npt.NDArray:
         r"""How much particle mass each dof sees, :math:`\sum_p M_p |\langle N_i \rangle_p|` on
@@ -289,38 +229,12 @@ class Projector:
     def solve(self, b: npt.NDArray, guess: npt.NDArray | None = None) -> npt.NDArray:
         """Solve ``m F = b`` on the active dofs for (owned + ghost dofs, k) right-hand sides;
         returns (owned + ghost dofs, k) with ghosts updated and 0 on inactive dofs.
-        ``guess`` (same shape) warm-starts the KSP."""
-        base = self.active[: self.num_owned]
-        n, k = self.num_owned, b.shape[1]
-        F = np.zeros((n, k))
-        if not self.model.matrix:
-            free = np.repeat(base[:, None], k, axis=1)
-            for c, dofs in enumerate(self.exclude_components[:k]):
-                free[dofs[dofs < n], c] = False
-            if not self.model.couples_dofs:  # lumped
-                F[free] = (b[:n] / np.where(base, self.lumped[:n], 1.0)[:, None])[free]
-            else:
-                F = fmpm_solve(self.basis, self.weights, self.lumped, b, free, self.model.order, self._ghosted,
-                               lump=None if self.lump is None else self.lump[:n])
-        else:
-            self.iterations = []
-            for c in range(k):
-                act, ksp, x, rhs = self._systems[c] if c < len(self._systems) else (base, self.ksp, self._x, self._b)
-                rhs.array[:] = b[:n][act, c]
-                if guess is None:
-                    x.set(0.0)
-                else:
-                    x.array[:] = guess[:n][act, c]
-                reason = fpetsc.solve_from(ksp, rhs, x, guess is not None)
-                if reason < 0:
-                    raise RuntimeError(
-                        f"consistent projection: KSP did not converge ({fpetsc.converged_reason_name(reason)}, "
-                        f"{ksp.getIterationNumber()} iterations); the particle mass matrix may be "
-                        "singular: too few particles per cell for this space?"
-                    )
-                self.iterations.append(ksp.getIterationNumber())
-                F[act, c] = x.array
-        return self._ghosted(F)
+        ``guess`` (same shape) warm-starts the KSP.
+
+        Note:
+            Collective.
+        """
+        return self._ghosted(self.grid_solve.solve(b, guess, self._ghosted))
 
     def _ghosted(self, F: npt.NDArray) -> npt.NDArray:
         """Owned values (owned dofs, k) -> (owned + ghost dofs, k), ghosts from their owners."""
