@@ -14,6 +14,7 @@ import fempm  # noqa: F401  (DOLFINx set-up before the scene imports)
 from mpi4py import MPI
 
 from fempm.scenes.incline import incline
+from fempm.studies.harness import Provenance
 
 
 def time_steps(compiled: bool, body: str, cells: int, steps: int, warm: int = 20) -> tuple[float, int]:
@@ -36,6 +37,9 @@ def main(argv: list[str] | None = None) -> None:
     ap.add_argument("--body", choices=("block", "disk"), default="disk")
     ap.add_argument("--steps", type=int, default=200)
     a = ap.parse_args(argv)
+    provenance = Provenance.now()
+    if MPI.COMM_WORLD.rank == 0:
+        print(provenance.line(), flush=True)
     for compiled in (False, True):
         t, n = time_steps(compiled, a.body, a.cells, a.steps)
         if MPI.COMM_WORLD.rank == 0:

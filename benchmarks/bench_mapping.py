@@ -30,6 +30,7 @@ import numpy as np
 from mpi4py import MPI
 
 from fempm.meshes import unstructured_box, unstructured_rectangle
+from fempm.studies.harness import Provenance
 from fempm.transfer import consistent_mass_matrix, p2g
 
 
@@ -98,6 +99,7 @@ def main() -> None:
     if a.dim is not None:
         one_case(a.dim, int(a.n), a.ppc)
         return
+    print(Provenance.now().line(), flush=True)
     for dim, n in [(2, 100_000), (2, 1_000_000), (3, 100_000)]:
         subprocess.run([sys.executable, __file__, "--dim", str(dim), "--n", str(n), "--ppc", str(a.ppc)], check=True)
 

@@ -30,9 +30,11 @@ taken within a round, then its median.
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import json
 import os
 import resource
+import shlex
 import statistics
 import subprocess
 import sys
@@ -366,8 +368,20 @@ def main(argv=None) -> None:
             speedup = one[0]["t_step_s"] / row["t_step_s"]
             out["scaling"].append({"impl": row["impl"], "n": row["n"], "ranks": row["ranks"], "speedup": speedup})
             print(f"{row['ranks']} ranks/threads over 1, {row['impl']}, {row['n']} particles: {speedup:.2f}x")
+    provenance = _provenance(argv)
+    out["provenance"] = dataclasses.asdict(provenance)
+    print(provenance.line())
     if a.json:
         a.json.write_text(json.dumps(out, indent=1))
+
+
+def _provenance(argv):
+    """The commit, command and date of this run (imported only now: the driver starts MPI, which
+    importing fempm does, after its workers have run)."""
+    import fempm  # noqa: F401  (dolfinx_solver before dolfinx)
+    from fempm.studies.harness import Provenance
+
+    return Provenance.now(command=None if argv is None else shlex.join(["python", __file__, *argv]))
 
 
 if __name__ == "__main__":

@@ -19,6 +19,7 @@ from mpi4py import MPI
 
 from fempm.scene import run
 from fempm.scenes import two_disks
+from fempm.studies.harness import Provenance
 
 VARIANTS = {
     "lumped": {"mass": "lumped"},
@@ -33,6 +34,7 @@ def main(argv: list[str] | None = None) -> None:
     ap.add_argument("--t-end", type=float, default=0.15)
     a = ap.parse_args(argv)
     comm = MPI.COMM_WORLD
+    provenance = Provenance.now()
     rows = []
     run(two_disks(cells=8, t_end=0.01), None, progress=False)  # untimed: the compiled kernels load or compile
     for n in a.cells:
@@ -45,7 +47,7 @@ def main(argv: list[str] | None = None) -> None:
             rows.append((f"{n}x{n} quads", r["particles"], name, r["steps"], wall,
                          r["particles"] * r["steps"] / wall, wall / a.t_end))
     if comm.rank == 0:
-        print(f"two disks, t_end = {a.t_end}, {comm.size} rank(s)\n")
+        print(f"{provenance.line()}\n\ntwo disks, t_end = {a.t_end}, {comm.size} rank(s)\n")
         print("| mesh | particles | mass | steps | wall [s] | particle-steps/s | wall per simulated second [s] |")
         print("|---|---|---|---|---|---|---|")
         for m, npart, name, steps, wall, rate, per in rows:

@@ -5,6 +5,7 @@
     python -m fempm study convergence [--quick] [--problems NAME ...] [--out DIR]
     python -m fempm study stability [--quick] [--cases NAME ...] [--out DIR]
     python -m fempm study error-vs-time [--quick] [--problems NAME ...] [--out DIR]
+    python -m fempm study all [--out DIR]   (the quick version of every study, into DIR/study-NAME)
     python -m fempm run SCENE [--out DIR] [--overwrite] [--force] [--checkpoint-every N] [--option value ...]
     python -m fempm resume OUT [--t-end T] [--checkpoint-every N]
     python -m fempm run --help          (the scenes, a line each)
@@ -43,6 +44,7 @@ from fempm.scenes import SCENES
 from fempm.stepping.health import Health
 from fempm.stepping.options import SimulationError
 from fempm.studies import convergence, error_vs_time, mapping, particle_basis, stability
+from fempm.studies.harness import Provenance
 from fempm.transfer.mapping import SingularMassError
 
 __all__ = ["UsageError", "main"]
@@ -72,7 +74,7 @@ def _parser() -> argparse.ArgumentParser:
     parser.add_argument("--version", action="version", version=f"fempm {__version__}")
     sub = parser.add_subparsers(dest="command", required=True)
     study = sub.add_parser("study", help="run a study and write its tables and figures", allow_abbrev=False)
-    study.add_argument("name", choices=["mapping", "particle-basis", "convergence", "stability", "error-vs-time"])
+    study.add_argument("name", choices=[*STUDIES, "all"], help="a study, or all: the quick version of every one")
     study.add_argument("--full", action="store_true", help="mapping: more mesh sizes and particle densities")
     study.add_argument("--quick", action="store_true",
                        help="convergence, stability, error-vs-time: fewer configurations and smaller sizes")
@@ -82,7 +84,8 @@ def _parser() -> argparse.ArgumentParser:
     study.add_argument("--ppc", type=int, nargs="+", help="particles per cell (default 4 9; --full: 1 4 9 16)")
     study.add_argument("--domains", nargs="+", default=["point"], metavar="DOMAIN",
                        help="mapping: particle domains point, gimp, cpdi1, cpdi2 (default point)")
-    study.add_argument("--out", type=Path, default=None, help="output folder (default output/study-NAME)")
+    study.add_argument("--out", type=Path, default=None,
+                       help="output folder (default output/study-NAME; all: the folder of the study-NAME folders)")
     runp = sub.add_parser("run", help="run a scene, writing outputs and a JSON summary", add_help=False, allow_abbrev=False)
     runp.add_argument("scene", nargs="?")
     runp.add_argument("--out", type=Path, default=None, help="output folder (default output/SCENE)")
@@ -115,36 +118,58 @@ def _main(argv: list[str] | None) -> int:
         parser.error(str(e))
 
 
+STUDIES = ("mapping", "particle-basis", "convergence", "stability", "error-vs-time")
+
+
 def _study(args) -> int:
-    """``python -m fempm study NAME``: run the study and say what it wrote."""
-    rank0 = MPI.COMM_WORLD.rank == 0
-    if args.name == "particle-basis":
-        out = args.out or Path("output/study-particle-basis")
-        if rank0:  # dense operators on small bodies: one rank
-            particle_basis.run(out)
-            print(f"wrote {out}/properties.md, properties.csv, particle_basis_*.png")
-        return 0
-    if args.name == "mapping":
-        sizes = args.sizes or ((8, 16, 32, 64, 128) if args.full else (8, 16, 32))
-        ppcs = args.ppc or ((1, 4, 9, 16) if args.full else (4, 9))
-        out = args.out or Path("output/study-mapping")
-        mapping.run(sizes=sizes, ppcs=ppcs, out=out, domains=tuple(args.domains))
-        if rank0:
-            print(f"wrote {out}/mapping.csv, mapping.md, mapping.png")
-        return 0
-    out = args.out or Path(f"output/study-{args.name}")
-    if args.name == "convergence":
-        convergence.run(out, quick=args.quick, problems=args.problems)
-        written = "convergence.csv, convergence.md, convergence_*.png"
-    elif args.name == "stability":
-        stability.run_study(out, quick=args.quick, cases=args.cases)
-        written = "stability.csv, stability.md, stability.png"
-    else:  # error-vs-time
-        error_vs_time.run_study(out, quick=args.quick, problems=args.problems)
-        written = "error_vs_time.csv, error_vs_time.md, error_vs_time_*.png"
-    if rank0:
-        print(f"wrote {out}/: {written}")
+    """``python -m fempm study NAME``: run the study and say what it wrote; ``all``: the quick
+    version of every study, each into ``OUT/study-NAME`` (default ``output/``)."""
+    names = STUDIES if args.name == "all" else (args.name,)
+    if args.name == "all":
+        given = [f"--{k}" for k in ("full", "problems", "cases", "sizes", "ppc") if getattr(args, k)]
+        if given:
+            raise ValueError(f"study all runs the quick version of every study; it takes --out only, not {given[0]}")
+        args.quick = True
+    provenance = Provenance.now()
+    for name in names:
+        out = (args.out or Path("output")) / f"study-{name}" if args.name == "all" else args.out
+        out = out or Path(f"output/study-{name}")
+        written = _STUDY_RUNS[name](args, out, provenance)
+        if MPI.COMM_WORLD.rank == 0:
+            print(f"wrote {out}/: {written}, provenance.json")
     return 0
+
+
+def _particle_basis(args, out: Path, provenance: Provenance) -> str:
+    if MPI.COMM_WORLD.rank == 0:  # dense operators on small bodies: one rank
+        particle_basis.run(out, provenance=provenance)
+    return "properties.md, properties.csv, particle_basis_*.png"
+
+
+def _mapping(args, out: Path, provenance: Provenance) -> str:
+    sizes = args.sizes or ((8, 16, 32, 64, 128) if args.full else (8, 16, 32))
+    ppcs = args.ppc or ((1, 4, 9, 16) if args.full else (4, 9))
+    mapping.run(sizes=sizes, ppcs=ppcs, out=out, domains=tuple(args.domains), provenance=provenance)
+    return "mapping.csv, mapping.md, mapping.png"
+
+
+def _convergence(args, out: Path, provenance: Provenance) -> str:
+    convergence.run(out, quick=args.quick, problems=args.problems, provenance=provenance)
+    return "convergence.csv, convergence.md, convergence_*.png"
+
+
+def _stability(args, out: Path, provenance: Provenance) -> str:
+    stability.run_study(out, quick=args.quick, cases=args.cases, provenance=provenance)
+    return "stability.csv, stability.md, stability.png"
+
+
+def _error_vs_time(args, out: Path, provenance: Provenance) -> str:
+    error_vs_time.run_study(out, quick=args.quick, problems=args.problems, provenance=provenance)
+    return "error_vs_time.csv, error_vs_time.md, error_vs_time_*.png"
+
+
+_STUDY_RUNS = {"mapping": _mapping, "particle-basis": _particle_basis, "convergence": _convergence,
+               "stability": _stability, "error-vs-time": _error_vs_time}
 
 
 def _scene_options(builder, rest: list[str]) -> dict:

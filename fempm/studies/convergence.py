@@ -37,6 +37,7 @@ from mpi4py import MPI
 from fempm.io.plot import plot_convergence
 from fempm.scene.loop import run as run_scene
 from fempm.scenes.manufactured import manufactured_scene
+from fempm.studies.harness import Provenance, chosen, sweep
 from fempm.transfer.mass_models import mass_model
 from fempm.verification import manufactured as mf
 from fempm.verification.errors import ErrorHistory
@@ -193,31 +194,36 @@ def run_case(name: str, config: Config, cells: int, comm: MPI.Comm = MPI.COMM_WO
 
 
 def run(out: Path = Path("output/study-convergence"), *, quick: bool = False, problems=None,
-        comm: MPI.Comm = MPI.COMM_WORLD, log=print) -> list[dict]:
+        comm: MPI.Comm = MPI.COMM_WORLD, log=print, provenance: Provenance | None = None) -> list[dict]:
     """Run the study (``problems``: names of :data:`PROBLEMS`, default all), write its outputs
-    into ``out`` (CSV after every run, so that nothing measured is lost) and return the rows."""
-    names = list(problems or PROBLEMS)
-    for n in names:
-        if n not in PROBLEMS:
-            raise ValueError(f"unknown problem {n!r}; expected one of {', '.join(PROBLEMS)}")
+    into ``out`` (CSV after every run, so that nothing measured is lost) and return the rows.
+
+    Note:
+        Collective.
+    """
+    names = chosen(problems, list(PROBLEMS), "problem")
+    provenance = provenance or Provenance.now(comm=comm)
     out = Path(out)
     if comm.rank == 0:
         out.mkdir(parents=True, exist_ok=True)
-    rows: list[dict] = []
-    for name in names:
-        spec = PROBLEMS[name]
-        for config in (spec.quick_configs if quick else spec.configs):
-            for cells in (spec.quick_sizes if quick else spec.sizes):
-                if config.max_cells is not None and cells > config.max_cells:
-                    continue
-                row = run_case(name, config, cells, comm)
-                rows.append(row)
-                if comm.rank == 0:
-                    log(f"{name:22s} {config.label:40s} cells={cells:4d} L2={row['error_l2']:.3e} "
-                        f"max={row['error_max']:.3e} steps={row['steps']:5d} {row['wall_s']:7.1f}s {row['status']}")
-                    write_csv(rows, out / "convergence.csv")
+
+    def cases():
+        for name in names:
+            spec = PROBLEMS[name]
+            for config in (spec.quick_configs if quick else spec.configs):
+                for cells in (spec.quick_sizes if quick else spec.sizes):
+                    if config.max_cells is None or cells <= config.max_cells:
+                        yield name, config, cells, comm
+
+    def describe(row: dict) -> str:
+        label = (f"{row['mesh']} P{row['degree']}{'B' if row['variant'] == 'bernstein' else ''} {row['mass']} "
+                 f"{row['domain']} {row['scheme']}")
+        return (f"{row['problem']:22s} {label:40s} cells={row['cells']:4d} L2={row['error_l2']:.3e} "
+                f"max={row['error_max']:.3e} steps={row['steps']:5d} {row['wall_s']:7.1f}s {row['status']}")
+
+    rows = sweep(cases(), run_case, describe, lambda rows: write_csv(rows, out / "convergence.csv"), comm, log)
     if comm.rank == 0:
-        write_report(rows, out, quick=quick)
+        write_report(rows, out, quick=quick, provenance=provenance)
     return rows
 
 
@@ -242,12 +248,15 @@ def read_csv(path: Path) -> list[dict]:
     return rows
 
 
-def write_report(rows: list[dict], out: Path, *, quick: bool = False) -> None:
-    """``convergence.csv``, ``convergence.md`` and the figures of ``rows`` into ``out``."""
+def write_report(rows: list[dict], out: Path, *, quick: bool = False, provenance: Provenance | None = None) -> None:
+    """``convergence.csv``, ``convergence.md``, the figures of ``rows`` and ``provenance.json``
+    into ``out`` (``provenance``: what made them, default this process now)."""
 
     out = Path(out)
+    provenance = provenance or Provenance.now(comm=MPI.COMM_SELF)
+    provenance.write(out)
     write_csv(rows, out / "convergence.csv")
-    write_markdown(rows, out / "convergence.md", quick=quick)
+    write_markdown(rows, out / "convergence.md", quick=quick, provenance=provenance)
     for name in dict.fromkeys(r["problem"] for r in rows):
         plot_convergence([r for r in rows if r["problem"] == name], out / f"convergence_{name}.png", title=name)
 
@@ -301,9 +310,11 @@ def fitted_rates(rows: list[dict]) -> list[dict]:
     return out
 
 
-def write_markdown(rows: list[dict], path: Path, *, quick: bool = False) -> None:
+def write_markdown(rows: list[dict], path: Path, *, quick: bool = False, provenance: Provenance | None = None) -> None:
+    """The fitted rates of every configuration and the runs that stopped, as Markdown."""
     rates = fitted_rates(rows)
     lines = [f"# Convergence of the MPM loop{' (quick)' if quick else ''}", "",
+             (provenance or Provenance.now(comm=MPI.COMM_SELF)).line(), "",
              "Displacement error of the particles against the exact motion, maximum over time; "
              f"rates fitted (numpy.polyfit) over the finest {FIT_SIZES} ok sizes of each configuration.", "",
              "| problem | mesh | space | mass | domain | scheme | sizes fitted | finest L2 error | rate L2 | rate max | failed runs | verdict |",

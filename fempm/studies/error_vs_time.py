@@ -34,6 +34,7 @@ from fempm.io.plot import plot_pareto
 from fempm.particles.seeding import create_particles
 from fempm.studies import convergence, mapping
 from fempm.studies.convergence import Config
+from fempm.studies.harness import Provenance, chosen, sweep
 from fempm.transfer.domains import half_widths
 
 __all__ = [
@@ -163,37 +164,43 @@ def _warm_up(name: str, sweep: Sweep, quick: bool, comm: MPI.Comm) -> None:
 
 
 def run_study(out: Path = Path("output/study-error-vs-time"), *, quick: bool = False, problems=None,
-              comm: MPI.Comm = MPI.COMM_WORLD, log=print) -> list[dict]:
+              comm: MPI.Comm = MPI.COMM_WORLD, log=print, provenance: Provenance | None = None) -> list[dict]:
     """Run the sweeps (``problems``: names of :data:`SWEEPS`, default all) into ``out``; the CSV
-    is rewritten after every run."""
-    names = list(problems or SWEEPS)
-    for n in names:
-        if n not in SWEEPS:
-            raise ValueError(f"unknown problem {n!r}; expected one of {', '.join(SWEEPS)}")
+    is rewritten after every run.
+
+    Note:
+        Collective.
+    """
+    names = chosen(problems, list(SWEEPS), "problem")
+    provenance = provenance or Provenance.now(comm=comm)
     out = Path(out)
     if comm.rank == 0:
         out.mkdir(parents=True, exist_ok=True)
-    rows: list[dict] = []
     t0 = time.perf_counter()
     run_case("mapping", Config(ppc=4), 4, comm)  # first-call costs (imports, PETSc set-up) untimed
-    for name in names:
-        sw = SWEEPS[name]
-        _warm_up(name, sw, quick, comm)
-        for config in (sw.quick_configs if quick else sw.configs):
-            for cells in (sw.quick_sizes if quick else sw.sizes):
-                if config.degree == 2 and name != "mapping" and cells > max(sw.sizes[:-1], default=cells):
-                    continue  # the P2 spaces stop one size earlier
-                row = run_case(name, config, cells, comm)
-                rows.append(row)
-                if comm.rank == 0:
-                    log(f"{name:22s} {row['mesh']:12s} P{row['degree']:2s} {row['mass']:10s} {row['domain']:6s} "
-                        f"{row['scheme']:4s} cells={cells:4d} ppc={row['ppc']} error={row['error']:.3e} "
-                        f"t={row['wall_s']:.3f}s x{row['repeats']} {row['status']}")
-                    pareto(rows)
-                    write_csv(rows, out / "error_vs_time.csv")
+
+    def cases():
+        for name in names:
+            sw = SWEEPS[name]
+            _warm_up(name, sw, quick, comm)
+            for config in (sw.quick_configs if quick else sw.configs):
+                for cells in (sw.quick_sizes if quick else sw.sizes):
+                    if config.degree == 1 or name == "mapping" or cells <= max(sw.sizes[:-1], default=cells):
+                        yield name, config, cells, comm  # the P2 spaces stop one size earlier
+
+    def describe(row: dict) -> str:
+        return (f"{row['problem']:22s} {row['mesh']:12s} P{row['degree']:2s} {row['mass']:10s} {row['domain']:6s} "
+                f"{row['scheme']:4s} cells={row['cells']:4d} ppc={row['ppc']} error={row['error']:.3e} "
+                f"t={row['wall_s']:.3f}s x{row['repeats']} {row['status']}")
+
+    def save(rows: list[dict]) -> None:
+        pareto(rows)
+        write_csv(rows, out / "error_vs_time.csv")
+
+    rows = sweep(cases(), run_case, describe, save, comm, log)
     pareto(rows)
     if comm.rank == 0:
-        write_report(rows, out, quick=quick, wall=time.perf_counter() - t0)
+        write_report(rows, out, quick=quick, wall=time.perf_counter() - t0, provenance=provenance)
     return rows
 
 
@@ -231,14 +238,18 @@ def _name(r: dict) -> str:
     return f"{r['mesh']} P{r['degree']} {r['mass']} {r['domain']} {r['scheme']} ppc={r['ppc']} n={r['cells']}"
 
 
-def write_report(rows: list[dict], out: Path, *, quick: bool = False, wall: float | None = None) -> None:
-    """CSV, Markdown summary and one figure per problem."""
+def write_report(rows: list[dict], out: Path, *, quick: bool = False, wall: float | None = None,
+                 provenance: Provenance | None = None) -> None:
+    """CSV, Markdown summary, one figure per problem and ``provenance.json`` (``provenance``: what
+    made them, default this process now)."""
 
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
+    provenance = provenance or Provenance.now(comm=MPI.COMM_SELF)
+    provenance.write(out)
     pareto(rows)
     write_csv(rows, out / "error_vs_time.csv")
-    lines = [f"# Error against run time{' (quick)' if quick else ''}", "",
+    lines = [f"# Error against run time{' (quick)' if quick else ''}", "", provenance.line(), "",
              "Error: V0-weighted L2 particle displacement error, maximum over time (loop problems), or the L2 error "
              "of the projected smooth field (mapping). Time: median wall time of the run (projection alone for "
              f"mapping), on {rows[0]['threads'] if rows else 1} rank(s) x thread(s) of a machine with "

@@ -40,6 +40,7 @@ from mpi4py import MPI
 from fempm.io.plot import plot_error_vs_time
 from fempm.meshes.generators import unstructured_rectangle
 from fempm.particles.seeding import create_particles
+from fempm.studies.harness import Provenance
 from fempm.transfer.basis import ParticleBasis
 from fempm.transfer.domains import half_widths, make_domain, step_domain
 from fempm.transfer.mapping import SingularMassError
@@ -128,8 +129,15 @@ def run(
     jitter: float = 0.5,
     domains=("point",),
     log=print,
+    provenance: Provenance | None = None,
 ) -> list[dict]:
-    """Run every case, write ``mapping.csv``, ``mapping.md`` and ``mapping.png`` into ``out``."""
+    """Run every case, write ``mapping.csv``, ``mapping.md``, ``mapping.png`` and
+    ``provenance.json`` into ``out``.
+
+    Note:
+        Collective.
+    """
+    provenance = provenance or Provenance.now(comm=comm)
     for domain in domains:
         make_domain(domain)  # unknown names fail before any work
     rows = []
@@ -161,7 +169,7 @@ def run(
                     log(f"{kind:17s} n={n:4d} ppc={ppc:2d} {domain:5s} {field:6s} P{degree} {mass:10s} "
                         f"L2={r['l2_error']:.3e}  t={r['time_s']:.4f}s  its={r['ksp_its']}")
     if comm.rank == 0:
-        write(rows, out)
+        write(rows, out, provenance)
     return rows
 
 
@@ -181,15 +189,19 @@ def convergence_rates(rows: list[dict]) -> list[dict]:
 COLUMNS = ["mesh", "n", "cells", "ppc", "domain", "particles", "field", "space", "mass", "l2_error", "time_s", "ksp_its", "dofs", "inactive"]
 
 
-def write(rows: list[dict], out: Path) -> None:
+def write(rows: list[dict], out: Path, provenance: Provenance | None = None) -> None:
+    """``mapping.csv``, ``mapping.md`` (the rows and the fitted rates), ``mapping.png`` and
+    ``provenance.json`` into ``out``."""
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
+    provenance = provenance or Provenance.now(comm=MPI.COMM_SELF)
+    provenance.write(out)
     with open(out / "mapping.csv", "w", newline="") as f:
         w = csv.DictWriter(f, fieldnames=COLUMNS + ["h"])
         w.writeheader()
         w.writerows(rows)
     fmt = {"l2_error": "{:.3e}", "time_s": "{:.4f}", "h": "{:.4f}"}
-    lines = ["# Mapping study: L2 error and wall time of the particle-to-grid projection", "",
+    lines = ["# Mapping study: L2 error and wall time of the particle-to-grid projection", "", provenance.line(), "",
              "| " + " | ".join(COLUMNS) + " |", "|" + "---|" * len(COLUMNS)]
     for r in rows:
         lines.append("| " + " | ".join(fmt.get(c, "{}").format(r[c]) for c in COLUMNS) + " |")

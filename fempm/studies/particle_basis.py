@@ -25,13 +25,15 @@ and property (xiv) checks them against the PETSc projection
 from __future__ import annotations
 
 import csv
+from collections.abc import Callable
 from pathlib import Path
-from typing import Callable
 
 import dolfinx
 import numpy as np
 import ufl
+from mpi4py import MPI
 
+from fempm.studies.harness import Provenance
 from fempm.studies.particle_basis_bodies import (
     ALG_TOL,
     DENSITIES,
@@ -291,9 +293,11 @@ def linear_fields(out: Path) -> list[dict]:
     return rows
 
 
-def write_markdown(out: Path, rows: list[dict], lin: list[dict]) -> None:
+def write_markdown(out: Path, rows: list[dict], lin: list[dict], provenance: Provenance | None = None) -> None:
+    """``properties.md``: each property's verdict and number per option, in 1D and 2D."""
     lines = ["# Implied particle basis functions: properties", "",
-             "Measured by `python -m fempm study particle-basis`. 1D: a body of 20 particles (2 per cell) "
+             (provenance or Provenance.now(comm=MPI.COMM_SELF)).line(), "",
+             "1D: a body of 20 particles (2 per cell) "
              "on a 16-cell line; 2D: 2 x 2 particles per unit cell, 6 x 6 cells, on an unstructured triangle "
              "mesh of size 1. Both bodies sit at a generic offset from the grid. "
              "Option 1 = lumped psi, option 2 = consistent (pseudo-inverse) psi. Each entry: does the "
@@ -324,12 +328,15 @@ def write_markdown(out: Path, rows: list[dict], lin: list[dict]) -> None:
     (out / "properties.md").write_text("\n".join(lines) + "\n")
 
 
-def run(out: Path, figures: bool = True) -> dict:
-    """The whole study on this rank; returns the property rows and the linear-field rows."""
+def run(out: Path, figures: bool = True, provenance: Provenance | None = None) -> dict:
+    """The whole study on this rank; returns the property rows and the linear-field rows
+    (``provenance``: what made the outputs, default this process now, written beside them)."""
     out.mkdir(parents=True, exist_ok=True)
+    provenance = provenance or Provenance.now(comm=MPI.COMM_SELF)
+    provenance.write(out)
     rows = property_table(out)
     lin = linear_fields(out)
-    write_markdown(out, rows, lin)
+    write_markdown(out, rows, lin, provenance)
     if figures:
         figures_1d(out)
         figures_2d(out)

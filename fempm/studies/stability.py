@@ -33,6 +33,7 @@ from fempm.io.plot import plot_stability
 from fempm.particles.location import OutsideMeshError
 from fempm.scene.loop import run
 from fempm.stepping.options import SimulationError
+from fempm.studies.harness import Provenance, chosen, sweep
 from fempm.studies.stability_cases import CASES
 from fempm.transfer.mapping import SingularMassError
 
@@ -101,37 +102,41 @@ def _health(row: dict, health: dict) -> None:
 
 
 def run_study(out: Path = Path("output/study-stability"), *, quick: bool = False, cases=None,
-              comm: MPI.Comm = MPI.COMM_WORLD, log=print) -> list[dict]:
-    """Run the catalogue (``cases``: names of :data:`CASES`, default all) into ``out``."""
-    names = list(cases or CASES)
-    for n in names:
-        if n not in CASES:
-            raise ValueError(f"unknown case {n!r}; expected one of {', '.join(CASES)}")
+              comm: MPI.Comm = MPI.COMM_WORLD, log=print, provenance: Provenance | None = None) -> list[dict]:
+    """Run the catalogue (``cases``: names of :data:`CASES`, default all) into ``out``.
+
+    Note:
+        Collective.
+    """
+    names = chosen(cases, list(CASES), "case")
+    provenance = provenance or Provenance.now(comm=comm)
     out = Path(out)
     if comm.rank == 0:
         out.mkdir(parents=True, exist_ok=True)
-    rows: list[dict] = []
     t0 = time.perf_counter()
-    for case in names:
-        for opts in options_for(case, quick):
-            row = run_one(case, opts, quick=quick, comm=comm)
-            rows.append(row)
-            if comm.rank == 0:
-                log(f"{case:24s} {row['option']:44s} {row['outcome']:9s} E/E0={row['energy_ratio']:.3g} "
-                    f"J=[{row['j_min']:.3g}, {row['j_max']:.3g}] steps={row['steps']} {row['wall_s']:.1f}s "
-                    f"{row['reason'][:80]}")
-                write_csv(rows, out / "stability.csv")
+
+    def describe(row: dict) -> str:
+        return (f"{row['case']:24s} {row['option']:44s} {row['outcome']:9s} E/E0={row['energy_ratio']:.3g} "
+                f"J=[{row['j_min']:.3g}, {row['j_max']:.3g}] steps={row['steps']} {row['wall_s']:.1f}s "
+                f"{row['reason'][:80]}")
+
+    runs = ((case, opts) for case in names for opts in options_for(case, quick))
+    rows = sweep(runs, lambda case, opts: run_one(case, opts, quick=quick, comm=comm), describe, lambda rows: write_csv(rows, out / "stability.csv"), comm, log)
     if comm.rank == 0:
-        write_report(rows, out, quick=quick, wall=time.perf_counter() - t0)
+        write_report(rows, out, quick=quick, wall=time.perf_counter() - t0, provenance=provenance)
     return rows
 
 
-def write_report(rows: list[dict], out: Path, *, quick: bool = False, wall: float | None = None) -> None:
-    """``stability.csv``, ``stability.md`` and the outcome matrix ``stability.png`` into ``out``."""
+def write_report(rows: list[dict], out: Path, *, quick: bool = False, wall: float | None = None,
+                 provenance: Provenance | None = None) -> None:
+    """``stability.csv``, ``stability.md``, the outcome matrix ``stability.png`` and
+    ``provenance.json`` into ``out`` (``provenance``: what made them, default this process now)."""
 
     Path(out).mkdir(parents=True, exist_ok=True)
+    provenance = provenance or Provenance.now(comm=MPI.COMM_SELF)
+    provenance.write(Path(out))
     write_csv(rows, Path(out) / "stability.csv")
-    write_markdown(rows, Path(out) / "stability.md", quick=quick, wall=wall)
+    write_markdown(rows, Path(out) / "stability.md", quick=quick, wall=wall, provenance=provenance)
     plot_stability(rows, Path(out) / "stability.png")
 
 
@@ -152,10 +157,12 @@ def read_csv(path: Path) -> list[dict]:
     return rows
 
 
-def write_markdown(rows: list[dict], path: Path, *, quick: bool = False, wall: float | None = None) -> None:
+def write_markdown(rows: list[dict], path: Path, *, quick: bool = False, wall: float | None = None,
+                   provenance: Provenance | None = None) -> None:
     """Per case, the outcome of every option (``stable``, ``unstable``, ``aborted`` with the
     cause), the energy ratio and the J range; then a count per option over the cases."""
     lines = [f"# Stability catalogue{' (quick)' if quick else ''}", "",
+             (provenance or Provenance.now(comm=MPI.COMM_SELF)).line(), "",
              "Outcome of each case with each transfer option (one factor at a time from USL, lumped, point, "
              "cut-off 1e-9, CFL 0.4; the full catalogue also crosses MUSL with consistent mass, FMPM(5) and CPDI1), "
              "under the default run-health limits (20 % energy growth beyond the work of the "

@@ -2,6 +2,7 @@
 CSV columns, a correct Pareto front per problem, the report and the figures."""
 
 import csv
+import json
 from pathlib import Path
 
 import numpy as np
@@ -29,6 +30,8 @@ def test_csv_has_the_fixed_columns_and_every_run(study):
                                          "wall_s", "repeats", "threads", "pareto"]
             assert len(list(reader)) == expected
         assert (Path(out) / "error_vs_time.md").read_text().count("## ") == len(evt.SWEEPS)
+        assert (Path(out) / "error_vs_time.md").read_text().splitlines()[2].startswith("Made by `")
+        assert set(json.loads((Path(out) / "provenance.json").read_text())) == {"commit", "command", "date", "ranks"}
         for problem in evt.SWEEPS:
             assert (Path(out) / f"error_vs_time_{problem}.png").stat().st_size > 10_000
 

@@ -2,6 +2,7 @@
 every case, finite figures where stable, known causes where not, and no Python traceback."""
 
 import csv
+import json
 
 import numpy as np
 import pytest
@@ -28,6 +29,8 @@ def test_every_case_has_a_row_for_every_option(study):
         assert len(list(reader)) == len(rows)
     md = open(f"{out}/stability.md").read()
     assert all(f"## {case}" in md for case in CASES)
+    assert md.splitlines()[2].startswith("Made by `")
+    assert set(json.loads(open(f"{out}/provenance.json").read())) == {"commit", "command", "date", "ranks"}
 
 
 def test_stable_rows_are_finite_and_within_the_limits(study):
