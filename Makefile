@@ -5,7 +5,7 @@ PY      := $(VENV)/bin/python
 MPIEXEC := $(VENV)/bin/mpiexec
 NPROCS  ?= 2
 
-.PHONY: venv demo test study bench clean
+.PHONY: venv demo test study quick bench clean
 
 venv:
 	@bash scripts/bootstrap
@@ -18,6 +18,10 @@ test: venv
 
 study: venv
 	$(PY) -m fempm study mapping
+
+# the quick version of every study output and benchmark table, into output/quick
+quick: venv
+	bash scripts/regenerate-quick
 
 bench: venv
 	$(PY) benchmarks/bench_mapping.py

@@ -1,6 +1,7 @@
 """Timings of the particle-grid operations and peak memory (prints figures; never fails on time).
 
     python benchmarks/bench_mapping.py                 # 2D 1e5, 2D 1e6, 3D 1e5 (one process each)
+    python benchmarks/bench_mapping.py --quick         # 2D 1e5 only
     python benchmarks/bench_mapping.py --dim 2 --n 1e6 # one case
     mpiexec -n 2 python benchmarks/bench_mapping.py --dim 2 --n 1e6
 
@@ -95,12 +96,13 @@ def main() -> None:
     parser.add_argument("--dim", type=int)
     parser.add_argument("--n", type=float)
     parser.add_argument("--ppc", type=int, default=4)
+    parser.add_argument("--quick", action="store_true", help="the 2D case at 1e5 particles only")
     a = parser.parse_args()
     if a.dim is not None:
         one_case(a.dim, int(a.n), a.ppc)
         return
     print(Provenance.now().line(), flush=True)
-    for dim, n in [(2, 100_000), (2, 1_000_000), (3, 100_000)]:
+    for dim, n in [(2, 100_000)] if a.quick else [(2, 100_000), (2, 1_000_000), (3, 100_000)]:
         subprocess.run([sys.executable, __file__, "--dim", str(dim), "--n", str(n), "--ppc", str(a.ppc)], check=True)
 
 

@@ -200,8 +200,15 @@ def locate_dofs(V: dolfinx.fem.FunctionSpace, where: Callable[[npt.NDArray], npt
 
 
 def fixed(V: dolfinx.fem.FunctionSpace, where: Callable[[npt.NDArray], npt.NDArray]) -> Fixed:
-    """All velocity components zero at the dofs where ``where(x)`` holds (x of shape (3, n);
-    see :func:`locate_dofs`)."""
+    """A no-slip condition: every velocity component zero at the dofs where ``where(x)`` holds.
+
+    Args:
+        V: The velocity space.
+        where: A predicate on the dof coordinates x of shape (3, n) (see :func:`locate_dofs`).
+
+    Returns:
+        The condition, for ``ExplicitSolver(bcs=[...])``.
+    """
     return Fixed(locate_dofs(V, where))
 
 
@@ -213,13 +220,34 @@ def _unit_normal(normal, d: int, what: str) -> npt.NDArray:
 
 
 def slip(V: dolfinx.fem.FunctionSpace, where: Callable[[npt.NDArray], npt.NDArray], normal) -> Slip:
-    """Zero normal velocity at the dofs where ``where(x)`` holds; ``normal`` any direction."""
+    """A frictionless wall: the velocity component along ``normal`` zero at the dofs where
+    ``where(x)`` holds.
+
+    Args:
+        V: The velocity space.
+        where: A predicate on the dof coordinates x of shape (3, n).
+        normal: The wall's normal (d,), any length; axis-aligned normals constrain one
+            component, others a direction.
+
+    Returns:
+        The condition, for ``ExplicitSolver(bcs=[...])``.
+    """
     return Slip(locate_dofs(V, where), _unit_normal(normal, V.mesh.geometry.dim, "slip"))
 
 
 def prescribed(V: dolfinx.fem.FunctionSpace, where: Callable[[npt.NDArray], npt.NDArray], velocity) -> Prescribed:
-    """The grid velocity held at ``velocity`` (d,) at the dofs where ``where(x)`` holds; NaN
-    components stay free (``(nan, -0.1)``: a smooth plate moving down at 0.1)."""
+    """A moving rigid plate: the grid velocity held at ``velocity`` at the dofs where ``where(x)``
+    holds.
+
+    Args:
+        V: The velocity space.
+        where: A predicate on the dof coordinates x of shape (3, n).
+        velocity: The velocity (d,); NaN components stay free (``(nan, -0.1)``: a smooth plate
+            moving down at 0.1).
+
+    Returns:
+        The condition, for ``ExplicitSolver(bcs=[...])``.
+    """
     u = np.asarray(velocity, dtype=np.float64)
     d = V.mesh.geometry.dim
     if u.shape != (d,) or np.any(np.isinf(u)) or np.all(np.isnan(u)):
@@ -230,10 +258,26 @@ def prescribed(V: dolfinx.fem.FunctionSpace, where: Callable[[npt.NDArray], npt.
 
 def friction(V: dolfinx.fem.FunctionSpace, where: Callable[[npt.NDArray], npt.NDArray], normal,
              mu: float, gap: float | None = None) -> Friction:
-    """A wall with Coulomb friction ``mu`` >= 0 at the dofs where ``where(x)`` holds, ``normal``
-    pointing out of the body into the wall (:class:`Friction`; ``mu = 0``: a slip wall that
-    lets the body leave it). ``gap`` > 0: hold only the nodes the body touches (a length;
-    half the cell size normal to the wall is a good value, see :class:`Friction`)."""
+    """A rigid wall with Coulomb friction at the dofs where ``where(x)`` holds.
+
+    Where the grid velocity moves into the wall its normal part is removed and the tangential
+    part reduced by at most ``mu`` times that normal change (:class:`Friction`); where it leaves,
+    the velocity is free.
+
+    Args:
+        V: The velocity space.
+        where: A predicate on the dof coordinates x of shape (3, n).
+        normal: The wall's normal (d,), pointing out of the body into the wall.
+        mu: The friction coefficient, >= 0 (0: a slip wall the body may leave).
+        gap: Hold only the nodes the body touches (a length: half the cell size normal to the
+            wall is a good value); None holds every node moving into the wall.
+
+    Returns:
+        The condition, for ``ExplicitSolver(bcs=[...])``.
+
+    Raises:
+        ValueError: ``mu`` negative or not finite, ``gap`` not positive.
+    """
     if not 0.0 <= mu < np.inf:
         raise ValueError(f"friction needs a finite coefficient mu >= 0 (got {mu!r})")
     if gap is not None and not 0.0 < gap < np.inf:

@@ -84,8 +84,17 @@ def plane_strain_cone(friction_deg: float, dilation_deg: float) -> tuple[float, 
 
 @dataclass(frozen=True)
 class DruckerPrager(HypoelasticPlastic):
-    """``DruckerPrager(E, nu, friction_angle, dilation_angle=0.0, cohesion=0.0, tension=None)``,
-    angles in degrees (see the module)."""
+    r"""Drucker-Prager plasticity matched to Mohr-Coulomb, non-associated, with a tension cut-off
+    (see the module).
+
+    Args:
+        E: Young's modulus.
+        nu: Poisson's ratio.
+        friction_angle: :math:`\phi` in degrees, in [0, 90).
+        dilation_angle: :math:`\psi` in degrees, in [0, :math:`\phi`].
+        cohesion: :math:`c` >= 0.
+        tension: The tension cut-off on the mean stress (None: the cone's apex).
+    """
 
     friction_angle: float = 30.0
     dilation_angle: float = 0.0

@@ -20,6 +20,13 @@ __all__ = ["LinearElastic"]
 
 @dataclass(frozen=True)
 class LinearElastic(IsotropicElastic):
+    """Linear elasticity, small strain (see the module).
+
+    Args:
+        E: Young's modulus.
+        nu: Poisson's ratio, in (-1, 0.5).
+    """
+
     def strain(self, F: npt.NDArray) -> npt.NDArray:
         return sym(F) - identity(len(F), F.shape[1])
 

@@ -18,6 +18,13 @@ __all__ = ["NeoHookean"]
 
 @dataclass(frozen=True)
 class NeoHookean(IsotropicElastic):
+    """The compressible neo-Hookean solid (see the module).
+
+    Args:
+        E: Young's modulus (of the linearised law).
+        nu: Poisson's ratio, in (-1, 0.5).
+    """
+
     nu: float = 0.3
 
     def stress(self, F, L, sigma, dt, rho) -> npt.NDArray:

@@ -20,6 +20,16 @@ __all__ = ["NewtonianTait"]
 
 @dataclass(frozen=True)
 class NewtonianTait:
+    """A weakly compressible Newtonian fluid with the Tait equation of state (see the module).
+
+    Args:
+        rho0: The reference density.
+        kappa: The bulk stiffness of the equation of state.
+        gamma: The Tait exponent.
+        viscosity: The dynamic viscosity.
+        history: The internal variables (none).
+    """
+
     rho0: float
     kappa: float = 2.0e4
     gamma: float = 7.0

@@ -32,7 +32,14 @@ __all__ = ["VonMises"]
 
 @dataclass(frozen=True)
 class VonMises(HypoelasticPlastic):
-    """``VonMises(E, nu, yield_stress, hardening=0.0)``: J2 plasticity (see the module)."""
+    """J2 plasticity with linear isotropic hardening, hypoelastic (see the module).
+
+    Args:
+        E: Young's modulus.
+        nu: Poisson's ratio.
+        yield_stress: The initial yield stress (inf: elastic, the hypoelastic law alone).
+        hardening: The linear hardening modulus :math:`H`.
+    """
 
     yield_stress: float = np.inf
     hardening: float = 0.0

@@ -48,18 +48,14 @@ def as_points3(x: npt.NDArray) -> npt.NDArray[np.float64]:
 
 
 class CellLocator:
-    """Point location in owned cells with reference coordinates.
+    """Point location in owned cells, with the reference coordinates of each point in its cell.
 
-    Parameters
-    ----------
-    mesh:
-        The background mesh.
-    tol:
-        Tolerance on the reference coordinates for a point to count as inside a cell.
-    ghosts:
-        Also search the rank's ghost cells (for the sample points of particle domains, whose
-        contributions go to ghost dofs and are summed to their owners; particles themselves are
-        located in owned cells only).
+    Args:
+        mesh: The background mesh.
+        tol: The tolerance on the reference coordinates for a point to count as inside a cell.
+        ghosts: Also search the rank's ghost cells (for the sample points of particle domains,
+            whose contributions go to ghost dofs and are summed to their owners; particles
+            themselves are located in owned cells only).
     """
 
     def __init__(self, mesh: dolfinx.mesh.Mesh, *, tol: float = 1e-10, ghosts: bool = False):

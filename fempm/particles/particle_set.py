@@ -38,24 +38,29 @@ def _check_positive(name: str, a: npt.NDArray, comm: MPI.Comm) -> None:
 
 
 class Particles:
-    """Particles distributed over the ranks that own the cells containing them.
+    """Particles distributed over the ranks that own the cells containing them: a struct of
+    arrays (positions ``x``, cells, reference coordinates ``X``, ``mass``, ``volume``, ids and
+    the ``fields`` dictionary), each rank holding its own.
 
-    ``Particles(mesh, x, mass, volume)`` is collective: each rank may pass any subset of the
-    points (or none); every particle ends on the rank owning its cell.
+    Args:
+        mesh: The background mesh.
+        x: Positions (n, gdim) (3 columns accepted); each rank may pass any subset of the
+            particles, or none.
+        mass: Masses (n,), positive.
+        volume: Volumes (n,), positive.
+        fields: Extra per-particle arrays (first dimension n), carried along.
+        ids: Global integer ids; default: consecutive over the ranks in rank order.
+        outside: ``"raise"`` (default): an :class:`OutsideMeshError` names the particles
+            outside the mesh; ``"remove"``: drop them (the global count in :attr:`removed` and
+            in the log).
+        locator: A :class:`fempm.particles.location.CellLocator` of ``mesh`` to reuse.
 
-    Parameters
-    ----------
-    mesh:
-        Background mesh.
-    x, mass, volume:
-        Positions (n, gdim) (3 columns accepted), masses and volumes (n,), all positive.
-    fields:
-        Extra per-particle arrays (first dimension n), carried along.
-    ids:
-        Global integer ids; default: consecutive over the ranks in rank order.
-    outside:
-        ``"raise"`` (default): an :class:`OutsideMeshError` names the particles outside the mesh.
-        ``"remove"``: drop them; the global count is in :attr:`removed` and in the log.
+    Raises:
+        ValueError: Arrays of the wrong shapes, masses or volumes not positive, ids repeated.
+        OutsideMeshError: Particles outside the mesh with ``outside="raise"``.
+
+    Note:
+        Collective: every particle ends on the rank owning its cell.
     """
 
     def __init__(

@@ -100,18 +100,38 @@ def create_particles(
     locator: CellLocator | None = None,
     corners: bool = False,
 ) -> Particles:
-    """Seed ``ppc`` particles in every owned cell of ``mesh`` (collective).
+    """Seed ``ppc`` particles in every owned cell of ``mesh``.
 
-    ``density`` is a number or a function of the positions (n, gdim) -> (n,). ``cells``
-    restricts the seeding to some owned cells: local cell indices, or a predicate on the cell
-    midpoints (x of shape (3, n), as ``dolfinx.mesh.locate_entities``). ``where`` keeps only
-    the particles whose positions (3, n) satisfy it (a body's shape, e.g. a disk).
+    The reference cell is split into ``ppc`` sub-cells (``ppc`` a square in 2D, a cube in 3D:
+    n per direction), and a particle sits at each sub-cell's centre mapped to the cell, with
+    the sub-cell's share of the cell's volume.
 
-    ``corners=True`` makes each particle its sub-cell, for CPDI2 (:class:`fempm.transfer.domains.CPDI2`):
-    ``fields["corners"]`` holds the sub-cell's physical vertices (simplices on simplex cells,
-    quadrilaterals/hexahedra in :func:`fempm.transfer.domains.box_corners` order on tensor cells), and the
-    particle's position and volume are its domain's centroid and volume (the same as without
-    corners on affine cells).
+    Args:
+        mesh: The background mesh.
+        ppc: Particles per cell.
+        density: A number or a function of the positions (n, gdim) -> (n,); each particle's
+            mass is its density times its volume.
+        jitter: Random offset of each particle within its sub-cell, as a fraction of its size.
+        seed: The random seed of the jitter.
+        cells: Restrict the seeding to some owned cells: local cell indices, or a predicate on
+            the cell midpoints (x of shape (3, n), as ``dolfinx.mesh.locate_entities``).
+        where: Keep only the particles whose positions (3, n) satisfy it (a body's shape).
+        locator: A :class:`fempm.particles.location.CellLocator` of ``mesh`` to reuse.
+        corners: Make each particle its sub-cell, for CPDI2
+            (:class:`fempm.transfer.domains.CPDI2`): ``fields["corners"]`` holds the sub-cell's
+            vertices (simplices on simplex cells, quadrilaterals/hexahedra in
+            :func:`fempm.transfer.domains.box_corners` order on tensor cells), and the
+            particle's position and volume are its domain's centroid and volume.
+
+    Returns:
+        The particles (masses and volumes; ``fields["corners"]`` with ``corners``).
+
+    Raises:
+        ValueError: ``ppc`` not a ``d``-th power, ``jitter`` outside [0, 1], ``cells`` not owned
+            cells or a predicate of the wrong shape.
+
+    Note:
+        Collective.
     """
     if not 0.0 <= jitter <= 1.0:
         raise ValueError(f"jitter={jitter} must lie in [0, 1]")

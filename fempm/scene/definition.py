@@ -69,23 +69,34 @@ MAX_STEPS = 1e9
 
 @dataclass
 class Scene:
-    """Everything a run needs.
+    """Everything a run needs (:func:`fempm.scene.run`).
 
-    ``bcs`` builds the grid conditions from the vector space (``V -> [Fixed | Slip]``).
-    ``frames`` particle/grid frames are written over ``[0, t_end]``. ``dt``: a fixed time step
-    (the last step is shortened so that the run ends exactly at ``t_end``; a step above the
-    stability limit is an error); None (default) takes the CFL step of
-    :meth:`ExplicitSolver.stable_dt` every step. ``variant``: the Lagrange variant of the
-    velocity space (e.g. ``"bernstein"``, non-negative on simplices), default the DOLFINx one.
-    ``health``: the limits that stop an unhealthy run (:class:`fempm.stepping.health.Health`: energy
-    growth beyond the work of the loads, J bounds, time-step floor). ``outputs``: the frames a
-    run with an output folder writes, of :data:`OUTPUTS` (the energies and the summary always);
-    what is not asked for is not computed (the grid stress is a projection per frame).
-    ``results``: the scene's own measures of the final state, ``results(scene, solver) -> dict``
-    (collective), added to the run's summary. ``contact``: one velocity field per particle
-    group with frictional contact (:class:`fempm.stepping.contact.Contact`); None: one field.
-    ``watch``: called with the solver after every step (collective), for the scene's own
-    histories (a continued run calls it from the checkpoint on).
+    Args:
+        name: The scene's name (its output folder's default, its summary's ``scene``).
+        mesh: The background mesh.
+        particles: The particles, with their fields.
+        materials: The laws, one per value of ``fields["body"]``.
+        t_end: The end time.
+        bcs: Builds the grid conditions from the velocity space, ``V -> [condition, ...]``.
+        loads: Body forces and tractions.
+        options: The step's options.
+        degree: The velocity space's degree.
+        frames: The number of particle and grid frames over ``[0, t_end]``.
+        params: The scene's parameters, written to the summary and the checkpoint.
+        dt: A fixed time step (the last step shortened to end at ``t_end``; a step above the
+            stability limit is an error); None takes the CFL step every step.
+        variant: The Lagrange variant of the velocity space (e.g. ``"bernstein"``), default
+            DOLFINx's.
+        health: The limits that stop an unhealthy run (:class:`fempm.stepping.health.Health`:
+            energy growth beyond the work of the loads, J bounds, time-step floor).
+        outputs: The frames a run with an output folder writes, of :data:`OUTPUTS` (the
+            energies and the summary always); what is not asked for is not computed.
+        results: The scene's own measures of the final state, ``results(scene, solver) ->
+            dict`` (collective), added to the summary.
+        contact: One velocity field per particle group with frictional contact
+            (:class:`fempm.stepping.contact.Contact`); None: one field.
+        watch: Called with the solver after every step (collective), for the scene's own
+            histories (a continued run calls it from the checkpoint on).
     """
 
     name: str

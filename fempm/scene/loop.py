@@ -76,37 +76,57 @@ def run(
     overwrite: bool = True,
     output_limit: float | None = OUTPUT_LIMIT,
 ) -> dict:
-    """Run ``scene`` to ``t_end``. Energies and momentum are recorded every step (returned in
-    ``history`` and, with ``out``, written to ``energies.csv`` as the run goes, together with
-    particle VTK frames, the grid velocity and stress (VTK XML, the stress projected as a per-volume
-    field, :meth:`ExplicitSolver.grid_stress`), ``summary.json`` and, with ``png``, a PNG of
-    the particles per frame in ``frames/``; :mod:`fempm.io`). The scene's
+    """Run ``scene`` to ``t_end``, writing its outputs as it goes.
+
+    Energies and momentum are recorded every step (returned in ``history``; with ``out``
+    written to ``energies.csv`` as the run goes, with the particle frames, the grid velocity
+    and stress (VTK XML; the stress projected as a per-volume field,
+    :meth:`ExplicitSolver.grid_stress`), ``summary.json`` and, with ``png``, a PNG of the
+    particles per frame in ``frames/``; :mod:`fempm.io`). The scene's
     :class:`~fempm.stepping.health.Health` limits are checked every step.
 
     A run that raises still writes its summary (``status`` "aborted" for a health limit or a
     failed step: J <= 0, non-finite state, singular mass, a particle leaving the mesh;
     "interrupted"; "failed" for any other error, ``health.error`` the message) and a particle
-    frame of its last state, then raises the error. Under MPI an error raised on some ranks
-    only (a law, ``Scene.watch`` or ``callback`` failing on one rank, a file it cannot write)
-    leaves the others waiting in a collective call: the failing rank writes the summary alone
-    (``status`` "failed", the error with its rank) and ends every rank
-    (:func:`fempm.abort.abort`, exit code 1) within seconds (:class:`fempm.abort.FailureAgreement`).
+    frame of its last state, then raises the error. With ``out``, SIGTERM and SIGINT stop the
+    run at the next step boundary after a checkpoint, its summary (``status`` "interrupted")
+    and a particle frame.
 
-    ``checkpoint_every``: with ``out``, write the full state to ``out/checkpoint/`` every that
-    many steps and at the end (:mod:`fempm.io.checkpoint`; a resumed run also writes one at its end).
-    With ``out``, SIGTERM and SIGINT stop the run at the next step boundary, after a checkpoint,
-    its summary (``status`` "interrupted") and a particle frame; then
-    :class:`fempm.io.checkpoint.RunInterrupted` is raised.
-    ``resume``: continue the run whose checkpoint is in ``out`` (``scene`` built as it was, with
-    the ``t_end`` to run to: any other difference is a :class:`fempm.io.checkpoint.CheckpointError`
-    naming it); on the same number of ranks the continuation writes byte for byte what the
-    uninterrupted run writes. ``rebuild``: how to build ``scene`` again (the command
-    line's scene name and options), kept in the checkpoint for ``python -m fempm resume``.
-    ``overwrite``: remove the outputs of an earlier run in ``out`` (else they are an error;
-    :func:`fempm.io.make_folder`). ``output_limit``: the bytes of frames a run may write
-    (estimated before it starts, :func:`fempm.io.check_output_size`, and printed with
-    ``progress``); above it the run is a :class:`fempm.io.OutputSizeError` before anything is
-    written (None: no limit). Collective."""
+    Args:
+        scene: What to run.
+        out: The output folder (None: nothing written).
+        progress: Print a progress bar (and the estimated output size).
+        png: Also write a PNG of the particles per frame.
+        callback: Called with the solver after every step (collective).
+        checkpoint_every: With ``out``, write the full state to ``out/checkpoint/`` every that
+            many steps and at the end (:mod:`fempm.io.checkpoint`).
+        resume: Continue the run whose checkpoint is in ``out`` (``scene`` built as it was,
+            with the ``t_end`` to run to); on the same number of ranks the continuation writes
+            byte for byte what the uninterrupted run writes.
+        rebuild: How to build ``scene`` again (the command line's scene name and options), kept
+            in the checkpoint for ``python -m fempm resume``.
+        overwrite: Remove the outputs of an earlier run in ``out`` (else they are an error).
+        output_limit: The bytes of frames a run may write, estimated before it starts (None:
+            no limit).
+
+    Returns:
+        The summary (as in ``summary.json``) with the energy ``history``.
+
+    Raises:
+        fempm.SimulationError: A health limit or a failed step (after the summary is written).
+        fempm.io.checkpoint.RunInterrupted: SIGTERM or SIGINT (after the checkpoint).
+        fempm.io.checkpoint.CheckpointError: ``resume`` with a damaged checkpoint or a scene
+            that differs from the checkpoint's, naming the difference.
+        fempm.io.OutputSizeError: Frames larger than ``output_limit``, before anything is
+            written.
+
+    Note:
+        Collective. An error raised on some ranks only (a law, ``Scene.watch`` or ``callback``
+        failing on one rank, a file it cannot write) would leave the others waiting in a
+        collective call: the failing rank writes the summary alone (``status`` "failed", the
+        error with its rank) and ends every rank (:func:`fempm.abort.abort`, exit code 1)
+        within seconds (:class:`fempm.abort.FailureAgreement`).
+    """
     if (checkpoint_every is not None or resume) and out is None:
         raise ValueError("checkpoints need an output folder (out)")
     if checkpoint_every is not None and (isinstance(checkpoint_every, bool) or int(checkpoint_every) != checkpoint_every

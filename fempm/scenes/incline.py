@@ -19,39 +19,16 @@ under stress has it. It starts at rest on the plane:
   (a uniform disk, :math:`I = \tfrac12 m s^2`), where :math:`\mu \ge \tfrac13 \tan\theta`, and
   slides with :math:`a = g (\sin\theta - \mu \cos\theta)` otherwise.
 
-What rolling takes. With every node of the plane that the disk moves into held, the disk
-meets the plane across the :math:`\sim\sqrt{8 R h}` of nodes its bottom cells touch, which
-stops its rotation: it slid at mu = 0.3 (2.35 m/s^2 against the rolling 3.27). The plane
-therefore holds only the nodes the body touches (its nodal centre of mass within ``gap``
-cells, :class:`fempm.boundary.Friction`), and the disk has 4 x 4 particles per cell (with 2 x 2
-its staircase of particles rolls with errors up to 4 % at 16 cells).
+The defaults are what the analytic accelerations take, with the measurements behind each in
+docs/contact.md ("The incline", "The sliding block", "The rolling threshold on the grid"):
 
-What sliding takes. The block slides on its flat face, and the sliding of an elastic body on a
-Coulomb plane is unstable: the rocking of the block and the waves along its base grow (its
-strain energy from 0.004 J to 0.2 J in 0.35 s at mu = 0.5), some nodes of the base move uphill
-for a moment and the friction pushes them downhill, so the plane takes less friction than
-mu times its normal impulse (0.454 instead of 0.5) and the block slides too fast (mu = 0.5,
-FLIP 1: 1.25 m/s^2 against 0.657 at 8 cells, 3.06 at 16: worse on the finer grid, as an
-ill-posed problem is; 1.07 and 1.39 at CFL 0.1 and 0.8, 3.16, 1.50 and 1.28 at 1, 9 and 16
-particles per cell)
-and creeps where it should stick (mu = 0.6: 0.90 m/s^2). Pure FLIP has nothing that damps it;
-5 % of PIC (``flip=0.95``) brings mu = 0.5 to 0.2 % (8 cells) and 1.0 % (16); 20 % (0.8) held
-the block at mu = 0.6 only just (0.041 m/s^2 at 8 cells against the limit 0.049 of 1 % of
-g sin, 0.080 at 4 cells), 30 % (0.7) with a margin on either plane (0.028 and 0.019 m/s^2 at 8
-and 16 cells on the grid plane, 0.031 and 0.020 on the rigid plane, 0 at 4 cells; mu = 0.5
-within 0.5 %). The block's default is therefore ``flip=0.7``; the disk, whose rolling PIC would
-brake (at FLIP 0.8 it rolled at 0.84 m/s^2 instead of 3.27 at mu = 1), keeps pure FLIP
-(``flip=1.0``). Consistent mass damps less than lumped: a sticking block needs more PIC there
-(docs/contact.md).
-
-Measured (``python demos/incline.py``, 30 degrees, MUSL; docs/incline/incline.md and
-docs/contact.md): every case within 2 % at 8 and 16 cells, on either plane, the disk within
-0.84 % also just above its rolling threshold (mu = 0.2 and 0.22). That takes a plane that
-shares its normal impulse over the nodes the disk touches (:class:`fempm.boundary.Friction`,
-and :func:`fempm.stepping.contact.correct` for the rigid plane): held node by node, the node ahead of
-the contact point carried the disk's weight, up to a cell ahead of its centre, and braked the
-rotation, so that the disk slid at mu = 0.2 (-1.5 % and -2.0 %) and rolled only from
-mu = 0.25-0.3 at 8 cells.
+* the plane holds only the nodes the body touches (its nodal centre of mass within ``gap``
+  cells, :class:`fempm.boundary.Friction`) and shares its normal impulse over them by depth,
+  else it stops the disk's rotation;
+* the disk has 4 x 4 particles per cell (with 2 x 2 its staircase of particles bounces as it
+  rolls) and pure FLIP (PIC brakes rolling);
+* the block blends 30 % of PIC (``flip=0.7``): with pure FLIP the frictional sliding of an
+  elastic block is unstable near the friction angle and nothing damps it.
 
 The results (:func:`slope_acceleration`): ``acceleration``, the along-slope acceleration of the
 body's centre of mass once it moves (:math:`2 c_2` of the least-squares fit

@@ -27,17 +27,18 @@ __all__ = [
 class Loads:
     r"""External loads; a term left None is never assembled.
 
-    body_force: acceleration (d,), or a function of the current positions ``x`` (n, d) and the
-    time ``t``, ``f(x, t)``, or also of the reference positions ``X`` (n, d), ``f(x, t, X)``
-    (the particles' ``fields["X0"]``, e.g. a manufactured body force :math:`b(X, t)`); it
-    returns (n, d), per unit mass. The number of positional parameters decides which is called.
-
-    traction: a function t -> (n, d), the traction :math:`\bar t_p` on each particle (zero rows
-    away from the loaded surface), applied as the force :math:`\bar t_p A_p` where :math:`A_p`
-    is the particle's share of the loaded surface: ``fields["area"]`` when the particles carry
-    it (e.g. from :func:`surface_areas`), else the body's boundary facets next to the loaded
-    particles (:func:`boundary_shares`: the traction times the loaded boundary's measure on
-    every cell type).
+    Args:
+        body_force: An acceleration (d,) per unit mass, or a function of the current positions
+            ``x`` (n, d) and the time, ``f(x, t)``, or also of the reference positions
+            ``f(x, t, X)`` (the particles' ``fields["X0"]``, e.g. a manufactured body force
+            :math:`b(X, t)`), returning (n, d); the number of its positional parameters
+            decides which is called.
+        traction: A function ``t -> (n, d)``, the traction :math:`\bar t_p` on each particle
+            (zero rows away from the loaded surface), applied as the force :math:`\bar t_p A_p`
+            with :math:`A_p` the particle's share of the loaded surface: ``fields["area"]``
+            when the particles carry it (:func:`surface_areas`), else the body's boundary
+            facets next to the loaded particles (:func:`boundary_shares`, exact on every cell
+            type).
     """
 
     body_force: npt.ArrayLike | Callable | None = None

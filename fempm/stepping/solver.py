@@ -54,18 +54,35 @@ class StepRecord:
 
 @dataclass
 class ExplicitSolver:
-    """Explicit MPM on the vector P1 (or P2/Bernstein) space ``V`` of the particles' mesh.
+    """Explicit MPM on a vector Lagrange space (degree 1 or 2, or Bernstein) of the particles' mesh.
 
-    Particle state lives in ``particles.fields``: ``v`` (n, d), ``F`` (n, d, d), ``sigma``
-    (n, d, d), ``volume0`` (n,), ``body`` (n,) index into ``materials``, and the reference
-    positions ``X0`` (n, d) (the positions when the solver is made, unless given).
+    :meth:`step` is one cycle: map the particles to the grid, solve for the grid velocity with
+    the mass model, apply the grid conditions (and contact), update the particles, relocate
+    them. The particles' state lives in ``particles.fields``: ``v`` (n, d), ``F`` (n, d, d),
+    ``sigma`` (n, d, d), ``volume0`` (n,), ``body`` (n,) an index into ``materials``, and the
+    reference positions ``X0`` (n, d) (the positions when the solver is made, unless given).
 
-    ``compiled``: take the compiled step (:mod:`fempm.stepping.lumped`, :mod:`fempm.stepping.consistent`:
-    lumped or consistent mass, point particles, a degree-1 space on an affine mesh) where it
-    applies (None, the default), insist on it (True: an error where it does not apply) or never
-    (False: the generic step, which is its reference). ``contact``: a
-    :class:`fempm.stepping.contact.Contact`, one velocity field per particle group with frictional
-    contact between them (the generic step; None: one field for all).
+    Args:
+        V: The velocity space.
+        particles: The particles.
+        materials: The laws (:mod:`fempm.materials`), one per value of ``fields["body"]``.
+        bcs: The grid conditions (:mod:`fempm.boundary`).
+        loads: Body forces and tractions.
+        options: The step's options (scheme, mass model, particle domain, FLIP blend, CFL).
+        t: The start time.
+        step_count: The steps taken before (a continued run).
+        compiled: Take the compiled passes where they apply (None, the default: lumped or
+            consistent mass, point particles, a degree-1 space on an affine mesh), insist on
+            them (True: an error where they do not apply) or never (False: the numpy step,
+            which is their reference).
+        contact: One velocity field per particle group with frictional contact between them
+            (:class:`fempm.stepping.contact.Contact`); None: one field for all.
+
+    Raises:
+        ValueError: Options, fields or conditions that do not fit the space or the particles.
+
+    Note:
+        Construction and :meth:`step` are collective.
     """
 
     V: dolfinx.fem.FunctionSpace

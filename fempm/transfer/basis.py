@@ -35,17 +35,19 @@ def is_nonnegative(element: basix.finite_element.FiniteElement) -> bool:
 
 
 class ParticleBasis:
-    """``S`` (values), optional ``G`` (gradients) and dof lists of ``V`` at the particles.
+    """The basis of a space at the particles: values ``S``, optional gradients ``G`` and the dofs
+    of each particle's cell (or, for particle domains, of every cell the domain touches).
 
-    Parameters
-    ----------
-    V:
-        A scalar or blocked Lagrange (any variant, including Bernstein) space on the particles'
-        mesh.
-    particles:
-        Located particles.
-    gradients:
-        Also tabulate physical gradients ``G`` (n, ndofs_per_cell, gdim).
+    Args:
+        V: A scalar or blocked Lagrange space (any variant, including Bernstein) on the
+            particles' mesh.
+        particles: Located particles.
+        gradients: Also tabulate the physical gradients ``G`` (n, dofs per cell, gdim).
+        domain: The particle domain over which the basis is averaged (a name or a
+            :mod:`fempm.transfer.domains` object; default the point).
+
+    Note:
+        Collective (domain samples on other ranks are exchanged).
     """
 
     def __init__(

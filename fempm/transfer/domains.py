@@ -235,7 +235,18 @@ GIMP_NAMES = ("gimp", "ugimp", "cpgimp")
 
 
 def make_domain(name: str, **kwargs):
-    """A domain by name: point, gimp, ugimp, cpgimp, cpdi1, cpdi2 (unknown names are errors)."""
+    """A particle domain by name.
+
+    Args:
+        name: ``point``, ``gimp`` (uGIMP), ``ugimp``, ``cpgimp``, ``cpdi1`` or ``cpdi2``.
+        kwargs: The domain's options (e.g. ``order`` of a Gauss-rule GIMP).
+
+    Returns:
+        The domain object (:mod:`fempm.transfer.domains`).
+
+    Raises:
+        ValueError: An unknown name.
+    """
     if name not in DOMAINS:
         raise ValueError(f"unknown option domain={name!r}; expected one of {', '.join(DOMAINS)}")
     return DOMAINS[name](**kwargs)

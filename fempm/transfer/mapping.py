@@ -83,8 +83,20 @@ def particle_weights(particles: Particles, weight: str) -> npt.NDArray:
 
 
 def lumped_mass(basis: ParticleBasis, particles: Particles, weight: str = "mass") -> npt.NDArray:
-    r"""Lumped nodal mass :math:`m_i = \sum_p M_p N_i(x_p)` (or nodal volume
-    :math:`V_i = \sum_p V_p N_i(x_p)` with ``weight="volume"``) on owned + ghost dofs."""
+    r"""The lumped nodal mass :math:`m_i = \sum_p M_p \langle N_i \rangle_p`, or with
+    ``weight="volume"`` the nodal volume :math:`V_i = \sum_p V_p \langle N_i \rangle_p`.
+
+    Args:
+        basis: The basis at the particles.
+        particles: The particles.
+        weight: ``"mass"`` or ``"volume"``.
+
+    Returns:
+        (owned + ghost dofs,) values summed over ranks, ghosts updated.
+
+    Note:
+        Collective.
+    """
     return p2g(basis, particle_weights(particles, weight))[:, 0]
 
 

@@ -257,8 +257,39 @@ def project(
     weight: str = "mass",
     fmpm_order: int | None = None,
 ) -> dolfinx.fem.Function:
-    """Galerkin projection of particle ``values`` onto ``V`` (see :class:`Projector`;
-    ``weight="volume"`` for per-volume fields such as stress; ``mass="fmpmK"`` for FMPM(K))."""
+    r"""Galerkin (mass-weighted least-squares) projection of particle values onto ``V``.
+
+    Solves :math:`\sum_j m_{ij} F_j = b_i` with :math:`m_{ij} = \sum_p M_p \langle N_i N_j \rangle_p`
+    and :math:`b_i = \sum_p M_p f_p \langle N_i \rangle_p` (lumped: :math:`m_i = \sum_j m_{ij}`).
+    A :class:`Projector` that is used once; build one to project several fields on the same
+    particles.
+
+    Args:
+        V: The space to project onto (scalar, vector or tensor; Lagrange, Bernstein).
+        particles: The particles carrying the values.
+        values: (n,) or (n, bs) values per particle, or a function of x of shape (3, n)
+            returning (bs, n) values (the DOLFINx convention).
+        mass: ``"consistent"`` (the exact projection), ``"lumped"``, ``"fmpm"`` (with
+            ``fmpm_order``), ``"fmpmK"`` or a :class:`fempm.transfer.mass_models.MassModel`.
+        petsc_options_prefix: Options prefix of the consistent solve's KSP.
+        petsc_options: PETSc options set under that prefix.
+        domain: The particle domain over which the basis is averaged (a name, e.g. ``"gimp"``,
+            or a :mod:`fempm.transfer.domains` object; default the point).
+        weight: ``"mass"`` for per-mass fields such as velocity, ``"volume"`` for per-volume
+            fields such as stress.
+        fmpm_order: The FMPM order with ``mass="fmpm"``.
+
+    Returns:
+        The projection, a new ``dolfinx.fem.Function`` on ``V`` with ghosts updated.
+
+    Raises:
+        ValueError: Values of the wrong shape or not finite; a lumped mass on a basis with
+            negative values.
+        fempm.SingularMassError: Too few particles to determine the consistent projection.
+
+    Note:
+        Collective.
+    """
     projector = Projector(
         V, particles, mass=mass, petsc_options_prefix=petsc_options_prefix, petsc_options=petsc_options,
         domain=domain, weight=weight, fmpm_order=fmpm_order,
@@ -267,9 +298,19 @@ def project(
 
 
 def interpolate(u: dolfinx.fem.Function, particles: Particles, basis: ParticleBasis | None = None) -> npt.NDArray:
-    r"""G2P: values :math:`u(x_p) = \sum_i u_i N_i(x_p)` at the particles, (n,) or (n, bs).
+    r"""G2P: the values :math:`u(x_p) = \sum_i u_i \langle N_i \rangle_p` at the particles.
 
-    Ghost values of ``u`` must be up to date (as after any DOLFINx interpolation or solve).
+    Args:
+        u: A function whose ghost values are up to date (as after any DOLFINx interpolation
+            or solve).
+        particles: The particles.
+        basis: The basis at the particles (default: point values in ``u``'s space).
+
+    Returns:
+        (n,) values for a scalar space, (n, bs) otherwise.
+
+    Note:
+        Collective when ``basis`` is None (the basis is built); else local.
     """
     basis = basis if basis is not None else ParticleBasis(u.function_space, particles)
     vals = basis.gather(u.x.array.reshape(-1, basis.bs))

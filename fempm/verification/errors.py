@@ -21,16 +21,26 @@ def l2_error(uh: dolfinx.fem.Function, exact) -> float:
 
 
 def particle_errors(particles, exact, t: float) -> dict[str, float]:
-    r"""Displacement errors of the particles against an exact motion at time ``t``, reduced
-    over ranks. With :math:`u_p = x_p - X_p` (``fields["X0"]`` the reference positions) and
-    :math:`e_p = |u_p - u(X_p, t)|`:
+    r"""Displacement errors of the particles against an exact motion at time ``t``.
+
+    With :math:`u_p = x_p - X_p` and :math:`e_p = |u_p - u(X_p, t)|`:
 
     * ``max``: :math:`\max_p e_p`,
     * ``rms``: :math:`\sqrt{\sum_p e_p^2 / N}`,
-    * ``l2``: :math:`\sqrt{\sum_p V^0_p e_p^2}` (``fields["volume0"]``), an :math:`L^2` norm
-      over the reference body.
+    * ``l2``: :math:`\sqrt{\sum_p V^0_p e_p^2}`, an :math:`L^2` norm over the reference body.
 
-    ``exact`` is any object with ``displacement(X, t)`` (:mod:`fempm.verification.manufactured`)."""
+    Args:
+        particles: The particles, with the reference positions ``fields["X0"]`` and volumes
+            ``fields["volume0"]``.
+        exact: Any object with ``displacement(X, t)`` (:mod:`fempm.verification.manufactured`).
+        t: The time.
+
+    Returns:
+        ``{"max": ..., "rms": ..., "l2": ...}``, the same on every rank.
+
+    Note:
+        Collective.
+    """
     X = particles.fields["X0"]
     e = np.linalg.norm(particles.x - X - exact.displacement(X, t), axis=1) if len(X) else np.zeros(0)
     comm = particles.comm
