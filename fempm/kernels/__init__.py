@@ -2,14 +2,14 @@
 
 Each kernel has a numpy reference implementation (``*_numpy``) that defines what it computes;
 the compiled version (numba, ``*_numba``) is used when numba is installed and must agree with
-the reference to round-off (``tests/unit/test_kernels.py``). :data:`COMPILED`
+the reference to round-off (``tests/kernels/test_kernels.py``). :data:`COMPILED`
 (:mod:`fempm.kernels.choice`) tells which is in use; ``FEMPM_KERNELS=numpy`` in the environment selects the references.
 
 Two modules work on whole passes rather than single operations: :mod:`fempm.kernels.shape`
 (the degree-1 basis in closed form and the affine pull-back; basix and
 :class:`fempm.meshes.geometry.CellGeometry` are their references) and :mod:`fempm.kernels.lumped`
 (the passes of :class:`fempm.stepping.lumped.PointGrid`, whose reference is the generic
-:meth:`fempm.stepping.ExplicitSolver.step`, ``tests/mpi/test_compiled_step.py``).
+:meth:`fempm.stepping.ExplicitSolver.step`, ``tests/stepping/test_compiled_step.py``).
 """
 
 from __future__ import annotations

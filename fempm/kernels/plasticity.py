@@ -15,7 +15,7 @@ r"""The hypoelastic predictor and the J2 return mapping, per particle.
   cone (or its apex), then the tension cut-off :math:`p \le p_t` along the hydrostatic axis.
 
 The numpy functions (``*_numpy``) define what they compute; the compiled ones agree with them
-to round-off (``tests/unit/test_kernels.py``). Both return new arrays.
+to round-off (``tests/kernels/test_kernels.py``). Both return new arrays.
 """
 
 from __future__ import annotations

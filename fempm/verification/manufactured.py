@@ -12,7 +12,7 @@ the reference configuration,
     \quad\Longrightarrow\quad b = \ddot u - \frac{1}{\rho_0} \operatorname{Div} P,
 
 with :math:`P = J \sigma F^{-T}` the first Piola-Kirchhoff stress of the problem's material.
-Each closed form below is derived in its docstring; ``tests/unit/test_manufactured.py``
+Each closed form below is derived in its docstring; ``tests/verification/test_manufactured.py``
 checks it against finite differences of the exact motion.
 
 * :func:`axis_aligned_1d`: 1D, both ends fixed (Steffen, Kirby and Berzins 2008);
