@@ -43,28 +43,12 @@ G_SIN = 9.81 * np.sin(np.radians(30.0))
 
 #: name -> the scene's options (body, friction, plane), each with the scene's default PIC/FLIP
 #: blend (0.7 for the block, pure FLIP for the disk)
-CASES = {
-    "block mu=0": dict(body="block", friction=0.0),
-    "block mu=0.2": dict(body="block", friction=0.2),
-    "block mu=0.5": dict(body="block", friction=0.5),
-    "block mu=0.6": dict(body="block", friction=0.6),
-    "block mu=1": dict(body="block", friction=1.0),
-    "disk mu=0": dict(body="disk", friction=0.0),
-    "disk mu=0.1": dict(body="disk", friction=0.1),
-    "disk mu=0.2": dict(body="disk", friction=0.2),
-    "disk mu=0.22": dict(body="disk", friction=0.22),
-    "disk mu=0.25": dict(body="disk", friction=0.25),
-    "disk mu=0.3": dict(body="disk", friction=0.3),
-    "disk mu=1": dict(body="disk", friction=1.0),
-    "rigid plane, block mu=0": dict(body="block", friction=0.0, plane="rigid"),
-    "rigid plane, block mu=0.2": dict(body="block", friction=0.2, plane="rigid"),
-    "rigid plane, block mu=0.5": dict(body="block", friction=0.5, plane="rigid"),
-    "rigid plane, block mu=0.6": dict(body="block", friction=0.6, plane="rigid"),
-    "rigid plane, block mu=1": dict(body="block", friction=1.0, plane="rigid"),
-    "rigid plane, disk mu=0.1": dict(body="disk", friction=0.1, plane="rigid"),
-    "rigid plane, disk mu=0.2": dict(body="disk", friction=0.2, plane="rigid"),
-    "rigid plane, disk mu=0.3": dict(body="disk", friction=0.3, plane="rigid"),
-}
+#: the coefficients run for each plane and body
+FRICTIONS = {("grid", "block"): (0.0, 0.2, 0.5, 0.6, 1.0), ("grid", "disk"): (0.0, 0.1, 0.2, 0.22, 0.25, 0.3, 1.0),
+             ("rigid", "block"): (0.0, 0.2, 0.5, 0.6, 1.0), ("rigid", "disk"): (0.1, 0.2, 0.3)}
+CASES = {f"{'rigid plane, ' if plane == 'rigid' else ''}{body} mu={mu:g}":
+         dict(body=body, friction=mu, **({"plane": "rigid"} if plane == "rigid" else {}))
+         for (plane, body), mus in FRICTIONS.items() for mu in mus}
 COLUMNS = ["case", "cells", "ppc", "acceleration", "analytic", "error_percent", "energy_ratio", "steps", "wall_s"]
 
 

@@ -80,3 +80,9 @@ def shared_tmp(tmp_path_factory, name: str) -> str:
     """A temporary folder made on rank 0 and known to every rank (for studies run under MPI)."""
     out = tmp_path_factory.mktemp(name) if MPI.COMM_WORLD.rank == 0 else None
     return MPI.COMM_WORLD.bcast(str(out), root=0)
+
+
+def quick_study(tmp_path_factory, name: str, run) -> tuple[str, list[dict]]:
+    """(the folder, the rows) of ``run(folder, quick=True)``, a study at its quick size, silent."""
+    out = shared_tmp(tmp_path_factory, name)
+    return out, run(out, quick=True, log=lambda *a: None)

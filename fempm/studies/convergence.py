@@ -37,7 +37,7 @@ from mpi4py import MPI
 from fempm.io.plot import plot_convergence
 from fempm.scene.loop import run as run_scene
 from fempm.scenes.manufactured import manufactured_scene
-from fempm.studies.harness import Provenance, chosen, sweep
+from fempm.studies.harness import Provenance, chosen, prepare, read_rows, sweep
 from fempm.transfer.mass_models import mass_model
 from fempm.verification import manufactured as mf
 from fempm.verification.errors import ErrorHistory
@@ -202,10 +202,7 @@ def run(out: Path = Path("output/study-convergence"), *, quick: bool = False, pr
         Collective.
     """
     names = chosen(problems, list(PROBLEMS), "problem")
-    provenance = provenance or Provenance.now(comm=comm)
-    out = Path(out)
-    if comm.rank == 0:
-        out.mkdir(parents=True, exist_ok=True)
+    out, provenance = prepare(out, provenance, comm)
 
     def cases():
         for name in names:
@@ -235,16 +232,10 @@ def read_csv(path: Path) -> list[dict]:
     from ``convergence_failures.csv`` beside it when there is one (e.g. to merge studies run
     in parts and write their report again with :func:`write_report`)."""
     ints, floats = ("degree", "cells", "steps"), ("h", "dt", "error_max", "error_rms", "error_l2", "wall_s")
-    with open(path, newline="") as f:
-        rows = list(csv.DictReader(f))
-    reasons = {}
-    failures = Path(path).with_name("convergence_failures.csv")
-    if failures.exists():
-        with open(failures, newline="") as f:
-            reasons = {tuple(r[c] for c in FAILURE_COLUMNS[:8]): r["reason"] for r in csv.DictReader(f)}
-    for r in rows:
-        r["reason"] = reasons.get(tuple(r[c] for c in FAILURE_COLUMNS[:8]), "")
-        r.update({k: int(r[k]) for k in ints}, **{k: float(r[k]) for k in floats})
+    rows = []
+    for r, failed in read_rows(path, "convergence_failures.csv", FAILURE_COLUMNS[:8]):
+        r.update({k: int(r[k]) for k in ints}, **{k: float(r[k]) for k in floats}, reason=failed.get("reason", ""))
+        rows.append(r)
     return rows
 
 

@@ -34,7 +34,7 @@ from fempm.io.plot import plot_pareto
 from fempm.particles.seeding import create_particles
 from fempm.studies import convergence, mapping
 from fempm.studies.convergence import Config
-from fempm.studies.harness import Provenance, chosen, sweep
+from fempm.studies.harness import Provenance, chosen, prepare, read_rows, sweep
 from fempm.transfer.domains import half_widths
 
 __all__ = [
@@ -172,10 +172,7 @@ def run_study(out: Path = Path("output/study-error-vs-time"), *, quick: bool = F
         Collective.
     """
     names = chosen(problems, list(SWEEPS), "problem")
-    provenance = provenance or Provenance.now(comm=comm)
-    out = Path(out)
-    if comm.rank == 0:
-        out.mkdir(parents=True, exist_ok=True)
+    out, provenance = prepare(out, provenance, comm)
     t0 = time.perf_counter()
     run_case("mapping", Config(ppc=4), 4, comm)  # first-call costs (imports, PETSc set-up) untimed
 
@@ -219,18 +216,12 @@ def write_csv(rows: list[dict], path: Path) -> None:
 def read_csv(path: Path) -> list[dict]:
     """Rows of an ``error_vs_time.csv`` with their numbers typed, and the status and reason of
     failed runs from ``error_vs_time_failures.csv`` beside it (to write the report again)."""
-    with open(path, newline="") as f:
-        rows = list(csv.DictReader(f))
-    failed = {}
-    failures = Path(path).with_name("error_vs_time_failures.csv")
-    if failures.exists():
-        with open(failures, newline="") as f:
-            failed = {tuple(r[c] for c in COLUMNS[:8]): r for r in csv.DictReader(f)}
-    for r in rows:
-        f = failed.get(tuple(r[c] for c in COLUMNS[:8]), {})
+    rows = []
+    for r, f in read_rows(path, "error_vs_time_failures.csv", COLUMNS[:8]):
         r.update(status=f.get("status", "ok"), reason=f.get("reason", ""))
         r.update(error=float(r["error"]), wall_s=float(r["wall_s"]), cells=int(r["cells"]), ppc=int(r["ppc"]),
                  repeats=int(r["repeats"]), threads=int(r["threads"]), pareto=r["pareto"] == "True")
+        rows.append(r)
     return rows
 
 

@@ -9,6 +9,7 @@ and returns its row; :func:`sweep` runs them, and the study's report writes its 
 
 from __future__ import annotations
 
+import csv
 import datetime
 import json
 import shlex
@@ -20,7 +21,7 @@ from pathlib import Path
 
 from mpi4py import MPI
 
-__all__ = ["Provenance", "chosen", "sweep"]
+__all__ = ["Provenance", "chosen", "prepare", "read_rows", "sweep"]
 
 REPOSITORY = Path(__file__).resolve().parents[2]
 
@@ -102,6 +103,19 @@ def chosen(names: Iterable[str] | None, known: Sequence[str], kind: str) -> list
     return picked
 
 
+def prepare(out: Path, provenance: Provenance | None, comm: MPI.Comm = MPI.COMM_WORLD) -> tuple[Path, Provenance]:
+    """The output folder ``out``, made on rank 0, and the provenance of what will be written there
+    (``provenance``, or this process's now).
+
+    Note:
+        Collective.
+    """
+    out = Path(out)
+    if comm.rank == 0:
+        out.mkdir(parents=True, exist_ok=True)
+    return out, provenance or Provenance.now(comm=comm)
+
+
 def sweep(cases: Iterable, run: Callable[..., dict], describe: Callable[[dict], str],
           save: Callable[[list[dict]], None], comm: MPI.Comm = MPI.COMM_WORLD, log=print) -> list[dict]:
     """Run ``run(*case)`` for each case; after each, rank 0 logs ``describe(row)`` and saves all
@@ -117,3 +131,17 @@ def sweep(cases: Iterable, run: Callable[..., dict], describe: Callable[[dict], 
             log(describe(rows[-1]))
             save(rows)
     return rows
+
+
+def read_rows(path: Path, failures: str, key: Sequence[str]) -> list[tuple[dict, dict]]:
+    """The rows of a study's CSV as text, each with the row of the failures CSV ``failures``
+    beside it that has the same ``key`` columns ({} for a run that did not fail, or without
+    that file): to merge studies run in parts and write their reports again."""
+    with open(path, newline="") as f:
+        rows = list(csv.DictReader(f))
+    failed = {}
+    beside = Path(path).with_name(failures)
+    if beside.exists():
+        with open(beside, newline="") as f:
+            failed = {tuple(r[c] for c in key): r for r in csv.DictReader(f)}
+    return [(r, failed.get(tuple(r[c] for c in key), {})) for r in rows]

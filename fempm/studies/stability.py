@@ -33,7 +33,7 @@ from fempm.io.plot import plot_stability
 from fempm.particles.location import OutsideMeshError
 from fempm.scene.loop import run
 from fempm.stepping.options import SimulationError
-from fempm.studies.harness import Provenance, chosen, sweep
+from fempm.studies.harness import Provenance, chosen, prepare, sweep
 from fempm.studies.stability_cases import CASES
 from fempm.transfer.mapping import SingularMassError
 
@@ -109,10 +109,7 @@ def run_study(out: Path = Path("output/study-stability"), *, quick: bool = False
         Collective.
     """
     names = chosen(cases, list(CASES), "case")
-    provenance = provenance or Provenance.now(comm=comm)
-    out = Path(out)
-    if comm.rank == 0:
-        out.mkdir(parents=True, exist_ok=True)
+    out, provenance = prepare(out, provenance, comm)
     t0 = time.perf_counter()
 
     def describe(row: dict) -> str:

@@ -7,7 +7,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from conftest import shared_tmp
+from conftest import quick_study
 from mpi4py import MPI
 
 from fempm.studies import error_vs_time as evt
@@ -15,8 +15,7 @@ from fempm.studies import error_vs_time as evt
 
 @pytest.fixture(scope="module")
 def study(tmp_path_factory):
-    out = shared_tmp(tmp_path_factory, "evt")
-    return out, evt.run_study(out, quick=True, log=lambda *a: None)
+    return quick_study(tmp_path_factory, "evt", evt.run_study)
 
 
 def test_csv_has_the_fixed_columns_and_every_run(study):

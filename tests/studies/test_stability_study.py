@@ -6,7 +6,7 @@ import json
 
 import numpy as np
 import pytest
-from conftest import shared_tmp
+from conftest import quick_study
 
 from fempm.studies import stability
 from fempm.studies.stability_cases import CASES
@@ -14,8 +14,7 @@ from fempm.studies.stability_cases import CASES
 
 @pytest.fixture(scope="module")
 def study(tmp_path_factory):
-    out = shared_tmp(tmp_path_factory, "stability")
-    return out, stability.run_study(out, quick=True, log=lambda *a: None)
+    return quick_study(tmp_path_factory, "stability", stability.run_study)
 
 
 def test_every_case_has_a_row_for_every_option(study):
