@@ -42,6 +42,7 @@ from mpi4py import MPI
 from fempm.scene import run, run_stats
 from fempm.scenes import column_collapse
 from fempm.scenes.column import RUNOUT_LAWS, published_runout
+from fempm.studies.harness import Provenance
 
 
 def main(argv: list[str] | None = None) -> dict:
@@ -66,8 +67,9 @@ def main(argv: list[str] | None = None) -> dict:
     exponents = np.diff(np.log(runout)) / np.diff(np.log(aspects)) if len(rows) > 1 else np.zeros(0)
     if comm.rank == 0:
         a.out.mkdir(parents=True, exist_ok=True)
-        lines = [f"Granular column collapse, {a.cells} cells across the column width "
-                 "(`python demos/column_collapse.py`)", "",
+        provenance = Provenance.now(comm=MPI.COMM_SELF)
+        provenance.write(a.out)
+        lines = [f"Granular column collapse, {a.cells} cells across the column width", "", provenance.line(), "",
                  "| a | (L_inf - L0)/L0 | " + " | ".join(RUNOUT_LAWS) + " | H_inf/L0 | kinetic / released energy "
                  "| particles | steps |",
                  "|---|---|" + "---|" * len(RUNOUT_LAWS) + "---|---|---|---|"]

@@ -36,6 +36,7 @@ from mpi4py import MPI
 
 from fempm.scene import run
 from fempm.scenes.cook import cook_membrane, corner_displacement, fe_reference
+from fempm.studies.harness import Provenance
 
 
 def main(argv: list[str] | None = None) -> dict:
@@ -74,6 +75,7 @@ def main(argv: list[str] | None = None) -> dict:
                       flush=True)
     if comm.rank == 0:
         a.out.mkdir(parents=True, exist_ok=True)
+        Provenance.now(comm=MPI.COMM_SELF).write(a.out)
         with open(a.out / "cook.csv", "w", newline="") as f:
             w = csv.DictWriter(f, fieldnames=list(rows[0]))
             w.writeheader()

@@ -38,6 +38,7 @@ from mpi4py import MPI
 
 from fempm.scene import run
 from fempm.scenes import incline
+from fempm.studies.harness import Provenance
 
 G_SIN = 9.81 * np.sin(np.radians(30.0))
 
@@ -72,7 +73,9 @@ def write(rows: list[dict], out: Path, command: str) -> None:
         w = csv.DictWriter(f, COLUMNS)
         w.writeheader()
         w.writerows(rows)
-    lines = [f"Command: `{command}`", "",
+    provenance = Provenance.now(command=command, comm=MPI.COMM_SELF)
+    provenance.write(out)
+    lines = [provenance.line(), "",
              "| case | cells | ppc | acceleration (m/s^2) | analytic | error (%) | energy / work | steps | wall (s) |",
              "|---|---|---|---|---|---|---|---|---|"]
     lines += [f"| {r['case']} | {r['cells']} | {r['ppc']} | {r['acceleration']:.4f} | {r['analytic']:.4f} | "

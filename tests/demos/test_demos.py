@@ -58,6 +58,7 @@ def test_column_collapse_demo_writes_its_table_and_figure(tmp_path):
     assert "| Lube et al. 2005 | Lajeunesse et al. 2005 |" in md
     assert f"| 2 | {rows[1]['runout']:.3f} | 2.40-3.02 | 3.60 |" in md  # both branches of Lube's law at a = 2
     assert (tmp_path / "column_collapse.png").stat().st_size > 10_000
+    assert md.splitlines()[2].startswith("Made by `") and (tmp_path / "provenance.json").exists()
 
 
 def test_disks_contact_demo_separates_the_disks(tmp_path):
@@ -82,5 +83,6 @@ def test_incline_demo_writes_its_table(tmp_path):
     assert rows[1]["ppc"] == 16 and np.isfinite(rows[1]["acceleration"])
     table = (tmp_path / "incline.md").read_text()
     assert table.count("\n| ") == 3 and "disk mu=0.3" in table
+    assert table.startswith("Made by `python demos/incline.py --cells 4") and (tmp_path / "provenance.json").exists()
     with pytest.raises(ValueError, match="unknown case"):
         demo.main(["--cases", "sphere", "--out", str(tmp_path)])
