@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import ClassVar, Protocol
 
@@ -11,7 +12,7 @@ import numpy.typing as npt
 from fempm.arguments import check_numbers
 from fempm.kernels.kinematics import skew, sym  # noqa: F401  (the materials' tensor helpers)
 
-__all__ = ["Internal", "IsotropicElastic", "Material", "identity", "lame", "trace"]
+__all__ = ["LAW_ATTRIBUTES", "Internal", "IsotropicElastic", "Material", "check_materials", "identity", "lame", "trace"]
 
 
 @dataclass(frozen=True)
@@ -51,6 +52,25 @@ class Material(Protocol):
 
     def energy_density(self, F: npt.NDArray) -> npt.NDArray:
         """Stored energy per reference volume (n,)."""
+
+
+#: what the solver calls on a law (:class:`Material`)
+LAW_ATTRIBUTES = ("stress", "wave_speed", "energy_density", "history")
+
+
+def check_materials(materials: Sequence) -> None:
+    """Each law has what the solver calls (:data:`LAW_ATTRIBUTES`), checked once so that the
+    solver reads them without guessing.
+
+    Raises:
+        TypeError: A law without one of them, named with its index and class.
+    """
+    for i, mat in enumerate(materials):
+        missing = [a for a in LAW_ATTRIBUTES if not hasattr(mat, a)]
+        if missing:
+            raise TypeError(f"material {i} ({type(mat).__name__}) lacks {', '.join(missing)}: a law "
+                            "(fempm.materials.base.Material) has stress, wave_speed, energy_density and history "
+                            "(its internal variables, () for none)")
 
 
 def lame(E: float, nu: float) -> tuple[float, float]:

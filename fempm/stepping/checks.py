@@ -19,7 +19,7 @@ def check_fields(particles: Particles, materials: Sequence) -> None:
     d = particles.gdim
     shapes = {"v": (d,), "F": (d, d), "sigma": (d, d), "volume0": (), "body": (), "X0": (d,)}
     for mat in materials:
-        shapes.update({h.name: h.shape_for(d) for h in getattr(mat, "history", ())})
+        shapes.update({h.name: h.shape_for(d) for h in mat.history})
     particles.check_fields(shapes)
 
 

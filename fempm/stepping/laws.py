@@ -13,7 +13,7 @@ __all__ = ["law_state", "law_stress", "material_groups"]
 
 def law_state(mat, fields: dict, idx: npt.NDArray) -> dict:
     """The internal variables of law ``mat`` at the particles ``idx`` (copies), by name."""
-    return {h.name: fields[h.name][idx] for h in getattr(mat, "history", ())}
+    return {h.name: fields[h.name][idx] for h in mat.history}
 
 
 def law_stress(mat, F: npt.NDArray, L: npt.NDArray, sigma: npt.NDArray, dt: float, rho: npt.NDArray,
@@ -21,7 +21,7 @@ def law_stress(mat, F: npt.NDArray, L: npt.NDArray, sigma: npt.NDArray, dt: floa
     """``mat.stress(F, L, sigma, dt, rho)`` of the particles ``idx`` (and, for a law with
     internal variables, their ``state`` from ``fields``, updated there), checked to be one
     (d, d) stress per particle."""
-    history = getattr(mat, "history", ())
+    history = mat.history
     if history:
         state = law_state(mat, fields, idx)
         new = np.asarray(mat.stress(F, L, sigma, dt, rho, state))

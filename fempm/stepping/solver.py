@@ -20,7 +20,7 @@ import numpy.typing as npt
 from mpi4py import MPI
 
 from fempm.boundary.conditions import GridConditions
-from fempm.materials.base import identity
+from fempm.materials.base import check_materials, identity
 from fempm.meshes.cell_sizes import cell_sizes
 from fempm.particles.particle_set import Particles
 from fempm.stepping import checks, diagnostics
@@ -101,6 +101,7 @@ class ExplicitSolver:
         if self.V.mesh is not p.mesh:
             raise ValueError("the particles were made on another mesh than the velocity space's: make them on V.mesh "
                              "(fempm.create_particles(V.mesh, ...) or fempm.Particles(V.mesh, ...))")
+        check_materials(self.materials)
         d = p.gdim
         n = len(p)
         f = p.fields
@@ -111,7 +112,7 @@ class ExplicitSolver:
         f.setdefault("body", np.zeros(n, dtype=np.int32))
         f.setdefault("X0", p.x.copy())  # reference positions (body forces b(X, t), error norms)
         for mat in self.materials:  # the laws' internal variables (fempm.materials.base.Internal)
-            for h in getattr(mat, "history", ()):
+            for h in mat.history:
                 expected = (n, *h.shape_for(d))
                 if np.shape(f.setdefault(h.name, h.allocate(n, d))) != expected:
                     raise ValueError(f"internal variable {h.name!r} of {type(mat).__name__} has shape "

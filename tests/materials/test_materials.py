@@ -70,3 +70,23 @@ def test_invalid_parameters_are_rejected():
         LinearElastic(1.0, 0.5)
     with pytest.raises(ValueError, match="E > 0"):
         NeoHookean(-1.0, 0.3)
+
+
+def test_a_law_without_what_the_solver_calls_is_named():
+    from fempm.materials.base import check_materials
+
+    class NoHistory:
+        def stress(self, F, L, sigma, dt, rho):
+            return sigma
+
+        def wave_speed(self, F, rho):
+            return np.ones(len(F))
+
+        def energy_density(self, F):
+            return np.zeros(len(F))
+
+    check_materials([LinearElastic(1.0, 0.3), NeoHookean(1.0)])
+    with pytest.raises(TypeError, match=r"material 1 \(NoHistory\) lacks history"):
+        check_materials([LinearElastic(1.0, 0.3), NoHistory()])
+    with pytest.raises(TypeError, match=r"material 0 \(object\) lacks stress, wave_speed, energy_density, history"):
+        check_materials([object()])
