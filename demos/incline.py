@@ -67,13 +67,12 @@ def run_case(name: str, cells: int, t_end: float | None = None) -> dict:
             "energy_ratio": s["health"]["energy_ratio"], "steps": s["steps"], "wall_s": time.perf_counter() - t0}
 
 
-def write(rows: list[dict], out: Path, command: str) -> None:
+def write(rows: list[dict], out: Path, provenance: Provenance) -> None:
     out.mkdir(parents=True, exist_ok=True)
     with open(out / "incline.csv", "w", newline="") as f:
         w = csv.DictWriter(f, COLUMNS)
         w.writeheader()
         w.writerows(rows)
-    provenance = Provenance.now(command=command, comm=MPI.COMM_SELF)
     provenance.write(out)
     lines = [provenance.line(), "",
              "| case | cells | ppc | acceleration (m/s^2) | analytic | error (%) | energy / work | steps | wall (s) |",
@@ -93,6 +92,7 @@ def main(argv: list[str] | None = None) -> list[dict]:
     unknown = [c for c in a.cases if c not in CASES]
     if unknown:
         raise ValueError(f"unknown case(s) {unknown}; expected some of {list(CASES)}")
+    provenance = Provenance.now(command="python demos/incline.py " + " ".join(argv if argv is not None else []))
     rows = []
     for name in a.cases:
         for cells in a.cells:
@@ -101,7 +101,7 @@ def main(argv: list[str] | None = None) -> list[dict]:
                 r = rows[-1]
                 print(f"{name:28s} {cells:3d} cells: {r['acceleration']:.4f} against {r['analytic']:.4f} "
                       f"({r['error_percent']:+.2f} %), {r['wall_s']:.0f} s", flush=True)
-                write(rows, a.out, "python demos/incline.py " + " ".join(argv if argv is not None else []))
+                write(rows, a.out, provenance)
     return rows
 
 

@@ -67,6 +67,10 @@ def main(argv: list[str] | None = None) -> int:
         return 2
 
 
+#: the studies of ``python -m fempm study NAME`` (``all``: the quick version of each)
+STUDIES = ("mapping", "particle-basis", "convergence", "stability", "error-vs-time")
+
+
 def _parser() -> argparse.ArgumentParser:
     """The command line's parser: ``study``, ``run`` (its scene options parsed later,
     :func:`_scene_options`) and ``resume``."""
@@ -118,22 +122,19 @@ def _main(argv: list[str] | None) -> int:
         parser.error(str(e))
 
 
-STUDIES = ("mapping", "particle-basis", "convergence", "stability", "error-vs-time")
-
-
 def _study(args) -> int:
     """``python -m fempm study NAME``: run the study and say what it wrote; ``all``: the quick
     version of every study, each into ``OUT/study-NAME`` (default ``output/``)."""
-    names = STUDIES if args.name == "all" else (args.name,)
     if args.name == "all":
         given = [f"--{k}" for k in ("full", "problems", "cases", "sizes", "ppc") if getattr(args, k)]
         if given:
             raise ValueError(f"study all runs the quick version of every study; it takes --out only, not {given[0]}")
         args.quick = True
+        folders = {name: (args.out or Path("output")) / f"study-{name}" for name in STUDIES}
+    else:
+        folders = {args.name: args.out or Path(f"output/study-{args.name}")}
     provenance = Provenance.now()
-    for name in names:
-        out = (args.out or Path("output")) / f"study-{name}" if args.name == "all" else args.out
-        out = out or Path(f"output/study-{name}")
+    for name, out in folders.items():
         written = _STUDY_RUNS[name](args, out, provenance)
         if MPI.COMM_WORLD.rank == 0:
             print(f"wrote {out}/: {written}, provenance.json")
