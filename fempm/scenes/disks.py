@@ -17,7 +17,7 @@ __all__ = ["two_disks"]
 
 
 def two_disks(
-    mesh: str = "structured", cells: int = 20, ppc: int = 4, scheme: str = "MUSL", flip: float = 1.0,
+    mesh: str | dm.Mesh = "structured", cells: int = 20, ppc: int = 4, scheme: str = "MUSL", flip: float = 1.0,
     mass: str = "lumped", cfl: float = 0.4, t_end: float = 3.0, E: float = 1000.0, nu: float = 0.3,
     rho: float = 1000.0, speed: float = 0.1, radius: float = 0.2, frames: int = 30, contact: bool = False,
     friction: float = 0.0, comm: MPI.Comm = MPI.COMM_WORLD,
@@ -28,8 +28,9 @@ def two_disks(
     the single-valued grid velocity, or with ``contact`` one velocity field per disk
     (``fields["disk"]``, :class:`fempm.stepping.contact.Contact` with Coulomb ``friction``); no boundary
     conditions (the disks never reach the walls).
-    ``mesh``: "structured" (quadrilaterals, ``cells`` per side) or "unstructured"
-    (triangles from ``meshes/unit_square_tri.msh``).
+    ``mesh``: "structured" (quadrilaterals, ``cells`` per side), "unstructured"
+    (triangles from ``meshes/unit_square_tri.msh``) or a mesh of the unit square (e.g. of a
+    benchmark's size; ``cells`` unused).
     """
     check_counts(cells=cells, ppc=ppc)
     if friction and not contact:
@@ -38,7 +39,9 @@ def two_disks(
     if not 0.0 < radius <= 0.2:
         raise ValueError(f"radius={radius} must lie in (0, 0.2]: the disks, centred at (0.2, 0.2) and (0.8, 0.8), "
                          "must lie in the unit square and apart")
-    if mesh == "structured":
+    if isinstance(mesh, dm.Mesh):
+        m = mesh
+    elif mesh == "structured":
         m = dm.create_unit_square(comm, cells, cells, dm.CellType.quadrilateral)
     elif mesh == "unstructured":
         m = read_msh(MESHES / "unit_square_tri.msh", comm, gdim=2).mesh
@@ -53,7 +56,8 @@ def two_disks(
     lower = np.hypot(*(p.x - centres[0]).T) < radius
     p.fields["v"] = np.where(lower[:, None], speed, -speed) * np.ones((len(p), 2))
     p.fields["disk"] = (~lower).astype(np.int32)
-    params = dict(mesh=mesh, cells=cells, ppc=ppc, scheme=scheme, flip=flip, mass=mass, cfl=cfl, E=E, nu=nu, rho=rho,
+    params = dict(mesh=mesh if isinstance(mesh, str) else "given", cells=cells, ppc=ppc, scheme=scheme, flip=flip,
+                  mass=mass, cfl=cfl, E=E, nu=nu, rho=rho,
                   contact=contact, friction=friction)
     return Scene(
         name="two_disks", mesh=m, particles=p, materials=[LinearElastic(E, nu)], t_end=t_end, frames=frames,
