@@ -17,6 +17,7 @@ import numpy as np
 import numpy.typing as npt
 
 from fempm.kernels.choice import pick
+from fempm.kernels.particle_checks import LINEAR_ELASTIC, NEO_HOOKEAN
 
 __all__ = [
     "deform", "deform_numpy", "linear_elastic_stress", "linear_elastic_stress_numpy", "neo_hookean_stress",
@@ -108,6 +109,31 @@ try:
                     sigma[p, i, j] = lam * tr + 2.0 * mu * (e - 1.0)
                 else:
                     sigma[p, i, j] = 2.0 * mu * e
+
+    @njit(inline="always")
+    def energy_at(code, F, p, d, lam, mu):  # pragma: no cover - compiled
+        r"""The stored energy per reference volume :math:`W(F_p)` of the compiled law ``code``
+        (``NEO_HOOKEAN``: :math:`\frac{\mu}{2}(F:F - d) - \mu
+        \ln J + \frac{\lambda}{2} (\ln J)^2`; ``LINEAR_ELASTIC``: :math:`\frac{\lambda}{2}
+        (\mathrm{tr}\,\varepsilon)^2 + \mu\, \varepsilon:\varepsilon`), 0 for any other code
+        (the materials' ``energy_density`` are the reference)."""
+        if code == NEO_HOOKEAN:
+            ff = 0.0
+            for i in range(d):
+                for j in range(d):
+                    ff += F[p, i, j] * F[p, i, j]
+            lnJ = np.log(_det(F, p))
+            return 0.5 * mu * (ff - d) - mu * lnJ + 0.5 * lam * lnJ * lnJ
+        if code == LINEAR_ELASTIC:
+            tr = 0.0
+            ee = 0.0
+            for i in range(d):
+                tr += F[p, i, i] - 1.0
+                for j in range(d):
+                    e = 0.5 * (F[p, i, j] + F[p, j, i]) - (1.0 if i == j else 0.0)
+                    ee += e * e
+            return 0.5 * lam * tr * tr + mu * ee
+        return 0.0
 
     @njit(cache=True)
     def _neo_hookean(F, lam, mu, sigma):  # pragma: no cover - compiled

@@ -51,7 +51,7 @@ __all__ = ["kernels_for"]
 if AVAILABLE:
     from numba import njit
 
-    from fempm.kernels.kinematics import _det, linear_elastic_at, neo_hookean_at
+    from fempm.kernels.kinematics import _det, energy_at, linear_elastic_at, neo_hookean_at
     from fempm.kernels.shape import inside_after_pull_back, shape, star_search
 
     @njit(cache=True, error_model="numpy")
@@ -164,10 +164,12 @@ def kernels_for(cell: str) -> SimpleNamespace:
 
     def g2p_update(cells, X, K, cell_dofs, v_new, v_old, flip, dt, blend, kinematics, move, *rest):
         """See :func:`_g2p_kernel`; the flags choose the compiled variant (a momentum array
-        ``rest[-1]`` with a row per dof: the blend pass also re-maps the momenta, MUSL)."""
-        remap = blend and rest[-1].shape[0] > 0
-        return g2p_kernel(cell, bool(blend), bool(kinematics), bool(move), remap)(cells, X, K, cell_dofs, v_new,
-                                                                                  v_old, flip, dt, *rest)
+        ``rest[-2]`` with a row per dof: the blend pass also re-maps the momenta, MUSL; a sums
+        array ``rest[-1]`` of 3 + d entries: the moving pass also sums the state's energies)."""
+        remap = blend and rest[-2].shape[0] > 0
+        totals = move and rest[-1].shape[0] > 0
+        return g2p_kernel(cell, bool(blend), bool(kinematics), bool(move), remap, totals)(
+            cells, X, K, cell_dofs, v_new, v_old, flip, dt, *rest)
 
     return SimpleNamespace(scatter=scatter, g2p_update=g2p_update)
 
@@ -238,15 +240,15 @@ def _scatter_kernel(cell: str, with_mass: bool, with_momentum: bool, with_force:
 
 
 @functools.cache
-def _g2p_kernel(cell: str, blend: bool, kinematics: bool, move: bool, remap: bool):
+def _g2p_kernel(cell: str, blend: bool, kinematics: bool, move: bool, remap: bool, totals: bool = False):
     """The G2P pass of :func:`kernels_for` with its parts (flags) fixed at compile time."""
     D, NK, SIMPLEX = CELLS[cell]
 
     @njit(cache=True, error_model="numpy")
     def g2p_update(cells, X, K, cell_dofs, v_new, v_old, flip, dt, by_particle,
                    x, v, F, volume0, volume, sigma, body, law, lam, mu, L, x0, tol, left, c2v, v_offsets, v_cells,
-                   num_cells, mass, mom):  # pragma: no cover
-        """One pass over the particles, in place. ``blend``: ``v`` <- the FLIP/PIC blend of
+                   num_cells, mass, mom, sums):  # pragma: no cover
+        r"""One pass over the particles, in place. ``blend``: ``v`` <- the FLIP/PIC blend of
         ``v_new`` against ``v_old``. ``kinematics``: ``F``, ``volume`` and the compiled laws'
         ``sigma`` from :math:`L_p` of ``v_new`` (and :math:`L_p` into ``L`` when it has a row
         per particle). ``move``: ``x`` += dt times the grid velocity (or, ``by_particle``, the
@@ -254,7 +256,10 @@ def _g2p_kernel(cell: str, blend: bool, kinematics: bool, move: bool, remap: boo
         and, where they lie outside it (beyond ``tol``), ``cells`` and ``X`` <- the first cell
         of the vertex star (``c2v``, ``v_offsets``, ``v_cells``, ``num_cells``:
         :func:`fempm.kernels.shape.star_search`) that contains the particle, else ``left`` <-
-        True. Returns (#non-finite J, #J <= 0, min J, max J, #non-finite x or v)."""
+        True. ``totals`` (a moving pass): ``sums`` <- the sums over the particles of the state
+        the pass leaves, :math:`[\sum_p \tfrac12 M_p |v_p|^2,\ \sum_p V^0_p W(F_p),\ \sum_p M_p
+        |v_p|,\ \sum_p M_p v_p]` (W of the compiled laws; 0 for the others). Returns (#non-finite
+        J, #J <= 0, min J, max J, #non-finite x or v)."""
         n = len(cells)
         N = np.empty(NK)
         G = np.empty((NK, D))
@@ -268,6 +273,8 @@ def _g2p_kernel(cell: str, blend: bool, kinematics: bool, move: bool, remap: boo
         jmax = -np.inf
         nonfinite = 0
         dv = np.empty(D)
+        kinetic, strain, scale = 0.0, 0.0, 0.0
+        momentum = np.zeros(D)
         for p in range(n):
             c = cells[p]
             shape(X, p, K, c, SIMPLEX, D, NK, N, G)
@@ -306,6 +313,20 @@ def _g2p_kernel(cell: str, blend: bool, kinematics: bool, move: bool, remap: boo
                         cells[p] = e
                         out = False
                 left[p] = out
+            if totals:
+                m = mass[p]
+                w2 = 0.0
+                for j in range(D):
+                    w2 += v[p, j] * v[p, j]
+                    momentum[j] += m * v[p, j]
+                kinetic += 0.5 * m * w2
+                scale += m * np.sqrt(w2)
+                b = body[p]
+                strain += volume0[p] * energy_at(law[b], F, p, D, lam[b], mu[b])
+        if totals:
+            sums[0], sums[1], sums[2] = kinetic, strain, scale
+            for j in range(D):
+                sums[3 + j] = momentum[j]
         return nonfinite_j, inverted, jmin, jmax, nonfinite
 
     return g2p_update

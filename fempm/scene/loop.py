@@ -167,6 +167,7 @@ class Run:
                 raise ValueError(f"the run in {out} is already at t = {solver.t:.6g}: give a later t_end")
         self.num_particles = scene.particles.num_global
         self.steps0 = solver.step_count
+        self.momentum_scale: float | None = None  # the last step's sum_p M_p |v_p|, for the health checks
         self.agreement = FailureAgreement(comm)
 
     def save(self) -> Path:
@@ -182,9 +183,9 @@ class Run:
         scene, solver = self.scene, self.solver
         remaining = scene.t_end - solver.t
         if scene.dt is None:
-            dt = solver.step(dt_max=remaining)
+            dt = solver.step(dt_max=remaining, totals=True)
         else:  # a last step shorter than 1e-9 dt is merged into the one before
-            dt = solver.step(remaining if remaining <= scene.dt * (1 + 1e-9) else scene.dt)
+            dt = solver.step(remaining if remaining <= scene.dt * (1 + 1e-9) else scene.dt, totals=True)
         final = dt >= remaining
         if not final and remaining > MAX_STEPS * dt:  # e.g. velocities of 1e200: no progress
             raise SimulationError(f"step {solver.step_count}, t = {solver.t:.6g}: time step collapse: dt = {dt:.3g} "
@@ -211,7 +212,8 @@ class Run:
                 observer.before_step(self)
             dt = self.step()
             final = solver.t >= scene.t_end
-            row = {"step": solver.step_count, "dt": dt, **solver.energies()}
+            energies, self.momentum_scale = solver.step_energies()  # from the step's own sums where it keeps them
+            row = {"step": solver.step_count, "dt": dt, **energies}
             for observer in observers:
                 observer.after_step(self, dt, row, final)
 

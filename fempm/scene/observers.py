@@ -52,7 +52,7 @@ class HealthChecks(Observer):
     """The scene's health limits (:class:`fempm.stepping.health.HealthMonitor`; collective)."""
 
     def after_step(self, run: Run, dt: float, row: dict, final: bool) -> None:
-        run.monitor.after_step(dt, row, final=final)
+        run.monitor.after_step(dt, row, final=final, momentum_scale=run.momentum_scale)
 
 
 class Watch(Observer):

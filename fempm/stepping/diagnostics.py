@@ -16,7 +16,7 @@ from fempm.stepping.options import StepOptions
 from fempm.transfer.basis import is_nonnegative
 from fempm.transfer.projection import Projector
 
-__all__ = ["energies", "grid_stress", "stress_space"]
+__all__ = ["energies", "energy_row", "grid_stress", "momentum_scale", "strain_energy", "stress_space"]
 
 
 def stress_space(V: dolfinx.fem.FunctionSpace) -> dolfinx.fem.FunctionSpace:
@@ -54,6 +54,29 @@ def grid_stress(space: dolfinx.fem.FunctionSpace, particles: Particles, options:
     return out
 
 
+def strain_energy(particles: Particles, materials: Sequence, which: Sequence[bool] | None = None) -> float:
+    r"""This rank's strain energy :math:`\sum_p V_p^0 W_p` of the laws ``which`` selects (by
+    body index; None: every law)."""
+    f = particles.fields
+    strain = 0.0
+    for b, (mat, idx) in enumerate(material_groups(f, materials)):
+        if which is not None and not which[b]:
+            continue
+        if getattr(mat, "energy_from_stress", False):  # hypoelastic: the elastic energy of the stress
+            w = mat.energy_density(f["F"][idx], f["sigma"][idx], law_state(mat, f, idx))
+        else:
+            w = mat.energy_density(f["F"][idx])
+        strain += np.sum(f["volume0"][idx] * w)
+    return float(strain)
+
+
+def energy_row(t: float, kinetic: float, strain: float, momentum) -> dict[str, float]:
+    """The energies row of :func:`energies` from the sums over all ranks."""
+    out = {"t": t, "kinetic": float(kinetic), "strain": float(strain), "total": float(kinetic + strain)}
+    out.update({f"momentum_{'xyz'[i]}": float(m) for i, m in enumerate(momentum)})
+    return out
+
+
 def energies(particles: Particles, materials: Sequence, t: float) -> dict[str, float]:
     r"""Kinetic energy :math:`\sum_p M_p |v_p|^2 / 2`, strain energy :math:`\sum_p V_p^0 W_p`,
     their total and the linear momentum :math:`\sum_p M_p v_p`, summed over ranks, at time ``t``.
@@ -64,16 +87,14 @@ def energies(particles: Particles, materials: Sequence, t: float) -> dict[str, f
     p = particles
     f = p.fields
     kin = 0.5 * np.sum(p.mass * np.einsum("nd,nd->n", f["v"], f["v"]))
-    strain = 0.0
-    for mat, idx in material_groups(f, materials):
-        if getattr(mat, "energy_from_stress", False):  # hypoelastic: the elastic energy of the stress
-            w = mat.energy_density(f["F"][idx], f["sigma"][idx], law_state(mat, f, idx))
-        else:
-            w = mat.energy_density(f["F"][idx])
-        strain += np.sum(f["volume0"][idx] * w)
+    strain = strain_energy(p, materials)
     mom = p.mass @ f["v"]
     kin, strain = p.comm.allreduce(kin), p.comm.allreduce(strain)
     mom = p.comm.allreduce(mom)
-    out = {"t": t, "kinetic": kin, "strain": strain, "total": kin + strain}
-    out.update({f"momentum_{'xyz'[i]}": float(m) for i, m in enumerate(mom)})
-    return out
+    return energy_row(t, kin, strain, mom)
+
+
+def momentum_scale(particles: Particles) -> float:
+    r""":math:`\sum_p M_p |v_p|` over all ranks (the scale of the momentum drift). Collective."""
+    p = particles
+    return p.comm.allreduce(float(p.mass @ np.linalg.norm(p.fields["v"], axis=1)))

@@ -55,6 +55,8 @@ class Grid:
     def __init__(self, solver: ExplicitSolver):
         self.solver = solver
         self.options = solver.options
+        #: whether this step's passes also sum the new state's energies (:meth:`state_sums`)
+        self.totals = False
 
     def open(self, dt: float | None) -> float:
         """P2G of mass and momentum (and of the forces when the scheme maps them then); returns
@@ -96,6 +98,12 @@ class Grid:
     def relocate(self) -> None:
         """Locate the moved particles (migration between ranks). Collective."""
         raise NotImplementedError
+
+    def state_sums(self) -> npt.NDArray | None:
+        r"""This rank's sums over its particles of the state the last step left,
+        :math:`[\sum_p \tfrac12 M_p |v_p|^2,\ \sum_p V^0_p W_p,\ \sum_p M_p |v_p|,\ \sum_p M_p v_p]`
+        (3 + d), where the step's particle passes accumulated them, else None (the default)."""
+        return None
 
     def checkpoint_state(self) -> tuple[dict, dict[str, npt.NDArray]]:
         """(counters, arrays) a resumed run needs to repeat the next steps bit for bit."""

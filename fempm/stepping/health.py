@@ -82,6 +82,7 @@ class HealthMonitor:
         self.e0 = e["total"]
         self.e_max = self.e0
         self.momentum0 = self._momentum()
+        self.total_mass = solver.particles.comm.allreduce(float(np.sum(solver.particles.mass)))
         self.work = 0.0
         self.impulse = np.zeros_like(self.momentum0)
         self._power, self._force = self._external(solver.t)
@@ -109,22 +110,34 @@ class HealthMonitor:
         lo = p.comm.allreduce(float(J.min(initial=np.inf)), op=MPI.MIN)
         return lo, p.comm.allreduce(float(J.max(initial=-np.inf)), op=MPI.MAX)
 
-    def _external(self, t: float) -> tuple[float, npt.NDArray]:
+    def _external(self, t: float, momentum: npt.NDArray | None = None) -> tuple[float, npt.NDArray]:
         r"""Power :math:`\sum_p f_p \cdot v_p` and resultant :math:`\sum_p f_p` of the external
-        loads at time ``t`` (body forces and tractions), summed over ranks."""
+        loads at time ``t`` (body forces and tractions), summed over ranks; a constant body
+        force :math:`g` with the particles' ``momentum`` given: :math:`g \cdot \sum_p M_p v_p`
+        and :math:`g \sum_p M_p`, without a pass over the particles."""
         p = self.solver.particles
-        f = external_forces(self.solver.loads, p, t)
+        loads = self.solver.loads
+        if momentum is not None and loads.traction is None and not callable(loads.body_force):
+            if loads.body_force is None:
+                return 0.0, np.zeros(p.gdim)
+            g = np.asarray(loads.body_force, dtype=np.float64)
+            return float(g @ momentum), g * self.total_mass
+        f = external_forces(loads, p, t)
         local = np.concatenate([[np.einsum("nd,nd->", f, p.fields["v"])], f.sum(axis=0)])
         total = p.comm.allreduce(local)
         return float(total[0]), total[1:]
 
     # -- the check -----------------------------------------------------------------------------
-    def after_step(self, dt: float, energies: dict, *, final: bool = False) -> None:
-        """Update the measures after a step of size ``dt`` that led to ``energies``
+    def after_step(self, dt: float, energies: dict, *, final: bool = False,
+                   momentum_scale: float | None = None) -> None:
+        r"""Update the measures after a step of size ``dt`` that led to ``energies``
         (:meth:`ExplicitSolver.energies`) and raise when a limit is crossed. ``final``: the
-        step that was shortened to end at ``t_end`` (exempt from the step floor)."""
+        step that was shortened to end at ``t_end`` (exempt from the step floor);
+        ``momentum_scale``: :math:`\sum_p M_p |v_p|` of the state when known
+        (:meth:`ExplicitSolver.step_energies`), else computed."""
         s, h = self.solver, self.health
-        power, force = self._external(s.t)
+        mom = np.array([energies[k] for k in energies if k.startswith("momentum_")])
+        power, force = self._external(s.t, mom)
         self.work += 0.5 * dt * (self._power + power)
         self.impulse = self.impulse + 0.5 * dt * (self._force + force)
         self._power, self._force = power, force
@@ -132,8 +145,7 @@ class HealthMonitor:
         self.e_max = max(self.e_max, e)
         budget = self.e0 + self.work
         self.ratio = e / budget if budget > 0 else (1.0 if e <= 0 else np.inf)
-        self.p_scale = max(self.p_scale, self._momentum_scale())
-        mom = np.array([energies[k] for k in energies if k.startswith("momentum_")])
+        self.p_scale = max(self.p_scale, self._momentum_scale() if momentum_scale is None else momentum_scale)
         self.drift = float(np.linalg.norm(mom - self.momentum0 - self.impulse) / self.p_scale) if self.p_scale > 0 else 0.0
         lo, hi = s.j_range if s.j_range is not None else self._j_range()
         self.j_min, self.j_max = min(self.j_min, lo), max(self.j_max, hi)

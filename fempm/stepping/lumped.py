@@ -37,6 +37,7 @@ from fempm.kernels.shape import AVAILABLE
 from fempm.materials.base import IsotropicElastic
 from fempm.materials.linear_elastic import LinearElastic
 from fempm.materials.neo_hookean import NeoHookean
+from fempm.stepping import diagnostics
 from fempm.stepping.consistent import ConsistentNodalMass
 from fempm.stepping.grid import Grid
 from fempm.stepping.laws import law_stress, material_groups
@@ -112,6 +113,8 @@ class PointGrid(Grid):
         # walls that check contact by position: the first mass moments sum_p M_p N_ip x_p
         self._moments = self.nodal_array(d) if self.conditions.needs_positions else None
         self._checked: tuple | None = None  # identities of the state arrays checked finite
+        self._sums = np.zeros(3 + d)  # the moving pass's sums of the state (state_sums)
+        self._summed = False  # whether they are the last step's
         self.mass = NODAL_MASSES[type(self.options.mass_model)](self)
         # every boundary condition a zero component, held by `free`, and a lumped mass: one fused grid pass
         self.fused = self.conditions.zero_components and self.mass.fusable
@@ -201,7 +204,8 @@ class PointGrid(Grid):
                                          float(dt), blend, kinematics, move, opts.position == "particle", p.x, f["v"],
                                          f["F"], f["volume0"], p.volume, f["sigma"], f["body"], self.law, self.lam,
                                          self.mu, L, self.x0, p.locator.tol, left, *p.locator.vertex_star(), p.mass,
-                                         remap if remap is not None else np.zeros((0, self.d)))
+                                         remap if remap is not None else np.zeros((0, self.d)),
+                                         self._sums if move and self.totals else np.zeros(0))
         nonfinite_j, inverted, jmin, jmax, nonfinite = counts
         if kinematics:
             flags = np.array([nonfinite_j, inverted, -jmin, jmax], dtype=float)
@@ -251,6 +255,7 @@ class PointGrid(Grid):
         self.active_min, self.weak_max = SUPPORT_TOL * top, opts.mass_cutoff * top
         self.centroids = self._centroids(nodal)
         self.force, self.cf = nodal, 1 + d
+        self._summed = False
         self.nonfinite, self.left = 0, None
         return opts.cfl * state * factor
 
@@ -287,6 +292,7 @@ class PointGrid(Grid):
         self.nonfinite += nonfinite
         if move:
             self.left = left
+            self._summed = self.totals
 
     def close(self) -> None:
         if self.solver.particles.comm.allreduce(self.nonfinite):
@@ -298,6 +304,17 @@ class PointGrid(Grid):
 
     def nodal(self, v: npt.NDArray) -> npt.NDArray:
         return v[: self.num_dofs]
+
+    def state_sums(self) -> npt.NDArray | None:
+        """The moving pass's sums (:func:`fempm.kernels.lumped._g2p_kernel`, ``totals``), with the
+        strain energy of the laws without a compiled kernel added from the state."""
+        if not self._summed:
+            return None
+        s = self.solver
+        sums = self._sums.copy()
+        if self.any_external:
+            sums[1] += diagnostics.strain_energy(s.particles, s.materials, self.law == 0)
+        return sums
 
     def checkpoint_state(self) -> tuple[dict, dict[str, npt.NDArray]]:
         counters, arrays = self.mass.checkpoint_state()

@@ -201,15 +201,18 @@ class ExplicitSolver:
                              "on an affine mesh (simplices, parallelograms) with numba installed")
         return SingleFieldGrid(self)
 
-    def step(self, dt: float | None = None, *, dt_max: float = np.inf) -> float:
+    def step(self, dt: float | None = None, *, dt_max: float = np.inf, totals: bool = False) -> float:
         """Advance one step; returns the ``dt`` used. ``dt`` defaults to the stable step
         (at most ``dt_max``); a given ``dt`` above the stability limit (CFL > 1) is an error.
+        ``totals``: the particle passes also sum the energies and momentum of the new state,
+        for :meth:`step_energies` (a run's every step; a few per cent of a pass).
 
         Note:
             Collective.
         """
         checks.check_step_arguments(self.particles, dt, dt_max)
         grid = self.grid
+        grid.totals = totals
         stable = grid.open(dt)
         dt = self._time_step(stable, dt, dt_max)
         v_new = self.options.stages.update(grid, dt)
@@ -269,3 +272,20 @@ class ExplicitSolver:
             Collective.
         """
         return diagnostics.energies(self.particles, self.materials, self.t)
+
+    def step_energies(self) -> tuple[dict[str, float], float]:
+        r"""(:meth:`energies`, the momentum scale :math:`\sum_p M_p |v_p|`) of the state the last
+        step left: from the sums its particle passes accumulated in a step with ``totals`` where
+        the grid keeps them (:meth:`fempm.stepping.grid.Grid.state_sums`: one reduction, no pass
+        over the particles), else from the state. Call it right after :meth:`step`: the sums do not see a state
+        changed after the step (:meth:`energies` does).
+
+        Note:
+            Collective.
+        """
+        p = self.particles
+        sums = self._grid.state_sums() if self._grid is not None else None
+        if sums is None:  # the same grid on every rank
+            return self.energies(), diagnostics.momentum_scale(p)
+        p.comm.Allreduce(MPI.IN_PLACE, sums, op=MPI.SUM)
+        return diagnostics.energy_row(self.t, sums[0], sums[1], sums[3:]), float(sums[2])
