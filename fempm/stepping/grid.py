@@ -58,6 +58,11 @@ class Grid:
         #: whether this step's passes also sum the new state's energies (:meth:`state_sums`)
         self.totals = False
 
+    def for_step(self) -> Grid:
+        """The grid that takes the next step: this one (the default), or one this grid hands the
+        step to where it cannot take it itself. Collective."""
+        return self
+
     def open(self, dt: float | None) -> float:
         """P2G of mass and momentum (and of the forces when the scheme maps them then); returns
         the stable time step of the state (the CFL number times the stable time, times the

@@ -51,7 +51,7 @@ from fempm.transfer.mass_models import Consistent, Lumped
 if TYPE_CHECKING:
     from fempm.stepping.solver import ExplicitSolver
 
-__all__ = ["BOUND_SAFETY", "NODAL_MASSES", "SORT_EVERY", "LumpedNodalMass", "PointGrid", "supported"]
+__all__ = ["BOUND_SAFETY", "NODAL_MASSES", "SORT_EVERY", "LumpedNodalMass", "PointGrid", "compiled_space", "supported"]
 
 
 #: steps between two sorts of the particles by cell
@@ -61,14 +61,21 @@ SORT_EVERY = 100
 BOUND_SAFETY = 1.0 - 1e-12
 
 
-def supported(solver: ExplicitSolver) -> bool:
-    """Whether ``solver``'s options, space and mesh take a compiled step (lumped, or
-    consistent: :mod:`fempm.stepping.consistent`)."""
-    opts, V = solver.options, solver.V
-    el = V.element.basix_element
+def compiled_space(solver: ExplicitSolver) -> bool:
+    """Whether ``solver``'s space and mesh take the compiled passes: a vector degree-1 space on
+    affine cells (and numba)."""
+    V = solver.V
     geo = solver.particles.locator.geometry
-    return (AVAILABLE and type(opts.mass_model) in NODAL_MASSES and isinstance(opts.particle_domain, Point)
-            and el.degree == 1 and V.dofmap.index_map_bs == solver.particles.gdim and geo.affine)
+    return (AVAILABLE and V.element.basix_element.degree == 1 and V.dofmap.index_map_bs == solver.particles.gdim
+            and geo.affine)
+
+
+def supported(solver: ExplicitSolver) -> bool:
+    """Whether ``solver``'s options, space and mesh take a :class:`PointGrid` (point particles,
+    lumped or consistent mass: :mod:`fempm.stepping.consistent`)."""
+    opts = solver.options
+    return (compiled_space(solver) and type(opts.mass_model) in NODAL_MASSES
+            and isinstance(opts.particle_domain, Point))
 
 
 def _law(mat) -> tuple[int, float, float, float]:
@@ -159,10 +166,22 @@ class PointGrid(Grid):
         vec, out = nodal
         out.fill(0.0)
         h, c = (s.h_cell, self._wave_speeds()) if stable else (np.zeros(0), np.zeros(0))
-        local = self.kernels.scatter(p.cells, p.X, self.K, self.cell_dofs, p.mass, f["v"], p.volume, f["sigma"], g,
-                                     fext, out, cm, cv, cf, h, f["body"], self.modulus, c, bound=stable == "bound")
+        local = self.scatter_pass(p.mass, f["v"], p.volume, f["sigma"], g, fext, out, cm, cv, cf, h, f["body"],
+                                  self.modulus, c, bound=stable == "bound")
         sum_ghosts(vec)
         return out, local
+
+    def scatter_pass(self, *args, bound: bool = False) -> float:
+        """The P2G pass (:func:`fempm.kernels.lumped.kernels_for`) with the particles' basis."""
+        p = self.solver.particles
+        return self.kernels.scatter(p.cells, p.X, self.K, self.cell_dofs, *args, bound=bound)
+
+    def gather_pass(self, v_new, v_old, flip: float, dt: float, blend: bool, kinematics: bool, move: bool,
+                    state: tuple) -> tuple:
+        """The G2P pass (:func:`fempm.kernels.lumped.kernels_for`) with the particles' basis."""
+        p = self.solver.particles
+        return self.kernels.g2p_update(p.cells, p.X, self.K, self.cell_dofs, v_new, v_old, flip, dt, blend,
+                                       kinematics, move, *state)
 
     def _centroids(self, nodal) -> NodalCentres | None:
         r"""The nodal centres of mass :math:`\sum_p M_p N_{ip} x_p / m_i` (one more particle
@@ -200,12 +219,11 @@ class PointGrid(Grid):
         external = kinematics and self.any_external
         L = np.empty((len(p) if external else 0, self.d, self.d))
         left = np.empty(len(p) if move else 0, dtype=np.bool_)
-        counts = self.kernels.g2p_update(p.cells, p.X, self.K, self.cell_dofs, v_new, v_old, float(opts.flip),
-                                         float(dt), blend, kinematics, move, opts.position == "particle", p.x, f["v"],
-                                         f["F"], f["volume0"], p.volume, f["sigma"], f["body"], self.law, self.lam,
-                                         self.mu, L, self.x0, p.locator.tol, left, *p.locator.vertex_star(), p.mass,
-                                         remap if remap is not None else np.zeros((0, self.d)),
-                                         self._sums if move and self.totals else np.zeros(0))
+        state = (opts.position == "particle", p.x, f["v"], f["F"], f["volume0"], p.volume, f["sigma"], f["body"],
+                 self.law, self.lam, self.mu, L, self.x0, p.locator.tol, left, *p.locator.vertex_star(), p.mass,
+                 remap if remap is not None else np.zeros((0, self.d)),
+                 self._sums if move and self.totals else np.zeros(0))
+        counts = self.gather_pass(v_new, v_old, float(opts.flip), float(dt), blend, kinematics, move, state)
         nonfinite_j, inverted, jmin, jmax, nonfinite = counts
         if kinematics:
             flags = np.array([nonfinite_j, inverted, -jmin, jmax], dtype=float)
@@ -230,17 +248,25 @@ class PointGrid(Grid):
         return id(p.x), id(f["v"]), id(f["sigma"]), id(f["F"]), id(f["body"])
 
     # -- the stages ---------------------------------------------------------------------------
-    def open(self, dt: float | None) -> float:
+    def for_step(self) -> Grid:
+        """The checks of a state set from outside the passes and, every :data:`SORT_EVERY`
+        steps, the sort of the particles by cell; this grid takes the step."""
         s = self.solver
-        opts = self.options
         p = s.particles
-        d = self.d
         if p.comm.allreduce(self._state() != self._checked, op=MPI.LOR):  # arrays set from outside (any rank)
             s.check_state()  # collective; the passes check their own results
         if self.since_sort >= SORT_EVERY:
             p.sort_by_cell()
             self.since_sort = 0
         self.since_sort += 1
+        self._summed = False
+        return self
+
+    def open(self, dt: float | None) -> float:
+        s = self.solver
+        opts = self.options
+        p = s.particles
+        d = self.d
         self.g, self.fext = self._external(s.t)
         # a given dt is checked against a lower bound of the stable time, and against the time
         # itself only where the bound does not show it stable
@@ -255,7 +281,6 @@ class PointGrid(Grid):
         self.active_min, self.weak_max = SUPPORT_TOL * top, opts.mass_cutoff * top
         self.centroids = self._centroids(nodal)
         self.force, self.cf = nodal, 1 + d
-        self._summed = False
         self.nonfinite, self.left = 0, None
         return opts.cfl * state * factor
 

@@ -25,6 +25,8 @@ from fempm.meshes.cell_sizes import cell_sizes
 from fempm.particles.particle_set import Particles
 from fempm.stepping import checks, diagnostics
 from fempm.stepping.contact import Contact, ContactGrid
+from fempm.stepping.domain_grid import DomainGrid
+from fempm.stepping.domain_grid import supported as domain_grid_supported
 from fempm.stepping.grid import Grid, SingleFieldGrid
 from fempm.stepping.laws import material_groups
 from fempm.stepping.loads import Loads
@@ -196,9 +198,12 @@ class ExplicitSolver:
             return grid
         if self.compiled is not False and point_grid_supported(self):
             return PointGrid(self)
+        if self.compiled is not False and domain_grid_supported(self):
+            return DomainGrid(self)
         if self.compiled:
-            raise ValueError("compiled=True needs lumped or consistent mass, point particles and a degree-1 space "
-                             "on an affine mesh (simplices, parallelograms) with numba installed")
+            raise ValueError("compiled=True needs a degree-1 space on an affine mesh (simplices, parallelograms) with "
+                             "numba installed, and point particles with lumped or consistent mass or CPDI1 or "
+                             "Gauss-rule GIMP domains with lumped mass")
         return SingleFieldGrid(self)
 
     def step(self, dt: float | None = None, *, dt_max: float = np.inf, totals: bool = False) -> float:
@@ -211,7 +216,7 @@ class ExplicitSolver:
             Collective.
         """
         checks.check_step_arguments(self.particles, dt, dt_max)
-        grid = self.grid
+        grid = self.grid.for_step()
         grid.totals = totals
         stable = grid.open(dt)
         dt = self._time_step(stable, dt, dt_max)

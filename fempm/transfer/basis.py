@@ -145,6 +145,8 @@ class ParticleBasis:
         beyond = self._remote_samples(particles, xs, cells, need_grad, N, dofs, dN)
         if smp.beyond == "cut":  # drop the points beyond the mesh, renormalise (collective check)
             w[beyond], N[beyond], dofs[beyond] = 0.0, 0.0, 0
+            if need_grad:  # not evaluated: 0, not whatever np.empty held (0 * NaN is NaN)
+                dN[beyond] = 0.0
             wsum = w.reshape(n, q).sum(axis=1)
             if particles.comm.allreduce(int(np.count_nonzero(wsum <= 0))):
                 raise ValueError(f"{domain.name} particle domains with no sample point inside the mesh")

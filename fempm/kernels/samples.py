@@ -1,0 +1,333 @@
+r"""The particle passes of particle domains given by sample points, on affine degree-1 cells
+(:class:`fempm.stepping.domain_grid.DomainGrid` drives them; the numpy
+:class:`~fempm.transfer.basis.ParticleBasis` with a domain is their reference).
+
+A particle :math:`p` has :math:`Q` samples :math:`y_{pq}` in cells :math:`c_{pq}` with
+reference coordinates :math:`Y_{pq}`, value weights :math:`w_{pq}` and gradient weights
+:math:`g_{pq}` (:mod:`fempm.transfer.domains`); the averaged basis is
+
+.. math::
+    \langle N_i \rangle_p = \sum_q w_{pq} N_i(y_{pq}), \qquad
+    \langle \nabla N_i \rangle_p = \sum_q \big(g_{pq} N_i(y_{pq})\big)
+    \ \text{(CPDI)} \quad\text{or}\quad \sum_q w_{pq} \nabla N_i(y_{pq}) \ \text{(Gauss GIMP)},
+
+evaluated in the passes (:func:`fempm.kernels.shape.shape`), never stored; a node that several
+samples reach gets each share (the sums are the same as over distinct nodes).
+
+* :func:`cpdi1_samples`: the corners :math:`y_{pq} = x_p + R_p s_q`, :math:`R_p = F_p
+  \operatorname{diag}(\ell_p)`, :math:`w = 2^{-d}`, :math:`g_{pq} = 2^{-d} R_p^{-T} s_q`.
+* :func:`locate_samples`: each sample's cell, the particle's own or one of its vertex star
+  (:func:`fempm.kernels.shape.star_search`), -1 where neither holds it.
+* :func:`kernels_for`: ``scatter`` and ``g2p_update``, the passes of
+  :mod:`fempm.kernels.lumped` (same arguments, plus the samples) summing over the samples
+  instead of the particle's cell.
+"""
+
+from __future__ import annotations
+
+import functools
+from types import SimpleNamespace
+
+import numpy as np
+
+from fempm.kernels.shape import AVAILABLE, CELLS
+
+__all__ = ["cpdi1_samples", "kernels_for", "locate_samples"]
+
+if AVAILABLE:
+    from numba import njit
+
+    from fempm.kernels.kinematics import energy_at
+    from fempm.kernels.lumped import deform_at, law_at
+    from fempm.kernels.particle_checks import count_j, stable_time
+    from fempm.kernels.shape import inside_after_pull_back, shape, star_search
+
+    @njit(cache=True, error_model="numpy")
+    def _cpdi1_samples(x, F, lp, signs, y, w, g):  # pragma: no cover - compiled
+        n, d = x.shape
+        Q = signs.shape[0]
+        R = np.empty((d, d))
+        Ri = np.empty((d, d))
+        share = 1.0 / Q
+        for p in range(n):
+            for i in range(d):
+                for j in range(d):
+                    R[i, j] = F[p, i, j] * lp[p, j]
+            _inverse(R, d, Ri)
+            for q in range(Q):
+                w[p, q] = share
+                for i in range(d):
+                    s = x[p, i]
+                    t = 0.0
+                    for j in range(d):
+                        s += R[i, j] * signs[q, j]
+                        t += Ri[j, i] * signs[q, j]  # (R^-T s)_i
+                    y[p * Q + q, i] = s
+                    g[p, q, i] = share * t
+
+    @njit(inline="always")
+    def _inverse(A, d, B):  # pragma: no cover - compiled
+        """B <- A^-1 (d <= 3, closed form; inf/NaN where A is singular)."""
+        if d == 1:
+            B[0, 0] = 1.0 / A[0, 0]
+        elif d == 2:
+            det = A[0, 0] * A[1, 1] - A[0, 1] * A[1, 0]
+            B[0, 0], B[0, 1] = A[1, 1] / det, -A[0, 1] / det
+            B[1, 0], B[1, 1] = -A[1, 0] / det, A[0, 0] / det
+        else:
+            c00 = A[1, 1] * A[2, 2] - A[1, 2] * A[2, 1]
+            c01 = A[1, 2] * A[2, 0] - A[1, 0] * A[2, 2]
+            c02 = A[1, 0] * A[2, 1] - A[1, 1] * A[2, 0]
+            det = A[0, 0] * c00 + A[0, 1] * c01 + A[0, 2] * c02
+            B[0, 0] = c00 / det
+            B[1, 0] = c01 / det
+            B[2, 0] = c02 / det
+            B[0, 1] = (A[0, 2] * A[2, 1] - A[0, 1] * A[2, 2]) / det
+            B[1, 1] = (A[0, 0] * A[2, 2] - A[0, 2] * A[2, 0]) / det
+            B[2, 1] = (A[0, 1] * A[2, 0] - A[0, 0] * A[2, 1]) / det
+            B[0, 2] = (A[0, 1] * A[1, 2] - A[0, 2] * A[1, 1]) / det
+            B[1, 2] = (A[0, 2] * A[1, 0] - A[0, 0] * A[1, 2]) / det
+            B[2, 2] = (A[0, 0] * A[1, 1] - A[0, 1] * A[1, 0]) / det
+
+    @njit(cache=True)
+    def _locate_samples(y, cells, Q, x0, K, c2v, v_offsets, v_cells, num_cells, simplex, tol, guess, sc,
+                        Y):  # pragma: no cover - compiled
+        t = K.shape[1]
+        missing = 0
+        guessed = guess.shape[0] == len(cells)
+        for p in range(len(cells)):
+            c = cells[p]
+            for q in range(Q):
+                r = p * Q + q
+                e = guess[p, q] if guessed else -1
+                if e >= 0 and e != c and inside_after_pull_back(y, r, x0, K, e, simplex, t, tol, Y):
+                    sc[p, q] = e
+                elif inside_after_pull_back(y, r, x0, K, c, simplex, t, tol, Y):
+                    sc[p, q] = c
+                else:
+                    e = star_search(y, r, x0, K, c, c2v, v_offsets, v_cells, num_cells, simplex, t, tol, Y)
+                    sc[p, q] = e
+                    if e < 0:
+                        missing += 1
+        return missing
+
+
+def cpdi1_samples(x, F, lp, signs, out=None):
+    """CPDI1 samples of particles at ``x`` (n, d) with ``F`` (n, d, d), half-widths ``lp``
+    (n, d) and corner ``signs`` (Q, d): (y (n Q, d), w (n, Q), g (n, Q, d)), into ``out`` if
+    given (arrays of those shapes)."""
+    n, d = x.shape
+    Q = len(signs)
+    y, w, g = out if out is not None else (np.empty((n * Q, d)), np.empty((n, Q)), np.empty((n, Q, d)))
+    _cpdi1_samples(x, F, np.ascontiguousarray(lp), signs, y, w, g)
+    return y, w, g
+
+
+def locate_samples(y, cells, Q: int, x0, K, star: tuple, simplex: bool, tol: float, guess=None, out=None):
+    """Cells (n, Q) and reference coordinates (n Q, t) of samples ``y`` (n Q, d) of particles in
+    ``cells``: the sample's cell in ``guess`` (n, Q; e.g. the last step's), else the particle's
+    cell or the first of its vertex star (``star``: cell -> vertices, vertex -> cells offsets
+    and cells, the cells searched) that holds it, -1 where none does; and the number of such
+    samples. ``out``: the arrays (cells, coordinates) to fill (the cells may be ``guess``)."""
+    n = len(cells)
+    sc, Y = out if out is not None else (np.empty((n, Q), dtype=np.int32), np.zeros((n * Q, K.shape[1])))
+    guess = np.zeros((0, Q), dtype=np.int32) if guess is None else guess
+    missing = _locate_samples(y, cells, Q, x0, K, *star, bool(simplex), float(tol), guess, sc, Y)
+    return sc, Y, int(missing)
+
+
+@functools.cache
+def kernels_for(cell: str, grad_from_values: bool) -> SimpleNamespace:
+    """The sample passes ``scatter`` and ``g2p_update`` of one cell type; with
+    ``grad_from_values`` the gradient of the average is :math:`\\sum_q w_{pq} \\nabla N_i(y_{pq})`
+    (Gauss GIMP), else :math:`\\sum_q g_{pq} N_i(y_{pq})` (CPDI)."""
+
+    def scatter(cells, sc, Y, w, gw, K, cell_dofs, mass, v, volume, sigma, g, fext, out, cm, cv, cf, h, body,
+                modulus, c, bound=False):
+        kernel = _scatter_kernel(cell, grad_from_values, cm >= 0, cv >= 0, cf >= 0, h.shape[0] > 0,
+                                 fext.shape[0] > 0, bool(bound))
+        return kernel(cells, sc, Y, w, gw, K, cell_dofs, mass, v, volume, sigma, g, fext, out, h, body, modulus, c)
+
+    def g2p_update(cells, sc, Y, w, gw, K, cell_dofs, v_new, v_old, flip, dt, blend, kinematics, move, *rest):
+        remap = blend and rest[-2].shape[0] > 0
+        totals = move and rest[-1].shape[0] > 0
+        return _g2p_kernel(cell, grad_from_values, bool(blend), bool(kinematics), bool(move), remap, totals)(
+            cells, sc, Y, w, gw, K, cell_dofs, v_new, v_old, flip, dt, *rest)
+
+    return SimpleNamespace(scatter=scatter, g2p_update=g2p_update)
+
+
+if AVAILABLE:
+    @njit(inline="always")
+    def _particle_basis(p, sc, Y, w, gw, K, simplex, D, NK, grad_from_values, N, G, cells, W, GW):  # pragma: no cover
+        r"""The averaged basis of particle ``p`` by cell: the distinct cells its samples lie in
+        (``cells``, returned their number) and in row ``k`` the weighted values ``W[k]`` (NK,)
+        and gradients ``GW[k]`` (NK, D) of the samples in ``cells[k]`` summed (samples sharing a
+        cell share its nodes: one scatter or gather per cell instead of per sample)."""
+        Q = sc.shape[1]
+        ncell = 0
+        for q in range(Q):
+            c = sc[p, q]
+            k = 0
+            while k < ncell and cells[k] != c:
+                k += 1
+            if k == ncell:
+                cells[k] = c
+                ncell += 1
+                for a in range(NK):
+                    W[k, a] = 0.0
+                    for e in range(D):
+                        GW[k, a, e] = 0.0
+            shape(Y, p * Q + q, K, c, simplex, D, NK, N, G)
+            wq = w[p, q]
+            for a in range(NK):
+                W[k, a] += wq * N[a]
+                for e in range(D):
+                    GW[k, a, e] += wq * G[a, e] if grad_from_values else gw[p, q, e] * N[a]
+        return ncell
+
+
+@functools.cache
+def _scatter_kernel(cell: str, grad_from_values: bool, with_mass: bool, with_momentum: bool, with_force: bool,
+                    with_dt: bool, has_fext: bool, bound: bool):
+    """:func:`fempm.kernels.lumped._scatter_kernel` over the samples."""
+    D, NK, SIMPLEX = CELLS[cell]
+    CV = 1 if with_mass else 0
+    CF = CV + (D if with_momentum else 0)
+
+    @njit(cache=True, error_model="numpy")
+    def scatter(cells, sc, Y, w, gw, K, cell_dofs, mass, v, volume, sigma, g, fext, out, h, body, modulus,
+                c):  # pragma: no cover
+        Q = sc.shape[1]
+        N, G, cs = np.empty(NK), np.empty((NK, D)), np.empty(Q, np.int32)
+        W, GW = np.empty((Q, NK)), np.empty((Q, NK, D))
+        mv, fe, sg = np.empty(D), np.empty(D), np.empty((D, D))
+        best = 0.0 if bound else np.inf
+        for p in range(len(cells)):
+            m = mass[p]
+            V = volume[p]
+            speed = 0.0
+            for j in range(D):
+                mv[j] = m * v[p, j]
+                speed += v[p, j] * v[p, j]
+                if with_force:
+                    fe[j] = m * g[j] + (fext[p, j] if has_fext else 0.0)
+                    for e in range(D):
+                        sg[j, e] = sigma[p, j, e]
+            if with_dt:
+                best = stable_time(best, bound, m, V, speed, modulus[body[p]], c, p, h[cells[p]])
+            ncell = _particle_basis(p, sc, Y, w, gw, K, SIMPLEX, D, NK, grad_from_values, N, G, cs, W, GW)
+            for k in range(ncell):
+                cq = cs[k]
+                for a in range(NK):
+                    i = cell_dofs[cq, a]
+                    wa = W[k, a]
+                    if with_mass:
+                        out[i, 0] += wa * m
+                    if with_momentum:
+                        for j in range(D):
+                            out[i, CV + j] += wa * mv[j]
+                    if with_force:
+                        for j in range(D):
+                            s = 0.0
+                            for e in range(D):
+                                s += sg[j, e] * GW[k, a, e]
+                            out[i, CF + j] += wa * fe[j] - V * s
+        return 1.0 / np.sqrt(2.0 * best) if bound else best
+
+    return scatter
+
+
+@functools.cache
+def _g2p_kernel(cell: str, grad_from_values: bool, blend: bool, kinematics: bool, move: bool, remap: bool,
+                totals: bool):
+    """:func:`fempm.kernels.lumped._g2p_kernel` over the samples (the particle itself moves and
+    is relocated as there)."""
+    D, NK, SIMPLEX = CELLS[cell]
+
+    @njit(cache=True, error_model="numpy")
+    def g2p_update(cells, sc, Y, w, gw, K, cell_dofs, v_new, v_old, flip, dt, by_particle, X, x, v, F, volume0,
+                   volume, sigma, body, law, lam, mu, L, x0, tol, left, c2v, v_offsets, v_cells, num_cells, mass, mom,
+                   sums):  # pragma: no cover
+        n = len(cells)
+        Q = sc.shape[1]
+        N, G, cs = np.empty(NK), np.empty((NK, D)), np.empty(Q, np.int32)
+        W, GW = np.empty((Q, NK)), np.empty((Q, NK, D))
+        vg, dv, Lp, Fn = np.empty(D), np.empty(D), np.empty((D, D)), np.empty((D, D))
+        keep_L = L.shape[0] == n
+        nonfinite_j, inverted, jmin, jmax, nonfinite = 0, 0, np.inf, -np.inf, 0
+        kinetic, strain, scale = 0.0, 0.0, 0.0
+        momentum = np.zeros(D)
+        for p in range(n):
+            for j in range(D):
+                vg[j] = 0.0
+                dv[j] = 0.0
+                for e in range(D):
+                    Lp[j, e] = 0.0
+            ncell = _particle_basis(p, sc, Y, w, gw, K, SIMPLEX, D, NK, grad_from_values, N, G, cs, W, GW)
+            for k in range(ncell):
+                cq = cs[k]
+                for a in range(NK):
+                    i = cell_dofs[cq, a]
+                    wa = W[k, a]
+                    for j in range(D):
+                        vij = v_new[i, j]
+                        vg[j] += wa * vij
+                        if blend:
+                            dv[j] += wa * (vij - v_old[i, j])
+                        if kinematics:
+                            for e in range(D):
+                                Lp[j, e] += vij * GW[k, a, e]
+            if blend:
+                for j in range(D):
+                    v[p, j] = flip * (v[p, j] + dv[j]) + (1.0 - flip) * vg[j]
+            if remap:  # MUSL: the blended momenta back to the grid
+                for k in range(ncell):
+                    cq = cs[k]
+                    for a in range(NK):
+                        i = cell_dofs[cq, a]
+                        for j in range(D):
+                            mom[i, j] += W[k, a] * (mass[p] * v[p, j])
+            if kinematics:
+                J = deform_at(F, p, dt, Lp, D, Fn)
+                if keep_L:
+                    for i in range(D):
+                        for j in range(D):
+                            L[p, i, j] = Lp[i, j]
+                volume[p] = J * volume0[p]
+                ok, nonfinite_j, inverted, jmin, jmax = count_j(J, nonfinite_j, inverted, jmin, jmax)
+                if ok:
+                    law_at(law[body[p]], F, p, D, J, lam[body[p]], mu[body[p]], sigma)
+            if move:
+                ok = True
+                speed2 = 0.0
+                for j in range(D):
+                    x[p, j] += dt * (v[p, j] if by_particle else vg[j])
+                    ok = ok and np.isfinite(x[p, j])
+                    speed2 += v[p, j] * v[p, j]
+                if not (ok and np.isfinite(speed2)):
+                    nonfinite += 1
+                c = cells[p]
+                out = not inside_after_pull_back(x, p, x0, K, c, SIMPLEX, D, tol, X)
+                if out:
+                    e = star_search(x, p, x0, K, c, c2v, v_offsets, v_cells, num_cells, SIMPLEX, D, tol, X)
+                    if e >= 0:
+                        cells[p] = e
+                        out = False
+                left[p] = out
+            if totals:
+                m = mass[p]
+                w2 = 0.0
+                for j in range(D):
+                    w2 += v[p, j] * v[p, j]
+                    momentum[j] += m * v[p, j]
+                kinetic += 0.5 * m * w2
+                scale += m * np.sqrt(w2)
+                strain += volume0[p] * energy_at(law[body[p]], F, p, D, lam[body[p]], mu[body[p]])
+        if totals:
+            sums[0], sums[1], sums[2] = kinetic, strain, scale
+            for j in range(D):
+                sums[3 + j] = momentum[j]
+        return nonfinite_j, inverted, jmin, jmax, nonfinite
+
+    return g2p_update

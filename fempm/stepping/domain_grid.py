@@ -1,0 +1,148 @@
+r"""The compiled passes of particle domains given by sample points (:class:`DomainGrid`).
+
+The stages and checks of :class:`fempm.stepping.lumped.PointGrid` with the domain-averaged
+basis of :mod:`fempm.kernels.samples` in place of the point basis: CPDI1 (the corners of
+:math:`x_p + F_p \operatorname{diag}(\ell_p) [-1, 1]^d`, made in a compiled pass) and GIMP with
+a Gauss rule (``gimp_order``), lumped mass, on affine degree-1 cells. Each step locates the
+samples in the particle's cell or its vertex star (owned and ghost cells) in one compiled pass;
+the few it does not find are located through the DOLFINx tree, and on one rank samples beyond
+the mesh are treated as :class:`~fempm.transfer.basis.ParticleBasis` treats them (CPDI corners
+at the closest point of the mesh, Gauss points dropped and the weights renormalised). A step
+with a sample on no local cell on some rank (a domain reaching over the partition beyond the
+ghost cells) is handed to the numpy :class:`~fempm.stepping.grid.SingleFieldGrid`, the
+reference, which exchanges the samples between ranks.
+"""
+
+from __future__ import annotations
+
+from typing import TYPE_CHECKING
+
+import numpy as np
+import numpy.typing as npt
+
+from fempm.kernels import samples as ks
+from fempm.kernels.shape import CELLS
+from fempm.particles.corners import corner_signs
+from fempm.stepping.grid import Grid, SingleFieldGrid
+from fempm.stepping.lumped import PointGrid, compiled_space
+from fempm.transfer.domains import CPDI1, GIMP, half_widths
+from fempm.transfer.mass_models import Lumped
+
+if TYPE_CHECKING:
+    from fempm.stepping.solver import ExplicitSolver
+
+__all__ = ["DomainGrid", "supported"]
+
+
+def supported(solver: ExplicitSolver) -> bool:
+    """Whether ``solver``'s domain, mass, conditions, space and mesh take :class:`DomainGrid`."""
+    dom = solver.options.particle_domain
+    sampled = isinstance(dom, CPDI1) or (isinstance(dom, GIMP) and not dom.exact)
+    return (sampled and type(solver.options.mass_model) is Lumped and compiled_space(solver)
+            and not solver.conditions.needs_positions)
+
+
+class DomainGrid(PointGrid):
+    """:class:`~fempm.stepping.lumped.PointGrid` with particle domains of sample points (see the
+    module)."""
+
+    def __init__(self, solver: ExplicitSolver):
+        super().__init__(solver)
+        dom = self.options.particle_domain
+        self.cpdi1 = isinstance(dom, CPDI1)
+        self.passes = ks.kernels_for(solver.particles.locator.geometry.cell_name, grad_from_values=not self.cpdi1)
+        self.signs = corner_signs(self.d)
+        self.simplex = CELLS[solver.particles.locator.geometry.cell_name][2]
+        self.generic: SingleFieldGrid | None = None  # for steps with samples beyond the ghost cells
+        self.stencil: tuple = (np.zeros((0, 0), dtype=np.int32),)  # the samples' cells, coordinates, weights
+        self._cells: npt.NDArray | None = None
+        self._arrays: dict = {}  # kept sample arrays (_kept)
+
+    def for_step(self) -> Grid:
+        super().for_step()
+        missing = self._samples()
+        p = self.solver.particles
+        if p.comm.size > 1 and p.comm.allreduce(missing):
+            if self.generic is None:
+                self.generic = SingleFieldGrid(self.solver)
+            return self.generic
+        return self
+
+    def _samples(self) -> int:
+        """Make this step's samples (cells, reference coordinates, weights); returns the number
+        left on no local cell (0 on one rank)."""
+        p = self.solver.particles
+        dom = self.options.particle_domain
+        d = self.d
+        n, Q = len(p), len(self.signs)
+        if self.cpdi1:
+            y, w, g = ks.cpdi1_samples(p.x, p.fields["F"], half_widths(p), self.signs, self._kept("cpdi1", n, Q))
+            beyond = "clamp"
+        else:
+            smp = dom.samples(p)
+            n, q, _ = smp.x.shape
+            y, w, g, beyond = np.ascontiguousarray(smp.x.reshape(n * q, d)), smp.w, np.zeros((n, q, d)), smp.beyond
+        Q = w.shape[1]
+        loc = p.sample_locator  # owned and ghost cells
+        # the last step's sample cells are the first guess while the particles keep their order
+        guess = self.stencil[0] if self._cells is p.cells and self.stencil[0].shape == (len(p), Q) else None
+        sc, Y, missing = ks.locate_samples(y, p.cells, Q, self.x0, self.K, loc.vertex_star(), self.simplex, loc.tol,
+                                           guess, self._kept("located", n, Q))
+        if missing:
+            missing = self._place(y, sc, Y, w, beyond)
+        self.stencil = (sc, Y, np.ascontiguousarray(w), g)
+        self._cells = p.cells  # kept: the guess is valid while this is the particles' array of cells
+        return missing
+
+    def _kept(self, what: str, n: int, Q: int) -> tuple:
+        """Arrays kept from step to step for ``n`` particles of ``Q`` samples (made anew when
+        ``n`` changes): the CPDI1 samples (y, w, g) or the located ones (cells, coordinates)."""
+        key = (what, n, Q)
+        if key not in self._arrays:
+            self._arrays = {k: a for k, a in self._arrays.items() if k[0] != what}
+            d = self.d
+            self._arrays[key] = ((np.empty((n * Q, d)), np.empty((n, Q)), np.empty((n, Q, d))) if what == "cpdi1" else
+                                 (np.full((n, Q), -1, dtype=np.int32), np.zeros((n * Q, d))))
+        return self._arrays[key]
+
+    def _place(self, y: npt.NDArray, sc: npt.NDArray, Y: npt.NDArray, w: npt.NDArray, beyond: str) -> int:
+        """The samples the vertex-star search did not find: located through the tree; on one rank
+        those beyond the mesh clamped or cut (as :class:`~fempm.transfer.basis.ParticleBasis`).
+        Returns the number left on no local cell (several ranks)."""
+        p = self.solver.particles
+        loc = p.sample_locator
+        Q = sc.shape[1]
+        rows = np.flatnonzero(sc.ravel() < 0)
+        cells, X = loc.locate(y[rows])
+        found = cells >= 0
+        sc.ravel()[rows[found]] = cells[found]
+        Y[rows[found]] = X[found]
+        rows = rows[~found]
+        if p.comm.size > 1 or len(rows) == 0:
+            return len(rows)
+        if beyond == "cut":  # Gauss GIMP: drop the points beyond the mesh, renormalise
+            part = rows // Q
+            w.ravel()[rows] = 0.0
+            sc.ravel()[rows] = p.cells[part]
+            Y[rows] = p.X[part]
+            total = w.sum(axis=1)
+            if np.any(total <= 0):
+                raise ValueError(f"{self.options.particle_domain.name} particle domains with no sample point inside "
+                                 "the mesh")
+            w /= total[:, None]
+            return 0
+        cells, X = loc.locate(loc.closest_on_mesh(y[rows]))  # CPDI: at the closest point of the mesh
+        if np.any(cells < 0):
+            raise RuntimeError("a clamped sample point was not found on the mesh")
+        sc.ravel()[rows], Y[rows] = cells, X
+        return 0
+
+    def scatter_pass(self, *args, bound: bool = False) -> float:
+        p = self.solver.particles
+        return self.passes.scatter(p.cells, *self.stencil, self.K, self.cell_dofs, *args, bound=bound)
+
+    def gather_pass(self, v_new, v_old, flip: float, dt: float, blend: bool, kinematics: bool, move: bool,
+                    state: tuple) -> tuple:
+        p = self.solver.particles
+        return self.passes.g2p_update(p.cells, *self.stencil, self.K, self.cell_dofs, v_new, v_old, flip, dt, blend,
+                                      kinematics, move, state[0], p.X, *state[1:])

@@ -1,0 +1,101 @@
+"""The compiled passes of particle domains (fempm.stepping.domain_grid: CPDI1, Gauss-rule GIMP)
+against the numpy step, their reference: the same state to round-off after every scheme, on
+every cell type, inside the mesh and with domains reaching beyond it (CPDI corners clamped onto
+the mesh, Gauss points cut), on 1 and 2 ranks (where a step hands samples beyond the ghost cells
+to the numpy step)."""
+
+import dolfinx.fem
+import dolfinx.mesh as dm
+import fempm
+import numpy as np
+import pytest
+from mpi4py import MPI
+
+from fempm.boundary import slip
+from fempm.materials import LinearElastic, NeoHookean
+from fempm.materials.newtonian_eos import NewtonianTait
+from fempm.stepping import ExplicitSolver, Loads, StepOptions
+from fempm.stepping.domain_grid import DomainGrid
+from fempm.stepping.grid import SingleFieldGrid
+
+from tests.stepping.test_compiled_step import MESHES, assert_close, make_solver, state
+
+pytestmark = pytest.mark.parallel  # also under mpiexec -n 2 (scripts/run-tests)
+
+comm = MPI.COMM_WORLD
+DOMAINS = {"cpdi1": {"domain": "cpdi1"}, "gimp2": {"domain": "gimp", "gimp_order": 2},
+           "cpgimp3": {"domain": "cpgimp", "gimp_order": 3}}
+
+
+def run_both(build, steps=12):
+    out = []
+    for compiled in (False, True):
+        solver = build(compiled)
+        dts = [solver.step() for _ in range(steps)]
+        out.append((state(solver), np.array(dts), solver.j_range, solver.t))
+    assert isinstance(solver.grid, DomainGrid)
+    return out
+
+
+CASES = ([(cell, scheme, "cpdi1") for cell in MESHES for scheme in ("USL", "MUSL", "USF")]
+         + [(cell, scheme, "gimp2") for cell in ("triangle", "hexahedron") for scheme in ("USL", "MUSL", "USF")]
+         + [("quadrilateral", "MUSL", "cpgimp3"), ("tetrahedron", "USL", "cpgimp3")])
+
+
+@pytest.mark.parametrize(("cell", "scheme", "domain"), CASES)
+def test_domain_passes_equal_the_numpy_step(cell, scheme, domain):
+    opts = StepOptions(scheme=scheme, flip=0.9, damping=0.5, **DOMAINS[domain])
+    ref, got = run_both(lambda compiled: make_solver(cell, opts, compiled=compiled))
+    assert np.concatenate(comm.allgather(ref[0][1])).std() > 0.005  # the particles did move differently
+    assert_close(ref, got)
+
+
+def filled(cell: str, options: StepOptions, compiled: bool) -> ExplicitSolver:
+    """Particles in every cell, domains larger than their sub-cells: the boundary ones reach
+    beyond the mesh; a law without a kernel on half of them."""
+    mesh = MESHES[cell]()
+    d = mesh.geometry.dim
+    p = fempm.create_particles(mesh, 2 ** d, density=1.0, jitter=0.3, seed=5)
+    p.fields["lp"] = 1.6 * 0.5 * p.volume[:, None] ** (1.0 / d) * np.ones((1, d))
+    p.fields["v"] = 0.3 * np.sin(np.pi * p.x) * np.cos(2.0 * p.x[:, ::-1])  # no normal velocity at the walls
+    p.fields["body"] = (p.x[:, 0] > 0.5).astype(np.int32)
+    V = dolfinx.fem.functionspace(mesh, ("Lagrange", 1, (d,)))
+    bcs = [slip(V, lambda x: np.isclose(x[0], 0.0), np.eye(d)[0])]
+    materials = [NeoHookean(30.0, 0.3), NewtonianTait(rho0=1.0, kappa=20.0, viscosity=0.05)]
+    return ExplicitSolver(V, p, materials, bcs=bcs, loads=Loads(body_force=-np.eye(d)[d - 1]), options=options,
+                          compiled=compiled)
+
+
+@pytest.mark.parametrize("cell", list(MESHES))
+@pytest.mark.parametrize("domain", ["cpdi1", "gimp2"])
+def test_domains_beyond_the_mesh(cell, domain):
+    opts = StepOptions(scheme="MUSL", flip=0.95, **DOMAINS[domain])
+    ref, got = run_both(lambda compiled: filled(cell, opts, compiled), steps=8)
+    assert_close(ref, got)
+
+
+def test_samples_beyond_the_ghost_cells_take_the_numpy_step():
+    """On several ranks a step whose samples some rank holds in no local cell is the numpy
+    step's; the others are the compiled passes'."""
+    solver = make_solver("triangle", StepOptions(domain="cpdi1"))
+    grid = solver.grid
+    taken = []
+    for _ in range(3):
+        step_grid = grid.for_step()
+        taken.append(type(step_grid))
+        solver.step()
+    if comm.size == 1:
+        assert taken == [DomainGrid] * 3
+    else:
+        assert set(taken) <= {DomainGrid, SingleFieldGrid}
+
+
+def test_domain_grid_needs_lumped_mass_and_sample_points():
+    mesh = dm.create_unit_square(comm, 4, 4)
+    p = fempm.create_particles(mesh, 4)
+    V = dolfinx.fem.functionspace(mesh, ("Lagrange", 1, (2,)))
+    for opts, expected in [(StepOptions(domain="cpdi1"), DomainGrid),
+                           (StepOptions(domain="cpdi1", mass="consistent"), SingleFieldGrid),
+                           (StepOptions(domain="ugimp"), SingleFieldGrid),
+                           (StepOptions(domain="gimp", gimp_order=2), DomainGrid)]:
+        assert type(ExplicitSolver(V, p, [LinearElastic(1.0, 0.3)], options=opts).grid) is expected
