@@ -4,7 +4,8 @@ The stages of :mod:`fempm.stepping.grid` (same equations, options and checks; th
 :class:`~fempm.stepping.grid.SingleFieldGrid` is the reference it is tested against to
 round-off) for the common case: standard MPM particles, lumped or consistent mass
 (:class:`LumpedNodalMass`, :class:`~fempm.stepping.consistent.ConsistentNodalMass`), a P1/Q1
-vector space on a mesh of simplices, parallelograms or parallelepipeds. Nothing per particle
+vector space on a mesh of simplices, parallelograms or parallelepipeds (FMPM(k):
+:mod:`fempm.stepping.fmpm_mass`; particle domains: :mod:`fempm.stepping.domain_grid`). Nothing per particle
 is stored between the passes; the basis is evaluated on the fly in each pass
 (:mod:`fempm.kernels.shape`):
 
@@ -39,6 +40,7 @@ from fempm.materials.linear_elastic import LinearElastic
 from fempm.materials.neo_hookean import NeoHookean
 from fempm.stepping import diagnostics
 from fempm.stepping.consistent import ConsistentNodalMass
+from fempm.stepping.fmpm_mass import FMPMNodalMass
 from fempm.stepping.grid import Grid
 from fempm.stepping.laws import law_stress, material_groups
 from fempm.stepping.loads import external_forces
@@ -46,7 +48,7 @@ from fempm.stepping.nodal import kept_nodal_array, sum_ghosts
 from fempm.transfer.centres import NodalCentres
 from fempm.transfer.domains import Point
 from fempm.transfer.mapping import SUPPORT_TOL, mass_centres
-from fempm.transfer.mass_models import Consistent, Lumped
+from fempm.transfer.mass_models import FMPM, Consistent, Lumped
 
 if TYPE_CHECKING:
     from fempm.stepping.solver import ExplicitSolver
@@ -72,7 +74,7 @@ def compiled_space(solver: ExplicitSolver) -> bool:
 
 def supported(solver: ExplicitSolver) -> bool:
     """Whether ``solver``'s options, space and mesh take a :class:`PointGrid` (point particles,
-    lumped or consistent mass: :mod:`fempm.stepping.consistent`)."""
+    lumped, consistent (:mod:`fempm.stepping.consistent`) or FMPM (:mod:`fempm.stepping.fmpm_mass`) mass)."""
     opts = solver.options
     return (compiled_space(solver) and type(opts.mass_model) in NODAL_MASSES
             and isinstance(opts.particle_domain, Point))
@@ -275,10 +277,10 @@ class PointGrid(Grid):
         top = np.array([nodal[: self.num_owned, 0].max(initial=0.0), -local])
         p.comm.Allreduce(MPI.IN_PLACE, top, op=MPI.MAX)  # one collective: the largest mass and the stable time
         top, state = float(top[0]), -float(top[1])
+        self.top, self.active_min, self.weak_max = top, SUPPORT_TOL * top, opts.mass_cutoff * top
         factor = self.mass.stable_factor(nodal, dt is None)
         if dt is not None and not dt <= state * BOUND_SAFETY * factor:
             state = self._stable_time()
-        self.active_min, self.weak_max = SUPPORT_TOL * top, opts.mass_cutoff * top
         self.centroids = self._centroids(nodal)
         self.force, self.cf = nodal, 1 + d
         self.nonfinite, self.left = 0, None
@@ -391,4 +393,4 @@ class LumpedNodalMass:
 
 
 #: the compiled grid mass of each mass model
-NODAL_MASSES = {Lumped: LumpedNodalMass, Consistent: ConsistentNodalMass}
+NODAL_MASSES = {Lumped: LumpedNodalMass, Consistent: ConsistentNodalMass, FMPM: FMPMNodalMass}

@@ -73,10 +73,11 @@ class ExplicitSolver:
         options: The step's options (scheme, mass model, particle domain, FLIP blend, CFL).
         t: The start time.
         step_count: The steps taken before (a continued run).
-        compiled: Take the compiled passes where they apply (None, the default: lumped or
-            consistent mass, point particles, a degree-1 space on an affine mesh), insist on
-            them (True: an error where they do not apply) or never (False: the numpy step,
-            which is their reference).
+        compiled: Take the compiled passes where they apply (None, the default: a degree-1
+            space on an affine mesh, with point particles and lumped, consistent or FMPM mass,
+            or CPDI1 or Gauss-rule GIMP domains and lumped mass), insist on them (True: an
+            error where they do not apply) or never (False: the numpy step, which is their
+            reference).
         contact: One velocity field per particle group with frictional contact between them
             (:class:`fempm.stepping.contact.Contact`); None: one field for all.
 
@@ -183,7 +184,8 @@ class ExplicitSolver:
     def grid(self) -> Grid:
         """The grid of the step (made on first use, remade when the options, ``compiled`` or
         ``contact`` change): a :class:`~fempm.stepping.contact.ContactGrid` with contact, a
-        :class:`~fempm.stepping.lumped.PointGrid` where the compiled passes apply (unless
+        :class:`~fempm.stepping.lumped.PointGrid` or a
+        :class:`~fempm.stepping.domain_grid.DomainGrid` where the compiled passes apply (unless
         ``compiled=False``), else a :class:`~fempm.stepping.grid.SingleFieldGrid`."""
         key = (id(self.options), self.compiled, id(self.contact))
         if self._grid is None or self._grid_key != key:
@@ -202,8 +204,8 @@ class ExplicitSolver:
             return DomainGrid(self)
         if self.compiled:
             raise ValueError("compiled=True needs a degree-1 space on an affine mesh (simplices, parallelograms) with "
-                             "numba installed, and point particles with lumped or consistent mass or CPDI1 or "
-                             "Gauss-rule GIMP domains with lumped mass")
+                             "numba installed, and point particles with lumped, consistent or FMPM mass, or CPDI1 "
+                             "or Gauss-rule GIMP domains with lumped mass")
         return SingleFieldGrid(self)
 
     def step(self, dt: float | None = None, *, dt_max: float = np.inf, totals: bool = False) -> float:

@@ -1,0 +1,110 @@
+r"""FMPM(k) as the grid mass of the compiled passes (:class:`FMPMNodalMass`).
+
+The passes of :class:`fempm.stepping.lumped.PointGrid` with the grid update of FMPM(k)
+(:mod:`fempm.transfer.fmpm`), whose reference is :class:`~fempm.stepping.grid.SingleFieldGrid`
+with ``mass="fmpmK"``: the velocity and the acceleration are each k Richardson steps from the
+lumped solve,
+
+.. math::
+    x \leftarrow x + m^{-1} (b - M_C x), \qquad (M_C x)_i = \sum_p M_p N_{ip} \sum_j N_{jp} x_j,
+
+every step after the first one compiled particle pass (:func:`fempm.kernels.fmpm.mass_apply`,
+no matrix) and one ghost exchange. Solved on the free components of the supported dofs; the
+rows and columns of dofs whose lumped mass is below ``lump_below`` of the largest, and of
+frictional walls, are lumped (they keep the lumped value); the acceleration is 0 where the
+lumped mass is below ``mass_cutoff``; the stable step is :math:`1/\sqrt{k}` of the lumped one
+(1 with ``lumped_forces``, which divides the forces by the lumped mass).
+"""
+
+from __future__ import annotations
+
+from typing import TYPE_CHECKING
+
+import numpy as np
+import numpy.typing as npt
+
+from fempm.kernels import consistent as kc
+from fempm.kernels import fmpm as kf
+from fempm.stepping.nodal import sum_ghosts
+
+if TYPE_CHECKING:
+    from fempm.stepping.lumped import PointGrid
+
+__all__ = ["FMPMNodalMass"]
+
+
+class FMPMNodalMass:
+    """FMPM(k) as the grid mass of a :class:`~fempm.stepping.lumped.PointGrid` (see the module)."""
+
+    fusable = False  # the grid update takes particle passes
+
+    def __init__(self, grid: PointGrid):
+        self.grid = grid
+        self.order = grid.options.mass_model.order
+        self.apply = kf.mass_apply(grid.solver.particles.locator.geometry.cell_name)
+        self._work = {False: grid.nodal_array(grid.d), True: grid.nodal_array(grid.d + 1)}  # without, with M_C 1_l
+        self.friction = grid.conditions.friction_dofs
+        self.lump = np.zeros(0, dtype=np.bool_)
+
+    def stable_factor(self, nodal, need: bool) -> float:
+        r"""The lumped rows of this step; :math:`1/\sqrt{k}` (1 with lumped forces)."""
+        g = self.grid
+        m = nodal[:, 0]
+        lump = m < g.options.lump_below * g.top if g.options.lump_below > 0.0 else np.zeros(len(m), dtype=np.bool_)
+        if self.friction is not None:
+            lump[: len(self.friction)] |= self.friction[: len(lump)]
+        self.lump = lump if lump.any() else np.zeros(0, dtype=np.bool_)
+        if g.options.lumped_forces:
+            return 1.0
+        return 1.0 / float(np.sqrt(self.order))
+
+    def mc(self, y: npt.NDArray) -> npt.NDArray:
+        """:math:`M_C y` without the lumped dofs (and :math:`M_C 1_l` in one more column where
+        rows are lumped) on every local dof, ghosts summed and updated (a kept array)."""
+        g = self.grid
+        p = g.solver.particles
+        vec, out = self._work[len(self.lump) > 0]
+        out.fill(0.0)
+        self.apply(p.cells, p.X, g.K, g.cell_dofs, p.mass, y, self.lump, out)
+        sum_ghosts(vec)
+        return out
+
+    def solve(self, mass: npt.NDArray, b: npt.NDArray, cb: int, active_min: float) -> npt.NDArray:
+        r"""k Richardson steps :math:`x \leftarrow x + m^{-1}(b - M_C x)` from :math:`x = m^{-1} b`
+        (``b[:, cb:cb+d]``, ``m = mass[:, 0]``) on the free components of the supported dofs
+        (lumped rows keep :math:`m^{-1} b`)."""
+        g = self.grid
+        x = np.empty((g.num_dofs, g.d))
+        kf.lumped_solve(b, cb, mass, g.free, active_min, x)
+        for _ in range(self.order - 1):
+            x_new = np.empty_like(x)
+            kf.richardson(x, b, cb, self.mc(x), mass, g.free, active_min, self.lump, x_new)
+            x = x_new
+        return x
+
+    def velocity(self, mass, mom, cv: int, active_min: float, guess=None, centroids=None) -> npt.NDArray:
+        g = self.grid
+        v = self.solve(mass, mom, cv, active_min)
+        g.conditions.apply(v, centroids)
+        return v
+
+    def advance(self, mass, force, cf: int, active_min: float, weak_max: float, dt: float, v_old: npt.NDArray,
+                centroids=None) -> npt.NDArray:
+        g = self.grid
+        if g.options.lumped_forces:
+            m = mass[:, 0]
+            active = (m > active_min)[:, None]
+            a = np.where(active, force[:, cf:cf + g.d] / np.where(active, m[:, None], 1.0), 0.0)
+        else:
+            a = self.solve(mass, force, cf, active_min)
+        v_new = np.empty_like(a)
+        kc.advance(np.ascontiguousarray(a), v_old, np.ascontiguousarray(mass[:, 0]), weak_max, float(dt),
+                   float(g.options.damping), v_new)
+        g.conditions.apply(v_new, centroids)
+        return v_new
+
+    def checkpoint_state(self) -> tuple[dict, dict[str, npt.NDArray]]:
+        return {}, {}
+
+    def restore_state(self, counters: dict, arrays: dict[str, npt.NDArray]) -> None:
+        pass
