@@ -32,7 +32,7 @@ import numpy as np
 
 from fempm.kernels.shape import AVAILABLE, CELLS
 
-__all__ = ["cpdi1_samples", "kernels_for", "locate_samples"]
+__all__ = ["at_samples", "cpdi1_samples", "kernels_for", "locate_samples"]
 
 if AVAILABLE:
     from numba import njit
@@ -134,6 +134,36 @@ def locate_samples(y, cells, Q: int, x0, K, star: tuple, simplex: bool, tol: flo
     guess = np.zeros((0, Q), dtype=np.int32) if guess is None else guess
     missing = _locate_samples(y, cells, Q, x0, K, *star, bool(simplex), float(tol), guess, sc, Y)
     return sc, Y, int(missing)
+
+
+@functools.cache
+def _at_samples_kernel(cell: str):
+    D, NK, SIMPLEX = CELLS[cell]
+
+    @njit(cache=True, error_model="numpy")
+    def kernel(sc, Y, K, cell_dofs, u, out):  # pragma: no cover - compiled
+        N, G = np.empty(NK), np.empty((NK, D))
+        Q = sc.shape[1]
+        for p in range(sc.shape[0]):
+            for q in range(Q):
+                r = p * Q + q
+                c = sc[p, q]
+                shape(Y, r, K, c, SIMPLEX, D, NK, N, G)
+                for j in range(u.shape[1]):
+                    s = 0.0
+                    for a in range(NK):
+                        s += N[a] * u[cell_dofs[c, a], j]
+                    out[p, q, j] = s
+
+    return kernel
+
+
+def at_samples(cell: str, sc, Y, K, cell_dofs, u):
+    r"""Nodal values ``u`` (dofs, k) at the samples, :math:`u(y_{pq}) = \sum_a N_a(y_{pq})
+    u_{d(pq, a)}`, shape (n, Q, k) (e.g. the grid velocity at CPDI2 corners)."""
+    out = np.empty((sc.shape[0], sc.shape[1], u.shape[1]))
+    _at_samples_kernel(cell)(sc, Y, K, cell_dofs, np.ascontiguousarray(u), out)
+    return out
 
 
 @functools.cache

@@ -5,10 +5,15 @@ from __future__ import annotations
 
 import itertools
 
+import functools
+
 import numpy as np
 import numpy.typing as npt
 
-__all__ = ["box_corners", "corner_signs", "domain_geometry"]
+from fempm.kernels import corners as kc
+from fempm.kernels.choice import COMPILED
+
+__all__ = ["box_corners", "corner_signs", "domain_geometry", "domain_geometry_numpy"]
 
 
 def corner_signs(d: int) -> npt.NDArray:
@@ -16,6 +21,7 @@ def corner_signs(d: int) -> npt.NDArray:
     return np.array(list(itertools.product((-1.0, 1.0), repeat=d)))  # (2^d, d)
 
 
+@functools.cache
 def _tensor_corner_rule(d: int) -> tuple[npt.NDArray, npt.NDArray, npt.NDArray]:
     r"""Multilinear corner functions :math:`\phi_c(\xi) = \prod_a (1 + s_{ca} \xi_a)/2` on
     :math:`[-1, 1]^d` at the 2-point Gauss rule: values (G, 2^d), reference gradients
@@ -47,6 +53,23 @@ def domain_geometry(corners: npt.NDArray, comm=None) -> tuple[npt.NDArray, npt.N
     g (n, k, d), volume (n,), centroid (n, d)); a degenerate or twisted domain is a ValueError,
     raised on every rank of ``comm`` when one is given (collective)."""
     n, k, d = corners.shape
+    if COMPILED and kc.AVAILABLE and k in (d + 1, 2**d):
+        corners = np.ascontiguousarray(corners, dtype=np.float64)
+        w, g, vol, centroid = np.empty((n, k)), np.empty((n, k, d)), np.empty(n), np.empty((n, d))
+        if k == d + 1:
+            bad, kind = kc.simplex_geometry(corners, w, g, vol, centroid), "simplex"
+        else:
+            bad, kind = kc.tensor_geometry(corners, *_tensor_corner_rule(d), w, g, vol, centroid), \
+                "quadrilateral/hexahedral"
+        _report(bad, kind, comm)
+        return w, g, vol, centroid
+    return domain_geometry_numpy(corners, comm)
+
+
+def domain_geometry_numpy(corners: npt.NDArray, comm=None) -> tuple[npt.NDArray, npt.NDArray, npt.NDArray, npt.NDArray]:
+    """The numpy formulas of :func:`domain_geometry`, the reference of its compiled kernels
+    (:mod:`fempm.kernels.corners`)."""
+    n, k, d = corners.shape
     if k == d + 1:
         J = np.swapaxes(corners[:, 1:, :] - corners[:, :1, :], 1, 2)  # (n, d, d), columns c_k - c_0
         det = np.linalg.det(J)
@@ -75,7 +98,11 @@ def _check_volumes(det: npt.NDArray, kind: str, comm=None) -> None:
     """Each domain's Jacobian determinants (n,) or (n, G) must be non-zero and of one sign
     (a mirrored corner order is fine, a degenerate or twisted domain is not)."""
     det = det if det.ndim == 2 else det[:, None]
-    nbad = int(np.count_nonzero(~((det > 0).all(axis=1) | (det < 0).all(axis=1))))
+    _report(int(np.count_nonzero(~((det > 0).all(axis=1) | (det < 0).all(axis=1)))), kind, comm)
+
+
+def _report(nbad: int, kind: str, comm=None) -> None:
+    """A ValueError naming the ``nbad`` degenerate or twisted domains (on every rank of ``comm``)."""
     if comm is not None and comm.size > 1:
         nbad = comm.allreduce(nbad)
     if nbad:

@@ -2,15 +2,18 @@ r"""The compiled passes of particle domains given by sample points (:class:`Doma
 
 The stages and checks of :class:`fempm.stepping.lumped.PointGrid` with the domain-averaged
 basis of :mod:`fempm.kernels.samples` in place of the point basis: CPDI1 (the corners of
-:math:`x_p + F_p \operatorname{diag}(\ell_p) [-1, 1]^d`, made in a compiled pass) and GIMP with
-a Gauss rule (``gimp_order``), lumped mass, on affine degree-1 cells. Each step locates the
+:math:`x_p + F_p \operatorname{diag}(\ell_p) [-1, 1]^d`, made in a compiled pass), CPDI2 (the
+tracked corners, moved with the grid velocity at them after the moving pass) and GIMP with a
+Gauss rule (``gimp_order``), lumped mass, on affine degree-1 cells. Each step locates the
 samples in the particle's cell or its vertex star (owned and ghost cells) in one compiled pass;
 the few it does not find are located through the DOLFINx tree, and on one rank samples beyond
 the mesh are treated as :class:`~fempm.transfer.basis.ParticleBasis` treats them (CPDI corners
 at the closest point of the mesh, Gauss points dropped and the weights renormalised). A step
 with a sample on no local cell on some rank (a domain reaching over the partition beyond the
 ghost cells) is handed to the numpy :class:`~fempm.stepping.grid.SingleFieldGrid`, the
-reference, which exchanges the samples between ranks.
+reference, which exchanges the samples between ranks. CPDI2 keeps the corner weights of the
+corners a step moved for the next step (the same array in ``fields["corners"]``: corners
+changed between steps are given as a new array, as the moving step does).
 """
 
 from __future__ import annotations
@@ -25,7 +28,8 @@ from fempm.kernels.shape import CELLS
 from fempm.particles.corners import corner_signs
 from fempm.stepping.grid import Grid, SingleFieldGrid
 from fempm.stepping.lumped import PointGrid, compiled_space
-from fempm.transfer.domains import CPDI1, GIMP, half_widths
+from fempm.particles.corners import domain_geometry
+from fempm.transfer.domains import CPDI1, CPDI2, GIMP, half_widths
 from fempm.transfer.mass_models import Lumped
 
 if TYPE_CHECKING:
@@ -37,7 +41,7 @@ __all__ = ["DomainGrid", "supported"]
 def supported(solver: ExplicitSolver) -> bool:
     """Whether ``solver``'s domain, mass, conditions, space and mesh take :class:`DomainGrid`."""
     dom = solver.options.particle_domain
-    sampled = isinstance(dom, CPDI1) or (isinstance(dom, GIMP) and not dom.exact)
+    sampled = isinstance(dom, (CPDI1, CPDI2)) or (isinstance(dom, GIMP) and not dom.exact)
     return (sampled and type(solver.options.mass_model) is Lumped and compiled_space(solver)
             and not solver.conditions.needs_positions)
 
@@ -50,13 +54,13 @@ class DomainGrid(PointGrid):
         super().__init__(solver)
         dom = self.options.particle_domain
         self.cpdi1 = isinstance(dom, CPDI1)
-        self.passes = ks.kernels_for(solver.particles.locator.geometry.cell_name, grad_from_values=not self.cpdi1)
+        self.passes = ks.kernels_for(solver.particles.locator.geometry.cell_name, grad_from_values=isinstance(dom, GIMP))
         self.signs = corner_signs(self.d)
         self.simplex = CELLS[solver.particles.locator.geometry.cell_name][2]
         self.generic: SingleFieldGrid | None = None  # for steps with samples beyond the ghost cells
         self.stencil: tuple = (np.zeros((0, 0), dtype=np.int32),)  # the samples' cells, coordinates, weights
-        self._cells: npt.NDArray | None = None
         self._arrays: dict = {}  # kept sample arrays (_kept)
+        self._corner_weights: tuple | None = None  # CPDI2: (corners, w, g) after the last move
 
     def for_step(self) -> Grid:
         super().for_step()
@@ -75,7 +79,16 @@ class DomainGrid(PointGrid):
         dom = self.options.particle_domain
         d = self.d
         n, Q = len(p), len(self.signs)
-        if self.cpdi1:
+        if isinstance(dom, CPDI2):  # the tracked corners
+            corners = dom.corners(p)
+            n, Q, _ = corners.shape
+            y = np.ascontiguousarray(corners.reshape(n * Q, d))
+            if self._corner_weights is not None and self._corner_weights[0] is corners:
+                w, g = self._corner_weights[1:]  # of the corners the last step moved
+            else:
+                w, g, _, _ = domain_geometry(corners, p.comm)
+            beyond = "clamp"
+        elif self.cpdi1:
             y, w, g = ks.cpdi1_samples(p.x, p.fields["F"], half_widths(p), self.signs, self._kept("cpdi1", n, Q))
             beyond = "clamp"
         else:
@@ -84,14 +97,14 @@ class DomainGrid(PointGrid):
             y, w, g, beyond = np.ascontiguousarray(smp.x.reshape(n * q, d)), smp.w, np.zeros((n, q, d)), smp.beyond
         Q = w.shape[1]
         loc = p.sample_locator  # owned and ghost cells
-        # the last step's sample cells are the first guess while the particles keep their order
-        guess = self.stencil[0] if self._cells is p.cells and self.stencil[0].shape == (len(p), Q) else None
+        # the last step's sample cells are the first guess (a guess only: after the particles were
+        # sorted or migrated a wrong one costs a search)
+        guess = self.stencil[0] if self.stencil[0].shape == (len(p), Q) else None
         sc, Y, missing = ks.locate_samples(y, p.cells, Q, self.x0, self.K, loc.vertex_star(), self.simplex, loc.tol,
                                            guess, self._kept("located", n, Q))
         if missing:
             missing = self._place(y, sc, Y, w, beyond)
         self.stencil = (sc, Y, np.ascontiguousarray(w), g)
-        self._cells = p.cells  # kept: the guess is valid while this is the particles' array of cells
         return missing
 
     def _kept(self, what: str, n: int, Q: int) -> tuple:
@@ -136,6 +149,28 @@ class DomainGrid(PointGrid):
             raise RuntimeError("a clamped sample point was not found on the mesh")
         sc.ravel()[rows], Y[rows] = cells, X
         return 0
+
+    def to_particles(self, v_new: npt.NDArray, v_old: npt.NDArray, dt: float, *, blend: bool = False,
+                     kinematics: bool = False, move: bool = False, remap: bool = False) -> None:
+        """The passes of :class:`~fempm.stepping.lumped.PointGrid`; with domains tracked by their
+        corners (CPDI2) a moving pass then moves the corners with the grid velocity at them
+        (:func:`fempm.kernels.samples.at_samples`), and each particle to its domain's centroid
+        with its volume (:meth:`fempm.transfer.domains.CPDI2.move`)."""
+        super().to_particles(v_new, v_old, dt, blend=blend, kinematics=kinematics, move=move, remap=remap)
+        if not (move and self.options.particle_domain.tracks_corners):
+            return
+        s = self.solver
+        p = s.particles
+        sc, Y = self.stencil[:2]
+        at = ks.at_samples(p.locator.geometry.cell_name, sc, Y, self.K, self.cell_dofs, v_new)
+        corners = p.fields["corners"] + dt * at
+        try:
+            w, g, volume, centroid = domain_geometry(corners, p.comm)
+        except ValueError as e:  # collective
+            s.fail(f"inverted particle domain: {e}")
+        p.fields["corners"], p.x, p.volume = corners, centroid, volume
+        self._corner_weights = (corners, w, g)  # the next step's, while the particles keep this array
+        self.left = None  # the particles moved to their centroids: located anew
 
     def scatter_pass(self, *args, bound: bool = False) -> float:
         p = self.solver.particles

@@ -37,8 +37,9 @@ MESHES = {
 def make_solver(cell: str, options: StepOptions, *, law=None, loads=None, compiled=None) -> ExplicitSolver:
     mesh = MESHES[cell]()
     d = mesh.geometry.dim
-    p = fempm.create_particles(mesh, 2 ** d, density=1.0, jitter=0.3, seed=3,
-                               where=lambda x: np.all(np.abs(x[:d] - 0.5) < 0.3, axis=0))
+    p = fempm.create_particles(mesh, 2 ** d, density=1.0, jitter=0.0 if options.particle_domain.tracks_corners else 0.3, seed=3,
+                               where=lambda x: np.all(np.abs(x[:d] - 0.5) < 0.3, axis=0),
+                               corners=options.particle_domain.tracks_corners)
     rng = np.random.default_rng(7)
     p.fields["v"] = 0.2 * np.sin(3.0 * p.x + 0.1 * rng.standard_normal(p.x.shape))  # per-particle values
     p.fields["body"] = (p.x[:, 0] > 0.5).astype(np.int32)  # two bodies

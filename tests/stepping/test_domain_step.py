@@ -23,7 +23,7 @@ from tests.stepping.test_compiled_step import MESHES, assert_close, make_solver,
 pytestmark = pytest.mark.parallel  # also under mpiexec -n 2 (scripts/run-tests)
 
 comm = MPI.COMM_WORLD
-DOMAINS = {"cpdi1": {"domain": "cpdi1"}, "gimp2": {"domain": "gimp", "gimp_order": 2},
+DOMAINS = {"cpdi1": {"domain": "cpdi1"}, "cpdi2": {"domain": "cpdi2"}, "gimp2": {"domain": "gimp", "gimp_order": 2},
            "cpgimp3": {"domain": "cpgimp", "gimp_order": 3}}
 
 
@@ -38,6 +38,7 @@ def run_both(build, steps=12):
 
 
 CASES = ([(cell, scheme, "cpdi1") for cell in MESHES for scheme in ("USL", "MUSL", "USF")]
+         + [(cell, scheme, "cpdi2") for cell in MESHES for scheme in ("USL", "MUSL")]
          + [(cell, scheme, "gimp2") for cell in ("triangle", "hexahedron") for scheme in ("USL", "MUSL", "USF")]
          + [("quadrilateral", "MUSL", "cpgimp3"), ("tetrahedron", "USL", "cpgimp3")])
 
@@ -55,7 +56,8 @@ def filled(cell: str, options: StepOptions, compiled: bool) -> ExplicitSolver:
     beyond the mesh; a law without a kernel on half of them."""
     mesh = MESHES[cell]()
     d = mesh.geometry.dim
-    p = fempm.create_particles(mesh, 2 ** d, density=1.0, jitter=0.3, seed=5)
+    p = fempm.create_particles(mesh, 2 ** d, density=1.0, jitter=0.0 if options.particle_domain.tracks_corners else 0.3, seed=5,
+                               corners=options.particle_domain.tracks_corners)
     p.fields["lp"] = 1.6 * 0.5 * p.volume[:, None] ** (1.0 / d) * np.ones((1, d))
     p.fields["v"] = 0.3 * np.sin(np.pi * p.x) * np.cos(2.0 * p.x[:, ::-1])  # no normal velocity at the walls
     p.fields["body"] = (p.x[:, 0] > 0.5).astype(np.int32)
@@ -67,7 +69,7 @@ def filled(cell: str, options: StepOptions, compiled: bool) -> ExplicitSolver:
 
 
 @pytest.mark.parametrize("cell", list(MESHES))
-@pytest.mark.parametrize("domain", ["cpdi1", "gimp2"])
+@pytest.mark.parametrize("domain", ["cpdi1", "cpdi2", "gimp2"])
 def test_domains_beyond_the_mesh(cell, domain):
     opts = StepOptions(scheme="MUSL", flip=0.95, **DOMAINS[domain])
     ref, got = run_both(lambda compiled: filled(cell, opts, compiled), steps=8)
