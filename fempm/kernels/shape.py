@@ -73,6 +73,23 @@ if njit is not None:
                         G[a, e] += g * K[c, j, e]
 
     @njit(inline="always")
+    def shape_values(X, p, simplex, t, k, N):  # pragma: no cover - compiled
+        """The values ``N`` (k,) of :func:`shape` alone (no gradients, no Jacobian)."""
+        if simplex:
+            s = 1.0
+            for i in range(t):
+                s -= X[p, i]
+            N[0] = s
+            for a in range(1, k):
+                N[a] = X[p, a - 1]
+        else:
+            for a in range(k):
+                v = 1.0
+                for i in range(t):
+                    v *= X[p, i] if (a >> i) & 1 else 1.0 - X[p, i]
+                N[a] = v
+
+    @njit(inline="always")
     def inside_after_pull_back(x, p, x0, K, c, simplex, t, tol, X):  # pragma: no cover - compiled
         """X[p] <- K[c] (x[p] - x0[c]); whether it lies in the reference cell within ``tol``
         (:meth:`fempm.meshes.geometry.CellGeometry.contains`; NaN lies outside)."""
