@@ -317,6 +317,9 @@ def main(argv=None) -> None:
 
         worker(a)
         return
+    if not (a.reference / "common.py").exists():
+        raise SystemExit(f"bench_configurations: no reference kernels in {a.reference} (their seeding makes the "
+                         "problem; set --reference or FEMPM_REFERENCE_MPM)")
     meshes = tempfile.TemporaryDirectory(prefix="fempm-bench-meshes-")
     os.environ["FEMPM_BENCH_MESHES"] = meshes.name  # the workers share the triangle meshes
     rows = []
