@@ -43,6 +43,15 @@ if AVAILABLE:
             B[2, 2] = (A[0, 0] * A[1, 1] - A[0, 1] * A[1, 0]) / det
         return det
 
+    @njit(inline="always")
+    def _centroid(corners, w, p, centroid):  # pragma: no cover - compiled
+        """``centroid[p]`` <- :math:`\sum_c w_c y_c` of domain ``p``."""
+        for i in range(corners.shape[2]):
+            s = 0.0
+            for c in range(corners.shape[1]):
+                s += w[p, c] * corners[p, c, i]
+            centroid[p, i] = s
+
     @njit(cache=True, error_model="numpy")
     def simplex_geometry(corners, w, g, vol, centroid):  # pragma: no cover - compiled
         """Simplices (n, d + 1, d); returns the number of degenerate ones."""
@@ -68,11 +77,7 @@ if AVAILABLE:
             for c in range(k):
                 w[p, c] = 1.0 / k
             vol[p] = abs(det) / factorial
-            for i in range(d):
-                s = 0.0
-                for c in range(k):
-                    s += w[p, c] * corners[p, c, i]
-                centroid[p, i] = s
+            _centroid(corners, w, p, centroid)
         return bad
 
     @njit(cache=True, error_model="numpy")
@@ -119,9 +124,5 @@ if AVAILABLE:
                 w[p, c] /= V
                 for i in range(d):
                     g[p, c, i] /= V
-            for i in range(d):
-                s = 0.0
-                for c in range(k):
-                    s += w[p, c] * corners[p, c, i]
-                centroid[p, i] = s
+            _centroid(corners, w, p, centroid)
         return bad
