@@ -45,7 +45,7 @@ if AVAILABLE:
 
     @njit(inline="always")
     def _centroid(corners, w, p, centroid):  # pragma: no cover - compiled
-        """``centroid[p]`` <- :math:`\sum_c w_c y_c` of domain ``p``."""
+        r"""``centroid[p]`` <- :math:`\sum_c w_c y_c` of domain ``p``."""
         for i in range(corners.shape[2]):
             s = 0.0
             for c in range(corners.shape[1]):
