@@ -135,6 +135,20 @@ try:
             return 0.5 * lam * tr * tr + mu * ee
         return 0.0
 
+    @njit(inline="always")
+    def add_totals(acc, p, mass, v, F, volume0, law, lam, mu, d):  # pragma: no cover - compiled
+        r"""``acc`` (3 + d) += particle ``p``'s :math:`[\tfrac12 M_p |v_p|^2,\ V^0_p W(F_p),\ M_p |v_p|,
+        \ M_p v_p]` (``law``, ``lam``, ``mu``: its body's law code and Lame constants; W of the
+        compiled laws, 0 for the others)."""
+        m = mass[p]
+        w2 = 0.0
+        for j in range(d):
+            w2 += v[p, j] * v[p, j]
+            acc[3 + j] += m * v[p, j]
+        acc[0] += 0.5 * m * w2
+        acc[1] += volume0[p] * energy_at(law, F, p, d, lam, mu)
+        acc[2] += m * np.sqrt(w2)
+
     @njit(cache=True)
     def _neo_hookean(F, lam, mu, sigma):  # pragma: no cover - compiled
         for p in range(F.shape[0]):

@@ -51,7 +51,7 @@ __all__ = ["kernels_for"]
 if AVAILABLE:
     from numba import njit
 
-    from fempm.kernels.kinematics import _det, energy_at, linear_elastic_at, neo_hookean_at
+    from fempm.kernels.kinematics import _det, add_totals, linear_elastic_at, neo_hookean_at
     from fempm.kernels.shape import inside_after_pull_back, shape, star_search
 
     @njit(cache=True, error_model="numpy")
@@ -273,8 +273,7 @@ def _g2p_kernel(cell: str, blend: bool, kinematics: bool, move: bool, remap: boo
         jmax = -np.inf
         nonfinite = 0
         dv = np.empty(D)
-        kinetic, strain, scale = 0.0, 0.0, 0.0
-        momentum = np.zeros(D)
+        acc = np.zeros(3 + D)  # the state's sums (totals)
         for p in range(n):
             c = cells[p]
             shape(X, p, K, c, SIMPLEX, D, NK, N, G)
@@ -314,19 +313,9 @@ def _g2p_kernel(cell: str, blend: bool, kinematics: bool, move: bool, remap: boo
                         out = False
                 left[p] = out
             if totals:
-                m = mass[p]
-                w2 = 0.0
-                for j in range(D):
-                    w2 += v[p, j] * v[p, j]
-                    momentum[j] += m * v[p, j]
-                kinetic += 0.5 * m * w2
-                scale += m * np.sqrt(w2)
-                b = body[p]
-                strain += volume0[p] * energy_at(law[b], F, p, D, lam[b], mu[b])
+                add_totals(acc, p, mass, v, F, volume0, law[body[p]], lam[body[p]], mu[body[p]], D)
         if totals:
-            sums[0], sums[1], sums[2] = kinetic, strain, scale
-            for j in range(D):
-                sums[3 + j] = momentum[j]
+            sums[:] = acc
         return nonfinite_j, inverted, jmin, jmax, nonfinite
 
     return g2p_update

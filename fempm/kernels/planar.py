@@ -29,7 +29,7 @@ __all__ = ["g2p_kernel", "scatter_kernel"]
 if AVAILABLE:
     from numba import njit
 
-    from fempm.kernels.kinematics import energy_at
+    from fempm.kernels.kinematics import add_totals
     from fempm.kernels.particle_checks import count_j, stable_time
     from fempm.kernels.shape import star_search
 
@@ -160,7 +160,7 @@ def g2p_kernel(simplex: bool, blend: bool, kinematics: bool, move: bool, remap: 
         n = len(cells)
         keep_L = L.shape[0] == n
         nonfinite_j, inverted, jmin, jmax, nonfinite = 0, 0, np.inf, -np.inf, 0  # the pass's checks
-        kinetic, strain, scale, p0, p1 = 0.0, 0.0, 0.0, 0.0, 0.0  # the state's sums (totals)
+        acc = np.zeros(5)  # the state's sums (totals)
         for p in range(n):
             c = cells[p]
             N0, N1, N2, N3, g0x, g0y, g1x, g1y, g2x, g2y, g3x, g3y = basis(X, p, K, c, simplex)
@@ -223,16 +223,9 @@ def g2p_kernel(simplex: bool, blend: bool, kinematics: bool, move: bool, remap: 
                     cells[p] = c if out else e
                 left[p] = out
             if totals:
-                m, w0, w1 = mass[p], v[p, 0], v[p, 1]
-                w2 = w0 * w0 + w1 * w1
-                kinetic += 0.5 * m * w2
-                scale += m * np.sqrt(w2)
-                p0 += m * w0
-                p1 += m * w1
-                b = body[p]
-                strain += volume0[p] * energy_at(law[b], F, p, 2, lam[b], mu[b])
+                add_totals(acc, p, mass, v, F, volume0, law[body[p]], lam[body[p]], mu[body[p]], 2)
         if totals:
-            sums[0], sums[1], sums[2], sums[3], sums[4] = kinetic, strain, scale, p0, p1
+            sums[:] = acc
         return nonfinite_j, inverted, jmin, jmax, nonfinite
 
     return g2p_update

@@ -39,7 +39,7 @@ if AVAILABLE:
     from numba import njit
 
     from fempm.kernels.corners import inverse
-    from fempm.kernels.kinematics import energy_at
+    from fempm.kernels.kinematics import add_totals
     from fempm.kernels.lumped import deform_at, law_at
     from fempm.kernels.particle_checks import count_j, stable_time
     from fempm.kernels.shape import inside_after_pull_back, shape, shape_values, star_search
@@ -289,8 +289,7 @@ def _g2p_kernel(cell: str, grad_from_values: bool, blend: bool, kinematics: bool
         vg, dv, Lp, Fn = np.empty(D), np.empty(D), np.empty((D, D)), np.empty((D, D))
         keep_L = L.shape[0] == n
         nonfinite_j, inverted, jmin, jmax, nonfinite = 0, 0, np.inf, -np.inf, 0
-        kinetic, strain, scale = 0.0, 0.0, 0.0
-        momentum = np.zeros(D)
+        acc = np.zeros(3 + D)  # the state's sums (totals)
         for p in range(n):
             for j in range(D):
                 vg[j] = 0.0
@@ -349,18 +348,9 @@ def _g2p_kernel(cell: str, grad_from_values: bool, blend: bool, kinematics: bool
                         out = False
                 left[p] = out
             if totals:
-                m = mass[p]
-                w2 = 0.0
-                for j in range(D):
-                    w2 += v[p, j] * v[p, j]
-                    momentum[j] += m * v[p, j]
-                kinetic += 0.5 * m * w2
-                scale += m * np.sqrt(w2)
-                strain += volume0[p] * energy_at(law[body[p]], F, p, D, lam[body[p]], mu[body[p]])
+                add_totals(acc, p, mass, v, F, volume0, law[body[p]], lam[body[p]], mu[body[p]], D)
         if totals:
-            sums[0], sums[1], sums[2] = kinetic, strain, scale
-            for j in range(D):
-                sums[3 + j] = momentum[j]
+            sums[:] = acc
         return nonfinite_j, inverted, jmin, jmax, nonfinite
 
     return g2p_update

@@ -41,7 +41,8 @@ __all__ = ["DomainGrid", "supported"]
 def supported(solver: ExplicitSolver) -> bool:
     """Whether ``solver``'s domain, mass, conditions, space and mesh take :class:`DomainGrid`."""
     dom = solver.options.particle_domain
-    sampled = isinstance(dom, (CPDI1, CPDI2)) or (isinstance(dom, GIMP) and not dom.exact)
+    # these types themselves: a subclass may make or move its samples otherwise
+    sampled = type(dom) in (CPDI1, CPDI2) or (type(dom) is GIMP and not dom.exact)
     return (sampled and type(solver.options.mass_model) is Lumped and compiled_space(solver)
             and not solver.conditions.needs_positions)
 

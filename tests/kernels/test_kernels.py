@@ -150,23 +150,26 @@ def test_planar_kernels_equal_the_generic_ones_bit_for_bit(cell):
         assert np.array_equal(results[0][0], results[1][0]) and results[0][1] == results[1][1], flags
         if with_dt:
             assert np.isfinite(results[0][1]) and results[0][1] > 0
-    for (blend, kinematics, move, remap), by_particle, keep_L in itertools.product(
-            [(True, True, True, False), (True, False, False, True), (False, True, True, False)], [False, True],
-            [False, True]):
+    for (blend, kinematics, move, remap, totals), by_particle, keep_L in itertools.product(
+            [(True, True, True, False, True), (True, False, False, True, False), (False, True, True, False, False),
+             (False, False, True, False, True)], [False, True], [False, True]):
         results = []
-        for kernel in (lumped._g2p_kernel(cell, blend, kinematics, move, remap),
-                       planar.g2p_kernel(simplex, blend, kinematics, move, remap)):
+        for kernel in (lumped._g2p_kernel(cell, blend, kinematics, move, remap, totals),
+                       planar.g2p_kernel(simplex, blend, kinematics, move, remap, totals)):
             s = _pass_state(simplex, 2)
             n = len(s["cells"])
             L = np.zeros((n if keep_L else 0, 2, 2))
             left, mom = np.zeros(n, dtype=np.bool_), np.zeros((90 if remap else 0, 2))
+            sums = np.full(5 if totals else 0, np.nan)
             counts = kernel(s["cells"], s["X"], s["K"], s["cell_dofs"], s["v_new"], s["v_old"], 0.9, 1e-2,
                             by_particle, s["x"], s["v"], s["F"], s["volume0"], s["volume"], s["sigma"], s["body"],
-                            s["law"], s["lam"], s["mu"], L, s["x0"], 1e-10, left, *s["star"], s["mass"], mom)
-            results.append((counts, [s[k] for k in ("X", "x", "v", "F", "volume", "sigma", "cells")], L, left, mom))
-        (c0, a0, L0, l0, m0), (c1, a1, L1, l1, m1) = results
+                            s["law"], s["lam"], s["mu"], L, s["x0"], 1e-10, left, *s["star"], s["mass"], mom, sums)
+            results.append((counts, [s[k] for k in ("X", "x", "v", "F", "volume", "sigma", "cells")], L, left, mom,
+                            sums))
+        (c0, a0, L0, l0, m0, s0), (c1, a1, L1, l1, m1, s1) = results
         assert c0 == c1 and all(np.array_equal(a, b) for a, b in zip(a0, a1))
         assert np.array_equal(L0, L1) and np.array_equal(l0, l1) and np.array_equal(m0, m1)
+        assert np.array_equal(s0, s1) and np.all(np.isfinite(s0))
         if move:  # some particles stay in their cells, some move to a neighbour, some are not found
             moved = np.count_nonzero(a0[-1] != _pass_state(simplex, 2)["cells"])
             assert 0 < np.count_nonzero(l0) and 0 < moved and np.count_nonzero(l0) + moved < len(l0)
