@@ -30,7 +30,7 @@ import numpy.typing as npt
 
 from fempm.kernels import consistent as kc
 from fempm.stepping.mass_systems import ConsistentSystems
-from fempm.stepping.nodal import sum_ghosts
+from fempm.stepping.nodal import NodalMass, sum_ghosts
 from fempm.transfer.mass_models import MASS_RATIO_ITERATIONS
 
 if TYPE_CHECKING:
@@ -42,13 +42,13 @@ __all__ = ["RATIO_EVERY", "ConsistentNodalMass"]
 RATIO_EVERY = 20
 
 
-class ConsistentNodalMass:
+class ConsistentNodalMass(NodalMass):
     """The consistent grid mass of a :class:`~fempm.stepping.lumped.PointGrid` (see the module)."""
 
     fusable = False  # the grid update solves with the consistent matrix
 
     def __init__(self, grid: PointGrid):
-        self.grid = grid
+        super().__init__(grid)
         solver, opts = grid.solver, grid.options
         self.systems = ConsistentSystems(solver.V, grid.cell_dofs, grid.free, grid.conditions.fixed_mask(),
                                          prefix=opts.petsc_options_prefix, lump_below=opts.lump_below,

@@ -25,7 +25,7 @@ import numpy.typing as npt
 
 from fempm.kernels import consistent as kc
 from fempm.kernels import fmpm as kf
-from fempm.stepping.nodal import sum_ghosts
+from fempm.stepping.nodal import NodalMass, sum_ghosts
 
 if TYPE_CHECKING:
     from fempm.stepping.lumped import PointGrid
@@ -33,13 +33,13 @@ if TYPE_CHECKING:
 __all__ = ["FMPMNodalMass"]
 
 
-class FMPMNodalMass:
+class FMPMNodalMass(NodalMass):
     """FMPM(k) as the grid mass of a :class:`~fempm.stepping.lumped.PointGrid` (see the module)."""
 
     fusable = False  # the grid update takes particle passes
 
     def __init__(self, grid: PointGrid):
-        self.grid = grid
+        super().__init__(grid)
         self.order = grid.options.mass_model.order
         self.apply = kf.mass_apply(grid.solver.particles.locator.geometry.cell_name)
         self._work = {False: grid.nodal_array(grid.d), True: grid.nodal_array(grid.d + 1)}  # without, with M_C 1_l
@@ -102,9 +102,3 @@ class FMPMNodalMass:
                    float(g.options.damping), v_new)
         g.conditions.apply(v_new, centroids)
         return v_new
-
-    def checkpoint_state(self) -> tuple[dict, dict[str, npt.NDArray]]:
-        return {}, {}
-
-    def restore_state(self, counters: dict, arrays: dict[str, npt.NDArray]) -> None:
-        pass

@@ -44,7 +44,7 @@ from fempm.stepping.fmpm_mass import FMPMNodalMass
 from fempm.stepping.grid import Grid
 from fempm.stepping.laws import law_stress, material_groups
 from fempm.stepping.loads import external_forces
-from fempm.stepping.nodal import kept_nodal_array, sum_ghosts
+from fempm.stepping.nodal import NodalMass, kept_nodal_array, sum_ghosts
 from fempm.transfer.centres import NodalCentres
 from fempm.transfer.domains import Point
 from fempm.transfer.mapping import SUPPORT_TOL, mass_centres
@@ -353,15 +353,12 @@ class PointGrid(Grid):
         self.mass.restore_state(counters, arrays)
 
 
-class LumpedNodalMass:
+class LumpedNodalMass(NodalMass):
     r"""The lumped grid mass of a :class:`PointGrid`: :math:`v = (mv)/m`,
     :math:`v^+ = v + \Delta t f/m` on the free components, fused into one pass where the
     conditions allow."""
 
     fusable = True
-
-    def __init__(self, grid: PointGrid):
-        self.grid = grid
 
     def stable_factor(self, nodal, need: bool) -> float:
         """Called after P2G: the factor on the stable time of the state."""
@@ -384,12 +381,6 @@ class LumpedNodalMass:
                         float(g.options.damping), v_old, v_new)
         g.conditions.apply(v_new, centroids)
         return v_new
-
-    def checkpoint_state(self) -> tuple[dict, dict[str, npt.NDArray]]:
-        return {}, {}
-
-    def restore_state(self, counters: dict, arrays: dict[str, npt.NDArray]) -> None:
-        pass
 
 
 #: the compiled grid mass of each mass model

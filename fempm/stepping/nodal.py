@@ -1,4 +1,5 @@
-"""Nodal arrays kept for a run, and their ghost updates."""
+"""Nodal arrays kept for a run, their ghost updates, and what the grid masses of the compiled
+passes share (:class:`NodalMass`)."""
 
 from __future__ import annotations
 
@@ -10,7 +11,7 @@ import numpy as np
 if TYPE_CHECKING:
     pass
 
-__all__ = ["kept_nodal_array", "sum_ghosts"]
+__all__ = ["NodalMass", "kept_nodal_array", "sum_ghosts"]
 
 
 def sum_ghosts(vec) -> None:
@@ -29,3 +30,21 @@ def kept_nodal_array(index_map, k: int) -> tuple:
         return None, np.empty((n, k))
     vec = dolfinx.la.vector(index_map, bs=k)
     return vec, vec.array.reshape(n, k)
+
+
+class NodalMass:
+    """The grid mass of a :class:`fempm.stepping.lumped.PointGrid`: ``stable_factor`` (after
+    P2G), ``velocity`` and ``advance`` (the grid update), and the state a resumed run needs
+    (none, by default). ``fusable``: the grid may fuse its update into one pass over the dofs."""
+
+    fusable = False
+
+    def __init__(self, grid):
+        self.grid = grid
+
+    def checkpoint_state(self) -> tuple[dict, dict[str, np.ndarray]]:
+        """(counters, arrays) a resumed run needs to repeat the next steps bit for bit."""
+        return {}, {}
+
+    def restore_state(self, counters: dict, arrays: dict[str, np.ndarray]) -> None:
+        """Restore :meth:`checkpoint_state`."""
