@@ -15,8 +15,7 @@ evaluated in the passes (:func:`fempm.kernels.shape.shape`), never stored; a nod
 samples reach gets each share (the sums are the same as over distinct nodes).
 
 * :func:`cpdi1_samples`: the corners :math:`y_{pq} = x_p + R_p s_q`, :math:`R_p = F_p
-  \operatorname{diag}(\ell_p)`, :math:`w = 2^{-d}`, :math:`g_{pq} = 2^{-d} R_p^{-T} s_q`, made
-  and located in one pass.
+  \operatorname{diag}(\ell_p)`, :math:`w = 2^{-d}`, :math:`g_{pq} = 2^{-d} R_p^{-T} s_q`.
 * :func:`locate_samples`: each sample's cell, the particle's own or one of its vertex star
   (:func:`fempm.kernels.shape.star_search`), -1 where neither holds it.
 * :func:`kernels_for`: ``scatter`` and ``g2p_update``, the passes of
@@ -45,23 +44,18 @@ if AVAILABLE:
     from fempm.kernels.shape import inside_after_pull_back, shape, shape_values, star_search
 
     @njit(cache=True, error_model="numpy")
-    def _cpdi1_samples(x, F, lp, signs, cells, x0, K, c2v, v_offsets, v_cells, num_cells, simplex, tol, guess, y,
-                       w, g, sc, Y):  # pragma: no cover - compiled
+    def _cpdi1_samples(x, F, lp, signs, y, w, g):  # pragma: no cover - compiled
         n, d = x.shape
         Q = signs.shape[0]
         R = np.empty((d, d))
         Ri = np.empty((d, d))
         share = 1.0 / Q
-        guessed = guess.shape[0] == n
-        missing = 0
         for p in range(n):
             for i in range(d):
                 for j in range(d):
                     R[i, j] = F[p, i, j] * lp[p, j]
             inverse(R, d, Ri)
-            c = cells[p]
             for q in range(Q):
-                r = p * Q + q
                 w[p, q] = share
                 for i in range(d):
                     s = x[p, i]
@@ -69,20 +63,8 @@ if AVAILABLE:
                     for j in range(d):
                         s += R[i, j] * signs[q, j]
                         t += Ri[j, i] * signs[q, j]  # (R^-T s)_i
-                    y[r, i] = s
+                    y[p * Q + q, i] = s
                     g[p, q, i] = share * t
-                # located here, not through a helper function (through one the pass took 2.5 times as long)
-                e = guess[p, q] if guessed else -1
-                if e >= 0 and e != c and inside_after_pull_back(y, r, x0, K, e, simplex, d, tol, Y):
-                    sc[p, q] = e
-                elif inside_after_pull_back(y, r, x0, K, c, simplex, d, tol, Y):
-                    sc[p, q] = c
-                else:
-                    e = star_search(y, r, x0, K, c, c2v, v_offsets, v_cells, num_cells, simplex, d, tol, Y)
-                    sc[p, q] = e
-                    if e < 0:
-                        missing += 1
-        return missing
 
     @njit(cache=True)
     def _locate_samples(y, cells, Q, x0, K, c2v, v_offsets, v_cells, num_cells, simplex, tol, guess, sc,
@@ -107,20 +89,15 @@ if AVAILABLE:
         return missing
 
 
-def cpdi1_samples(x, F, lp, signs, cells, x0, K, star: tuple, simplex: bool, tol: float, guess=None, out=None):
-    """CPDI1 samples of particles at ``x`` (n, d) in ``cells`` with ``F`` (n, d, d), half-widths
-    ``lp`` (n, d) and corner ``signs`` (Q, d), made and located in one pass (as
-    :func:`locate_samples`): (y (n Q, d), w (n, Q), g (n, Q, d), cells (n, Q), reference
-    coordinates (n Q, d), the number not found), into ``out`` if given (arrays of those shapes
-    but the last; the cells may be ``guess``)."""
+def cpdi1_samples(x, F, lp, signs, out=None):
+    """CPDI1 samples of particles at ``x`` (n, d) with ``F`` (n, d, d), half-widths ``lp``
+    (n, d) and corner ``signs`` (Q, d): (y (n Q, d), w (n, Q), g (n, Q, d)), into ``out`` if
+    given (arrays of those shapes)."""
     n, d = x.shape
     Q = len(signs)
-    y, w, g, sc, Y = out if out is not None else (np.empty((n * Q, d)), np.empty((n, Q)), np.empty((n, Q, d)),
-                                                  np.empty((n, Q), dtype=np.int32), np.zeros((n * Q, d)))
-    guess = np.zeros((0, Q), dtype=np.int32) if guess is None else guess
-    missing = _cpdi1_samples(x, F, np.ascontiguousarray(lp), signs, cells, x0, K, *star, bool(simplex), float(tol),
-                             guess, y, w, g, sc, Y)
-    return y, w, g, sc, Y, int(missing)
+    y, w, g = out if out is not None else (np.empty((n * Q, d)), np.empty((n, Q)), np.empty((n, Q, d)))
+    _cpdi1_samples(x, F, np.ascontiguousarray(lp), signs, y, w, g)
+    return y, w, g
 
 
 def locate_samples(y, cells, Q: int, x0, K, star: tuple, simplex: bool, tol: float, guess=None, out=None):

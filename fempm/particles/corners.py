@@ -3,9 +3,8 @@ box corners, and the volumes, centroids and corner weights of simplex and tensor
 
 from __future__ import annotations
 
-import itertools
-
 import functools
+import itertools
 
 import numpy as np
 import numpy.typing as npt

@@ -24,11 +24,10 @@ import numpy as np
 import numpy.typing as npt
 
 from fempm.kernels import samples as ks
-from fempm.kernels.shape import CELLS, affine_pull_back, near_pull_back
-from fempm.particles.corners import corner_signs
+from fempm.kernels.shape import CELLS
+from fempm.particles.corners import corner_signs, domain_geometry
 from fempm.stepping.grid import Grid, SingleFieldGrid
 from fempm.stepping.lumped import PointGrid, compiled_space
-from fempm.particles.corners import domain_geometry
 from fempm.transfer.domains import CPDI1, CPDI2, GIMP, half_widths
 from fempm.transfer.mass_models import Lumped
 
@@ -80,34 +79,28 @@ class DomainGrid(PointGrid):
         dom = self.options.particle_domain
         d = self.d
         n, Q = len(p), len(self.signs)
+        if self.cpdi1:
+            y, w, g = ks.cpdi1_samples(p.x, p.fields["F"], half_widths(p), self.signs, self._kept("cpdi1", n, Q))
+            beyond = "clamp"
+        elif isinstance(dom, CPDI2):  # the tracked corners
+            corners = dom.corners(p)
+            n, Q, _ = corners.shape
+            y = np.ascontiguousarray(corners.reshape(n * Q, d))
+            if self._corner_weights is not None and self._corner_weights[0] is corners:
+                w, g = self._corner_weights[1:]  # of the corners the last step moved
+            else:
+                w, g, _, _ = domain_geometry(corners, p.comm)
+            beyond = "clamp"
+        else:
+            smp = dom.samples(p)
+            n, Q, _ = smp.x.shape
+            y, w, g, beyond = np.ascontiguousarray(smp.x.reshape(n * Q, d)), smp.w, np.zeros((n, Q, d)), smp.beyond
         loc = p.sample_locator  # owned and ghost cells
         # the last step's sample cells are the first guess (a guess only: after the particles were
         # sorted or migrated a wrong one costs a search)
-        last = self.stencil[0]
-        if self.cpdi1:  # made and located in one pass
-            guess = last if last.shape == (n, Q) else None
-            out = self._kept("cpdi1", n, Q) + self._kept("located", n, Q)
-            y, w, g, sc, Y, missing = ks.cpdi1_samples(p.x, p.fields["F"], half_widths(p), self.signs, p.cells,
-                                                       self.x0, self.K, loc.vertex_star(), self.simplex, loc.tol,
-                                                       guess, out)
-            beyond = "clamp"
-        else:
-            if isinstance(dom, CPDI2):  # the tracked corners
-                corners = dom.corners(p)
-                n, Q, _ = corners.shape
-                y = np.ascontiguousarray(corners.reshape(n * Q, d))
-                if self._corner_weights is not None and self._corner_weights[0] is corners:
-                    w, g = self._corner_weights[1:]  # of the corners the last step moved
-                else:
-                    w, g, _, _ = domain_geometry(corners, p.comm)
-                beyond = "clamp"
-            else:
-                smp = dom.samples(p)
-                n, Q, _ = smp.x.shape
-                y, w, g, beyond = np.ascontiguousarray(smp.x.reshape(n * Q, d)), smp.w, np.zeros((n, Q, d)), smp.beyond
-            guess = last if last.shape == (n, Q) else None
-            sc, Y, missing = ks.locate_samples(y, p.cells, Q, self.x0, self.K, loc.vertex_star(), self.simplex,
-                                               loc.tol, guess, self._kept("located", n, Q))
+        guess = self.stencil[0] if self.stencil[0].shape == (n, Q) else None
+        sc, Y, missing = ks.locate_samples(y, p.cells, Q, self.x0, self.K, loc.vertex_star(), self.simplex, loc.tol,
+                                           guess, self._kept("located", n, Q))
         if missing:
             missing = self._place(y, sc, Y, w, beyond)
         self.stencil = (sc, Y, np.ascontiguousarray(w), g)
@@ -176,19 +169,7 @@ class DomainGrid(PointGrid):
             s.fail(f"inverted particle domain: {e}")
         p.fields["corners"], p.x, p.volume = corners, centroid, volume
         self._corner_weights = (corners, w, g)  # the next step's, while the particles keep this array
-        # the particles moved to their centroids: in the same cell or its vertex star, else searched for
-        X, inside = affine_pull_back(p.cells, p.x, self.x0, self.K, self.simplex, p.locator.tol)
-        out = np.flatnonzero(~inside)
-        if len(out):
-            star = p.locator.vertex_star()
-            cells, X[out] = near_pull_back(p.cells[out], p.x[out], self.x0, self.K, *star, self.simplex,
-                                           p.locator.tol)
-            found = cells >= 0
-            p.cells[out[found]] = cells[found]
-        p.X[:] = X
-        self.left = np.zeros(len(p), dtype=np.bool_)
-        if len(out):
-            self.left[out[~found]] = True
+        self.left = None  # moved to their centroids: relocated from their cells (Particles.relocate)
 
     def scatter_pass(self, *args, bound: bool = False) -> float:
         p = self.solver.particles

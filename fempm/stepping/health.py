@@ -34,6 +34,7 @@ import numpy as np
 import numpy.typing as npt
 from mpi4py import MPI
 
+from fempm.stepping import diagnostics
 from fempm.stepping.loads import external_forces
 
 __all__ = ["Health", "HealthMonitor"]
@@ -89,7 +90,7 @@ class HealthMonitor:
         self.first_dt: float | None = None
         self._t_prev = solver.t
         self.j_min, self.j_max = self._j_range()
-        self.p_scale = self._momentum_scale()
+        self.p_scale = diagnostics.momentum_scale(self.solver.particles)
         self.drift = 0.0
         self.ratio = 1.0
         self.outcome = "running"
@@ -99,10 +100,6 @@ class HealthMonitor:
     def _momentum(self) -> npt.NDArray:
         p = self.solver.particles
         return p.comm.allreduce(p.mass @ p.fields["v"])
-
-    def _momentum_scale(self) -> float:
-        p = self.solver.particles
-        return p.comm.allreduce(float(p.mass @ np.linalg.norm(p.fields["v"], axis=1)))
 
     def _j_range(self) -> tuple[float, float]:
         p = self.solver.particles
@@ -145,7 +142,9 @@ class HealthMonitor:
         self.e_max = max(self.e_max, e)
         budget = self.e0 + self.work
         self.ratio = e / budget if budget > 0 else (1.0 if e <= 0 else np.inf)
-        self.p_scale = max(self.p_scale, self._momentum_scale() if momentum_scale is None else momentum_scale)
+        if momentum_scale is None:
+            momentum_scale = diagnostics.momentum_scale(s.particles)
+        self.p_scale = max(self.p_scale, momentum_scale)
         self.drift = float(np.linalg.norm(mom - self.momentum0 - self.impulse) / self.p_scale) if self.p_scale > 0 else 0.0
         lo, hi = s.j_range if s.j_range is not None else self._j_range()
         self.j_min, self.j_max = min(self.j_min, lo), max(self.j_max, hi)
