@@ -103,15 +103,26 @@ def create_ksp(comm, prefix: str, options: dict[str, Any] | None = None) -> PETS
 
 def solve_from(ksp: PETSc.KSP, b: PETSc.Vec, x: PETSc.Vec, warm: bool) -> int:
     """``ksp.solve(b, x)`` from the guess in ``x`` (``warm``) or from zero; returns the converged
-    reason. A warm start that PETSc stops at once as diverging (``DIVERGED_DTOL``: its residual is
-    far above ``b``, as for forces near equilibrium) is solved again from zero."""
+    reason (an iterative method stopped at its iteration limit: ``DIVERGED_ITS``, whatever the
+    type reports). A warm start that PETSc stops at once as diverging (``DIVERGED_DTOL``: its
+    residual is far above ``b``, as for forces near equilibrium) is solved again from zero."""
     ksp.setInitialGuessNonzero(warm)
     ksp.solve(b, x)
-    reason = ksp.getConvergedReason()
+    reason = _reason(ksp)
     if warm and reason == PETSc.KSP.ConvergedReason.DIVERGED_DTOL:
         ksp.setInitialGuessNonzero(False)
         ksp.solve(b, x)
-        reason = ksp.getConvergedReason()
+        reason = _reason(ksp)
+    return reason
+
+
+def _reason(ksp: PETSc.KSP) -> int:
+    """The converged reason of the last solve, with ``CONVERGED_ITS`` at the iteration limit of an
+    iterative method (GCR reports it so) as ``DIVERGED_ITS``: the tolerance was not reached."""
+    reason = ksp.getConvergedReason()
+    if (reason == PETSc.KSP.ConvergedReason.CONVERGED_ITS and ksp.getType() != PETSc.KSP.Type.PREONLY
+            and ksp.getIterationNumber() >= ksp.getTolerances()[3]):
+        return PETSc.KSP.ConvergedReason.DIVERGED_ITS
     return reason
 
 

@@ -20,7 +20,7 @@ import functools
 
 import numpy as np
 
-from fempm.kernels.shape import AVAILABLE, CELLS
+from fempm.kernels.shape import AVAILABLE, CELLS, is_affine, space_of
 
 __all__ = ["cell_mass"]
 
@@ -207,6 +207,8 @@ def cell_mass(cell: str):
     (rows, k, k), ``diagonal`` (ndofs,) and ``count`` (rows,), where cell ``c`` has row
     ``row[c]``; returns the number of particles in cells without a row (-1), which it skips."""
     D, NK, SIMPLEX = CELLS[cell]
+    AFFINE = is_affine(cell)
+    DEGREE, BERNSTEIN = space_of(cell)
 
     @njit(cache=True)
     def kernel(cells, X, K, cell_dofs, mass, row, blocks, diagonal, count):  # pragma: no cover
@@ -219,7 +221,7 @@ def cell_mass(cell: str):
             if q < 0:
                 missing += 1
                 continue
-            shape(X, p, K, c, SIMPLEX, D, NK, N, G)
+            shape(X, p, K, c, SIMPLEX, AFFINE, D, NK, N, G, DEGREE, BERNSTEIN)
             m = mass[p]
             count[q] += 1
             for a in range(NK):

@@ -22,7 +22,7 @@ import functools
 
 import numpy as np
 
-from fempm.kernels.shape import AVAILABLE, CELLS
+from fempm.kernels.shape import AVAILABLE, CELLS, is_affine, space_of
 
 __all__ = ["lumped_solve", "mass_apply", "richardson"]
 
@@ -64,6 +64,8 @@ def mass_apply(cell: str):
     for ``y`` (dofs, k) without its lumped dofs, and, where ``lump`` has an entry per dof,
     ``out[:, k]`` += :math:`M_C 1_l`; compiled for one cell type."""
     D, NK, SIMPLEX = CELLS[cell]
+    AFFINE = is_affine(cell)
+    DEGREE, BERNSTEIN = space_of(cell)
 
     @njit(cache=True, error_model="numpy")
     def kernel(cells, X, K, cell_dofs, mass, y, lump, out):  # pragma: no cover - compiled
@@ -74,7 +76,7 @@ def mass_apply(cell: str):
         lumping = lump.shape[0] > 0
         for p in range(len(cells)):
             c = cells[p]
-            shape(X, p, K, c, SIMPLEX, D, NK, N, G)
+            shape(X, p, K, c, SIMPLEX, AFFINE, D, NK, N, G, DEGREE, BERNSTEIN)
             for j in range(k):
                 u[j] = 0.0
             ul = 0.0

@@ -25,8 +25,10 @@ switched on by a flag): the FLIP blend
 :math:`\min_p h_{c(p)} / (c_p + |v_p|)` with :math:`c_p = \sqrt{M_b / \rho_p}` for bodies with
 a P-wave modulus :math:`M_b` (else a given ``c_p``).
 
-The particle passes are compiled once per cell type (:func:`kernels_for`): the dimension, the
-number of vertices and the simplex/tensor-product basis are constants of the compiled code, so
+The particle passes are compiled once per cell type (:func:`kernels_for`; multilinear cells,
+whose ``K`` and ``x0`` are the cells' vertices, are a type of their own:
+:mod:`fempm.kernels.shape`): the dimension, the number of vertices, the simplex/tensor-product
+basis and the affine/multilinear map are constants of the compiled code, so
 its small loops unroll (a kernel with run-time sizes is 2-4x slower), and numba caches each.
 """
 
@@ -44,7 +46,7 @@ from fempm.kernels.particle_checks import (
     count_j,
     stable_time,
 )
-from fempm.kernels.shape import AVAILABLE, CELLS
+from fempm.kernels.shape import AVAILABLE, CELLS, MULTILINEAR, is_affine, space_of
 
 __all__ = ["kernels_for"]
 
@@ -150,10 +152,10 @@ def kernels_for(cell: str) -> SimpleNamespace:
     triangles and quadrilaterals the scalar ones of :mod:`fempm.kernels.planar`)."""
 
     scatter_kernel, g2p_kernel = _scatter_kernel, _g2p_kernel
-    if cell in ("triangle", "quadrilateral"):
-        simplex = cell == "triangle"
-        scatter_kernel = functools.partial(_planar, planar.scatter_kernel, simplex)
-        g2p_kernel = functools.partial(_planar, planar.g2p_kernel, simplex)
+    if cell in ("triangle", "quadrilateral", "quadrilateral" + MULTILINEAR):
+        simplex, affine = cell == "triangle", is_affine(cell)
+        scatter_kernel = functools.partial(_planar, planar.scatter_kernel, simplex, affine)
+        g2p_kernel = functools.partial(_planar, planar.g2p_kernel, simplex, affine)
 
     def scatter(cells, X, K, cell_dofs, mass, v, volume, sigma, g, fext, out, cm, cv, cf, h, body, modulus, c,
                 bound=False):
@@ -174,22 +176,28 @@ def kernels_for(cell: str) -> SimpleNamespace:
     return SimpleNamespace(scatter=scatter, g2p_update=g2p_update)
 
 
-def _planar(make, simplex: bool, cell: str, *flags):
+def _planar(make, simplex: bool, affine: bool, cell: str, *flags):
     """A kernel of :mod:`fempm.kernels.planar` in the place of a generic one of ``cell``."""
-    return make(simplex, *flags)
+    return make(simplex, affine, *flags)
 
 
 @functools.cache
 def _scatter_kernel(cell: str, with_mass: bool, with_momentum: bool, with_force: bool, with_dt: bool, has_fext: bool,
                     bound: bool = False):
     r"""The P2G pass of :func:`kernels_for` with its terms fixed at compile time: the columns of
-    ``out`` are [mass | momentum (d) | force (d)], of the terms present.
+    ``out`` are [mass | momentum (d) | force (d)], of the terms present. On a basis with
+    negative values (P2 Lagrange) the mass column is :math:`\sum_p M_p |N_{ip}|`, the measure
+    of support of :meth:`fempm.transfer.Projector.support_masses` (such a basis takes the
+    consistent mass only).
 
     ``with_dt``: also the stable time of the state, :math:`\min_p h_{c(p)} / (c_p + |v_p|)`;
     with ``bound`` a lower bound of it without square roots per particle (a given step only
     needs to be checked against it), from :math:`(c + |v|)^2 \le 2 (c^2 + |v|^2)`:
     :math:`\big(2 \max_p (c_p^2 + |v_p|^2) / h_{c(p)}^2\big)^{-1/2}`."""
     D, NK, SIMPLEX = CELLS[cell]
+    AFFINE = is_affine(cell)
+    DEGREE, BERNSTEIN = space_of(cell)
+    SIGNED = DEGREE == 2 and not BERNSTEIN  # a basis with negative values: the mass column is its support measure
     CV = 1 if with_mass else 0
     CF = CV + (D if with_momentum else 0)
 
@@ -205,7 +213,7 @@ def _scatter_kernel(cell: str, with_mass: bool, with_momentum: bool, with_force:
         best = 0.0 if bound else np.inf
         for p in range(len(cells)):
             cp = cells[p]
-            shape(X, p, K, cp, SIMPLEX, D, NK, N, G)
+            shape(X, p, K, cp, SIMPLEX, AFFINE, D, NK, N, G, DEGREE, BERNSTEIN)
             m = mass[p]
             V = volume[p]
             speed = 0.0
@@ -224,7 +232,7 @@ def _scatter_kernel(cell: str, with_mass: bool, with_momentum: bool, with_force:
                 i = cell_dofs[cp, a]
                 w = N[a]
                 if with_mass:
-                    out[i, 0] += w * m
+                    out[i, 0] += (abs(w) if SIGNED else w) * m
                 if with_momentum:
                     for j in range(D):
                         out[i, CV + j] += w * mv[j]
@@ -243,6 +251,8 @@ def _scatter_kernel(cell: str, with_mass: bool, with_momentum: bool, with_force:
 def _g2p_kernel(cell: str, blend: bool, kinematics: bool, move: bool, remap: bool, totals: bool = False):
     """The G2P pass of :func:`kernels_for` with its parts (flags) fixed at compile time."""
     D, NK, SIMPLEX = CELLS[cell]
+    AFFINE = is_affine(cell)
+    DEGREE, BERNSTEIN = space_of(cell)
 
     @njit(cache=True, error_model="numpy")
     def g2p_update(cells, X, K, cell_dofs, v_new, v_old, flip, dt, by_particle,
@@ -276,7 +286,7 @@ def _g2p_kernel(cell: str, blend: bool, kinematics: bool, move: bool, remap: boo
         acc = np.zeros(3 + D)  # the state's sums (totals)
         for p in range(n):
             c = cells[p]
-            shape(X, p, K, c, SIMPLEX, D, NK, N, G)
+            shape(X, p, K, c, SIMPLEX, AFFINE, D, NK, N, G, DEGREE, BERNSTEIN)
             gather(N, G, cell_dofs, c, v_new, v_old, blend, kinematics, D, NK, vg, dv, Lp)
             if blend:
                 for j in range(D):
@@ -305,9 +315,9 @@ def _g2p_kernel(cell: str, blend: bool, kinematics: bool, move: bool, remap: boo
                     speed2 += v[p, j] * v[p, j]
                 if not (ok and np.isfinite(speed2)):  # x or v (v.v: the kinetic energy)
                     nonfinite += 1
-                out = not inside_after_pull_back(x, p, x0, K, c, SIMPLEX, D, tol, X)
+                out = not inside_after_pull_back(x, p, x0, K, c, SIMPLEX, D, tol, X, AFFINE)
                 if out:  # the neighbours, while their geometry is in cache
-                    e = star_search(x, p, x0, K, c, c2v, v_offsets, v_cells, num_cells, SIMPLEX, D, tol, X)
+                    e = star_search(x, p, x0, K, c, c2v, v_offsets, v_cells, num_cells, SIMPLEX, D, tol, X, AFFINE)
                     if e >= 0:
                         cells[p] = e
                         out = False

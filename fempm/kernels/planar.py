@@ -1,5 +1,5 @@
-r"""The particle passes of :mod:`fempm.kernels.lumped` for triangles and parallelograms, in
-scalar code.
+r"""The particle passes of :mod:`fempm.kernels.lumped` for triangles and quadrilaterals
+(parallelograms, or any with the bilinear map), in scalar code.
 
 The same equations, arguments and results as :func:`fempm.kernels.lumped._scatter_kernel` and
 :func:`fempm.kernels.lumped._g2p_kernel` (their dimension-generic loops are the reference,
@@ -31,14 +31,27 @@ if AVAILABLE:
 
     from fempm.kernels.kinematics import add_totals
     from fempm.kernels.particle_checks import count_j, stable_time
-    from fempm.kernels.shape import star_search
+    from fempm.kernels.shape import inside_after_pull_back, star_search
 
     @njit(inline="always")
-    def basis(X, p, K, c, simplex):  # pragma: no cover - compiled
-        """(N0..N3, gradients g0x, g0y .. g3x, g3y) at particle ``p`` in cell ``c``; on a
-        triangle the fourth is 0."""
-        k00, k01, k10, k11 = K[c, 0, 0], K[c, 0, 1], K[c, 1, 0], K[c, 1, 1]
-        X0, X1 = X[p, 0], X[p, 1]
+    def inverse_jacobian(X0, X1, K, c, affine):  # pragma: no cover - compiled
+        r"""(k00, k01, k10, k11) of cell ``c`` at the reference point (X0, X1): ``K[c]`` on affine
+        cells; not ``affine``, ``K`` holds the vertices of quadrilaterals and the inverse of
+        :math:`J(X) = \sum_a x_a \otimes \nabla_X \hat N_a(X)` of the bilinear map is computed."""
+        if affine:
+            return K[c, 0, 0], K[c, 0, 1], K[c, 1, 0], K[c, 1, 1]
+        Z0, Z1 = 1.0 - X0, 1.0 - X1
+        j00 = Z1 * (K[c, 1, 0] - K[c, 0, 0]) + X1 * (K[c, 3, 0] - K[c, 2, 0])
+        j01 = Z0 * (K[c, 2, 0] - K[c, 0, 0]) + X0 * (K[c, 3, 0] - K[c, 1, 0])
+        j10 = Z1 * (K[c, 1, 1] - K[c, 0, 1]) + X1 * (K[c, 3, 1] - K[c, 2, 1])
+        j11 = Z0 * (K[c, 2, 1] - K[c, 0, 1]) + X0 * (K[c, 3, 1] - K[c, 1, 1])
+        r = 1.0 / (j00 * j11 - j01 * j10)
+        return j11 * r, -j01 * r, -j10 * r, j00 * r
+
+    @njit(inline="always")
+    def basis(X0, X1, k00, k01, k10, k11, simplex):  # pragma: no cover - compiled
+        """(N0..N3, gradients g0x, g0y .. g3x, g3y) at the reference point (X0, X1) with inverse
+        Jacobian ``k`` there; on a triangle the fourth is 0."""
         if simplex:
             return (1.0 - X0 - X1, X0, X1, 0.0,
                     -k00 - k10, -k01 - k11, k00, k01, k10, k11, 0.0, 0.0)
@@ -97,10 +110,10 @@ if AVAILABLE:
 
 
 @functools.cache
-def scatter_kernel(simplex: bool, with_mass: bool, with_momentum: bool, with_force: bool, with_dt: bool,
+def scatter_kernel(simplex: bool, affine: bool, with_mass: bool, with_momentum: bool, with_force: bool, with_dt: bool,
                    has_fext: bool, bound: bool):
     """:func:`fempm.kernels.lumped._scatter_kernel` for ``triangle`` (``simplex``) or
-    ``quadrilateral`` cells."""
+    ``quadrilateral`` cells, ``affine`` or multilinear."""
     CV = 1 if with_mass else 0
     CF = CV + (2 if with_momentum else 0)
     QUAD = not simplex
@@ -110,7 +123,9 @@ def scatter_kernel(simplex: bool, with_mass: bool, with_momentum: bool, with_for
         best = 0.0 if bound else np.inf
         for p in range(len(cells)):
             cp = cells[p]
-            N0, N1, N2, N3, g0x, g0y, g1x, g1y, g2x, g2y, g3x, g3y = basis(X, p, K, cp, simplex)
+            X0, X1 = X[p, 0], X[p, 1]
+            k00, k01, k10, k11 = inverse_jacobian(X0, X1, K, cp, affine)
+            N0, N1, N2, N3, g0x, g0y, g1x, g1y, g2x, g2y, g3x, g3y = basis(X0, X1, k00, k01, k10, k11, simplex)
             m = mass[p]
             V = volume[p]
             v0, v1 = v[p, 0], v[p, 1]
@@ -148,9 +163,9 @@ def scatter_kernel(simplex: bool, with_mass: bool, with_momentum: bool, with_for
 
 
 @functools.cache
-def g2p_kernel(simplex: bool, blend: bool, kinematics: bool, move: bool, remap: bool, totals: bool = False):
+def g2p_kernel(simplex: bool, affine: bool, blend: bool, kinematics: bool, move: bool, remap: bool, totals: bool = False):
     """:func:`fempm.kernels.lumped._g2p_kernel` for ``triangle`` (``simplex``) or
-    ``quadrilateral`` cells."""
+    ``quadrilateral`` cells, ``affine`` or multilinear."""
     QUAD = not simplex
 
     @njit(cache=True, error_model="numpy")
@@ -163,7 +178,9 @@ def g2p_kernel(simplex: bool, blend: bool, kinematics: bool, move: bool, remap: 
         acc = np.zeros(5)  # the state's sums (totals)
         for p in range(n):
             c = cells[p]
-            N0, N1, N2, N3, g0x, g0y, g1x, g1y, g2x, g2y, g3x, g3y = basis(X, p, K, c, simplex)
+            X0, X1 = X[p, 0], X[p, 1]
+            k00, k01, k10, k11 = inverse_jacobian(X0, X1, K, c, affine)
+            N0, N1, N2, N3, g0x, g0y, g1x, g1y, g2x, g2y, g3x, g3y = basis(X0, X1, k00, k01, k10, k11, simplex)
             i0, i1, i2 = cell_dofs[c, 0], cell_dofs[c, 1], cell_dofs[c, 2]
             i3 = cell_dofs[c, 3] if QUAD else i0
             a0, b0, a1, b1, a2, b2 = v_new[i0, 0], v_new[i0, 1], v_new[i1, 0], v_new[i1, 1], v_new[i2, 0], v_new[i2, 1]
@@ -202,23 +219,28 @@ def g2p_kernel(simplex: bool, blend: bool, kinematics: bool, move: bool, remap: 
                 if ok:
                     law_stress(sigma, p, law[b], lam[b], mu[b], n00, n01, n10, n11, J)
             if move:
-                y0 = x[p, 0] + dt * (v[p, 0] if by_particle else vg0)
-                y1 = x[p, 1] + dt * (v[p, 1] if by_particle else vg1)
+                u0 = dt * (v[p, 0] if by_particle else vg0)
+                u1 = dt * (v[p, 1] if by_particle else vg1)
+                y0, y1 = x[p, 0] + u0, x[p, 1] + u1
                 x[p, 0], x[p, 1] = y0, y1
                 if not (np.isfinite(y0) and np.isfinite(y1) and np.isfinite(v[p, 0] * v[p, 0] + v[p, 1] * v[p, 1])):
                     nonfinite += 1  # x or v (v.v: the kinetic energy); the compiled laws' stress is finite where J is
-                e0, e1 = y0 - x0[c, 0], y1 - x0[c, 1]
-                r0 = K[c, 0, 0] * e0 + K[c, 0, 1] * e1
-                r1 = K[c, 1, 0] * e0 + K[c, 1, 1] * e1
-                X[p, 0], X[p, 1] = r0, r1
-                if QUAD:
-                    out = not (r0 >= -tol and r1 >= -tol and r0 <= 1.0 + tol and r1 <= 1.0 + tol)
+                if not affine:  # Newton from the first step X + K(X) u, K of the basis above
+                    X[p, 0], X[p, 1] = X0 + k00 * u0 + k01 * u1, X1 + k10 * u0 + k11 * u1
+                    out = not inside_after_pull_back(x, p, x0, K, c, False, 2, tol, X, False)
                 else:
-                    out = not (r0 >= -tol and r1 >= -tol and r0 + r1 <= 1.0 + tol)
+                    e0, e1 = y0 - x0[c, 0], y1 - x0[c, 1]
+                    r0 = K[c, 0, 0] * e0 + K[c, 0, 1] * e1
+                    r1 = K[c, 1, 0] * e0 + K[c, 1, 1] * e1
+                    X[p, 0], X[p, 1] = r0, r1
+                    if QUAD:
+                        out = not (r0 >= -tol and r1 >= -tol and r0 <= 1.0 + tol and r1 <= 1.0 + tol)
+                    else:
+                        out = not (r0 >= -tol and r1 >= -tol and r0 + r1 <= 1.0 + tol)
                 # the neighbours, while their geometry is in cache (written out here: through a helper
                 # function the pass took 1.8 times as long)
                 if out:
-                    e = star_search(x, p, x0, K, c, c2v, v_offsets, v_cells, num_cells, simplex, 2, tol, X)
+                    e = star_search(x, p, x0, K, c, c2v, v_offsets, v_cells, num_cells, simplex, 2, tol, X, affine)
                     out = e < 0
                     cells[p] = c if out else e
                 left[p] = out

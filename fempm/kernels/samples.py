@@ -186,7 +186,7 @@ if AVAILABLE:
                     for e in range(D):
                         GW[k, a, e] = 0.0
             if grad_from_values:
-                shape(Y, p * Q + q, K, c, simplex, D, NK, N, G)
+                shape(Y, p * Q + q, K, c, simplex, True, D, NK, N, G)
             else:  # CPDI: the gradient weights times the values
                 shape_values(Y, p * Q + q, simplex, D, NK, N)
             wq = w[p, q]

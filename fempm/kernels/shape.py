@@ -1,5 +1,6 @@
 r"""Degree-1 Lagrange basis in closed form on affine cells (simplices, parallelograms,
-parallelepipeds), and the affine pull-back.
+parallelepipeds) and on multilinear cells (any quadrilateral or hexahedron with straight
+edges), and the pull-back.
 
 On a cell :math:`c` with :math:`x = x_0 + J X` and :math:`K = J^{-1}`:
 
@@ -11,22 +12,31 @@ with :math:`\hat N_0 = 1 - \sum_t X_t`, :math:`\hat N_{a} = X_{a-1}` on simplice
 on the reference square and cube (basix's vertex order: vertex ``a`` has coordinate ``t``
 equal to bit ``t`` of ``a``). The pull-back's inside test is :meth:`fempm.meshes.geometry.CellGeometry.contains`.
 
-:func:`affine_basis` fills the per-particle arrays of :class:`fempm.transfer.basis.ParticleBasis`
+On a multilinear cell (kernel cell type ``"quadrilateral" + MULTILINEAR``) the map is
+:math:`x(X) = \sum_a \hat N_a(X) x_a` over its vertices, :math:`K = J(X)^{-1}` is evaluated at
+each point (:func:`multilinear_map`, :func:`inverse3`) and the pull-back is Newton's method,
+:math:`X \leftarrow X - J(X)^{-1} (x(X) - x)` (:func:`multilinear_pull_back`; the numpy
+reference is :meth:`fempm.meshes.geometry.CellGeometry.pull_back`). The kernels receive the
+cells' vertices (cells, k, gdim) in the place of ``K`` and ``x0``.
+
+:func:`cell_basis` fills the per-particle arrays of :class:`fempm.transfer.basis.ParticleBasis`
 (basix tabulation and the geometry's inverse Jacobians are its reference);
-:func:`affine_pull_back` serves :meth:`fempm.particles.location.CellLocator.relocate`. The other kernels
+:func:`cell_pull_back` serves :meth:`fempm.particles.location.CellLocator.relocate`. The other kernels
 evaluate the basis on the fly with :func:`shape` instead of storing it.
 """
 
 from __future__ import annotations
 
 import functools
+from types import SimpleNamespace
 
 import numpy as np
 import numpy.typing as npt
 
 from fempm.kernels.choice import COMPILED
 
-__all__ = ["AVAILABLE", "CELLS", "affine_basis", "affine_pull_back", "near_pull_back", "vertex_star_pull_back"]
+__all__ = ["AVAILABLE", "BERNSTEIN2", "CELLS", "LAGRANGE2", "MULTILINEAR", "NEWTON_FLOOR", "NEWTON_MAX", "NEWTON_TOL",
+           "cell_basis", "cell_pull_back", "is_affine", "near_pull_back", "space_of", "vertex_star_pull_back"]
 
 try:
     from numba import njit
@@ -35,12 +45,166 @@ except ImportError:  # pragma: no cover - numba is a dependency
 
 if njit is not None:
     @njit(inline="always")
-    def shape(X, p, K, c, simplex, t, k, N, G):  # pragma: no cover - compiled
+    def multilinear_map(X0, X1, X2, xc, c, t):  # pragma: no cover - compiled
+        r"""The multilinear map of cell ``c`` (vertices ``xc[c]``, basix order) at the
+        reference point :math:`(X_0, X_1, X_2)` (``t`` = 2: :math:`X_2` unused): the point
+        :math:`y = \sum_a \hat N_a(X) x_a` and :math:`J = \sum_a x_a \otimes \nabla_X \hat N_a`,
+        as 3 + 9 scalars (``t`` = 2: :math:`y_2 = 0` and the third row and column of the
+        identity, so that :func:`inverse3` serves both dimensions)."""
+        y0 = y1 = y2 = 0.0
+        j00 = j01 = j02 = j10 = j11 = j12 = j20 = j21 = j22 = 0.0
+        for a in range(4 if t == 2 else 8):
+            b0, b1 = a & 1, (a >> 1) & 1
+            f0 = X0 if b0 else 1.0 - X0
+            f1 = X1 if b1 else 1.0 - X1
+            d0 = 1.0 if b0 else -1.0
+            d1 = 1.0 if b1 else -1.0
+            if t == 3:
+                b2 = (a >> 2) & 1
+                f2 = X2 if b2 else 1.0 - X2
+                d2 = 1.0 if b2 else -1.0
+            else:
+                f2, d2 = 1.0, 0.0
+            n, g0, g1, g2 = f0 * f1 * f2, d0 * f1 * f2, f0 * d1 * f2, f0 * f1 * d2
+            u0, u1 = xc[c, a, 0], xc[c, a, 1]
+            y0 += n * u0
+            y1 += n * u1
+            j00 += u0 * g0
+            j01 += u0 * g1
+            j10 += u1 * g0
+            j11 += u1 * g1
+            if t == 3:
+                u2 = xc[c, a, 2]
+                y2 += n * u2
+                j02 += u0 * g2
+                j12 += u1 * g2
+                j20 += u2 * g0
+                j21 += u2 * g1
+                j22 += u2 * g2
+        if t == 2:
+            j22 = 1.0
+        return y0, y1, y2, j00, j01, j02, j10, j11, j12, j20, j21, j22
+
+    @njit(inline="always")
+    def inverse3(j00, j01, j02, j10, j11, j12, j20, j21, j22):  # pragma: no cover - compiled
+        """The inverse of a 3x3 matrix by cofactors, row by row (9 scalars)."""
+        c00 = j11 * j22 - j12 * j21
+        c01 = j12 * j20 - j10 * j22
+        c02 = j10 * j21 - j11 * j20
+        r = 1.0 / (j00 * c00 + j01 * c01 + j02 * c02)
+        return (c00 * r, (j02 * j21 - j01 * j22) * r, (j01 * j12 - j02 * j11) * r,
+                c01 * r, (j00 * j22 - j02 * j20) * r, (j02 * j10 - j00 * j12) * r,
+                c02 * r, (j01 * j20 - j00 * j21) * r, (j00 * j11 - j01 * j10) * r)
+
+    @njit(inline="always")
+    def multilinear_pull_back(x, p, xc, c, t, tol, X):  # pragma: no cover - compiled
+        """X[p] <- the reference coordinates of ``x[p]`` in the multilinear cell ``c`` by Newton's
+        method, from ``X[p]`` where it is finite and near the cell (else the centre), until a
+        step is below :data:`NEWTON_TOL` (or, below :data:`NEWTON_FLOOR`, no longer halves the
+        one before: the round-off of cells far from the origin); whether the point lies in the reference cell within
+        ``tol`` (a point where Newton does not converge lies outside, X[p] NaN)."""
+        X0, X1 = X[p, 0], X[p, 1]
+        X2 = X[p, 2] if t == 3 else 0.0
+        if not (abs(X0 - 0.5) < 1.5 and abs(X1 - 0.5) < 1.5 and abs(X2 - 0.5) < 1.5):  # also NaN
+            X0 = X1 = 0.5
+            X2 = 0.5 if t == 3 else 0.0
+        z0, z1 = x[p, 0], x[p, 1]
+        z2 = x[p, 2] if t == 3 else 0.0
+        done = False
+        last = np.inf
+        for _ in range(NEWTON_MAX):
+            y0, y1, y2, j00, j01, j02, j10, j11, j12, j20, j21, j22 = multilinear_map(X0, X1, X2, xc, c, t)
+            k00, k01, k02, k10, k11, k12, k20, k21, k22 = inverse3(j00, j01, j02, j10, j11, j12, j20, j21, j22)
+            r0, r1, r2 = y0 - z0, y1 - z1, y2 - z2
+            e0 = k00 * r0 + k01 * r1 + k02 * r2
+            e1 = k10 * r0 + k11 * r1 + k12 * r2
+            e2 = k20 * r0 + k21 * r1 + k22 * r2 if t == 3 else 0.0
+            X0 -= e0
+            X1 -= e1
+            X2 -= e2
+            step = max(abs(e0), abs(e1), abs(e2))
+            if not (step < 1e3):  # diverged, or NaN
+                break
+            if step < NEWTON_TOL or (step < NEWTON_FLOOR and step > 0.5 * last):  # converged, or at round-off
+                done = True
+                break
+            last = step
+        if not done:
+            X0 = X1 = X2 = np.nan
+        X[p, 0], X[p, 1] = X0, X1
+        if t == 3:
+            X[p, 2] = X2
+        return done and X0 >= -tol and X1 >= -tol and X2 >= -tol and X0 <= 1.0 + tol and X1 <= 1.0 + tol and \
+            X2 <= 1.0 + tol
+
+    @njit(inline="always")
+    def edge_vertices(q, t):  # pragma: no cover - compiled
+        """The vertices (a, b), a < b, of edge ``q`` of the reference simplex of dimension ``t``
+        in basix's numbering (triangle: (1, 2), (0, 2), (0, 1); tetrahedron: (2, 3), (1, 3),
+        (1, 2), (0, 3), (0, 2), (0, 1); interval: (0, 1))."""
+        if t == 1:
+            return 0, 1
+        if t == 2:
+            return (1 if q == 0 else 0), (2 if q < 2 else 1)
+        if q < 3:
+            return (2 if q == 0 else 1), (3 if q < 2 else 2)
+        return 0, 6 - q
+
+    @njit(inline="always")
+    def degree2(t, k, bernstein, N, G, gradients):  # pragma: no cover - compiled
+        r"""The degree-2 basis on a simplex from the barycentric coordinates :math:`\lambda_a` in
+        ``N[:t+1]`` (and their gradients in ``G[:t+1]``), in place: Lagrange
+        :math:`\lambda_a (2\lambda_a - 1)` at the vertices and :math:`4 \lambda_a \lambda_b` on
+        edge (a, b) (:func:`edge_vertices`); Bernstein :math:`\lambda_a^2` and
+        :math:`2 \lambda_a \lambda_b`."""
+        w = 2.0 if bernstein else 4.0
+        for q in range(k - t - 1):
+            a, b = edge_vertices(q, t)
+            la, lb = N[a], N[b]
+            N[t + 1 + q] = w * la * lb
+            if gradients:
+                for e in range(t):
+                    G[t + 1 + q, e] = w * (lb * G[a, e] + la * G[b, e])
+        for a in range(t + 1):
+            la = N[a]
+            N[a] = la * la if bernstein else la * (2.0 * la - 1.0)
+            if gradients:
+                f = 2.0 * la if bernstein else 4.0 * la - 1.0
+                for e in range(t):
+                    G[a, e] *= f
+
+    @njit(inline="always")
+    def shape(X, p, K, c, simplex, affine, t, k, N, G, degree=1, bernstein=False):  # pragma: no cover - compiled
         """Values ``N`` (k,) and physical gradients ``G`` (k, t) of particle ``p`` at reference
-        point ``X[p]`` in cell ``c`` with inverse Jacobian ``K[c]`` (gdim = tdim = ``t``).
-        Inlined: where ``simplex``, ``t`` and ``k`` are compile-time constants (the kernels of
+        point ``X[p]`` in cell ``c`` with inverse Jacobian ``K[c]`` (gdim = tdim = ``t``); on
+        multilinear cells (not ``affine``) ``K`` holds the vertices (cells, k, t) and the
+        inverse Jacobian is computed at ``X[p]``. ``degree`` 2 (simplices): the Lagrange or
+        ``bernstein`` basis of :func:`degree2`. Inlined: where ``simplex``, ``affine``, ``t``,
+        ``k``, ``degree`` and ``bernstein`` are compile-time constants (the kernels of
         :func:`fempm.kernels.lumped.kernels_for`) the loops unroll and the branches fold."""
-        if simplex:
+        if not affine:
+            X0, X1 = X[p, 0], X[p, 1]
+            X2 = X[p, 2] if t == 3 else 0.0
+            _, _, _, j00, j01, j02, j10, j11, j12, j20, j21, j22 = multilinear_map(X0, X1, X2, K, c, t)
+            k00, k01, k02, k10, k11, k12, k20, k21, k22 = inverse3(j00, j01, j02, j10, j11, j12, j20, j21, j22)
+            for a in range(k):
+                b0, b1, b2 = a & 1, (a >> 1) & 1, (a >> 2) & 1
+                f0 = X0 if b0 else 1.0 - X0
+                f1 = X1 if b1 else 1.0 - X1
+                d0 = 1.0 if b0 else -1.0
+                d1 = 1.0 if b1 else -1.0
+                if t == 3:
+                    f2 = X2 if b2 else 1.0 - X2
+                    d2 = 1.0 if b2 else -1.0
+                else:
+                    f2, d2 = 1.0, 0.0
+                g0, g1, g2 = d0 * f1 * f2, f0 * d1 * f2, f0 * f1 * d2
+                N[a] = f0 * f1 * f2
+                G[a, 0] = g0 * k00 + g1 * k10 + g2 * k20
+                G[a, 1] = g0 * k01 + g1 * k11 + g2 * k21
+                if t == 3:
+                    G[a, 2] = g0 * k02 + g1 * k12 + g2 * k22
+        elif simplex:
             s = 1.0
             for i in range(t):
                 s -= X[p, i]
@@ -50,10 +214,12 @@ if njit is not None:
                 for i in range(t):
                     g -= K[c, i, e]
                 G[0, e] = g
-            for a in range(1, k):
+            for a in range(1, t + 1):
                 N[a] = X[p, a - 1]
                 for e in range(t):
                     G[a, e] = K[c, a - 1, e]
+            if degree == 2:
+                degree2(t, k, bernstein, N, G, True)
         else:
             for a in range(k):
                 v = 1.0
@@ -90,9 +256,12 @@ if njit is not None:
                 N[a] = v
 
     @njit(inline="always")
-    def inside_after_pull_back(x, p, x0, K, c, simplex, t, tol, X):  # pragma: no cover - compiled
+    def inside_after_pull_back(x, p, x0, K, c, simplex, t, tol, X, affine=True):  # pragma: no cover - compiled
         """X[p] <- K[c] (x[p] - x0[c]); whether it lies in the reference cell within ``tol``
-        (:meth:`fempm.meshes.geometry.CellGeometry.contains`; NaN lies outside)."""
+        (:meth:`fempm.meshes.geometry.CellGeometry.contains`; NaN lies outside). Not
+        ``affine``: ``K`` holds the cells' vertices and :func:`multilinear_pull_back` pulls back."""
+        if not affine:
+            return multilinear_pull_back(x, p, K, c, t, tol, X)
         ok = True
         s = 0.0
         for i in range(t):
@@ -107,21 +276,13 @@ if njit is not None:
             ok = False
         return ok
 
-    @njit(cache=True)
-    def _affine_pull_back(cells, x, x0, K, simplex, tol, X, inside):  # pragma: no cover - compiled
-        for p in range(len(cells)):
-            if cells[p] < 0:
-                X[p, :] = 0.0
-                inside[p] = False
-            else:
-                inside[p] = inside_after_pull_back(x, p, x0, K, cells[p], simplex, K.shape[2], tol, X)
-
     @njit(inline="always")
-    def star_search(x, p, x0, K, c0, c2v, v_offsets, v_cells, num_cells, simplex, t, tol, X):  # pragma: no cover
+    def star_search(x, p, x0, K, c0, c2v, v_offsets, v_cells, num_cells, simplex, t, tol, X,
+                    affine=True):  # pragma: no cover - compiled
         """The lowest-numbered cell below ``num_cells`` other than ``c0`` sharing a vertex with
         it (cell -> vertices ``c2v``, vertex -> cells ``v_offsets``/``v_cells``) that contains
         point ``x[p]`` within ``tol``, and ``X[p]`` its reference coordinates there; -1 (and
-        ``X[p]`` undefined) if none does."""
+        ``X[p]`` undefined) if none does (``affine``: see :func:`inside_after_pull_back`)."""
         best = -1
         for a in range(c2v.shape[1]):
             v = c2v[c0, a]
@@ -129,16 +290,90 @@ if njit is not None:
                 e = v_cells[q]
                 if e >= num_cells or e == c0 or (best >= 0 and e >= best):
                     continue
-                if inside_after_pull_back(x, p, x0, K, e, simplex, t, tol, X):
+                if inside_after_pull_back(x, p, x0, K, e, simplex, t, tol, X, affine):
                     best = e
         if best >= 0:
-            inside_after_pull_back(x, p, x0, K, best, simplex, t, tol, X)
+            inside_after_pull_back(x, p, x0, K, best, simplex, t, tol, X, affine)
         return best
 
+
+#: the name of a kernel's cell type for cells whose map is multilinear, not affine (quadrilaterals
+#: that are not parallelograms, hexahedra that are not parallelepipeds): ``"quadrilateral" + MULTILINEAR``
+MULTILINEAR = "-multilinear"
+#: cell type -> (dimension, vertices, simplex)
+CELLS = {"interval": (1, 2, True), "triangle": (2, 3, True), "tetrahedron": (3, 4, True),
+         "quadrilateral": (2, 4, False), "hexahedron": (3, 8, False),
+         "quadrilateral" + MULTILINEAR: (2, 4, False), "hexahedron" + MULTILINEAR: (3, 8, False)}
+#: the suffixes of the kernel cell types of the degree-2 Lagrange and Bernstein spaces on affine
+#: simplices: ``"triangle" + LAGRANGE2`` (the other kernel cell types are of degree-1 spaces)
+LAGRANGE2, BERNSTEIN2 = "-P2", "-bernstein2"
+for _name in ("interval", "triangle", "tetrahedron"):
+    _t = CELLS[_name][0]
+    CELLS[_name + LAGRANGE2] = CELLS[_name + BERNSTEIN2] = (_t, (_t + 1) * (_t + 2) // 2, True)
+#: a step of Newton's pull-back on multilinear cells below which it has converged (reference
+#: coordinates; the numpy pull-back's tolerance)
+NEWTON_TOL = 1e-12
+#: a step below which Newton's pull-back has reached round-off when it no longer halves
+NEWTON_FLOOR = 1e-7
+#: Newton steps after which a pull-back that has not converged lies outside the cell
+NEWTON_MAX = 25
+
+
+def is_affine(cell: str) -> bool:
+    """Whether the kernels of ``cell`` (a key of :data:`CELLS`) see affine cells."""
+    return not cell.endswith(MULTILINEAR)
+
+
+def space_of(cell: str) -> tuple[int, bool]:
+    """(degree, Bernstein) of the space of the kernel cell type ``cell`` (a key of :data:`CELLS`)."""
+    if cell.endswith(LAGRANGE2):
+        return 2, False
+    return (2, True) if cell.endswith(BERNSTEIN2) else (1, False)
+
+
+@functools.cache
+def _basis_kernel(cell: str):
+    """The per-particle basis of one kernel cell type, its sizes compile-time constants."""
+    D, NK, SIMPLEX = CELLS[cell]
+    AFFINE = is_affine(cell)
+    DEGREE, BERNSTEIN = space_of(cell)
+
+    @njit(cache=True, error_model="numpy")
+    def cell_basis(cells, X, K, cell_dofs, S, G, dofs):  # pragma: no cover - compiled
+        Np = np.empty(NK)
+        Gp = np.empty((NK, D))
+        for p in range(len(cells)):
+            c = cells[p]
+            shape(X, p, K, c, SIMPLEX, AFFINE, D, NK, Np, Gp, DEGREE, BERNSTEIN)
+            for a in range(NK):
+                S[p, a] = Np[a]
+                dofs[p, a] = cell_dofs[c, a]
+                for e in range(D):
+                    G[p, a, e] = Gp[a, e]
+
+    return cell_basis
+
+
+@functools.cache
+def _pull_back_kernels(cell: str) -> SimpleNamespace:
+    """The pull-backs of whole arrays of points for one kernel cell type (its dimension, the
+    simplex test and the affine or multilinear map compile-time constants): ``cell``,
+    ``near`` and ``star`` serve :func:`cell_pull_back`, :func:`near_pull_back` and
+    :func:`vertex_star_pull_back`."""
+    D, _, SIMPLEX = CELLS[cell]
+    AFFINE = is_affine(cell)
+
     @njit(cache=True)
-    def _vertex_star_pull_back(x, verts, x0, K, v_offsets, v_cells, num_cells, simplex, tol, cells,
-                               X):  # pragma: no cover - compiled
-        t = K.shape[1]
+    def cell_kernel(cells, x, x0, K, tol, X, inside):  # pragma: no cover - compiled
+        for p in range(len(cells)):
+            if cells[p] < 0:
+                X[p, :] = 0.0
+                inside[p] = False
+            else:
+                inside[p] = inside_after_pull_back(x, p, x0, K, cells[p], SIMPLEX, D, tol, X, AFFINE)
+
+    @njit(cache=True)
+    def star_kernel(x, verts, x0, K, v_offsets, v_cells, num_cells, tol, cells, X):  # pragma: no cover - compiled
         for p in range(len(x)):
             best = -1
             for a in range(verts.shape[1]):
@@ -149,77 +384,53 @@ if njit is not None:
                     e = v_cells[q]
                     if e >= num_cells or (best >= 0 and e >= best):
                         continue
-                    if inside_after_pull_back(x, p, x0, K, e, simplex, t, tol, X):
+                    if inside_after_pull_back(x, p, x0, K, e, SIMPLEX, D, tol, X, AFFINE):
                         best = e
             if best >= 0:
-                inside_after_pull_back(x, p, x0, K, best, simplex, t, tol, X)
+                inside_after_pull_back(x, p, x0, K, best, SIMPLEX, D, tol, X, AFFINE)
             cells[p] = best
 
     @njit(cache=True)
-    def _near_pull_back(previous, x, x0, K, c2v, v_offsets, v_cells, num_cells, simplex, tol, cells,
-                        X):  # pragma: no cover - compiled
-        t = K.shape[1]
+    def near_kernel(previous, x, x0, K, c2v, v_offsets, v_cells, num_cells, tol, cells, X):  # pragma: no cover
         for p in range(len(previous)):
-            cells[p] = star_search(x, p, x0, K, previous[p], c2v, v_offsets, v_cells, num_cells, simplex, t, tol, X)
+            cells[p] = star_search(x, p, x0, K, previous[p], c2v, v_offsets, v_cells, num_cells, SIMPLEX, D, tol, X,
+                                   AFFINE)
+
+    return SimpleNamespace(cell=cell_kernel, near=near_kernel, star=star_kernel)
 
 
-#: cell type -> (dimension, vertices, simplex)
-CELLS = {"interval": (1, 2, True), "triangle": (2, 3, True), "tetrahedron": (3, 4, True),
-         "quadrilateral": (2, 4, False), "hexahedron": (3, 8, False)}
-
-
-@functools.cache
-def _basis_kernel(cell: str):
-    """The per-particle basis of one cell type, its sizes compile-time constants."""
-    D, NK, SIMPLEX = CELLS[cell]
-
-    @njit(cache=True, error_model="numpy")
-    def affine_basis(cells, X, K, cell_dofs, S, G, dofs):  # pragma: no cover - compiled
-        Np = np.empty(NK)
-        Gp = np.empty((NK, D))
-        for p in range(len(cells)):
-            c = cells[p]
-            shape(X, p, K, c, SIMPLEX, D, NK, Np, Gp)
-            for a in range(NK):
-                S[p, a] = Np[a]
-                dofs[p, a] = cell_dofs[c, a]
-                for e in range(D):
-                    G[p, a, e] = Gp[a, e]
-
-    return affine_basis
-
-
-def affine_basis(cells: npt.NDArray[np.int32], X: npt.NDArray, K: npt.NDArray, cell_dofs: npt.NDArray[np.int32],
-                 cell: str) -> tuple[npt.NDArray, npt.NDArray, npt.NDArray[np.int32]]:
+def cell_basis(cells: npt.NDArray[np.int32], X: npt.NDArray, K: npt.NDArray, cell_dofs: npt.NDArray[np.int32],
+               cell: str) -> tuple[npt.NDArray, npt.NDArray, npt.NDArray[np.int32]]:
     """(S (n, k), G (n, k, gdim), dofs (n, k)) of the degree-1 space with cell dofmap
-    ``cell_dofs`` at reference points ``X`` of ``cells`` (affine geometry of type ``cell``,
-    ``K`` per cell)."""
-    n, k, g = len(cells), cell_dofs.shape[1], K.shape[2]
+    ``cell_dofs`` at reference points ``X`` of ``cells`` (kernel cell type ``cell``, ``K`` per
+    cell: :attr:`fempm.meshes.geometry.CellGeometry.kernel_geometry`)."""
+    n, k, g = len(cells), cell_dofs.shape[1], X.shape[1]
     S, G, dofs = np.empty((n, k)), np.empty((n, k, g)), np.empty((n, k), dtype=np.int32)
     _basis_kernel(cell)(cells, np.ascontiguousarray(X), K, np.ascontiguousarray(cell_dofs), S, G, dofs)
     return S, G, dofs
 
 
-def affine_pull_back(cells: npt.NDArray[np.int32], x: npt.NDArray, x0: npt.NDArray, K: npt.NDArray, simplex: bool,
-                     tol: float) -> tuple[npt.NDArray, npt.NDArray[np.bool_]]:
-    """Reference coordinates (n, tdim) of points ``x`` in ``cells`` (affine geometry, -1: none)
-    and whether each lies inside its cell within ``tol``."""
-    X, inside = np.empty((len(cells), K.shape[1])), np.empty(len(cells), dtype=np.bool_)
-    _affine_pull_back(np.asarray(cells, dtype=np.int32), np.ascontiguousarray(x), x0, K, bool(simplex), float(tol),
-                      X, inside)
+def cell_pull_back(cells: npt.NDArray[np.int32], x: npt.NDArray, x0: npt.NDArray, K: npt.NDArray, cell: str,
+                   tol: float) -> tuple[npt.NDArray, npt.NDArray[np.bool_]]:
+    """Reference coordinates (n, tdim) of points ``x`` in ``cells`` (-1: none) and whether each
+    lies inside its cell within ``tol`` (kernel cell type ``cell``, geometry ``x0``, ``K``:
+    :attr:`fempm.meshes.geometry.CellGeometry.kernel_geometry`)."""
+    X, inside = np.full((len(cells), x.shape[1]), np.nan), np.empty(len(cells), dtype=np.bool_)
+    _pull_back_kernels(cell).cell(np.asarray(cells, dtype=np.int32), np.ascontiguousarray(x), x0, K, float(tol), X,
+                                  inside)
     return X, inside
 
 
 def near_pull_back(previous: npt.NDArray[np.int32], x: npt.NDArray, x0: npt.NDArray, K: npt.NDArray,
                    c2v: npt.NDArray[np.int32], v_offsets: npt.NDArray[np.int32], v_cells: npt.NDArray[np.int32],
-                   num_cells: int, simplex: bool, tol: float) -> tuple[npt.NDArray[np.int32], npt.NDArray]:
+                   num_cells: int, cell: str, tol: float) -> tuple[npt.NDArray[np.int32], npt.NDArray]:
     """For points ``x`` that left their ``previous`` cells: the lowest-numbered cell below
     ``num_cells`` sharing a vertex with the previous one (cell -> vertices ``c2v``, vertex ->
     cells ``v_offsets``/``v_cells``) that contains the point within ``tol`` (-1: none), and the
-    reference coordinates there (affine geometry)."""
-    cells, X = np.empty(len(previous), dtype=np.int32), np.full((len(previous), K.shape[1]), np.nan)
-    _near_pull_back(previous, x, x0, K, np.ascontiguousarray(c2v), v_offsets, v_cells, int(num_cells), bool(simplex),
-                    float(tol), cells, X)
+    reference coordinates there (kernel cell type ``cell``, geometry ``x0``, ``K``)."""
+    cells, X = np.empty(len(previous), dtype=np.int32), np.full((len(previous), x.shape[1]), np.nan)
+    _pull_back_kernels(cell).near(np.asarray(previous, dtype=np.int32), np.ascontiguousarray(x), x0, K,
+                                  np.ascontiguousarray(c2v), v_offsets, v_cells, int(num_cells), float(tol), cells, X)
     return cells, X
 
 
@@ -229,12 +440,12 @@ AVAILABLE = COMPILED and njit is not None
 
 def vertex_star_pull_back(x: npt.NDArray, verts: npt.NDArray[np.int32], x0: npt.NDArray, K: npt.NDArray,
                           v_offsets: npt.NDArray[np.int32], v_cells: npt.NDArray[np.int32], num_cells: int,
-                          simplex: bool, tol: float) -> tuple[npt.NDArray[np.int32], npt.NDArray]:
+                          cell: str, tol: float) -> tuple[npt.NDArray[np.int32], npt.NDArray]:
     """For points ``x`` and vertices ``verts`` (n, k; -1: none): the lowest-numbered cell below
     ``num_cells`` holding one of the point's vertices (vertex -> cells ``v_offsets``/``v_cells``)
     that contains the point within ``tol`` (-1: none), and the reference coordinates there
-    (affine geometry)."""
-    cells, X = np.empty(len(x), dtype=np.int32), np.full((len(x), K.shape[1]), np.nan)
-    _vertex_star_pull_back(np.ascontiguousarray(x), np.ascontiguousarray(verts, dtype=np.int32), x0, K, v_offsets,
-                           v_cells, int(num_cells), bool(simplex), float(tol), cells, X)
+    (kernel cell type ``cell``, geometry ``x0``, ``K``)."""
+    cells, X = np.empty(len(x), dtype=np.int32), np.full((len(x), x.shape[1]), np.nan)
+    _pull_back_kernels(cell).star(np.ascontiguousarray(x), np.ascontiguousarray(verts, dtype=np.int32), x0, K,
+                                  v_offsets, v_cells, int(num_cells), float(tol), cells, X)
     return cells, X

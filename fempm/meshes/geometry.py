@@ -19,6 +19,8 @@ import numpy as np
 import numpy.typing as npt
 from mpi4py import MPI
 
+from fempm.kernels.shape import MULTILINEAR
+
 __all__ = ["CHUNK", "SIMPLICES", "CellGeometry", "coordinate_map"]
 
 SIMPLICES = {"interval", "triangle", "tetrahedron"}
@@ -59,7 +61,9 @@ class CellGeometry:
         self.dofmap = np.asarray(dofmap)
         self.x = mesh.geometry.x[:, : self.gdim]
         self.num_owned = mesh.topology.index_map(self.tdim).size_local
+        self.degree = cmap.degree
         self.affine = False
+        self._vertices: npt.NDArray | None = None
         #: affine cells: the first vertex x0 (cells, gdim) and the inverse Jacobian K (cells, tdim, gdim)
         #: of each cell's map x = x0 + J X (None for other cells)
         self.x0: npt.NDArray | None = None
@@ -88,6 +92,29 @@ class CellGeometry:
             self.affine = bool(mesh.comm.allreduce(worst <= 1e-13 * scale, op=MPI.LAND))
             if self.affine:
                 self.x0, self.K = x0, K
+
+    @property
+    def kernel_cell(self) -> str | None:
+        """The cell type of the compiled kernels (a key of :data:`fempm.kernels.shape.CELLS`):
+        the cell's name on affine cells, with :data:`~fempm.kernels.shape.MULTILINEAR` on
+        quadrilaterals and hexahedra with straight edges that are not affine; None for curved
+        cells (a coordinate map of degree 2 or more)."""
+        if self.affine:
+            return self.cell_name
+        if self.degree == 1 and self.cell_name in ("quadrilateral", "hexahedron"):
+            return self.cell_name + MULTILINEAR
+        return None
+
+    @property
+    def kernel_geometry(self) -> tuple[npt.NDArray, npt.NDArray]:
+        """The cell geometry the compiled kernels take as ``(x0, K)``: on affine cells the first
+        vertex and the inverse Jacobian of each cell, on multilinear cells its vertices
+        (cells, vertices, gdim; made on first use) in both places."""
+        if self.affine:
+            return self.x0, self.K
+        if self._vertices is None:
+            self._vertices = np.ascontiguousarray(self.x[self.dofmap])
+        return self._vertices, self._vertices
 
     def _nodal_jacobian(self, nodes: npt.NDArray) -> npt.NDArray:
         """``J[c, g, t]`` of affine cells from their geometry nodes (c, nnodes, gdim)."""

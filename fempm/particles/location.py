@@ -16,7 +16,7 @@ import numpy as np
 import numpy.typing as npt
 
 from fempm.kernels import shape as shape_kernels
-from fempm.meshes.geometry import SIMPLICES, CellGeometry
+from fempm.meshes.geometry import CellGeometry
 from fempm.particles.cell_bins import CellBins
 
 __all__ = ["LOCATE_CHUNK", "CellLocator", "OutsideMeshError", "as_points3", "lowest_finding_rank", "outside_message"]
@@ -72,6 +72,12 @@ class CellLocator:
         self._global_tree = None
         self._midpoint_tree = None
         self._cell_bins = None
+
+    @property
+    def compiled(self) -> bool:
+        """Whether the compiled pull-backs of :mod:`fempm.kernels.shape` serve this mesh (affine
+        or multilinear cells, numba)."""
+        return shape_kernels.AVAILABLE and self.geometry.kernel_cell is not None
 
     @property
     def num_cells(self) -> int:
@@ -182,9 +188,8 @@ class CellLocator:
         pidx = np.repeat(np.arange(n), np.diff(adj.offsets))
         if cand.size == 0:
             return cells, X
-        if geo.affine and shape_kernels.AVAILABLE:
-            Xc, inside = shape_kernels.affine_pull_back(cand, x[pidx], geo.x0, geo.K, geo.cell_name in SIMPLICES,
-                                                        self.tol)
+        if self.compiled:
+            Xc, inside = shape_kernels.cell_pull_back(cand, x[pidx], *geo.kernel_geometry, geo.kernel_cell, self.tol)
         else:
             Xc = geo.pull_back(cand, x[pidx])
             inside = geo.contains(Xc, self.tol)
@@ -227,31 +232,31 @@ class CellLocator:
         """The lowest-numbered searched cell holding one of the vertices ``global_vertices``
         (n, k; global numbers, those not held here ignored) that contains each point of ``x``
         (-1: none), and the reference coordinates there: where a particle that left a cell with
-        these vertices on another rank can be (affine cells, compiled)."""
+        these vertices on another rank can be (cells with straight edges, compiled)."""
         geo = self.geometry
         c2v, v_offsets, v_cells, owned = self.vertex_star()
         vmap = self.mesh.topology.index_map(0)
         local = vmap.global_to_local(np.ascontiguousarray(global_vertices, dtype=np.int64).ravel())
         local = np.asarray(local, dtype=np.int32).reshape(global_vertices.shape)
-        return shape_kernels.vertex_star_pull_back(x, local, geo.x0, geo.K, v_offsets, v_cells, owned,
-                                                   geo.cell_name in SIMPLICES, self.tol)
+        return shape_kernels.vertex_star_pull_back(x, local, *geo.kernel_geometry, v_offsets, v_cells, owned,
+                                                   geo.kernel_cell, self.tol)
 
     def locate_near(self, x: npt.NDArray, previous: npt.NDArray[np.int32], *,
                     ghosts: bool = False) -> tuple[npt.NDArray[np.int32], npt.NDArray]:
         """Like :meth:`locate` for points that left their ``previous`` owned cells: the cells
         sharing a vertex with the previous one are tested first (the lowest-numbered cell
-        containing the point wins; affine cells, compiled), the tree searches only for the
+        containing the point wins; cells with straight edges, compiled), the tree searches only for the
         points not found there. ``ghosts``: the ghost cells among those neighbours are tested
         too (after the owned ones: they are numbered after them), so that a particle moving to
         another rank's cell in the ghost layer is sent there without a tree search
         (:func:`fempm.particles.migration.migrate`); its cell is then at or above the owned count."""
         geo = self.geometry
-        if not (geo.affine and shape_kernels.AVAILABLE) or len(x) == 0:
+        if not self.compiled or len(x) == 0:
             return self.locate(x)
         c2v, v_offsets, v_cells, owned = self.vertex_star()
         cells, X = shape_kernels.near_pull_back(np.asarray(previous, dtype=np.int32), np.ascontiguousarray(x),
-                                                geo.x0, geo.K, c2v, v_offsets, v_cells,
-                                                len(c2v) if ghosts else owned, geo.cell_name in SIMPLICES, self.tol)
+                                                *geo.kernel_geometry, c2v, v_offsets, v_cells,
+                                                len(c2v) if ghosts else owned, geo.kernel_cell, self.tol)
         miss = np.flatnonzero(cells < 0)
         if len(miss) and not ghosts:
             cells[miss], X[miss] = self.locate(np.asarray(x)[miss])
@@ -267,9 +272,9 @@ class CellLocator:
         new_cells = np.full(len(x), -1, dtype=np.int32)
         geo = self.geometry
         valid = np.flatnonzero(cells >= 0)
-        if geo.affine and shape_kernels.AVAILABLE:  # closed form, one compiled pass
+        if self.compiled:  # one compiled pass
             new_cells = cells.copy()
-            X, stay = shape_kernels.affine_pull_back(cells, x, geo.x0, geo.K, geo.cell_name in SIMPLICES, self.tol)
+            X, stay = shape_kernels.cell_pull_back(cells, x, *geo.kernel_geometry, geo.kernel_cell, self.tol)
             new_cells[~stay] = -1
         elif valid.size:
             Xv = self.geometry.pull_back(cells[valid], np.asarray(x)[valid])

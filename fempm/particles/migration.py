@@ -15,7 +15,6 @@ from dataclasses import dataclass
 import numpy as np
 import numpy.typing as npt
 
-from fempm.kernels.shape import AVAILABLE
 from fempm.particles.location import CellLocator, lowest_finding_rank
 
 __all__ = ["SLACK", "Distributed", "distribute", "migrate", "pack", "replace_rows", "unpack", "with_room"]
@@ -265,7 +264,7 @@ def migrate(locator: CellLocator, arrays: dict[str, npt.NDArray], leaving: npt.N
     parts = [_to_ghost_owners(locator, sub, ghosted)] if counts[0] else []
     if not counts[1]:
         return replace_rows(arrays, leaving, _concat(parts, sub)), None
-    if previous is not None and locator.geometry.affine and AVAILABLE:
+    if previous is not None and locator.compiled:
         near = previous[lost] >= 0
         taken, missed = _to_vertex_sharers(locator, sub, lost[near], previous[lost[near]])
         parts.append(taken)

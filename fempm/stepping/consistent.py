@@ -29,6 +29,7 @@ import numpy as np
 import numpy.typing as npt
 
 from fempm.kernels import consistent as kc
+from fempm.kernels.shape import space_of
 from fempm.stepping.mass_systems import ConsistentSystems
 from fempm.stepping.nodal import NodalMass, sum_ghosts
 from fempm.transfer.mass_models import MASS_RATIO_ITERATIONS
@@ -50,10 +51,15 @@ class ConsistentNodalMass(NodalMass):
     def __init__(self, grid: PointGrid):
         super().__init__(grid)
         solver, opts = grid.solver, grid.options
+        # no row lumped on a basis with negative values (P2 Lagrange): it could make the matrix
+        # indefinite (as fempm.transfer.Projector)
+        nonnegative = space_of(grid.cell) != (2, False)
         self.systems = ConsistentSystems(solver.V, grid.cell_dofs, grid.free, grid.conditions.fixed_mask(),
-                                         prefix=opts.petsc_options_prefix, lump_below=opts.lump_below,
-                                         always_lumped=grid.conditions.friction_dofs)
-        self.cell_mass = kc.cell_mass(solver.particles.locator.geometry.cell_name)
+                                         prefix=opts.petsc_options_prefix,
+                                         lump_below=opts.lump_below if nonnegative else 0.0,
+                                         always_lumped=grid.conditions.friction_dofs if nonnegative else None,
+                                         nonnegative=nonnegative)
+        self.cell_mass = kc.cell_mass(grid.cell)
         self._ghosted = grid.nodal_array(grid.d)
         self._accel: npt.NDArray | None = None  # the last acceleration, the warm start of its solve
         self._spare: npt.NDArray | None = None  # the array of the acceleration before it

@@ -42,8 +42,8 @@ def supported(solver: ExplicitSolver) -> bool:
     dom = solver.options.particle_domain
     # these types themselves: a subclass may make or move its samples otherwise
     sampled = type(dom) in (CPDI1, CPDI2) or (type(dom) is GIMP and not dom.exact)
-    return (sampled and type(solver.options.mass_model) is Lumped and compiled_space(solver)
-            and not solver.conditions.needs_positions)
+    return (sampled and type(solver.options.mass_model) is Lumped and not solver.conditions.needs_positions
+            and compiled_space(solver) == solver.particles.locator.geometry.cell_name)  # P1 on affine cells
 
 
 class DomainGrid(PointGrid):

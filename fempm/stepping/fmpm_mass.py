@@ -41,7 +41,7 @@ class FMPMNodalMass(NodalMass):
     def __init__(self, grid: PointGrid):
         super().__init__(grid)
         self.order = grid.options.mass_model.order
-        self.apply = kf.mass_apply(grid.solver.particles.locator.geometry.cell_name)
+        self.apply = kf.mass_apply(grid.cell)
         self._work = {False: grid.nodal_array(grid.d), True: grid.nodal_array(grid.d + 1)}  # without, with M_C 1_l
         self.friction = grid.conditions.friction_dofs
         self.lump = np.zeros(0, dtype=np.bool_)

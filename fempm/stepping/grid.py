@@ -18,7 +18,7 @@ instead, :mod:`fempm.transfer.mass_models`).
 Grids: :class:`SingleFieldGrid` (one velocity field; numpy, every particle domain, mass model
 and space: the reference of the compiled passes), :class:`fempm.stepping.contact.ContactGrid`
 (a field per body, corrected where bodies meet) and :class:`fempm.stepping.lumped.PointGrid`
-(point particles on affine degree-1 cells in compiled passes).
+(point particles on degree-1 cells in compiled passes).
 """
 
 from __future__ import annotations

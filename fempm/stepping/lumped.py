@@ -1,10 +1,11 @@
-r"""The grid of point particles on affine degree-1 cells, in compiled passes (:class:`PointGrid`).
+r"""The grid of point particles on degree-1 cells, in compiled passes (:class:`PointGrid`).
 
 The stages of :mod:`fempm.stepping.grid` (same equations, options and checks; the numpy
 :class:`~fempm.stepping.grid.SingleFieldGrid` is the reference it is tested against to
 round-off) for the common case: standard MPM particles, lumped or consistent mass
 (:class:`LumpedNodalMass`, :class:`~fempm.stepping.consistent.ConsistentNodalMass`), a P1/Q1
-vector space on a mesh of simplices, parallelograms or parallelepipeds (FMPM(k):
+vector space on a mesh of simplices, quadrilaterals or hexahedra with straight edges (affine
+or multilinear maps: :mod:`fempm.kernels.shape`) (FMPM(k):
 :mod:`fempm.stepping.fmpm_mass`; particle domains: :mod:`fempm.stepping.domain_grid`). Nothing per particle
 is stored between the passes; the basis is evaluated on the fly in each pass
 (:mod:`fempm.kernels.shape`):
@@ -29,15 +30,17 @@ from __future__ import annotations
 
 from typing import TYPE_CHECKING
 
+import basix
 import numpy as np
 import numpy.typing as npt
 from mpi4py import MPI
 
 from fempm.kernels import lumped as kl
-from fempm.kernels.shape import AVAILABLE
+from fempm.kernels.shape import AVAILABLE, BERNSTEIN2, LAGRANGE2, space_of
 from fempm.materials.base import IsotropicElastic
 from fempm.materials.linear_elastic import LinearElastic
 from fempm.materials.neo_hookean import NeoHookean
+from fempm.meshes.geometry import SIMPLICES
 from fempm.stepping import diagnostics
 from fempm.stepping.consistent import ConsistentNodalMass
 from fempm.stepping.fmpm_mass import FMPMNodalMass
@@ -47,15 +50,19 @@ from fempm.stepping.loads import external_forces
 from fempm.stepping.nodal import NodalMass, kept_nodal_array, sum_ghosts
 from fempm.transfer.centres import NodalCentres
 from fempm.transfer.domains import Point
+from fempm.transfer.grid_solves import negative_basis_message
 from fempm.transfer.mapping import SUPPORT_TOL, mass_centres
 from fempm.transfer.mass_models import FMPM, Consistent, Lumped
 
 if TYPE_CHECKING:
     from fempm.stepping.solver import ExplicitSolver
 
-__all__ = ["BOUND_SAFETY", "NODAL_MASSES", "SORT_EVERY", "LumpedNodalMass", "PointGrid", "compiled_space", "supported"]
+__all__ = ["BOUND_SAFETY", "NODAL_MASSES", "NODAL_VARIANTS", "SORT_EVERY", "LumpedNodalMass", "PointGrid", "compiled_space", "supported"]
 
 
+#: the Lagrange variants whose degree-2 basis is the nodal one of the vertices and edge midpoints
+NODAL_VARIANTS = (basix.LagrangeVariant.unset, basix.LagrangeVariant.equispaced, basix.LagrangeVariant.gll_warped,
+                  basix.LagrangeVariant.gll_isaac, basix.LagrangeVariant.gll_centroid)
 #: steps between two sorts of the particles by cell
 SORT_EVERY = 100
 #: a given dt at most this fraction of the bound of the stable time needs no exact check
@@ -63,13 +70,25 @@ SORT_EVERY = 100
 BOUND_SAFETY = 1.0 - 1e-12
 
 
-def compiled_space(solver: ExplicitSolver) -> bool:
-    """Whether ``solver``'s space and mesh take the compiled passes: a vector degree-1 space on
-    affine cells (and numba)."""
+def compiled_space(solver: ExplicitSolver) -> str | None:
+    """The kernel cell type (:data:`fempm.kernels.shape.CELLS`) of ``solver``'s space and mesh
+    where they take the compiled passes, else None: a vector degree-1 space on affine or
+    multilinear cells, or a continuous degree-2 Lagrange or Bernstein space on affine
+    simplices (and numba)."""
     V = solver.V
     geo = solver.particles.locator.geometry
-    return (AVAILABLE and V.element.basix_element.degree == 1 and V.dofmap.index_map_bs == solver.particles.gdim
-            and geo.affine)
+    element = V.element.basix_element
+    if not (AVAILABLE and V.dofmap.index_map_bs == solver.particles.gdim and geo.kernel_cell is not None
+            and element.family == basix.ElementFamily.P and not element.discontinuous):
+        return None
+    if element.degree == 1:
+        return geo.kernel_cell
+    if element.degree == 2 and geo.affine and geo.cell_name in SIMPLICES:
+        if element.lagrange_variant == basix.LagrangeVariant.bernstein:
+            return geo.cell_name + BERNSTEIN2
+        if element.lagrange_variant in NODAL_VARIANTS:
+            return geo.cell_name + LAGRANGE2
+    return None
 
 
 def supported(solver: ExplicitSolver) -> bool:
@@ -99,8 +118,9 @@ class PointGrid(Grid):
         super().__init__(solver)
         p, V = solver.particles, solver.V
         geo = p.locator.geometry
-        self.K = geo.K
-        self.kernels = kl.kernels_for(geo.cell_name)
+        self.cell = compiled_space(solver)  # the kernels' cell type
+        self.x0, self.K = geo.kernel_geometry
+        self.kernels = kl.kernels_for(self.cell)
         self.cell_dofs = np.ascontiguousarray(V.dofmap.list, dtype=np.int32)
         self.index_map = V.dofmap.index_map
         self.num_owned = self.index_map.size_local
@@ -115,7 +135,6 @@ class PointGrid(Grid):
         self.modulus = np.array([a[3] for a in laws])
         self.all_modulus = bool(np.all(self.modulus > 0))
         self.any_external = bool(np.any(self.law == 0))
-        self.x0 = geo.x0
         self.since_sort = SORT_EVERY  # steps since the particles were sorted by cell (sort on the first step)
         self._nodal = self.nodal_array(1 + 2 * d)  # [m | m v | f]
         self._nodal_d = self.nodal_array(d)  # USF's forces, MUSL's re-mapped momenta
@@ -124,6 +143,8 @@ class PointGrid(Grid):
         self._checked: tuple | None = None  # identities of the state arrays checked finite
         self._sums = np.zeros(3 + d)  # the moving pass's sums of the state (state_sums)
         self._summed = False  # whether they are the last step's
+        if space_of(self.cell) == (2, False) and type(self.options.mass_model) is not Consistent:
+            raise ValueError(negative_basis_message(self.options.mass_model.label, 2))  # as the numpy step
         self.mass = NODAL_MASSES[type(self.options.mass_model)](self)
         # every boundary condition a zero component, held by `free`, and a lumped mass: one fused grid pass
         self.fused = self.conditions.zero_components and self.mass.fusable

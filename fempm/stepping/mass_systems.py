@@ -49,7 +49,7 @@ from fempm.transfer.mass_span import (
     share_flags,
 )
 
-__all__ = ["KSP_OPTIONS", "KSP_OPTIONS_PARALLEL", "REFRESH_GROWTH", "SIMPLEX_OPTIONS", "ConsistentSystems"]
+__all__ = ["KSP_OPTIONS", "KSP_OPTIONS_PARALLEL", "REFRESH_GROWTH", "SIGNED_OPTIONS", "SIMPLEX_OPTIONS", "ConsistentSystems"]
 
 #: KSP defaults of the kept systems on one rank (the options prefix overrides them): CG with
 #: incomplete Cholesky, 5-10 iterations where Jacobi takes 50-60 (P1/Q1, 4 particles per cell).
@@ -70,6 +70,10 @@ KSP_OPTIONS_PARALLEL = {"ksp_type": "gcr", "pc_type": "asm", "sub_pc_type": "icc
 #: and 2 ranks (the set-up, once a step, costs more); on quadrilaterals the iterations do not
 #: drop (8-9) and the step is 4 % slower, so they keep ICC(0)
 SIMPLEX_OPTIONS = {"sub_pc_factor_levels": 1}
+#: a basis with negative values (P2 Lagrange), on any number of ranks: CG with the diagonal.
+#: Incomplete Cholesky of its mass breaks down (an indefinite factor: CG stops at once; on two
+#: ranks GCR with restricted Schwarz ran 20000 iterations without reaching the tolerance)
+SIGNED_OPTIONS = {"ksp_type": "cg", "pc_type": "jacobi"}
 #: the preconditioner is set up again when a solve takes more than this factor times the
 #: iterations it took fresh (plus 2), and whenever the sparsity, the occupied cells, the
 #: supported or the lumped dofs change
@@ -96,19 +100,22 @@ class _System:
 
 
 class ConsistentSystems:
-    """The kept consistent mass systems of a degree-1 vector space (see the module).
+    """The kept consistent mass systems of a vector space of degree 1 or 2 (see the module).
 
     ``cell_dofs`` (cells, k): the dofmap; ``free`` (dofs, d): which dof components are solved
     for (False on Dirichlet dofs and, per component, on axis-normal slip walls); ``fixed``
     (dofs,): the Dirichlet dofs (excluded from the stable-step system too); ``V``: the space
     (dof coordinates of the stable-step estimate's right-hand side); ``always_lumped`` (dofs,):
     dofs whose rows are lumped whatever their mass (the walls' of node-local conditions,
-    :attr:`fempm.stepping.ExplicitSolver.node_local_dofs`)."""
+    :attr:`fempm.stepping.ExplicitSolver.node_local_dofs`); ``nonnegative``: whether the basis
+    is (else, P2 Lagrange, the stable-step estimate is preconditioned by the diagonal, as
+    :meth:`fempm.transfer.Projector.mass_ratio_min`)."""
 
     def __init__(self, V, cell_dofs: npt.NDArray[np.int32], free: npt.NDArray[np.bool_],
                  fixed: npt.NDArray[np.bool_], *, prefix: str, lump_below: float,
-                 always_lumped: npt.NDArray[np.bool_] | None = None):
+                 always_lumped: npt.NDArray[np.bool_] | None = None, nonnegative: bool = True):
         self.index_map = V.dofmap.index_map
+        self.nonnegative = nonnegative
         self.comm = self.index_map.comm
         self.cell_dofs = cell_dofs
         self.num_owned = self.index_map.size_local
@@ -118,7 +125,9 @@ class ConsistentSystems:
         self.always_lumped = always_lumped  # dofs whose rows are lumped in any case (node-local conditions)
         self.prefix = prefix
         self.ksp_options = dict(KSP_OPTIONS if self.comm.size == 1 else KSP_OPTIONS_PARALLEL)
-        if V.mesh.topology.cell_type in (CellType.triangle, CellType.tetrahedron):
+        if not nonnegative:
+            self.ksp_options = dict(SIGNED_OPTIONS)
+        elif V.mesh.topology.cell_type in (CellType.triangle, CellType.tetrahedron):
             self.ksp_options.update(SIMPLEX_OPTIONS)
         base = ~fixed
         self.systems: list[_System] = []
@@ -372,7 +381,7 @@ class ConsistentSystems:
             self._set_values(s)
             self._base_values_stale = False
         if self._ratio_ksp is None:
-            self._ratio_ksp = mass_ratio_ksp(self.comm, iterations)
+            self._ratio_ksp = mass_ratio_ksp(self.comm, iterations, rowsum=self.nonnegative)
             self._ratio_rhs = mass_ratio_rhs(V, np.ones(self.num_owned, dtype=np.bool_))
         self._ratio_ksp.reset()  # the matrix may have new sizes
         keep = s.keep[self.owned_parent]

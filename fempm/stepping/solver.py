@@ -3,7 +3,7 @@ r"""The explicit MPM solver: the particle state's owner, and the step as the sta
 :meth:`ExplicitSolver.step` opens the grid (P2G and the stable time step), chooses the time step,
 runs the stages of the scheme (:mod:`fempm.stepping.schemes`: grid update, G2P, kinematics,
 stress, motion) on the grid (:mod:`fempm.stepping.grid`: one velocity field, a field per body
-with contact, or compiled passes for point particles on affine degree-1 cells), closes it and
+with contact, or compiled passes for point particles on degree-1 cells), closes it and
 advances the time. The equations are in :mod:`fempm.stepping.grid`.
 """
 
@@ -74,8 +74,8 @@ class ExplicitSolver:
         t: The start time.
         step_count: The steps taken before (a continued run).
         compiled: Take the compiled passes where they apply (None, the default: a degree-1
-            space on an affine mesh, with point particles and lumped, consistent or FMPM mass,
-            or CPDI1 or Gauss-rule GIMP domains and lumped mass), insist on them (True: an
+            space on cells with straight edges, with point particles and lumped, consistent or
+            FMPM mass, or on affine cells CPDI1 or Gauss-rule GIMP domains and lumped mass), insist on them (True: an
             error where they do not apply) or never (False: the numpy step, which is their
             reference).
         contact: One velocity field per particle group with frictional contact between them
@@ -203,9 +203,10 @@ class ExplicitSolver:
         if self.compiled is not False and domain_grid_supported(self):
             return DomainGrid(self)
         if self.compiled:
-            raise ValueError("compiled=True needs a degree-1 space on an affine mesh (simplices, parallelograms) with "
-                             "numba installed, and point particles with lumped, consistent or FMPM mass, or CPDI1 "
-                             "or Gauss-rule GIMP domains with lumped mass")
+            raise ValueError("compiled=True needs a degree-1 space on cells with straight edges (any simplex, "
+                             "quadrilateral or hexahedron) with numba installed, and point particles with lumped, "
+                             "consistent or FMPM mass, or CPDI1 or Gauss-rule GIMP domains with lumped mass on "
+                             "affine cells (simplices, parallelograms, parallelepipeds)")
         return SingleFieldGrid(self)
 
     def step(self, dt: float | None = None, *, dt_max: float = np.inf, totals: bool = False) -> float:

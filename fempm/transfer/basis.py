@@ -73,9 +73,9 @@ class ParticleBasis:
             cells, X = particles.cells, particles.X
             self.cells: npt.NDArray[np.int32] | None = cells  # one cell per particle
             geo = particles.locator.geometry
-            if element.degree == 1 and geo.affine and shape_kernels.AVAILABLE:  # closed form (fempm.kernels.shape)
-                self.values, G, self.dofs = shape_kernels.affine_basis(
-                    cells, X, geo.K, np.asarray(V.dofmap.list), geo.cell_name)
+            if element.degree == 1 and particles.locator.compiled:  # closed form (fempm.kernels.shape)
+                self.values, G, self.dofs = shape_kernels.cell_basis(
+                    cells, X, geo.kernel_geometry[1], np.asarray(V.dofmap.list), geo.kernel_cell)
                 self.gradients = G if gradients else None
                 return
             tab = element.tabulate(1 if gradients else 0, np.ascontiguousarray(X))[..., 0]

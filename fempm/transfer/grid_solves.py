@@ -79,16 +79,19 @@ class GridSolve:
         return 1.0
 
 
+def negative_basis_message(label: str, degree: int) -> str:
+    """The error of a lumped (or FMPM) mass on a Lagrange basis that takes negative values."""
+    return (f"{label} mass needs a non-negative basis (degree 1 or Bernstein); this Lagrange space of degree "
+            f"{degree} has lumped vertex masses that can be zero or negative: use mass='consistent' or a "
+            "Bernstein variant")
+
+
 class LumpedSolve(GridSolve):
     """:math:`F_i = b_i / m_i` on the active dofs, component by component where slip holds one."""
 
     def support_measure(self, lumped):
         if not self.basis.nonnegative:
-            raise ValueError(
-                f"{self.label} mass needs a non-negative basis (degree 1 or Bernstein); this "
-                f"Lagrange space of degree {self.basis.element.degree} has lumped vertex masses "
-                "that can be zero or negative: use mass='consistent' or a Bernstein variant"
-            )
+            raise ValueError(negative_basis_message(self.label, self.basis.element.degree))
         return lumped()
 
     def set_up(self, active, lump, exclude_components, lumped, petsc_options_prefix, petsc_options):

@@ -67,10 +67,12 @@ def test_nodal_force_kernel_equals_reference(data):
     assert np.abs(ref - got).max() < 1e-13 * np.abs(ref).max()
 
 
-@pytest.mark.parametrize("cell", ["interval", "triangle", "quadrilateral", "tetrahedron", "hexahedron"])
+@pytest.mark.parametrize("cell", ["interval", "triangle", "quadrilateral", "tetrahedron", "hexahedron",
+                                  "distorted quadrilateral", "distorted hexahedron"])
 def test_closed_form_basis_and_pull_back_equal_basix(cell):
-    """fempm.kernels.shape: degree-1 values and gradients against basix's tabulation, and the
-    affine pull-back against the particles' located reference coordinates."""
+    """fempm.kernels.shape: degree-1 values and gradients against basix's tabulation with the
+    geometry's inverse Jacobians, and the pull-back (closed form on affine cells, Newton's
+    method on multilinear ones) against the geometry's numpy pull-back."""
     import dolfinx.fem
     import dolfinx.mesh as dm
     import fempm
@@ -79,38 +81,55 @@ def test_closed_form_basis_and_pull_back_equal_basix(cell):
     from fempm.kernels import shape
 
     comm = MPI.COMM_SELF
+    name = cell.split()[-1]
     mesh = {"interval": lambda: dm.create_unit_interval(comm, 7),
             "triangle": lambda: dm.create_unit_square(comm, 5, 4),
             "quadrilateral": lambda: dm.create_unit_square(comm, 5, 4, dm.CellType.quadrilateral),
             "tetrahedron": lambda: dm.create_unit_cube(comm, 3, 3, 2),
-            "hexahedron": lambda: dm.create_unit_cube(comm, 3, 2, 2, dm.CellType.hexahedron)}[cell]()
+            "hexahedron": lambda: dm.create_unit_cube(comm, 3, 2, 2, dm.CellType.hexahedron)}[name]()
     d = mesh.geometry.dim
-    p = fempm.Particles(mesh, np.random.default_rng(0).random((300, d)) * 0.98 + 0.01, 1.0, 1.0)
+    if cell.startswith("distorted"):  # every node moved: no cell is a parallelogram (parallelepiped)
+        x = mesh.geometry.x
+        x[:, :d] += 0.04 * np.sin(7.0 * x[:, :d] + 3.0 * x[:, [1, 0, 0][:d]] + 1.0)
+    p = fempm.Particles(mesh, np.random.default_rng(0).random((300, d)) * 0.9 + 0.05, 1.0, 1.0)
     V = dolfinx.fem.functionspace(mesh, ("Lagrange", 1, (d,)))
     geo = p.locator.geometry
-    assert geo.affine
-    S, G, dofs = shape.affine_basis(p.cells, p.X, geo.K, np.asarray(V.dofmap.list), cell)
-    tab = V.element.basix_element.tabulate(1, p.X)[..., 0]
+    kind = geo.kernel_cell
+    assert geo.affine == (kind == name) and kind == name + ("" if geo.affine else shape.MULTILINEAR)
+    assert geo.affine != cell.startswith("distorted")
+    x0, K = geo.kernel_geometry
+    X = geo.pull_back(p.cells, p.x)  # numpy: affine, or Newton from the cell's centre
+    got, inside = shape.cell_pull_back(p.cells, p.x, x0, K, kind, 1e-10)
+    assert inside.all() and np.abs(got - X).max() < 1e-14
+    S, G, dofs = shape.cell_basis(p.cells, X, K, np.asarray(V.dofmap.list), kind)
+    tab = V.element.basix_element.tabulate(1, X)[..., 0]
     assert np.abs(S - tab[0]).max() < 1e-14
-    assert np.abs(G - np.transpose(tab[1:], (1, 2, 0)) @ geo.K[p.cells]).max() < 1e-12
+    assert np.abs(G - np.transpose(tab[1:], (1, 2, 0)) @ geo.inverse_jacobian(p.cells, X)).max() < 1e-11
     assert np.array_equal(dofs, np.asarray(V.dofmap.list)[p.cells])
-    X, inside = shape.affine_pull_back(p.cells, p.x, geo.x0, geo.K, cell in ("interval", "triangle", "tetrahedron"),
-                                       1e-10)
-    assert inside.all() and np.abs(X - p.X).max() < 1e-14
-    X, inside = shape.affine_pull_back(p.cells, p.x + 2.0, geo.x0, geo.K, cell in ("interval", "triangle",
-                                                                                     "tetrahedron"), 1e-10)
+    _, inside = shape.cell_pull_back(p.cells, p.x + 2.0, x0, K, kind, 1e-10)
     assert not inside.any()
+    c2v, v_offsets, v_cells, owned = p.locator.vertex_star()
+    cells, Xn = shape.near_pull_back(np.roll(p.cells, 1), p.x, x0, K, c2v, v_offsets, v_cells, owned, kind, 1e-10)
+    found = cells >= 0  # the particles whose cell shares a vertex with the one searched from
+    assert found.sum() > 10 and geo.contains(geo.pull_back(cells[found], p.x[found]), 1e-10).all()
+    assert np.abs(Xn[found] - geo.pull_back(cells[found], p.x[found])).max() < 1e-14
 
 
-def _pass_state(simplex: bool, seed: int):
-    """Random particles in random affine 2D cells, a random grid, two bodies (neo-Hookean and
-    linear elastic), for the particle passes of fempm.kernels.lumped."""
+def _pass_state(simplex: bool, seed: int, multilinear: bool = False):
+    """Random particles in random affine 2D cells (``multilinear``: quadrilaterals that are not
+    parallelograms, their vertices in the place of K and x0), a random grid, two bodies
+    (neo-Hookean and linear elastic), for the particle passes of fempm.kernels.lumped."""
     rng = np.random.default_rng(seed)
     n, ncell, nd, k = 400, 60, 90, 3 if simplex else 4
     cells = rng.integers(0, ncell, n).astype(np.int32)
     X = rng.random((n, 2)) * (0.5 if simplex else 1.0)
     K = rng.standard_normal((ncell, 2, 2)) * 3.0
-    x0 = rng.random((ncell, 2))
+    x0 = corner = rng.random((ncell, 2))
+    if multilinear:
+        J = 0.3 * (np.eye(2) + 0.2 * rng.standard_normal((ncell, 2, 2)))
+        K = x0[:, None, :] + np.einsum("cgt,at->cag", J, [[0, 0], [1, 0], [0, 1], [1, 1]])
+        K[:, 3] += 0.04 * rng.standard_normal((ncell, 2))
+        x0 = K
     cell_dofs = rng.integers(0, nd, (ncell, k)).astype(np.int32)
     F = np.eye(2) + 0.05 * rng.standard_normal((n, 2, 2))
     c2v = rng.integers(0, 40, (ncell, k)).astype(np.int32)  # a random vertex star
@@ -118,7 +137,7 @@ def _pass_state(simplex: bool, seed: int):
     v_offsets = np.searchsorted(c2v.ravel()[order], np.arange(41)).astype(np.int32)
     star = (c2v, v_offsets, (order // k).astype(np.int32), ncell - 5)
     return dict(star=star, cells=cells, X=X, K=K, x0=x0, cell_dofs=cell_dofs, F=F, v=rng.standard_normal((n, 2)),
-                x=x0[cells] + rng.random((n, 2)) * 0.1, v_new=rng.standard_normal((nd, 2)),
+                x=corner[cells] + rng.random((n, 2)) * 0.1, v_new=rng.standard_normal((nd, 2)),
                 v_old=rng.standard_normal((nd, 2)), mass=rng.random(n) + 0.5, volume=rng.random(n) + 0.5,
                 volume0=rng.random(n) + 0.5, sigma=rng.standard_normal((n, 2, 2)),
                 body=rng.integers(0, 3, n).astype(np.int32), law=np.array([1, 2, 0]), lam=np.array([3.0, 2.0, 0.0]),
@@ -126,28 +145,40 @@ def _pass_state(simplex: bool, seed: int):
                 h=rng.random(ncell) + 0.1, g=np.array([0.3, -9.8]), fext=rng.standard_normal((n, 2)))
 
 
-@pytest.mark.parametrize("cell", ["triangle", "quadrilateral"])
+@pytest.mark.parametrize("cell", ["triangle", "quadrilateral", "quadrilateral-multilinear"])
 def test_planar_kernels_equal_the_generic_ones_bit_for_bit(cell):
     """fempm.kernels.planar (scalar 2D) against the dimension-generic passes of
     fempm.kernels.lumped: identical results, not only to round-off, in variants that together
-    run every part (those of USL with its bound of the stable time, USF's two and MUSL's two)."""
+    run every part (those of USL with its bound of the stable time, USF's two and MUSL's two).
+    On multilinear quadrilaterals the two compute J(X) in another order: equal to round-off."""
     import itertools
 
     from fempm.kernels import lumped, planar
 
-    simplex = cell == "triangle"
+    simplex, affine = cell == "triangle", not cell.endswith("multilinear")
+
+    def same(a, b):
+        if affine:
+            return np.array_equal(a, b)
+        a, b = np.asarray(a, dtype=float), np.asarray(b, dtype=float)
+        return np.allclose(a, b, rtol=1e-12, atol=1e-12 * np.abs(a[np.isfinite(a)]).max(initial=1.0),
+                           equal_nan=True)
+
+    def _pass_state_(simplex, seed):
+        return _pass_state(simplex, seed, not affine)
+
     for flags in [(True, True, True, True, True, True), (True, True, False, True, False, False),
                   (False, False, True, False, True, False)]:
         with_dt, has_fext = flags[3], flags[4]
         results = []
-        for kernel in (lumped._scatter_kernel(cell, *flags), planar.scatter_kernel(simplex, *flags)):
-            s = _pass_state(simplex, 1)
+        for kernel in (lumped._scatter_kernel(cell, *flags), planar.scatter_kernel(simplex, affine, *flags)):
+            s = _pass_state_(simplex, 1)
             out = np.zeros((90, 5))
             t = kernel(s["cells"], s["X"], s["K"], s["cell_dofs"], s["mass"], s["v"], s["volume"], s["sigma"], s["g"],
                        s["fext"] if has_fext else np.zeros((0, 2)), out, s["h"] if with_dt else np.zeros(0),
                        s["body"], s["modulus"], s["c"])
             results.append((out, t))
-        assert np.array_equal(results[0][0], results[1][0]) and results[0][1] == results[1][1], flags
+        assert same(results[0][0], results[1][0]) and same(results[0][1], results[1][1]), flags
         if with_dt:
             assert np.isfinite(results[0][1]) and results[0][1] > 0
     for (blend, kinematics, move, remap, totals), by_particle, keep_L in itertools.product(
@@ -155,8 +186,8 @@ def test_planar_kernels_equal_the_generic_ones_bit_for_bit(cell):
              (False, False, True, False, True)], [False, True], [False, True]):
         results = []
         for kernel in (lumped._g2p_kernel(cell, blend, kinematics, move, remap, totals),
-                       planar.g2p_kernel(simplex, blend, kinematics, move, remap, totals)):
-            s = _pass_state(simplex, 2)
+                       planar.g2p_kernel(simplex, affine, blend, kinematics, move, remap, totals)):
+            s = _pass_state_(simplex, 2)
             n = len(s["cells"])
             L = np.zeros((n if keep_L else 0, 2, 2))
             left, mom = np.zeros(n, dtype=np.bool_), np.zeros((90 if remap else 0, 2))
@@ -167,11 +198,11 @@ def test_planar_kernels_equal_the_generic_ones_bit_for_bit(cell):
             results.append((counts, [s[k] for k in ("X", "x", "v", "F", "volume", "sigma", "cells")], L, left, mom,
                             sums))
         (c0, a0, L0, l0, m0, s0), (c1, a1, L1, l1, m1, s1) = results
-        assert c0 == c1 and all(np.array_equal(a, b) for a, b in zip(a0, a1))
-        assert np.array_equal(L0, L1) and np.array_equal(l0, l1) and np.array_equal(m0, m1)
-        assert np.array_equal(s0, s1) and np.all(np.isfinite(s0))
+        assert same(c0, c1) and all(same(a, b) for a, b in zip(a0, a1))
+        assert same(L0, L1) and np.array_equal(l0, l1) and same(m0, m1)
+        assert same(s0, s1) and np.all(np.isfinite(s0))
         if move:  # some particles stay in their cells, some move to a neighbour, some are not found
-            moved = np.count_nonzero(a0[-1] != _pass_state(simplex, 2)["cells"])
+            moved = np.count_nonzero(a0[-1] != _pass_state_(simplex, 2)["cells"])
             assert 0 < np.count_nonzero(l0) and 0 < moved and np.count_nonzero(l0) + moved < len(l0)
 
 
