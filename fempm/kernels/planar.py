@@ -227,16 +227,7 @@ def g2p_kernel(simplex: bool, affine: bool, blend: bool, kinematics: bool, move:
                     nonfinite += 1  # x or v (v.v: the kinetic energy); the compiled laws' stress is finite where J is
                 if not affine:  # Newton from the first step X + K(X) u, K of the basis above
                     X[p, 0], X[p, 1] = X0 + k00 * u0 + k01 * u1, X1 + k10 * u0 + k11 * u1
-                    out = not inside_after_pull_back(x, p, x0, K, c, False, 2, tol, X, False)
-                else:
-                    e0, e1 = y0 - x0[c, 0], y1 - x0[c, 1]
-                    r0 = K[c, 0, 0] * e0 + K[c, 0, 1] * e1
-                    r1 = K[c, 1, 0] * e0 + K[c, 1, 1] * e1
-                    X[p, 0], X[p, 1] = r0, r1
-                    if QUAD:
-                        out = not (r0 >= -tol and r1 >= -tol and r0 <= 1.0 + tol and r1 <= 1.0 + tol)
-                    else:
-                        out = not (r0 >= -tol and r1 >= -tol and r0 + r1 <= 1.0 + tol)
+                out = not inside_after_pull_back(x, p, x0, K, c, simplex, 2, tol, X, affine)
                 # the neighbours, while their geometry is in cache (written out here: through a helper
                 # function the pass took 1.8 times as long)
                 if out:

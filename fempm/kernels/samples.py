@@ -1,4 +1,5 @@
-r"""The particle passes of particle domains given by sample points, on affine degree-1 cells
+r"""The particle passes of particle domains given by sample points, on degree-1 cells (affine or
+multilinear: the kernel cell types of :data:`fempm.kernels.shape.CELLS`)
 (:class:`fempm.stepping.domain_grid.DomainGrid` drives them; the numpy
 :class:`~fempm.transfer.basis.ParticleBasis` with a domain is their reference).
 
@@ -30,7 +31,7 @@ from types import SimpleNamespace
 
 import numpy as np
 
-from fempm.kernels.shape import AVAILABLE, CELLS
+from fempm.kernels.shape import AVAILABLE, CELLS, is_affine
 
 __all__ = ["at_samples", "cpdi1_samples", "kernels_for", "locate_samples"]
 
@@ -66,28 +67,6 @@ if AVAILABLE:
                     y[p * Q + q, i] = s
                     g[p, q, i] = share * t
 
-    @njit(cache=True)
-    def _locate_samples(y, cells, Q, x0, K, c2v, v_offsets, v_cells, num_cells, simplex, tol, guess, sc,
-                        Y):  # pragma: no cover - compiled
-        t = K.shape[1]
-        missing = 0
-        guessed = guess.shape[0] == len(cells)
-        for p in range(len(cells)):
-            c = cells[p]
-            for q in range(Q):
-                r = p * Q + q
-                e = guess[p, q] if guessed else -1
-                if e >= 0 and e != c and inside_after_pull_back(y, r, x0, K, e, simplex, t, tol, Y):
-                    sc[p, q] = e
-                elif inside_after_pull_back(y, r, x0, K, c, simplex, t, tol, Y):
-                    sc[p, q] = c
-                else:
-                    e = star_search(y, r, x0, K, c, c2v, v_offsets, v_cells, num_cells, simplex, t, tol, Y)
-                    sc[p, q] = e
-                    if e < 0:
-                        missing += 1
-        return missing
-
 
 def cpdi1_samples(x, F, lp, signs, out=None):
     """CPDI1 samples of particles at ``x`` (n, d) with ``F`` (n, d, d), half-widths ``lp``
@@ -100,16 +79,48 @@ def cpdi1_samples(x, F, lp, signs, out=None):
     return y, w, g
 
 
-def locate_samples(y, cells, Q: int, x0, K, star: tuple, simplex: bool, tol: float, guess=None, out=None):
+@functools.cache
+def _locate_kernel(cell: str):
+    T, _, SIMPLEX = CELLS[cell]
+    AFFINE = is_affine(cell)
+
+    @njit(cache=True)
+    def locate(y, cells, Q, x0, K, c2v, v_offsets, v_cells, num_cells, tol, guess, sc, Y):  # pragma: no cover
+        missing = 0
+        guessed = guess.shape[0] == len(cells)
+        for p in range(len(cells)):
+            c = cells[p]
+            for q in range(Q):
+                r = p * Q + q
+                e = guess[p, q] if guessed else -1
+                if e >= 0 and e != c and inside_after_pull_back(y, r, x0, K, e, SIMPLEX, T, tol, Y, AFFINE):
+                    sc[p, q] = e
+                elif inside_after_pull_back(y, r, x0, K, c, SIMPLEX, T, tol, Y, AFFINE):
+                    sc[p, q] = c
+                else:
+                    e = star_search(y, r, x0, K, c, c2v, v_offsets, v_cells, num_cells, SIMPLEX, T, tol, Y, AFFINE)
+                    sc[p, q] = e
+                    if e < 0:
+                        missing += 1
+        return missing
+
+    return locate
+
+
+def locate_samples(y, cells, Q: int, x0, K, star: tuple, cell: str, tol: float, guess=None, out=None):
     """Cells (n, Q) and reference coordinates (n Q, t) of samples ``y`` (n Q, d) of particles in
-    ``cells``: the sample's cell in ``guess`` (n, Q; e.g. the last step's), else the particle's
-    cell or the first of its vertex star (``star``: cell -> vertices, vertex -> cells offsets
-    and cells, the cells searched) that holds it, -1 where none does; and the number of such
-    samples. ``out``: the arrays (cells, coordinates) to fill (the cells may be ``guess``)."""
+    ``cells`` of the kernel cell type ``cell`` (geometry ``x0``, ``K``:
+    :attr:`fempm.meshes.geometry.CellGeometry.kernel_geometry`): the sample's cell in ``guess``
+    (n, Q; e.g. the last step's), else the particle's cell or the first of its vertex star
+    (``star``: cell -> vertices, vertex -> cells offsets and cells, the cells searched) that
+    holds it, -1 where none does; and the number of such samples. ``out``: the arrays (cells,
+    coordinates) to fill (the cells may be ``guess``; on multilinear cells the coordinates are
+    Newton's first guess)."""
     n = len(cells)
-    sc, Y = out if out is not None else (np.empty((n, Q), dtype=np.int32), np.zeros((n * Q, K.shape[1])))
+    t = CELLS[cell][0]
+    sc, Y = out if out is not None else (np.empty((n, Q), dtype=np.int32), np.zeros((n * Q, t)))
     guess = np.zeros((0, Q), dtype=np.int32) if guess is None else guess
-    missing = _locate_samples(y, cells, Q, x0, K, *star, bool(simplex), float(tol), guess, sc, Y)
+    missing = _locate_kernel(cell)(y, cells, Q, x0, K, *star, float(tol), guess, sc, Y)
     return sc, Y, int(missing)
 
 
@@ -166,7 +177,8 @@ def kernels_for(cell: str, grad_from_values: bool) -> SimpleNamespace:
 
 if AVAILABLE:
     @njit(inline="always")
-    def _particle_basis(p, sc, Y, w, gw, K, simplex, D, NK, grad_from_values, N, G, cells, W, GW):  # pragma: no cover
+    def _particle_basis(p, sc, Y, w, gw, K, simplex, affine, D, NK, grad_from_values, N, G, cells, W,
+                        GW):  # pragma: no cover
         r"""The averaged basis of particle ``p`` by cell: the distinct cells its samples lie in
         (``cells``, returned their number) and in row ``k`` the weighted values ``W[k]`` (NK,)
         and gradients ``GW[k]`` (NK, D) of the samples in ``cells[k]`` summed (samples sharing a
@@ -186,7 +198,7 @@ if AVAILABLE:
                     for e in range(D):
                         GW[k, a, e] = 0.0
             if grad_from_values:
-                shape(Y, p * Q + q, K, c, simplex, True, D, NK, N, G)
+                shape(Y, p * Q + q, K, c, simplex, affine, D, NK, N, G)
             else:  # CPDI: the gradient weights times the values
                 shape_values(Y, p * Q + q, simplex, D, NK, N)
             wq = w[p, q]
@@ -202,6 +214,7 @@ def _scatter_kernel(cell: str, grad_from_values: bool, with_mass: bool, with_mom
                     with_dt: bool, has_fext: bool, bound: bool):
     """:func:`fempm.kernels.lumped._scatter_kernel` over the samples."""
     D, NK, SIMPLEX = CELLS[cell]
+    AFFINE = is_affine(cell)
     CV = 1 if with_mass else 0
     CF = CV + (D if with_momentum else 0)
 
@@ -226,7 +239,7 @@ def _scatter_kernel(cell: str, grad_from_values: bool, with_mass: bool, with_mom
                         sg[j, e] = sigma[p, j, e]
             if with_dt:
                 best = stable_time(best, bound, m, V, speed, modulus[body[p]], c, p, h[cells[p]])
-            ncell = _particle_basis(p, sc, Y, w, gw, K, SIMPLEX, D, NK, grad_from_values, N, G, cs, W, GW)
+            ncell = _particle_basis(p, sc, Y, w, gw, K, SIMPLEX, AFFINE, D, NK, grad_from_values, N, G, cs, W, GW)
             for k in range(ncell):
                 cq = cs[k]
                 for a in range(NK):
@@ -254,6 +267,7 @@ def _g2p_kernel(cell: str, grad_from_values: bool, blend: bool, kinematics: bool
     """:func:`fempm.kernels.lumped._g2p_kernel` over the samples (the particle itself moves and
     is relocated as there)."""
     D, NK, SIMPLEX = CELLS[cell]
+    AFFINE = is_affine(cell)
 
     @njit(cache=True, error_model="numpy")
     def g2p_update(cells, sc, Y, w, gw, K, cell_dofs, v_new, v_old, flip, dt, by_particle, X, x, v, F, volume0,
@@ -268,12 +282,10 @@ def _g2p_kernel(cell: str, grad_from_values: bool, blend: bool, kinematics: bool
         nonfinite_j, inverted, jmin, jmax, nonfinite = 0, 0, np.inf, -np.inf, 0
         acc = np.zeros(3 + D)  # the state's sums (totals)
         for p in range(n):
-            for j in range(D):
-                vg[j] = 0.0
-                dv[j] = 0.0
-                for e in range(D):
-                    Lp[j, e] = 0.0
-            ncell = _particle_basis(p, sc, Y, w, gw, K, SIMPLEX, D, NK, grad_from_values, N, G, cs, W, GW)
+            vg[:] = 0.0
+            dv[:] = 0.0
+            Lp[:] = 0.0
+            ncell = _particle_basis(p, sc, Y, w, gw, K, SIMPLEX, AFFINE, D, NK, grad_from_values, N, G, cs, W, GW)
             for k in range(ncell):
                 cq = cs[k]
                 for a in range(NK):
@@ -317,9 +329,9 @@ def _g2p_kernel(cell: str, grad_from_values: bool, blend: bool, kinematics: bool
                 if not (ok and np.isfinite(speed2)):
                     nonfinite += 1
                 c = cells[p]
-                out = not inside_after_pull_back(x, p, x0, K, c, SIMPLEX, D, tol, X)
+                out = not inside_after_pull_back(x, p, x0, K, c, SIMPLEX, D, tol, X, AFFINE)
                 if out:
-                    e = star_search(x, p, x0, K, c, c2v, v_offsets, v_cells, num_cells, SIMPLEX, D, tol, X)
+                    e = star_search(x, p, x0, K, c, c2v, v_offsets, v_cells, num_cells, SIMPLEX, D, tol, X, AFFINE)
                     if e >= 0:
                         cells[p] = e
                         out = False

@@ -1,6 +1,6 @@
 r"""Degree-1 Lagrange basis in closed form on affine cells (simplices, parallelograms,
 parallelepipeds) and on multilinear cells (any quadrilateral or hexahedron with straight
-edges), and the pull-back.
+edges), degree 2 on affine simplices (:mod:`fempm.kernels.degree2`), and the pull-back.
 
 On a cell :math:`c` with :math:`x = x_0 + J X` and :math:`K = J^{-1}`:
 
@@ -14,8 +14,8 @@ equal to bit ``t`` of ``a``). The pull-back's inside test is :meth:`fempm.meshes
 
 On a multilinear cell (kernel cell type ``"quadrilateral" + MULTILINEAR``) the map is
 :math:`x(X) = \sum_a \hat N_a(X) x_a` over its vertices, :math:`K = J(X)^{-1}` is evaluated at
-each point (:func:`multilinear_map`, :func:`inverse3`) and the pull-back is Newton's method,
-:math:`X \leftarrow X - J(X)^{-1} (x(X) - x)` (:func:`multilinear_pull_back`; the numpy
+each point and the pull-back is Newton's method (:mod:`fempm.kernels.multilinear`),
+:math:`X \leftarrow X - J(X)^{-1} (x(X) - x)` (the numpy
 reference is :meth:`fempm.meshes.geometry.CellGeometry.pull_back`). The kernels receive the
 cells' vertices (cells, k, gdim) in the place of ``K`` and ``x0``.
 
@@ -35,8 +35,8 @@ import numpy.typing as npt
 
 from fempm.kernels.choice import COMPILED
 
-__all__ = ["AVAILABLE", "BERNSTEIN2", "CELLS", "LAGRANGE2", "MULTILINEAR", "NEWTON_FLOOR", "NEWTON_MAX", "NEWTON_TOL",
-           "cell_basis", "cell_pull_back", "is_affine", "near_pull_back", "space_of", "vertex_star_pull_back"]
+__all__ = ["AVAILABLE", "BERNSTEIN2", "CELLS", "LAGRANGE2", "MULTILINEAR", "cell_basis", "cell_pull_back", "is_affine",
+           "near_pull_back", "space_of", "vertex_star_pull_back"]
 
 try:
     from numba import njit
@@ -44,134 +44,8 @@ except ImportError:  # pragma: no cover - numba is a dependency
     njit = None
 
 if njit is not None:
-    @njit(inline="always")
-    def multilinear_map(X0, X1, X2, xc, c, t):  # pragma: no cover - compiled
-        r"""The multilinear map of cell ``c`` (vertices ``xc[c]``, basix order) at the
-        reference point :math:`(X_0, X_1, X_2)` (``t`` = 2: :math:`X_2` unused): the point
-        :math:`y = \sum_a \hat N_a(X) x_a` and :math:`J = \sum_a x_a \otimes \nabla_X \hat N_a`,
-        as 3 + 9 scalars (``t`` = 2: :math:`y_2 = 0` and the third row and column of the
-        identity, so that :func:`inverse3` serves both dimensions)."""
-        y0 = y1 = y2 = 0.0
-        j00 = j01 = j02 = j10 = j11 = j12 = j20 = j21 = j22 = 0.0
-        for a in range(4 if t == 2 else 8):
-            b0, b1 = a & 1, (a >> 1) & 1
-            f0 = X0 if b0 else 1.0 - X0
-            f1 = X1 if b1 else 1.0 - X1
-            d0 = 1.0 if b0 else -1.0
-            d1 = 1.0 if b1 else -1.0
-            if t == 3:
-                b2 = (a >> 2) & 1
-                f2 = X2 if b2 else 1.0 - X2
-                d2 = 1.0 if b2 else -1.0
-            else:
-                f2, d2 = 1.0, 0.0
-            n, g0, g1, g2 = f0 * f1 * f2, d0 * f1 * f2, f0 * d1 * f2, f0 * f1 * d2
-            u0, u1 = xc[c, a, 0], xc[c, a, 1]
-            y0 += n * u0
-            y1 += n * u1
-            j00 += u0 * g0
-            j01 += u0 * g1
-            j10 += u1 * g0
-            j11 += u1 * g1
-            if t == 3:
-                u2 = xc[c, a, 2]
-                y2 += n * u2
-                j02 += u0 * g2
-                j12 += u1 * g2
-                j20 += u2 * g0
-                j21 += u2 * g1
-                j22 += u2 * g2
-        if t == 2:
-            j22 = 1.0
-        return y0, y1, y2, j00, j01, j02, j10, j11, j12, j20, j21, j22
-
-    @njit(inline="always")
-    def inverse3(j00, j01, j02, j10, j11, j12, j20, j21, j22):  # pragma: no cover - compiled
-        """The inverse of a 3x3 matrix by cofactors, row by row (9 scalars)."""
-        c00 = j11 * j22 - j12 * j21
-        c01 = j12 * j20 - j10 * j22
-        c02 = j10 * j21 - j11 * j20
-        r = 1.0 / (j00 * c00 + j01 * c01 + j02 * c02)
-        return (c00 * r, (j02 * j21 - j01 * j22) * r, (j01 * j12 - j02 * j11) * r,
-                c01 * r, (j00 * j22 - j02 * j20) * r, (j02 * j10 - j00 * j12) * r,
-                c02 * r, (j01 * j20 - j00 * j21) * r, (j00 * j11 - j01 * j10) * r)
-
-    @njit(inline="always")
-    def multilinear_pull_back(x, p, xc, c, t, tol, X):  # pragma: no cover - compiled
-        """X[p] <- the reference coordinates of ``x[p]`` in the multilinear cell ``c`` by Newton's
-        method, from ``X[p]`` where it is finite and near the cell (else the centre), until a
-        step is below :data:`NEWTON_TOL` (or, below :data:`NEWTON_FLOOR`, no longer halves the
-        one before: the round-off of cells far from the origin); whether the point lies in the reference cell within
-        ``tol`` (a point where Newton does not converge lies outside, X[p] NaN)."""
-        X0, X1 = X[p, 0], X[p, 1]
-        X2 = X[p, 2] if t == 3 else 0.0
-        if not (abs(X0 - 0.5) < 1.5 and abs(X1 - 0.5) < 1.5 and abs(X2 - 0.5) < 1.5):  # also NaN
-            X0 = X1 = 0.5
-            X2 = 0.5 if t == 3 else 0.0
-        z0, z1 = x[p, 0], x[p, 1]
-        z2 = x[p, 2] if t == 3 else 0.0
-        done = False
-        last = np.inf
-        for _ in range(NEWTON_MAX):
-            y0, y1, y2, j00, j01, j02, j10, j11, j12, j20, j21, j22 = multilinear_map(X0, X1, X2, xc, c, t)
-            k00, k01, k02, k10, k11, k12, k20, k21, k22 = inverse3(j00, j01, j02, j10, j11, j12, j20, j21, j22)
-            r0, r1, r2 = y0 - z0, y1 - z1, y2 - z2
-            e0 = k00 * r0 + k01 * r1 + k02 * r2
-            e1 = k10 * r0 + k11 * r1 + k12 * r2
-            e2 = k20 * r0 + k21 * r1 + k22 * r2 if t == 3 else 0.0
-            X0 -= e0
-            X1 -= e1
-            X2 -= e2
-            step = max(abs(e0), abs(e1), abs(e2))
-            if not (step < 1e3):  # diverged, or NaN
-                break
-            if step < NEWTON_TOL or (step < NEWTON_FLOOR and step > 0.5 * last):  # converged, or at round-off
-                done = True
-                break
-            last = step
-        if not done:
-            X0 = X1 = X2 = np.nan
-        X[p, 0], X[p, 1] = X0, X1
-        if t == 3:
-            X[p, 2] = X2
-        return done and X0 >= -tol and X1 >= -tol and X2 >= -tol and X0 <= 1.0 + tol and X1 <= 1.0 + tol and \
-            X2 <= 1.0 + tol
-
-    @njit(inline="always")
-    def edge_vertices(q, t):  # pragma: no cover - compiled
-        """The vertices (a, b), a < b, of edge ``q`` of the reference simplex of dimension ``t``
-        in basix's numbering (triangle: (1, 2), (0, 2), (0, 1); tetrahedron: (2, 3), (1, 3),
-        (1, 2), (0, 3), (0, 2), (0, 1); interval: (0, 1))."""
-        if t == 1:
-            return 0, 1
-        if t == 2:
-            return (1 if q == 0 else 0), (2 if q < 2 else 1)
-        if q < 3:
-            return (2 if q == 0 else 1), (3 if q < 2 else 2)
-        return 0, 6 - q
-
-    @njit(inline="always")
-    def degree2(t, k, bernstein, N, G, gradients):  # pragma: no cover - compiled
-        r"""The degree-2 basis on a simplex from the barycentric coordinates :math:`\lambda_a` in
-        ``N[:t+1]`` (and their gradients in ``G[:t+1]``), in place: Lagrange
-        :math:`\lambda_a (2\lambda_a - 1)` at the vertices and :math:`4 \lambda_a \lambda_b` on
-        edge (a, b) (:func:`edge_vertices`); Bernstein :math:`\lambda_a^2` and
-        :math:`2 \lambda_a \lambda_b`."""
-        w = 2.0 if bernstein else 4.0
-        for q in range(k - t - 1):
-            a, b = edge_vertices(q, t)
-            la, lb = N[a], N[b]
-            N[t + 1 + q] = w * la * lb
-            if gradients:
-                for e in range(t):
-                    G[t + 1 + q, e] = w * (lb * G[a, e] + la * G[b, e])
-        for a in range(t + 1):
-            la = N[a]
-            N[a] = la * la if bernstein else la * (2.0 * la - 1.0)
-            if gradients:
-                f = 2.0 * la if bernstein else 4.0 * la - 1.0
-                for e in range(t):
-                    G[a, e] *= f
+    from fempm.kernels.degree2 import degree2
+    from fempm.kernels.multilinear import inverse3, multilinear_map, multilinear_pull_back
 
     @njit(inline="always")
     def shape(X, p, K, c, simplex, affine, t, k, N, G, degree=1, bernstein=False):  # pragma: no cover - compiled
@@ -310,13 +184,6 @@ LAGRANGE2, BERNSTEIN2 = "-P2", "-bernstein2"
 for _name in ("interval", "triangle", "tetrahedron"):
     _t = CELLS[_name][0]
     CELLS[_name + LAGRANGE2] = CELLS[_name + BERNSTEIN2] = (_t, (_t + 1) * (_t + 2) // 2, True)
-#: a step of Newton's pull-back on multilinear cells below which it has converged (reference
-#: coordinates; the numpy pull-back's tolerance)
-NEWTON_TOL = 1e-12
-#: a step below which Newton's pull-back has reached round-off when it no longer halves
-NEWTON_FLOOR = 1e-7
-#: Newton steps after which a pull-back that has not converged lies outside the cell
-NEWTON_MAX = 25
 
 
 def is_affine(cell: str) -> bool:

@@ -4,7 +4,7 @@ The stages and checks of :class:`fempm.stepping.lumped.PointGrid` with the domai
 basis of :mod:`fempm.kernels.samples` in place of the point basis: CPDI1 (the corners of
 :math:`x_p + F_p \operatorname{diag}(\ell_p) [-1, 1]^d`, made in a compiled pass), CPDI2 (the
 tracked corners, moved with the grid velocity at them after the moving pass) and GIMP with a
-Gauss rule (``gimp_order``), lumped mass, on affine degree-1 cells. Each step locates the
+Gauss rule (``gimp_order``), lumped mass, on degree-1 cells (affine or multilinear). Each step locates the
 samples in the particle's cell or its vertex star (owned and ghost cells) in one compiled pass;
 the few it does not find are located through the DOLFINx tree, and on one rank samples beyond
 the mesh are treated as :class:`~fempm.transfer.basis.ParticleBasis` treats them (CPDI corners
@@ -24,10 +24,11 @@ import numpy as np
 import numpy.typing as npt
 
 from fempm.kernels import samples as ks
-from fempm.kernels.shape import CELLS
+from fempm.kernels.shape import space_of
 from fempm.particles.corners import corner_signs, domain_geometry
 from fempm.stepping.grid import Grid, SingleFieldGrid
-from fempm.stepping.lumped import PointGrid, compiled_space
+from fempm.stepping.lumped import PointGrid
+from fempm.stepping.spaces import compiled_space
 from fempm.transfer.domains import CPDI1, CPDI2, GIMP, half_widths
 from fempm.transfer.mass_models import Lumped
 
@@ -42,8 +43,9 @@ def supported(solver: ExplicitSolver) -> bool:
     dom = solver.options.particle_domain
     # these types themselves: a subclass may make or move its samples otherwise
     sampled = type(dom) in (CPDI1, CPDI2) or (type(dom) is GIMP and not dom.exact)
+    cell = compiled_space(solver)
     return (sampled and type(solver.options.mass_model) is Lumped and not solver.conditions.needs_positions
-            and compiled_space(solver) == solver.particles.locator.geometry.cell_name)  # P1 on affine cells
+            and cell is not None and space_of(cell) == (1, False))  # P1 on affine or multilinear cells
 
 
 class DomainGrid(PointGrid):
@@ -54,9 +56,8 @@ class DomainGrid(PointGrid):
         super().__init__(solver)
         dom = self.options.particle_domain
         self.cpdi1 = isinstance(dom, CPDI1)
-        self.passes = ks.kernels_for(solver.particles.locator.geometry.cell_name, grad_from_values=isinstance(dom, GIMP))
+        self.passes = ks.kernels_for(self.cell, grad_from_values=isinstance(dom, GIMP))
         self.signs = corner_signs(self.d)
-        self.simplex = CELLS[solver.particles.locator.geometry.cell_name][2]
         self.generic: SingleFieldGrid | None = None  # for steps with samples beyond the ghost cells
         self.stencil: tuple = (np.zeros((0, 0), dtype=np.int32),)  # the samples' cells, coordinates, weights
         self._arrays: dict = {}  # kept sample arrays (_kept)
@@ -99,7 +100,7 @@ class DomainGrid(PointGrid):
         # the last step's sample cells are the first guess (a guess only: after the particles were
         # sorted or migrated a wrong one costs a search)
         guess = self.stencil[0] if self.stencil[0].shape == (n, Q) else None
-        sc, Y, missing = ks.locate_samples(y, p.cells, Q, self.x0, self.K, loc.vertex_star(), self.simplex, loc.tol,
+        sc, Y, missing = ks.locate_samples(y, p.cells, Q, self.x0, self.K, loc.vertex_star(), self.cell, loc.tol,
                                            guess, self._kept("located", n, Q))
         if missing:
             missing = self._place(y, sc, Y, w, beyond)
@@ -161,7 +162,7 @@ class DomainGrid(PointGrid):
         s = self.solver
         p = s.particles
         sc, Y = self.stencil[:2]
-        at = ks.at_samples(p.locator.geometry.cell_name, sc, Y, self.K, self.cell_dofs, v_new)
+        at = ks.at_samples(self.cell, sc, Y, self.K, self.cell_dofs, v_new)
         corners = p.fields["corners"] + dt * at
         try:
             w, g, volume, centroid = domain_geometry(corners, p.comm)

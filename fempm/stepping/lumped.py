@@ -30,17 +30,15 @@ from __future__ import annotations
 
 from typing import TYPE_CHECKING
 
-import basix
 import numpy as np
 import numpy.typing as npt
 from mpi4py import MPI
 
 from fempm.kernels import lumped as kl
-from fempm.kernels.shape import AVAILABLE, BERNSTEIN2, LAGRANGE2, space_of
+from fempm.kernels.shape import space_of
 from fempm.materials.base import IsotropicElastic
 from fempm.materials.linear_elastic import LinearElastic
 from fempm.materials.neo_hookean import NeoHookean
-from fempm.meshes.geometry import SIMPLICES
 from fempm.stepping import diagnostics
 from fempm.stepping.consistent import ConsistentNodalMass
 from fempm.stepping.fmpm_mass import FMPMNodalMass
@@ -48,6 +46,7 @@ from fempm.stepping.grid import Grid
 from fempm.stepping.laws import law_stress, material_groups
 from fempm.stepping.loads import external_forces
 from fempm.stepping.nodal import NodalMass, kept_nodal_array, sum_ghosts
+from fempm.stepping.spaces import compiled_space
 from fempm.transfer.centres import NodalCentres
 from fempm.transfer.domains import Point
 from fempm.transfer.grid_solves import negative_basis_message
@@ -57,38 +56,14 @@ from fempm.transfer.mass_models import FMPM, Consistent, Lumped
 if TYPE_CHECKING:
     from fempm.stepping.solver import ExplicitSolver
 
-__all__ = ["BOUND_SAFETY", "NODAL_MASSES", "NODAL_VARIANTS", "SORT_EVERY", "LumpedNodalMass", "PointGrid", "compiled_space", "supported"]
+__all__ = ["BOUND_SAFETY", "NODAL_MASSES", "SORT_EVERY", "LumpedNodalMass", "PointGrid", "supported"]
 
 
-#: the Lagrange variants whose degree-2 basis is the nodal one of the vertices and edge midpoints
-NODAL_VARIANTS = (basix.LagrangeVariant.unset, basix.LagrangeVariant.equispaced, basix.LagrangeVariant.gll_warped,
-                  basix.LagrangeVariant.gll_isaac, basix.LagrangeVariant.gll_centroid)
 #: steps between two sorts of the particles by cell
 SORT_EVERY = 100
 #: a given dt at most this fraction of the bound of the stable time needs no exact check
 #: (the bound's own rounding)
 BOUND_SAFETY = 1.0 - 1e-12
-
-
-def compiled_space(solver: ExplicitSolver) -> str | None:
-    """The kernel cell type (:data:`fempm.kernels.shape.CELLS`) of ``solver``'s space and mesh
-    where they take the compiled passes, else None: a vector degree-1 space on affine or
-    multilinear cells, or a continuous degree-2 Lagrange or Bernstein space on affine
-    simplices (and numba)."""
-    V = solver.V
-    geo = solver.particles.locator.geometry
-    element = V.element.basix_element
-    if not (AVAILABLE and V.dofmap.index_map_bs == solver.particles.gdim and geo.kernel_cell is not None
-            and element.family == basix.ElementFamily.P and not element.discontinuous):
-        return None
-    if element.degree == 1:
-        return geo.kernel_cell
-    if element.degree == 2 and geo.affine and geo.cell_name in SIMPLICES:
-        if element.lagrange_variant == basix.LagrangeVariant.bernstein:
-            return geo.cell_name + BERNSTEIN2
-        if element.lagrange_variant in NODAL_VARIANTS:
-            return geo.cell_name + LAGRANGE2
-    return None
 
 
 def supported(solver: ExplicitSolver) -> bool:

@@ -41,13 +41,8 @@ from fempm.kernels import consistent as kc
 from fempm.stepping.nodal import kept_nodal_array
 from fempm.stepping.options import SimulationError
 from fempm.transfer.mapping import SUPPORT_TOL
-from fempm.transfer.mass_span import (
-    check_nonsingular,
-    mass_ratio_estimate,
-    mass_ratio_ksp,
-    mass_ratio_rhs,
-    share_flags,
-)
+from fempm.transfer.mass_span import (check_nonsingular, mass_ratio_estimate, mass_ratio_ksp, mass_ratio_rhs,
+                                      share_flags)
 
 __all__ = ["KSP_OPTIONS", "KSP_OPTIONS_PARALLEL", "REFRESH_GROWTH", "SIGNED_OPTIONS", "SIMPLEX_OPTIONS", "ConsistentSystems"]
 

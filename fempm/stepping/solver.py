@@ -203,10 +203,10 @@ class ExplicitSolver:
         if self.compiled is not False and domain_grid_supported(self):
             return DomainGrid(self)
         if self.compiled:
-            raise ValueError("compiled=True needs a degree-1 space on cells with straight edges (any simplex, "
-                             "quadrilateral or hexahedron) with numba installed, and point particles with lumped, "
-                             "consistent or FMPM mass, or CPDI1 or Gauss-rule GIMP domains with lumped mass on "
-                             "affine cells (simplices, parallelograms, parallelepipeds)")
+            raise ValueError("compiled=True needs numba and a Lagrange space of degree 1 (any simplex, "
+                             "quadrilateral or hexahedron) or of degree 2 or Bernstein on simplices, with point "
+                             "particles and lumped, consistent or FMPM mass, or CPDI1, CPDI2 or Gauss-rule GIMP "
+                             "domains with lumped mass on degree 1")
         return SingleFieldGrid(self)
 
     def step(self, dt: float | None = None, *, dt_max: float = np.inf, totals: bool = False) -> float:

@@ -14,6 +14,7 @@ from fempm.stepping import StepOptions
 from fempm.stepping.diagnostics import momentum_scale
 from fempm.stepping.lumped import PointGrid
 
+from tests.matrix import covering
 from tests.stepping.test_compiled_step import MESHES, make_solver
 
 pytestmark = pytest.mark.parallel  # also under mpiexec -n 2 (scripts/run-tests)
@@ -37,8 +38,7 @@ def assert_same_energies(solver):
     return row
 
 
-@pytest.mark.parametrize("cell", list(MESHES))
-@pytest.mark.parametrize("scheme", ["USL", "USF", "MUSL"])
+@pytest.mark.parametrize(("cell", "scheme"), covering(list(MESHES), ["USL", "USF", "MUSL"]))
 def test_sums_of_the_passes_equal_the_state(cell, scheme):
     solver = make_solver(cell, StepOptions(scheme=scheme, flip=0.9))
     assert isinstance(solver.grid, PointGrid)

@@ -1,0 +1,41 @@
+"""Which spaces and meshes take the compiled passes (:mod:`fempm.kernels`), and under which
+kernel cell type (a key of :data:`fempm.kernels.shape.CELLS`)."""
+
+from __future__ import annotations
+
+from typing import TYPE_CHECKING
+
+import basix
+
+from fempm.kernels.shape import AVAILABLE, BERNSTEIN2, LAGRANGE2
+from fempm.meshes.geometry import SIMPLICES
+
+if TYPE_CHECKING:
+    from fempm.stepping.solver import ExplicitSolver
+
+__all__ = ["NODAL_VARIANTS", "compiled_space"]
+
+#: the Lagrange variants whose degree-2 basis is the nodal one of the vertices and edge midpoints
+NODAL_VARIANTS = (basix.LagrangeVariant.unset, basix.LagrangeVariant.equispaced, basix.LagrangeVariant.gll_warped,
+                  basix.LagrangeVariant.gll_isaac, basix.LagrangeVariant.gll_centroid)
+
+
+def compiled_space(solver: ExplicitSolver) -> str | None:
+    """The kernel cell type (:data:`fempm.kernels.shape.CELLS`) of ``solver``'s space and mesh
+    where they take the compiled passes, else None: a vector degree-1 space on affine or
+    multilinear cells, or a continuous degree-2 Lagrange or Bernstein space on affine
+    simplices (and numba)."""
+    V = solver.V
+    geo = solver.particles.locator.geometry
+    element = V.element.basix_element
+    if not (AVAILABLE and V.dofmap.index_map_bs == solver.particles.gdim and geo.kernel_cell is not None
+            and element.family == basix.ElementFamily.P and not element.discontinuous):
+        return None
+    if element.degree == 1:
+        return geo.kernel_cell
+    if element.degree == 2 and geo.affine and geo.cell_name in SIMPLICES:
+        if element.lagrange_variant == basix.LagrangeVariant.bernstein:
+            return geo.cell_name + BERNSTEIN2
+        if element.lagrange_variant in NODAL_VARIANTS:
+            return geo.cell_name + LAGRANGE2
+    return None
