@@ -16,6 +16,8 @@ from fempm.boundary import fixed
 from fempm.materials import LinearElastic
 from fempm.stepping import ExplicitSolver, StepOptions
 
+pytestmark = pytest.mark.xdist_group("test_architecture")  # one worker computes its module fixtures
+
 comm = MPI.COMM_WORLD
 PAGE = Path(__file__).resolve().parents[2] / "docs" / "architecture.md"
 

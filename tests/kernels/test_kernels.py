@@ -145,7 +145,8 @@ def _pass_state(simplex: bool, seed: int, multilinear: bool = False):
                 h=rng.random(ncell) + 0.1, g=np.array([0.3, -9.8]), fext=rng.standard_normal((n, 2)))
 
 
-@pytest.mark.parametrize("cell", ["triangle", "quadrilateral", "quadrilateral-multilinear"])
+@pytest.mark.parametrize("cell", ["triangle", pytest.param("quadrilateral", marks=pytest.mark.slow),
+                                  "quadrilateral-multilinear"])  # affine quads: the Q1 basis of the one, the pull-back of the other
 def test_planar_kernels_equal_the_generic_ones_bit_for_bit(cell):
     """fempm.kernels.planar (scalar 2D) against the dimension-generic passes of
     fempm.kernels.lumped: identical results, not only to round-off, in variants that together

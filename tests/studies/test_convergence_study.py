@@ -9,6 +9,8 @@ from mpi4py import MPI
 
 from fempm.studies import convergence
 
+pytestmark = pytest.mark.xdist_group("test_convergence_study")  # one worker computes its module fixtures
+
 
 @pytest.fixture(scope="module")
 def study(tmp_path_factory):

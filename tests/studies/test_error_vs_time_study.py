@@ -12,6 +12,8 @@ from mpi4py import MPI
 
 from fempm.studies import error_vs_time as evt
 
+pytestmark = pytest.mark.xdist_group("test_error_vs_time_study")  # one worker computes its module fixtures
+
 
 @pytest.fixture(scope="module")
 def study(tmp_path_factory):

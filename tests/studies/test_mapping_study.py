@@ -5,6 +5,8 @@ from mpi4py import MPI
 
 from fempm.studies import mapping
 
+pytestmark = pytest.mark.xdist_group("test_mapping_study")  # one worker computes its module fixtures
+
 
 @pytest.fixture(scope="module")
 def study(tmp_path_factory):

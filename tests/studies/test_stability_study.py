@@ -11,6 +11,8 @@ from conftest import quick_study
 from fempm.studies import stability
 from fempm.studies.stability_cases import CASES
 
+pytestmark = pytest.mark.xdist_group("test_stability_study")  # one worker computes its module fixtures
+
 
 @pytest.fixture(scope="module")
 def study(tmp_path_factory):

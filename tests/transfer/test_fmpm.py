@@ -12,7 +12,8 @@ from fempm.transfer.mass_models import FMPM, Consistent, Lumped, mass_model
 from fempm.scene import run
 from fempm.scenes import two_disks, vibrating_bar
 
-pytestmark = pytest.mark.parallel  # also under mpiexec -n 2 (scripts/run-tests)
+pytestmark = [pytest.mark.parallel,  # also under mpiexec -n 2 (scripts/run-tests)
+              pytest.mark.xdist_group("test_fmpm")]  # one worker computes its module fixtures
 
 comm = MPI.COMM_WORLD
 

@@ -11,7 +11,8 @@ import fempm
 from fempm.scene import run
 from fempm.scenes import two_disks
 
-pytestmark = pytest.mark.parallel  # also under mpiexec -n 2 (scripts/run-tests)
+pytestmark = [pytest.mark.parallel,  # also under mpiexec -n 2 (scripts/run-tests)
+              pytest.mark.xdist_group("test_mass_span")]  # one worker computes its module fixtures
 
 comm = MPI.COMM_WORLD
 
