@@ -26,7 +26,7 @@ if njit is not None:
             return (2 if q == 0 else 1), (3 if q < 2 else 2)
         return 0, 6 - q
 
-    @njit(inline="always")
+    @njit(cache=True)  # not inlined: compiled once, not into every kernel
     def degree2(t, k, bernstein, N, G, gradients):  # pragma: no cover - compiled
         r"""The degree-2 basis on a simplex from the barycentric coordinates :math:`\lambda_a` in
         ``N[:t+1]`` (and their gradients in ``G[:t+1]``), in place: Lagrange

@@ -84,7 +84,7 @@ if njit is not None:
                 c01 * r, (j00 * j22 - j02 * j20) * r, (j02 * j10 - j00 * j12) * r,
                 c02 * r, (j01 * j20 - j00 * j21) * r, (j00 * j11 - j01 * j10) * r)
 
-    @njit(inline="always")
+    @njit(cache=True)  # not inlined: compiled once, not into every kernel
     def multilinear_pull_back(x, p, xc, c, t, tol, X):  # pragma: no cover - compiled
         """X[p] <- the reference coordinates of ``x[p]`` in the multilinear cell ``c`` by Newton's
         method, from ``X[p]`` where it is finite and near the cell (else the centre), until a
@@ -124,3 +124,29 @@ if njit is not None:
             X[p, 2] = X2
         return done and X0 >= -tol and X1 >= -tol and X2 >= -tol and X0 <= 1.0 + tol and X1 <= 1.0 + tol and \
             X2 <= 1.0 + tol
+
+    @njit(cache=True)  # not inlined: compiled once, not into every kernel
+    def multilinear_shape(X, p, xc, c, t, k, N, G):  # pragma: no cover - compiled
+        """Values ``N`` (k,) and physical gradients ``G`` (k, t) of the multilinear basis at
+        ``X[p]`` in the cell of vertices ``xc[c]``, the inverse Jacobian computed there."""
+        X0, X1 = X[p, 0], X[p, 1]
+        X2 = X[p, 2] if t == 3 else 0.0
+        _, _, _, j00, j01, j02, j10, j11, j12, j20, j21, j22 = multilinear_map(X0, X1, X2, xc, c, t)
+        k00, k01, k02, k10, k11, k12, k20, k21, k22 = inverse3(j00, j01, j02, j10, j11, j12, j20, j21, j22)
+        for a in range(k):
+            b0, b1, b2 = a & 1, (a >> 1) & 1, (a >> 2) & 1
+            f0 = X0 if b0 else 1.0 - X0
+            f1 = X1 if b1 else 1.0 - X1
+            d0 = 1.0 if b0 else -1.0
+            d1 = 1.0 if b1 else -1.0
+            if t == 3:
+                f2 = X2 if b2 else 1.0 - X2
+                d2 = 1.0 if b2 else -1.0
+            else:
+                f2, d2 = 1.0, 0.0
+            g0, g1, g2 = d0 * f1 * f2, f0 * d1 * f2, f0 * f1 * d2
+            N[a] = f0 * f1 * f2
+            G[a, 0] = g0 * k00 + g1 * k10 + g2 * k20
+            G[a, 1] = g0 * k01 + g1 * k11 + g2 * k21
+            if t == 3:
+                G[a, 2] = g0 * k02 + g1 * k12 + g2 * k22

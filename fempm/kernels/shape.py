@@ -45,7 +45,7 @@ except ImportError:  # pragma: no cover - numba is a dependency
 
 if njit is not None:
     from fempm.kernels.degree2 import degree2
-    from fempm.kernels.multilinear import inverse3, multilinear_map, multilinear_pull_back
+    from fempm.kernels.multilinear import multilinear_pull_back, multilinear_shape
 
     @njit(inline="always")
     def shape(X, p, K, c, simplex, affine, t, k, N, G, degree=1, bernstein=False):  # pragma: no cover - compiled
@@ -57,27 +57,7 @@ if njit is not None:
         ``k``, ``degree`` and ``bernstein`` are compile-time constants (the kernels of
         :func:`fempm.kernels.lumped.kernels_for`) the loops unroll and the branches fold."""
         if not affine:
-            X0, X1 = X[p, 0], X[p, 1]
-            X2 = X[p, 2] if t == 3 else 0.0
-            _, _, _, j00, j01, j02, j10, j11, j12, j20, j21, j22 = multilinear_map(X0, X1, X2, K, c, t)
-            k00, k01, k02, k10, k11, k12, k20, k21, k22 = inverse3(j00, j01, j02, j10, j11, j12, j20, j21, j22)
-            for a in range(k):
-                b0, b1, b2 = a & 1, (a >> 1) & 1, (a >> 2) & 1
-                f0 = X0 if b0 else 1.0 - X0
-                f1 = X1 if b1 else 1.0 - X1
-                d0 = 1.0 if b0 else -1.0
-                d1 = 1.0 if b1 else -1.0
-                if t == 3:
-                    f2 = X2 if b2 else 1.0 - X2
-                    d2 = 1.0 if b2 else -1.0
-                else:
-                    f2, d2 = 1.0, 0.0
-                g0, g1, g2 = d0 * f1 * f2, f0 * d1 * f2, f0 * f1 * d2
-                N[a] = f0 * f1 * f2
-                G[a, 0] = g0 * k00 + g1 * k10 + g2 * k20
-                G[a, 1] = g0 * k01 + g1 * k11 + g2 * k21
-                if t == 3:
-                    G[a, 2] = g0 * k02 + g1 * k12 + g2 * k22
+            multilinear_shape(X, p, K, c, t, k, N, G)
         elif simplex:
             s = 1.0
             for i in range(t):
