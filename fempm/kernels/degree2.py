@@ -1,6 +1,7 @@
 r"""The degree-2 Lagrange and Bernstein bases on a simplex from its barycentric coordinates,
-inlined into the compiled passes (:func:`fempm.kernels.shape.shape`); basix's numbering of the
-edges and the equispaced/GLL nodes (equal at degree 2) are the reference.
+for the compiled passes (:func:`fempm.kernels.shape.shape` calls :func:`degree2`, compiled
+once rather than inlined into every kernel); basix's numbering of the edges and the
+equispaced/GLL nodes (equal at degree 2) are the reference.
 """
 
 from __future__ import annotations

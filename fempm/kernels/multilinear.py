@@ -1,5 +1,7 @@
 r"""Newton's pull-back on multilinear cells (quadrilaterals and hexahedra with straight edges
-that are not parallelograms or parallelepipeds), inlined into the compiled passes.
+that are not parallelograms or parallelepipeds), for the compiled passes: the pull-back and
+the basis are functions compiled once that the passes call (inlined, their code made every
+kernel, affine or not, compile about 4 times as long).
 
 The map of such a cell is :math:`x(X) = \sum_a \hat N_a(X) x_a` over its vertices (basix order),
 its Jacobian :math:`J(X) = \sum_a x_a \otimes \nabla_X \hat N_a(X)` varies over the cell
@@ -33,6 +35,25 @@ except ImportError:  # pragma: no cover - numba is a dependency
 
 if njit is not None:
     @njit(inline="always")
+    def vertex_basis(a, X0, X1, X2, t):  # pragma: no cover - compiled
+        r"""The reference basis function of vertex ``a`` (basix order: bit ``i`` of ``a`` is the
+        vertex's coordinate ``i``) at :math:`(X_0, X_1, X_2)` and its reference gradient, as
+        4 scalars :math:`\hat N_a, \partial_0 \hat N_a, \partial_1 \hat N_a, \partial_2 \hat N_a`
+        (``t`` = 2: the factor of :math:`X_2` is 1, its derivative 0)."""
+        b0, b1 = a & 1, (a >> 1) & 1
+        f0 = X0 if b0 else 1.0 - X0
+        f1 = X1 if b1 else 1.0 - X1
+        d0 = 1.0 if b0 else -1.0
+        d1 = 1.0 if b1 else -1.0
+        if t == 3:
+            b2 = (a >> 2) & 1
+            f2 = X2 if b2 else 1.0 - X2
+            d2 = 1.0 if b2 else -1.0
+        else:
+            f2, d2 = 1.0, 0.0
+        return f0 * f1 * f2, d0 * f1 * f2, f0 * d1 * f2, f0 * f1 * d2
+
+    @njit(inline="always")
     def multilinear_map(X0, X1, X2, xc, c, t):  # pragma: no cover - compiled
         r"""The multilinear map of cell ``c`` (vertices ``xc[c]``, basix order) at the
         reference point :math:`(X_0, X_1, X_2)` (``t`` = 2: :math:`X_2` unused): the point
@@ -42,18 +63,7 @@ if njit is not None:
         y0 = y1 = y2 = 0.0
         j00 = j01 = j02 = j10 = j11 = j12 = j20 = j21 = j22 = 0.0
         for a in range(4 if t == 2 else 8):
-            b0, b1 = a & 1, (a >> 1) & 1
-            f0 = X0 if b0 else 1.0 - X0
-            f1 = X1 if b1 else 1.0 - X1
-            d0 = 1.0 if b0 else -1.0
-            d1 = 1.0 if b1 else -1.0
-            if t == 3:
-                b2 = (a >> 2) & 1
-                f2 = X2 if b2 else 1.0 - X2
-                d2 = 1.0 if b2 else -1.0
-            else:
-                f2, d2 = 1.0, 0.0
-            n, g0, g1, g2 = f0 * f1 * f2, d0 * f1 * f2, f0 * d1 * f2, f0 * f1 * d2
+            n, g0, g1, g2 = vertex_basis(a, X0, X1, X2, t)
             u0, u1 = xc[c, a, 0], xc[c, a, 1]
             y0 += n * u0
             y1 += n * u1
@@ -134,18 +144,8 @@ if njit is not None:
         _, _, _, j00, j01, j02, j10, j11, j12, j20, j21, j22 = multilinear_map(X0, X1, X2, xc, c, t)
         k00, k01, k02, k10, k11, k12, k20, k21, k22 = inverse3(j00, j01, j02, j10, j11, j12, j20, j21, j22)
         for a in range(k):
-            b0, b1, b2 = a & 1, (a >> 1) & 1, (a >> 2) & 1
-            f0 = X0 if b0 else 1.0 - X0
-            f1 = X1 if b1 else 1.0 - X1
-            d0 = 1.0 if b0 else -1.0
-            d1 = 1.0 if b1 else -1.0
-            if t == 3:
-                f2 = X2 if b2 else 1.0 - X2
-                d2 = 1.0 if b2 else -1.0
-            else:
-                f2, d2 = 1.0, 0.0
-            g0, g1, g2 = d0 * f1 * f2, f0 * d1 * f2, f0 * f1 * d2
-            N[a] = f0 * f1 * f2
+            n, g0, g1, g2 = vertex_basis(a, X0, X1, X2, t)
+            N[a] = n
             G[a, 0] = g0 * k00 + g1 * k10 + g2 * k20
             G[a, 1] = g0 * k01 + g1 * k11 + g2 * k21
             if t == 3:
