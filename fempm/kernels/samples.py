@@ -186,6 +186,9 @@ if AVAILABLE:
         Q = sc.shape[1]
         ncell = 0
         for q in range(Q):
+            wq = w[p, q]
+            if grad_from_values and wq == 0.0:
+                continue  # a sample of no weight (GIMP's cut or unused samples)
             c = sc[p, q]
             k = 0
             while k < ncell and cells[k] != c:
@@ -201,7 +204,6 @@ if AVAILABLE:
                 shape(Y, p * Q + q, K, c, simplex, affine, D, NK, N, G)
             else:  # CPDI: the gradient weights times the values
                 shape_values(Y, p * Q + q, simplex, D, NK, N)
-            wq = w[p, q]
             for a in range(NK):
                 W[k, a] += wq * N[a]
                 for e in range(D):

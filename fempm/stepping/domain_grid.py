@@ -4,7 +4,9 @@ The stages and checks of :class:`fempm.stepping.lumped.PointGrid` with the domai
 basis of :mod:`fempm.kernels.samples` in place of the point basis: CPDI1 (the corners of
 :math:`x_p + F_p \operatorname{diag}(\ell_p) [-1, 1]^d`, made in a compiled pass), CPDI2 (the
 tracked corners, moved with the grid velocity at them after the moving pass) and GIMP with a
-Gauss rule (``gimp_order``), lumped mass, on degree-1 cells (affine or multilinear). Each step locates the
+Gauss rule (``gimp_order``), lumped mass, on degree-1 cells (affine or multilinear); exact GIMP
+(uGIMP, cpGIMP) on simplices and axis-aligned boxes, the pieces of each box in the cells it
+meets as samples (:mod:`fempm.kernels.boxes`). Each step locates the
 samples in the particle's cell or its vertex star (owned and ghost cells) in one compiled pass;
 the few it does not find are located through the DOLFINx tree, and on one rank samples beyond
 the mesh are treated as :class:`~fempm.transfer.basis.ParticleBasis` treats them (CPDI corners
@@ -24,7 +26,8 @@ import numpy as np
 import numpy.typing as npt
 
 from fempm.kernels import samples as ks
-from fempm.kernels.shape import space_of
+from fempm.kernels.boxes import box_samples
+from fempm.kernels.shape import CELLS, space_of
 from fempm.particles.corners import corner_signs, domain_geometry
 from fempm.stepping.grid import Grid, SingleFieldGrid
 from fempm.stepping.lumped import PointGrid
@@ -41,11 +44,15 @@ __all__ = ["DomainGrid", "supported"]
 def supported(solver: ExplicitSolver) -> bool:
     """Whether ``solver``'s domain, mass, conditions, space and mesh take :class:`DomainGrid`."""
     dom = solver.options.particle_domain
-    # these types themselves: a subclass may make or move its samples otherwise
-    sampled = type(dom) in (CPDI1, CPDI2) or (type(dom) is GIMP and not dom.exact)
     cell = compiled_space(solver)
-    return (sampled and type(solver.options.mass_model) is Lumped and not solver.conditions.needs_positions
-            and cell is not None and space_of(cell) == (1, False))  # P1 on affine or multilinear cells
+    if not (cell is not None and space_of(cell) == (1, False)  # P1 on affine or multilinear cells
+            and type(solver.options.mass_model) is Lumped and not solver.conditions.needs_positions):
+        return False
+    # these types themselves: a subclass may make or move its samples otherwise
+    if type(dom) is GIMP and dom.exact:  # pieces averaged at their centroids: simplices and axis-aligned boxes
+        geo = solver.particles.locator.geometry
+        return cell in ("interval", "triangle", "tetrahedron") or (cell in ("quadrilateral", "hexahedron") and geo.axis_aligned)
+    return type(dom) in (CPDI1, CPDI2) or type(dom) is GIMP
 
 
 class DomainGrid(PointGrid):
@@ -56,7 +63,16 @@ class DomainGrid(PointGrid):
         super().__init__(solver)
         dom = self.options.particle_domain
         self.cpdi1 = isinstance(dom, CPDI1)
+        self.exact = isinstance(dom, GIMP) and dom.exact
         self.passes = ks.kernels_for(self.cell, grad_from_values=isinstance(dom, GIMP))
+        self.no_gradient_weights = np.zeros((1, 1, self.d))  # GIMP's (not read)
+        if self.exact:  # the cells' vertices and bounding boxes, the most pieces of a box so far
+            geo = solver.particles.locator.geometry
+            nodes = geo.x[geo.dofmap[:, : CELLS[self.cell][1]]]
+            self.vertices = np.ascontiguousarray(nodes)
+            self.bounds = np.ascontiguousarray(nodes.min(axis=1)), np.ascontiguousarray(nodes.max(axis=1))
+            self.pieces = 2**self.d
+            self.num_owned_cells = geo.num_owned
         self.signs = corner_signs(self.d)
         self.generic: SingleFieldGrid | None = None  # for steps with samples beyond the ghost cells
         self.stencil: tuple = (np.zeros((0, 0), dtype=np.int32),)  # the samples' cells, coordinates, weights
@@ -67,7 +83,7 @@ class DomainGrid(PointGrid):
         super().for_step()
         missing = self._samples()
         p = self.solver.particles
-        if p.comm.size > 1 and p.comm.allreduce(missing):
+        if p.comm.allreduce(missing) if p.comm.size > 1 else missing:
             if self.generic is None:
                 self.generic = SingleFieldGrid(self.solver)
             return self.generic
@@ -80,6 +96,8 @@ class DomainGrid(PointGrid):
         dom = self.options.particle_domain
         d = self.d
         n, Q = len(p), len(self.signs)
+        if self.exact:
+            return self._box_samples()
         if self.cpdi1:
             y, w, g = ks.cpdi1_samples(p.x, p.fields["F"], half_widths(p), self.signs, self._kept("cpdi1", n, Q))
             beyond = "clamp"
@@ -95,7 +113,7 @@ class DomainGrid(PointGrid):
         else:
             smp = dom.samples(p)
             n, Q, _ = smp.x.shape
-            y, w, g, beyond = np.ascontiguousarray(smp.x.reshape(n * Q, d)), smp.w, np.zeros((n, Q, d)), smp.beyond
+            y, w, g, beyond = np.ascontiguousarray(smp.x.reshape(n * Q, d)), smp.w, self.no_gradient_weights, smp.beyond
         loc = p.sample_locator  # owned and ghost cells
         # the last step's sample cells are the first guess (a guess only: after the particles were
         # sorted or migrated a wrong one costs a search)
@@ -107,15 +125,37 @@ class DomainGrid(PointGrid):
         self.stencil = (sc, Y, np.ascontiguousarray(w), g)
         return missing
 
+    def _box_samples(self) -> int:
+        """Exact GIMP: the pieces of the particles' boxes in the cells as samples
+        (:func:`fempm.kernels.boxes.box_samples`); returns the number of boxes that may reach
+        beyond the ghost cells (or meet more cells than the kernel searches)."""
+        p = self.solver.particles
+        ell = half_widths(p, self.options.particle_domain.deform)
+        cell_type = CELLS[self.cell][0], CELLS[self.cell][2]
+        while True:
+            guessed = ("boxes", len(p), self.pieces) in self._arrays  # the last step's samples
+            out = self._kept("boxes", len(p), self.pieces)
+            needed, reaching, failed = box_samples(p.x, ell, p.cells, cell_type, self.vertices, *self.bounds,
+                                                   p.sample_locator.vertex_star(), self.num_owned_cells, self.x0,
+                                                   self.K, out, guessed)
+            if needed <= self.pieces:
+                break
+            self.pieces = needed  # and again with room for every piece
+        self.stencil = (*out, self.no_gradient_weights)
+        return reaching + failed
+
     def _kept(self, what: str, n: int, Q: int) -> tuple:
         """Arrays kept from step to step for ``n`` particles of ``Q`` samples (made anew when
-        ``n`` changes): the CPDI1 samples (y, w, g) or the located ones (cells, coordinates)."""
+        ``n`` changes): the CPDI1 samples (y, w, g), the located ones (cells, coordinates) or
+        the exact GIMP ones (cells, coordinates, weights)."""
         key = (what, n, Q)
         if key not in self._arrays:
             self._arrays = {k: a for k, a in self._arrays.items() if k[0] != what}
             d = self.d
-            self._arrays[key] = ((np.empty((n * Q, d)), np.empty((n, Q)), np.empty((n, Q, d))) if what == "cpdi1" else
-                                 (np.full((n, Q), -1, dtype=np.int32), np.zeros((n * Q, d))))
+            self._arrays[key] = {"cpdi1": lambda: (np.empty((n * Q, d)), np.empty((n, Q)), np.empty((n, Q, d))),
+                                 "located": lambda: (np.full((n, Q), -1, dtype=np.int32), np.zeros((n * Q, d))),
+                                 "boxes": lambda: (np.empty((n, Q), dtype=np.int32), np.empty((n * Q, d)),
+                                                   np.empty((n, Q)))}[what]()
         return self._arrays[key]
 
     def _place(self, y: npt.NDArray, sc: npt.NDArray, Y: npt.NDArray, w: npt.NDArray, beyond: str) -> int:

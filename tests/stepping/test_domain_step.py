@@ -24,7 +24,9 @@ pytestmark = pytest.mark.parallel  # also under mpiexec -n 2 (scripts/run-tests)
 
 comm = MPI.COMM_WORLD
 DOMAINS = {"cpdi1": {"domain": "cpdi1"}, "cpdi2": {"domain": "cpdi2"}, "gimp2": {"domain": "gimp", "gimp_order": 2},
-           "cpgimp3": {"domain": "cpgimp", "gimp_order": 3}}
+           "cpgimp3": {"domain": "cpgimp", "gimp_order": 3}, "ugimp": {"domain": "ugimp"}, "cpgimp": {"domain": "cpgimp"}}
+#: the cells exact GIMP takes the compiled passes on (simplices, axis-aligned boxes)
+EXACT_CELLS = ["interval", "triangle", "quadrilateral", "tetrahedron", "hexahedron"]
 
 
 def run_both(build, steps=12):
@@ -45,12 +47,16 @@ def cases(domain, schemes, default):
             for cell in MESHES for scheme in schemes]
 
 
+EXACT_DEFAULT = [("interval", "MUSL", "cpgimp"), ("triangle", "USL", "cpgimp"), ("quadrilateral", "USF", "ugimp"),
+                 ("tetrahedron", "MUSL", "ugimp"), ("hexahedron", "USL", "cpgimp")]
 # the default run: every cell, every scheme and every domain at least once
 CASES = (cases("cpdi1", ["USL", "MUSL", "USF"], [("interval", "USL"), ("triangle", "MUSL"),
                                                 ("distorted quadrilateral", "USF"), ("distorted hexahedron", "USL")])
          + cases("cpdi2", ["USL", "MUSL"], [("quadrilateral", "USL"), ("tetrahedron", "MUSL"), ("hexahedron", "MUSL")])
          + cases("gimp2", ["USL", "MUSL", "USF"], [("triangle", "USL"), ("hexahedron", "USF")])
-         + [("quadrilateral", "MUSL", "cpgimp3"), ("tetrahedron", "USL", "cpgimp3")])
+         + [("quadrilateral", "MUSL", "cpgimp3"), ("tetrahedron", "USL", "cpgimp3")]
+         + [pytest.param(cell, scheme, domain, marks=() if (cell, scheme, domain) in EXACT_DEFAULT else pytest.mark.slow)
+            for cell in EXACT_CELLS for scheme in ["USL", "MUSL", "USF"] for domain in ["ugimp", "cpgimp"]])
 
 
 @pytest.mark.parametrize(("cell", "scheme", "domain"), CASES)
@@ -78,11 +84,14 @@ def filled(cell: str, options: StepOptions, compiled: bool) -> ExplicitSolver:
                           compiled=compiled)
 
 
-BEYOND = [("interval", "cpdi1"), ("triangle", "cpdi2"), ("distorted quadrilateral", "gimp2"), ("hexahedron", "cpdi1")]
+BEYOND = [("interval", "cpdi1"), ("triangle", "cpdi2"), ("distorted quadrilateral", "gimp2"), ("hexahedron", "cpdi1"),
+          ("triangle", "cpgimp"), ("quadrilateral", "ugimp"), ("tetrahedron", "cpgimp")]
 
 
 @pytest.mark.parametrize(("cell", "domain"), [pytest.param(c, d, marks=() if (c, d) in BEYOND else pytest.mark.slow)
-                                              for c in MESHES for d in ("cpdi1", "cpdi2", "gimp2")])
+                                              for c in MESHES for d in ("cpdi1", "cpdi2", "gimp2")]
+                         + [pytest.param(c, d, marks=() if (c, d) in BEYOND else pytest.mark.slow)
+                            for c in EXACT_CELLS for d in ("ugimp", "cpgimp")])
 def test_domains_beyond_the_mesh(cell, domain):
     opts = StepOptions(scheme="MUSL", flip=0.95, **DOMAINS[domain])
     ref, got = run_both(lambda compiled: filled(cell, opts, compiled), steps=8)
@@ -111,6 +120,7 @@ def test_domain_grid_needs_lumped_mass_and_sample_points():
     V = dolfinx.fem.functionspace(mesh, ("Lagrange", 1, (2,)))
     for opts, expected in [(StepOptions(domain="cpdi1"), DomainGrid),
                            (StepOptions(domain="cpdi1", mass="consistent"), SingleFieldGrid),
-                           (StepOptions(domain="ugimp"), SingleFieldGrid),
+                           (StepOptions(domain="ugimp"), DomainGrid),
+                           (StepOptions(domain="cpgimp", mass="consistent"), SingleFieldGrid),
                            (StepOptions(domain="gimp", gimp_order=2), DomainGrid)]:
         assert type(ExplicitSolver(V, p, [LinearElastic(1.0, 0.3)], options=opts).grid) is expected
