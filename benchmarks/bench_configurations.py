@@ -21,6 +21,7 @@ consistent    consistent mass                                       the base ste
 fmpm2         FMPM(2)                                               the base step
 cpdi1         CPDI1 domains                                         the base step
 cpdi2         CPDI2 domains (the seeding sub-cells' corners)        the base step
+cpdi1-fmpm2   CPDI1 domains, FMPM(2)                                the base step
 ugimp         exact uGIMP                                           the base step
 cpgimp        exact cpGIMP                                          the base step
 bernstein2    Bernstein P2, lumped                                  the base step
@@ -74,6 +75,7 @@ CASES = {
     "fmpm2": Case({"mass": "fmpm", "fmpm_order": 2}),
     "cpdi1": Case({"domain": "cpdi1"}),
     "cpdi2": Case({"domain": "cpdi2"}),
+    "cpdi1-fmpm2": Case({"domain": "cpdi1", "mass": "fmpm", "fmpm_order": 2}),
     "ugimp": Case({"domain": "ugimp"}),
     "cpgimp": Case({"domain": "cpgimp"}),
     "bernstein2": Case(degree=2, variant="bernstein", meshes=("tri", "tet")),  # basix: simplices only

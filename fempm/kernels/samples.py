@@ -21,7 +21,8 @@ samples reach gets each share (the sums are the same as over distinct nodes).
   (:func:`fempm.kernels.shape.star_search`), -1 where neither holds it.
 * :func:`kernels_for`: ``scatter`` and ``g2p_update``, the passes of
   :mod:`fempm.kernels.lumped` (same arguments, plus the samples) summing over the samples
-  instead of the particle's cell.
+  instead of the particle's cell, and ``mass_apply``, FMPM's :math:`M_C y` of
+  :mod:`fempm.kernels.fmpm` with the averaged basis.
 """
 
 from __future__ import annotations
@@ -172,7 +173,12 @@ def kernels_for(cell: str, grad_from_values: bool) -> SimpleNamespace:
         return _g2p_kernel(cell, grad_from_values, bool(blend), bool(kinematics), bool(move), remap, totals)(
             cells, sc, Y, w, gw, K, cell_dofs, v_new, v_old, flip, dt, *rest)
 
-    return SimpleNamespace(scatter=scatter, g2p_update=g2p_update)
+    def mass_apply(cells, sc, Y, w, gw, K, cell_dofs, mass, y, lump, out):
+        """:func:`fempm.kernels.fmpm.mass_apply` with the averaged basis,
+        :math:`(M_C y)_i = \\sum_p M_p \\langle N_i \\rangle_p \\sum_j \\langle N_j \\rangle_p y_j`."""
+        _mass_apply_kernel(cell, grad_from_values)(cells, sc, Y, w, gw, K, cell_dofs, mass, y, lump, out)
+
+    return SimpleNamespace(scatter=scatter, g2p_update=g2p_update, mass_apply=mass_apply)
 
 
 if AVAILABLE:
@@ -345,3 +351,43 @@ def _g2p_kernel(cell: str, grad_from_values: bool, blend: bool, kinematics: bool
         return nonfinite_j, inverted, jmin, jmax, nonfinite
 
     return g2p_update
+
+
+@functools.cache
+def _mass_apply_kernel(cell: str, grad_from_values: bool):
+    """:func:`fempm.kernels.fmpm.mass_apply` over the samples."""
+    D, NK, SIMPLEX = CELLS[cell]
+    AFFINE = is_affine(cell)
+
+    @njit(cache=True, error_model="numpy")
+    def kernel(cells, sc, Y, w, gw, K, cell_dofs, mass, y, lump, out):  # pragma: no cover - compiled
+        Q = sc.shape[1]
+        N, G, cs = np.empty(NK), np.empty((NK, D)), np.empty(Q, np.int32)
+        W, GW = np.empty((Q, NK)), np.empty((Q, NK, D))
+        k = y.shape[1]
+        u = np.empty(k)
+        lumping = lump.shape[0] > 0
+        for p in range(len(cells)):
+            ncell = _particle_basis(p, sc, Y, w, gw, K, SIMPLEX, AFFINE, D, NK, grad_from_values, N, G, cs, W, GW)
+            for j in range(k):
+                u[j] = 0.0
+            ul = 0.0
+            for q in range(ncell):
+                for a in range(NK):
+                    i = cell_dofs[cs[q], a]
+                    if lumping and lump[i]:
+                        ul += W[q, a]
+                    else:
+                        for j in range(k):
+                            u[j] += W[q, a] * y[i, j]
+            m = mass[p]
+            for q in range(ncell):
+                for a in range(NK):
+                    i = cell_dofs[cs[q], a]
+                    wa = m * W[q, a]
+                    for j in range(k):
+                        out[i, j] += wa * u[j]
+                    if lumping:
+                        out[i, k] += wa * ul
+
+    return kernel

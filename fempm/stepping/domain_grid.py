@@ -4,9 +4,10 @@ The stages and checks of :class:`fempm.stepping.lumped.PointGrid` with the domai
 basis of :mod:`fempm.kernels.samples` in place of the point basis: CPDI1 (the corners of
 :math:`x_p + F_p \operatorname{diag}(\ell_p) [-1, 1]^d`, made in a compiled pass), CPDI2 (the
 tracked corners, moved with the grid velocity at them after the moving pass) and GIMP with a
-Gauss rule (``gimp_order``), lumped mass, on degree-1 cells (affine or multilinear); exact GIMP
+Gauss rule (``gimp_order``), on degree-1 cells (affine or multilinear); exact GIMP
 (uGIMP, cpGIMP) on simplices and axis-aligned boxes, the pieces of each box in the cells it
-meets as samples (:mod:`fempm.kernels.boxes`). Each step locates the
+meets as samples (:mod:`fempm.kernels.boxes`); lumped mass or FMPM(k), whose :math:`M_C y`
+takes the averaged basis. Each step locates the
 samples in the particle's cell or its vertex star (owned and ghost cells) in one compiled pass;
 the few it does not find are located through the DOLFINx tree, and on one rank samples beyond
 the mesh are treated as :class:`~fempm.transfer.basis.ParticleBasis` treats them (CPDI corners
@@ -33,7 +34,7 @@ from fempm.stepping.grid import Grid, SingleFieldGrid
 from fempm.stepping.lumped import PointGrid
 from fempm.stepping.spaces import compiled_space
 from fempm.transfer.domains import CPDI1, CPDI2, GIMP, half_widths
-from fempm.transfer.mass_models import Lumped
+from fempm.transfer.mass_models import FMPM, Lumped
 
 if TYPE_CHECKING:
     from fempm.stepping.solver import ExplicitSolver
@@ -46,7 +47,7 @@ def supported(solver: ExplicitSolver) -> bool:
     dom = solver.options.particle_domain
     cell = compiled_space(solver)
     if not (cell is not None and space_of(cell) == (1, False)  # P1 on affine or multilinear cells
-            and type(solver.options.mass_model) is Lumped and not solver.conditions.needs_positions):
+            and type(solver.options.mass_model) in (Lumped, FMPM) and not solver.conditions.needs_positions):
         return False
     # these types themselves: a subclass may make or move its samples otherwise
     if type(dom) is GIMP and dom.exact:  # pieces averaged at their centroids: simplices and axis-aligned boxes
@@ -215,6 +216,11 @@ class DomainGrid(PointGrid):
     def scatter_pass(self, *args, bound: bool = False) -> float:
         p = self.solver.particles
         return self.passes.scatter(p.cells, *self.stencil, self.K, self.cell_dofs, *args, bound=bound)
+
+    def mass_apply(self, y: npt.NDArray, lump: npt.NDArray, out: npt.NDArray) -> None:
+        """FMPM's :math:`M_C y` with the averaged basis (the samples' ``mass_apply``)."""
+        p = self.solver.particles
+        self.passes.mass_apply(p.cells, *self.stencil, self.K, self.cell_dofs, p.mass, y, lump, out)
 
     def gather_pass(self, v_new, v_old, flip: float, dt: float, blend: bool, kinematics: bool, move: bool,
                     state: tuple) -> tuple:

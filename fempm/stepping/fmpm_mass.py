@@ -8,8 +8,9 @@ lumped solve,
 .. math::
     x \leftarrow x + m^{-1} (b - M_C x), \qquad (M_C x)_i = \sum_p M_p N_{ip} \sum_j N_{jp} x_j,
 
-every step after the first one compiled particle pass (:func:`fempm.kernels.fmpm.mass_apply`,
-no matrix) and one ghost exchange. Solved on the free components of the supported dofs; the
+every step after the first one compiled particle pass (the grid's ``mass_apply``:
+:func:`fempm.kernels.fmpm.mass_apply`, or with particle domains its form over the samples,
+:mod:`fempm.kernels.samples`; no matrix) and one ghost exchange. Solved on the free components of the supported dofs; the
 rows and columns of dofs whose lumped mass is below ``lump_below`` of the largest, and of
 frictional walls, are lumped (they keep the lumped value); the acceleration is 0 where the
 lumped mass is below ``mass_cutoff``; the stable step is :math:`1/\sqrt{k}` of the lumped one
@@ -41,7 +42,6 @@ class FMPMNodalMass(NodalMass):
     def __init__(self, grid: PointGrid):
         super().__init__(grid)
         self.order = grid.options.mass_model.order
-        self.apply = kf.mass_apply(grid.cell)
         self._work = {False: grid.nodal_array(grid.d), True: grid.nodal_array(grid.d + 1)}  # without, with M_C 1_l
         self.friction = grid.conditions.friction_dofs
         self.lump = np.zeros(0, dtype=np.bool_)
@@ -62,10 +62,9 @@ class FMPMNodalMass(NodalMass):
         """:math:`M_C y` without the lumped dofs (and :math:`M_C 1_l` in one more column where
         rows are lumped) on every local dof, ghosts summed and updated (a kept array)."""
         g = self.grid
-        p = g.solver.particles
         vec, out = self._work[len(self.lump) > 0]
         out.fill(0.0)
-        self.apply(p.cells, p.X, g.K, g.cell_dofs, p.mass, y, self.lump, out)
+        g.mass_apply(y, self.lump, out)
         sum_ghosts(vec)
         return out
 

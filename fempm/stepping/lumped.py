@@ -34,6 +34,7 @@ import numpy as np
 import numpy.typing as npt
 from mpi4py import MPI
 
+from fempm.kernels import fmpm as kf
 from fempm.kernels import lumped as kl
 from fempm.kernels.shape import space_of
 from fempm.materials.base import IsotropicElastic
@@ -168,6 +169,12 @@ class PointGrid(Grid):
                                   self.modulus, c, bound=stable == "bound")
         sum_ghosts(vec)
         return out, local
+
+    def mass_apply(self, y: npt.NDArray, lump: npt.NDArray, out: npt.NDArray) -> None:
+        """``out`` += FMPM's :math:`M_C y` on this rank's particles (ghost entries partial sums;
+        :func:`fempm.kernels.fmpm.mass_apply`)."""
+        p = self.solver.particles
+        kf.mass_apply(self.cell)(p.cells, p.X, self.K, self.cell_dofs, p.mass, y, lump, out)
 
     def scatter_pass(self, *args, bound: bool = False) -> float:
         """The P2G pass (:func:`fempm.kernels.lumped.kernels_for`) with the particles' basis."""

@@ -206,7 +206,8 @@ class ExplicitSolver:
             raise ValueError("compiled=True needs numba and a Lagrange space of degree 1 (any simplex, "
                              "quadrilateral or hexahedron) or of degree 2 or Bernstein on simplices, with point "
                              "particles and lumped, consistent or FMPM mass, or CPDI1, CPDI2 or Gauss-rule GIMP "
-                             "domains with lumped mass on degree 1")
+                             "domains with lumped or FMPM mass on degree 1 (exact GIMP: on simplices and "
+                             "axis-aligned boxes)")
         return SingleFieldGrid(self)
 
     def step(self, dt: float | None = None, *, dt_max: float = np.inf, totals: bool = False) -> float:

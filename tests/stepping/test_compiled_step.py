@@ -181,9 +181,11 @@ def test_compiled_step_is_taken_only_where_it_applies():
         assert isinstance(solver.grid, PointGrid) and solver.grid.cell.endswith("-multilinear")
         assert type(make_solver(cell, StepOptions(domain="cpdi1")).grid) is DomainGrid
     assert type(make_solver("triangle", StepOptions(mass="consistent")).grid.mass).__name__ == "ConsistentNodalMass"
-    assert isinstance(make_solver("triangle", StepOptions(domain="gimp")).grid, SingleFieldGrid)
-    with pytest.raises(ValueError, match="compiled=True needs numba and a Lagrange space"):
-        make_solver("triangle", StepOptions(domain="ugimp"), compiled=True).step()
+    assert type(make_solver("triangle", StepOptions(domain="gimp")).grid) is DomainGrid  # exact GIMP
+    assert isinstance(make_solver("distorted quadrilateral", StepOptions(domain="gimp")).grid, SingleFieldGrid)
+    assert isinstance(make_solver("triangle", StepOptions(domain="cpdi1", mass="consistent")).grid, SingleFieldGrid)
+    with pytest.raises(ValueError, match=r"compiled=True needs numba .* \(exact GIMP: on simplices and axis-aligned"):
+        make_solver("distorted quadrilateral", StepOptions(domain="ugimp"), compiled=True).step()
 
 
 @pytest.mark.filterwarnings("ignore:invalid value:RuntimeWarning")  # inf - inf on the oblique wall

@@ -18,6 +18,7 @@ from fempm.stepping import ExplicitSolver, Loads, StepOptions
 from fempm.stepping.domain_grid import DomainGrid
 from fempm.stepping.grid import SingleFieldGrid
 
+from tests.matrix import covering
 from tests.stepping.test_compiled_step import MESHES, assert_close, make_solver, state
 
 pytestmark = pytest.mark.parallel  # also under mpiexec -n 2 (scripts/run-tests)
@@ -64,6 +65,19 @@ def test_domain_passes_equal_the_numpy_step(cell, scheme, domain):
     opts = StepOptions(scheme=scheme, flip=0.9, damping=0.5, **DOMAINS[domain])
     ref, got = run_both(lambda compiled: make_solver(cell, opts, compiled=compiled))
     assert np.concatenate(comm.allgather(ref[0][1])).std() > 0.005  # the particles did move differently
+    assert_close(ref, got)
+
+
+#: FMPM's domains, each with its scheme and order
+FMPM_DOMAINS = {"cpdi1": ("USL", 2), "cpdi2": ("MUSL", 3), "gimp2": ("MUSL", 2), "cpgimp": ("USL", 3)}
+
+
+@pytest.mark.parametrize(("domain", "cell"), covering(list(FMPM_DOMAINS), EXACT_CELLS))
+def test_domain_passes_with_fmpm_equal_the_numpy_step(domain, cell):
+    """FMPM(k) with particle domains: M_C y = S^T M S y with the averaged basis S."""
+    scheme, order = FMPM_DOMAINS[domain]
+    opts = StepOptions(scheme=scheme, flip=0.9, mass="fmpm", fmpm_order=order, **DOMAINS[domain])
+    ref, got = run_both(lambda compiled: make_solver(cell, opts, compiled=compiled))
     assert_close(ref, got)
 
 
@@ -122,5 +136,6 @@ def test_domain_grid_needs_lumped_mass_and_sample_points():
                            (StepOptions(domain="cpdi1", mass="consistent"), SingleFieldGrid),
                            (StepOptions(domain="ugimp"), DomainGrid),
                            (StepOptions(domain="cpgimp", mass="consistent"), SingleFieldGrid),
+                           (StepOptions(domain="cpdi1", mass="fmpm", fmpm_order=2), DomainGrid),
                            (StepOptions(domain="gimp", gimp_order=2), DomainGrid)]:
         assert type(ExplicitSolver(V, p, [LinearElastic(1.0, 0.3)], options=opts).grid) is expected
