@@ -4,7 +4,9 @@ Which configuration is cheapest for a given error? Every configuration (backgrou
 velocity space, mass matrix: lumped, FMPM(k) or consistent, particle domain, scheme, particles
 per cell) of every problem is run at several resolutions; each run records its error and its
 wall time (median of ``repeats`` runs; 3 for runs under :data:`REPEAT_BELOW_S` seconds, else 1;
-maximum over ranks), with the number of ranks times threads it ran on.
+maximum over ranks; each loop configuration run once untimed at its smallest size first, so
+that no row times the compilation of its kernels), with the number of ranks times threads it
+ran on.
 
 Problems: the loop problems of the convergence study (:data:`fempm.studies.convergence.PROBLEMS`:
 the vibrating bar, the 1D and 2D axis-aligned manufactured solutions and the small-amplitude
@@ -24,7 +26,7 @@ from __future__ import annotations
 import csv
 import os
 import time
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -149,18 +151,14 @@ def pareto(rows: list[dict]) -> None:
                 best = r["error"]
 
 
-def _warm_up(name: str, sweep: Sweep, quick: bool, comm: MPI.Comm) -> None:
-    """Run each (mesh, scheme) of a loop problem's sweep once at its smallest size, untimed: the
-    compiled kernels (numba, one set per cell type and pass) load or compile on first use, which
-    would otherwise be timed in the sweep's first row."""
+def _warm_up(name: str, config: Config, sweep: Sweep, quick: bool, comm: MPI.Comm) -> None:
+    """Run a loop problem's configuration once at its sweep's smallest size, untimed: its
+    compiled kernels (numba, one set per cell type, space, domain, mass and pass) load or
+    compile on first use, which would otherwise be timed in its first row (a compilation of
+    several seconds is a run above :data:`REPEAT_BELOW_S`, timed once)."""
     if name == "mapping":
         return
-    configs = sweep.quick_configs if quick else sweep.configs
-    size = (sweep.quick_sizes if quick else sweep.sizes)[0]
-    for mesh, scheme in dict.fromkeys((c.mesh, c.scheme) for c in configs):
-        config = replace(configs[0], mesh=mesh, scheme=scheme, degree=1, variant="default", mass="lumped",
-                                     domain="point")
-        run_case(name, config, size, comm)
+    run_case(name, config, (sweep.quick_sizes if quick else sweep.sizes)[0], comm)
 
 
 def run_study(out: Path = Path("output/study-error-vs-time"), *, quick: bool = False, problems=None,
@@ -179,8 +177,8 @@ def run_study(out: Path = Path("output/study-error-vs-time"), *, quick: bool = F
     def cases():
         for name in names:
             sw = SWEEPS[name]
-            _warm_up(name, sw, quick, comm)
             for config in (sw.quick_configs if quick else sw.configs):
+                _warm_up(name, config, sw, quick, comm)
                 for cells in (sw.quick_sizes if quick else sw.sizes):
                     if config.degree == 1 or name == "mapping" or cells <= max(sw.sizes[:-1], default=cells):
                         yield name, config, cells, comm  # the P2 spaces stop one size earlier
