@@ -19,10 +19,14 @@ is a set of samples (one a cell the box meets: its piece's centroid, weight
 :math:`|P_c| / |\Omega_p \cap \Omega_h|`), which the sample passes of :mod:`fempm.kernels.samples`
 sum with ``grad_from_values``. The cells the box meets are found by a flood from the
 particle's cell through the cells sharing a vertex whose bounding boxes overlap the box
-(:func:`box_samples`); a simplex is cut by the box's :math:`2d` half-spaces one after the
-other into simplices (:func:`clip_simplex`, the arithmetic of
-:func:`fempm.transfer.box_average.clip_simplices`), a box cell by taking the intersection of
-the two boxes.
+(:func:`box_samples`; the last step's piece cells first: where their pieces cover the box,
+no other cell meets it). A triangle's piece is the box's image in the reference triangle (a
+parallelogram) clipped by the triangle's edges that cross it (Sutherland and Hodgman), its
+area and centroid by the shoelace formula; a tetrahedron's piece is integrated over its faces
+by the divergence theorem, :math:`|P| = \tfrac13 \oint_{\partial P} x \cdot n`,
+:math:`\int_P x = \tfrac14 \oint_{\partial P} x\, (x \cdot n)`, the faces being the
+tetrahedron's faces clipped by the box and the box's faces clipped by the tetrahedron; a box
+cell's piece is the intersection of the two boxes.
 """
 
 from __future__ import annotations
@@ -33,7 +37,7 @@ import numpy as np
 
 from fempm.kernels.shape import AVAILABLE
 
-__all__ = ["box_samples", "clip_simplex", "piece_capacity"]
+__all__ = ["box_samples"]
 
 #: the most cells one box is searched over (the flood's visited list)
 MAX_VISITED = 512
@@ -42,154 +46,9 @@ MAX_VISITED = 512
 COVERED = 1e-12
 
 
-def piece_capacity(d: int) -> int:
-    """The most simplices a simplex of dimension ``d`` is cut into by a box's :math:`2d` planes
-    (each plane keeps a simplex whole, or cuts it into one, two (2D) or three (3D) simplices)."""
-    return {1: 1, 2: 2**4, 3: 3**6}[d]
-
-
 if AVAILABLE:
     from numba import njit
 
-    @njit(cache=True, error_model="numpy")
-    def _clip(S, lo, hi, A, B, moment, s, order, V, E, P):  # pragma: no cover - compiled
-        """:func:`clip_simplex` with its work arrays: ``s``, ``order`` (d + 1,), ``V``
-        (d + 1, d), ``E`` (d, d), ``P`` (6, d)."""
-        k, d = S.shape
-        A[0] = S
-        na = 1
-        for a in range(d):
-            for side in (-1.0, 1.0):
-                bound = lo[a] if side < 0.0 else hi[a]
-                nb = 0
-                for m in range(na):
-                    nin = 0
-                    for v in range(k):
-                        s[v] = side * (A[m, v, a] - bound)
-                        if s[v] <= 0.0:
-                            nin += 1
-                    if nin == k:
-                        B[nb] = A[m]
-                        nb += 1
-                        continue
-                    if nin == 0:
-                        continue
-                    j = 0
-                    for v in range(k):  # the inside vertices first, in their order
-                        if s[v] <= 0.0:
-                            order[j] = v
-                            j += 1
-                    for v in range(k):
-                        if s[v] > 0.0:
-                            order[j] = v
-                            j += 1
-                    for v in range(k):
-                        V[v] = A[m, order[v]]
-                    nb = _cut(V, s, order, nin, d, B, nb, P)
-                A, B = B, A
-                na = nb
-        volume = 0.0
-        for e in range(d):
-            moment[e] = 0.0
-        factorial = 1.0
-        for e in range(2, d + 1):
-            factorial *= e
-        for m in range(na):
-            for r in range(d):
-                for e in range(d):
-                    E[r, e] = A[m, r + 1, e] - A[m, 0, e]
-            vol = abs(_det(E, d)) / factorial
-            volume += vol
-            for e in range(d):
-                c = 0.0
-                for v in range(k):
-                    c += A[m, v, e]
-                moment[e] += vol * c / k
-        return volume
-
-    @njit(inline="always")
-    def _point(V, s, order, i, o, out, row):  # pragma: no cover - compiled
-        """``out[row]``: where the edge (i, o) of the ordered simplex ``V`` crosses the plane."""
-        si, so = s[order[i]], s[order[o]]
-        t = si / (si - so)
-        for e in range(V.shape[1]):
-            out[row, e] = V[i, e] + t * (V[o, e] - V[i, e])
-
-    @njit(inline="always")
-    def _cut(V, s, order, j, d, B, nb, P):  # pragma: no cover - compiled
-        """Append to ``B`` the simplices of ``V`` (its first ``j`` vertices inside the plane)
-        inside it (:func:`fempm.transfer.box_average._pieces`; ``P`` (6, d): room for the
-        crossing points); returns the new count."""
-        if j == 1:
-            B[nb, 0] = V[0]
-            for o in range(1, d + 1):
-                _point(V, s, order, 0, o, B[nb], o)
-            return nb + 1
-        if d == 2:  # the quadrilateral v0 v1 p12 p02
-            _point(V, s, order, 1, 2, P, 0)
-            _point(V, s, order, 0, 2, P, 1)
-            B[nb, 0] = V[0]
-            B[nb, 1] = V[1]
-            B[nb, 2] = P[0]
-            B[nb + 1, 0] = V[0]
-            B[nb + 1, 1] = P[0]
-            B[nb + 1, 2] = P[1]
-            return nb + 2
-        # d = 3: the prism a0 a1 a2 - b0 b1 b2, rows 0-2 and 3-5 of P
-        if j == 2:  # (v0, p02, p03) - (v1, p12, p13)
-            P[0] = V[0]
-            _point(V, s, order, 0, 2, P, 1)
-            _point(V, s, order, 0, 3, P, 2)
-            P[3] = V[1]
-            _point(V, s, order, 1, 2, P, 4)
-            _point(V, s, order, 1, 3, P, 5)
-        else:  # (v0, v1, v2) - (p03, p13, p23)
-            for v in range(3):
-                P[v] = V[v]
-            _point(V, s, order, 0, 3, P, 3)
-            _point(V, s, order, 1, 3, P, 4)
-            _point(V, s, order, 2, 3, P, 5)
-        for t in range(3):  # (a0 a1 a2 b0), (a1 a2 b0 b1), (a2 b0 b1 b2)
-            for v in range(4):
-                B[nb + t, v] = P[t + v]
-        return nb + 3
-
-    @njit(inline="always")
-    def _holds_box(x0, K, c, lo, hi, d):  # pragma: no cover - compiled
-        """Whether the simplex ``c`` (``x = x0 + K^-1 X``) holds every corner of ``[lo, hi]``."""
-        for corner in range(2**d):
-            s = 0.0
-            for i in range(d):
-                t = 0.0
-                for e in range(d):
-                    t += K[c, i, e] * ((hi[e] if (corner >> e) & 1 else lo[e]) - x0[c, e])
-                if t < 0.0:
-                    return False
-                s += t
-            if s > 1.0:
-                return False
-        return True
-
-    @njit(inline="always")
-    def _det(E, d):  # pragma: no cover - compiled
-        if d == 1:
-            return E[0, 0]
-        if d == 2:
-            return E[0, 0] * E[1, 1] - E[0, 1] * E[1, 0]
-        return (E[0, 0] * (E[1, 1] * E[2, 2] - E[1, 2] * E[2, 1]) - E[0, 1] * (E[1, 0] * E[2, 2] - E[1, 2] * E[2, 0])
-                + E[0, 2] * (E[1, 0] * E[2, 1] - E[1, 1] * E[2, 0]))
-
-
-def clip_simplex(S, lo, hi, A, B, moment) -> float:
-    r"""The volume of the part of simplex ``S`` (d + 1, d) inside the box ``[lo, hi]``, and its
-    first moment :math:`\int x` into ``moment`` (d,); ``A`` and ``B`` are work arrays
-    (:func:`piece_capacity` (d), d + 1, d)."""
-    k, d = S.shape
-    return _clip(S, lo, hi, A, B, moment, np.empty(k), np.empty(k, np.int64), np.empty((k, d)), np.empty((d, d)),
-                 np.empty((6, d)))
-
-
-if AVAILABLE:
     @njit(inline="always")
     def _clip_polygon(P, src, n, f0, f1, f2, dst):  # pragma: no cover - compiled
         """The part of the polygon in rows ``src`` to ``src + n`` of ``P`` where
@@ -262,43 +121,146 @@ if AVAILABLE:
         cen[1] = P[at, 1] + c1 / (3.0 * area)
         return 0.5 * abs(area) / detK
 
+    @njit(inline="always")
+    def _clip3(P, src, n, f0, f1, f2, f3, strict, dst):  # pragma: no cover - compiled
+        """:func:`_clip_polygon` in 3D: the part where ``f0 + f1 x + f2 y + f3 z`` is >= 0 (> 0
+        with ``strict``)."""
+        m = 0
+        j = src + n - 1
+        fj = f0 + f1 * P[j, 0] + f2 * P[j, 1] + f3 * P[j, 2]
+        for i in range(src, src + n):
+            fi = f0 + f1 * P[i, 0] + f2 * P[i, 1] + f3 * P[i, 2]
+            inside_i = fi > 0.0 if strict else fi >= 0.0
+            inside_j = fj > 0.0 if strict else fj >= 0.0
+            if inside_i != inside_j:
+                t = fj / (fj - fi)
+                for e in range(3):
+                    P[dst + m, e] = P[j, e] + t * (P[i, e] - P[j, e])
+                m += 1
+            if inside_i:
+                for e in range(3):
+                    P[dst + m, e] = P[i, e]
+                m += 1
+            j, fj = i, fi
+        return m
+
+    @njit(inline="always")
+    def _fan(P, at, n, acc):  # pragma: no cover - compiled
+        r"""Add the cones from the origin over the fan of the polygon in rows ``at`` to
+        ``at + n`` of ``P``: 6 times their volumes to ``acc[0]``, 24 times their first moments to
+        ``acc[1:]``."""
+        for i in range(at + 1, at + n - 1):
+            a0, a1, a2 = P[at, 0], P[at, 1], P[at, 2]
+            b0, b1, b2 = P[i, 0], P[i, 1], P[i, 2]
+            c0, c1, c2 = P[i + 1, 0], P[i + 1, 1], P[i + 1, 2]
+            det = a0 * (b1 * c2 - b2 * c1) - a1 * (b0 * c2 - b2 * c0) + a2 * (b0 * c1 - b1 * c0)
+            acc[0] += det
+            acc[1] += det * (a0 + b0 + c0)
+            acc[2] += det * (a1 + b1 + c1)
+            acc[3] += det * (a2 + b2 + c2)
+
+    @njit(inline="always")
+    def _tet_piece(T, x0, K, c, lo, hi, P, acc, cen):  # pragma: no cover - compiled
+        r"""The volume of the part of the box ``[lo, hi]`` in tetrahedron ``c`` (vertices ``T``)
+        and its centroid's reference coordinates ``cen``, by the divergence theorem over the
+        piece's faces, :math:`|P| = 	frac13 \oint x \cdot n`, :math:`\int_P x =
+        	frac14 \oint x\, (x \cdot n)`: the tetrahedron's faces clipped by the box, and the
+        box's faces clipped by the tetrahedron (strictly: a box face on a face of the
+        tetrahedron counts once), about the box's centre (``P`` (32, 3), ``acc`` (4,): work)."""
+        o0, o1, o2 = 0.5 * (lo[0] + hi[0]), 0.5 * (lo[1] + hi[1]), 0.5 * (lo[2] + hi[2])
+        for e in range(3):  # apart: no volume in common
+            tlo = min(min(T[0, e], T[1, e]), min(T[2, e], T[3, e]))
+            thi = max(max(T[0, e], T[1, e]), max(T[2, e], T[3, e]))
+            if not (tlo < hi[e] and thi > lo[e]):
+                return 0.0
+        for e in range(4):
+            acc[e] = 0.0
+        for k in range(4):  # the face opposite vertex k, turned outwards
+            i, j, l = (k + 1) % 4, (k + 2) % 4, (k + 3) % 4
+            u0, u1, u2 = T[j, 0] - T[i, 0], T[j, 1] - T[i, 1], T[j, 2] - T[i, 2]
+            w0, w1, w2 = T[l, 0] - T[i, 0], T[l, 1] - T[i, 1], T[l, 2] - T[i, 2]
+            n0, n1, n2 = u1 * w2 - u2 * w1, u2 * w0 - u0 * w2, u0 * w1 - u1 * w0
+            if n0 * (T[k, 0] - T[i, 0]) + n1 * (T[k, 1] - T[i, 1]) + n2 * (T[k, 2] - T[i, 2]) > 0.0:
+                j, l = l, j
+            for r, v in enumerate((i, j, l)):
+                P[r, 0], P[r, 1], P[r, 2] = T[v, 0] - o0, T[v, 1] - o1, T[v, 2] - o2
+            n, at = 3, 0
+            for a in range(3):
+                oa = o0 if a == 0 else (o1 if a == 1 else o2)
+                for side in (-1.0, 1.0):
+                    if n == 0:
+                        break
+                    f0 = oa - lo[a] if side < 0.0 else hi[a] - oa
+                    f1, f2, f3 = -side if a == 0 else 0.0, -side if a == 1 else 0.0, -side if a == 2 else 0.0
+                    n = _clip3(P, at, n, f0, f1, f2, f3, False, 16 - at)
+                    at = 16 - at
+            if n >= 3:
+                _fan(P, at, n, acc)
+        # the barycentric coordinates about the box centre: lambda_i = g_i + sum_e K[c, i-1, e] x_e
+        g1 = K[c, 0, 0] * (o0 - x0[c, 0]) + K[c, 0, 1] * (o1 - x0[c, 1]) + K[c, 0, 2] * (o2 - x0[c, 2])
+        g2 = K[c, 1, 0] * (o0 - x0[c, 0]) + K[c, 1, 1] * (o1 - x0[c, 1]) + K[c, 1, 2] * (o2 - x0[c, 2])
+        g3 = K[c, 2, 0] * (o0 - x0[c, 0]) + K[c, 2, 1] * (o1 - x0[c, 1]) + K[c, 2, 2] * (o2 - x0[c, 2])
+        for a in range(3):  # the box's faces, corners counter-clockwise about the outward normal
+            b, q = (a + 1) % 3, (a + 2) % 3
+            for side in (-1.0, 1.0):
+                h = 0.5 * (hi[a] - lo[a]) * side
+                hb, hq = 0.5 * (hi[b] - lo[b]), 0.5 * (hi[q] - lo[q])
+                for r in range(4):
+                    sb = -1.0 if r == 0 or r == 3 else 1.0
+                    sq = -1.0 if r < 2 else 1.0
+                    if side < 0.0:
+                        sq = -sq  # the other way round
+                    P[r, a], P[r, b], P[r, q] = h, sb * hb, sq * hq
+                n, at = 4, 0
+                for i in range(4):
+                    if n == 0:
+                        break
+                    if i == 0:
+                        f0 = 1.0 - g1 - g2 - g3
+                        f1 = -(K[c, 0, 0] + K[c, 1, 0] + K[c, 2, 0])
+                        f2 = -(K[c, 0, 1] + K[c, 1, 1] + K[c, 2, 1])
+                        f3 = -(K[c, 0, 2] + K[c, 1, 2] + K[c, 2, 2])
+                    else:
+                        f0 = g1 if i == 1 else (g2 if i == 2 else g3)
+                        f1, f2, f3 = K[c, i - 1, 0], K[c, i - 1, 1], K[c, i - 1, 2]
+                    n = _clip3(P, at, n, f0, f1, f2, f3, True, 16 - at)
+                    at = 16 - at
+                if n >= 3:
+                    _fan(P, at, n, acc)
+        volume = acc[0] / 6.0
+        if not volume > 0.0:
+            return 0.0
+        m0, m1, m2 = acc[1] / (24.0 * volume) + o0, acc[2] / (24.0 * volume) + o1, acc[3] / (24.0 * volume) + o2
+        for i in range(3):
+            cen[i] = K[c, i, 0] * (m0 - x0[c, 0]) + K[c, i, 1] * (m1 - x0[c, 1]) + K[c, i, 2] * (m2 - x0[c, 2])
+        return volume
+
 
 @functools.cache
 def _kernel(d: int, simplex: bool):
-    """The sample kernel of cells of dimension ``d``: triangles clipped in their reference
-    coordinates, tetrahedra cut by :func:`clip_simplex`, or (``simplex`` False, and intervals)
-    axis-aligned boxes."""
-    BOX = not simplex or d == 1
+    """The sample kernel of cells of dimension ``d``: triangles, tetrahedra, or (``simplex``
+    False, and intervals) axis-aligned boxes."""
     TRIANGLE = simplex and d == 2
-    CAP = piece_capacity(d)
+    TETRAHEDRON = simplex and d == 3
 
     @njit(inline="always")
-    def piece(x, p, ell, c, verts, blo, bhi, x0, K, lo, hi, box, first, cen, A, B, moment, s, order, V, E,
-              P):  # pragma: no cover
+    def piece(x, p, ell, c, verts, blo, bhi, x0, K, lo, hi, P, acc, cen):  # pragma: no cover
         """The volume of the part of box ``p`` in cell ``c``, its centroid's reference
-        coordinates into ``cen`` (the others: work arrays)."""
+        coordinates into ``cen`` (``P``, ``acc``: work arrays)."""
         if TRIANGLE:
             return _triangle_piece(x, p, ell, x0, K, c, P, cen)
-        if BOX:
-            vol = 1.0
-            for e in range(d):
-                a = max(lo[e], blo[c, e])
-                b = min(hi[e], bhi[c, e])
-                vol *= max(b - a, 0.0)
-                moment[e] = 0.5 * (a + b)
-        elif first and _holds_box(x0, K, c, lo, hi, d):  # the box lies in the particle's cell
-            vol = box
-            for e in range(d):
-                moment[e] = x[p, e]
-        else:
-            vol = _clip(verts[c], lo, hi, A, B, moment, s, order, V, E, P)
-            if vol > 0.0:
-                for e in range(d):
-                    moment[e] /= vol
+        if TETRAHEDRON:
+            return _tet_piece(verts[c], x0, K, c, lo, hi, P, acc, cen)
+        vol = 1.0  # a box cell: the piece is a box
+        for e in range(d):
+            a = max(lo[e], blo[c, e])
+            b = min(hi[e], bhi[c, e])
+            vol *= max(b - a, 0.0)
+            acc[e] = 0.5 * (a + b)
         for i in range(d):  # the centroid's reference coordinates
             t = 0.0
             for e in range(d):
-                t += K[c, i, e] * (moment[e] - x0[c, e])
+                t += K[c, i, e] * (acc[e] - x0[c, e])
             cen[i] = t
         return vol
 
@@ -308,9 +270,7 @@ def _kernel(d: int, simplex: bool):
         n = len(cells)
         Q = sc.shape[1]
         lo, hi, cen = np.empty(d), np.empty(d), np.empty(d)
-        A, B, moment = np.empty((CAP, d + 1, d)), np.empty((CAP, d + 1, d)), np.empty(d)
-        s, order, V, E = np.empty(d + 1), np.empty(d + 1, np.int64), np.empty((d + 1, d)), np.empty((d, d))
-        P = np.empty((16, d))
+        P, acc = np.empty((32, d)), np.empty(4)
         visited = np.empty(MAX_VISITED, np.int32)
         guess = np.empty(Q, np.int32)
         piece_cell = np.empty(MAX_VISITED, np.int32)
@@ -334,7 +294,7 @@ def _kernel(d: int, simplex: bool):
             npiece, covered, ghost = 0, 0.0, False
             for r in range(ng):
                 c = guess[r]
-                vol = piece(x, p, ell, c, verts, blo, bhi, x0, K, lo, hi, box, False, cen, A, B, moment, s, order, V, E, P)
+                vol = piece(x, p, ell, c, verts, blo, bhi, x0, K, lo, hi, P, acc, cen)
                 if vol > 0.0:
                     piece_cell[npiece], piece_vol[npiece] = c, vol
                     for e in range(d):
@@ -348,7 +308,7 @@ def _kernel(d: int, simplex: bool):
                 while head < nvis:
                     c = visited[head]
                     head += 1
-                    vol = piece(x, p, ell, c, verts, blo, bhi, x0, K, lo, hi, box, head == 1, cen, A, B, moment, s, order, V, E, P)
+                    vol = piece(x, p, ell, c, verts, blo, bhi, x0, K, lo, hi, P, acc, cen)
                     if not vol > 0.0:
                         continue
                     piece_cell[npiece], piece_vol[npiece] = c, vol

@@ -9,11 +9,11 @@ import pytest
 from conftest import make_mesh
 from mpi4py import MPI
 
-from fempm.kernels.boxes import box_samples, clip_simplex, piece_capacity
+from fempm.kernels.boxes import box_samples
 from fempm.meshes.geometry import CellGeometry
 from fempm.particles.cell_bins import CellBins
 from fempm.particles.location import CellLocator
-from fempm.transfer.box_average import BoxIntegrator, clip_simplices
+from fempm.transfer.box_average import BoxIntegrator
 
 SERVED = ["interval", "triangle", "quadrilateral", "tetrahedron", "hexahedron", "unstructured-triangle",
           "unstructured-tetrahedron"]
@@ -84,21 +84,3 @@ def test_box_samples_equal_the_box_integrals(name):
     A_ref, G_ref = averages_from_integrals(V, integ, x - ell, x + ell)
     assert np.abs(A - A_ref).max() <= 1e-13
     assert np.abs(G - G_ref).max() <= 1e-12 * np.abs(G_ref).max()
-
-
-@pytest.mark.parametrize("d", [2, 3])
-def test_clip_simplex_keeps_the_volume_and_centroid_of_the_numpy_clip(d):
-    rng = np.random.default_rng(d)
-    A = np.empty((piece_capacity(d), d + 1, d))
-    B = np.empty_like(A)
-    moment = np.empty(d)
-    for _ in range(50):
-        S = rng.uniform(0.0, 1.0, (d + 1, d))
-        lo = rng.uniform(0.0, 0.6, d)
-        hi = lo + rng.uniform(0.05, 0.6, d)
-        vol = clip_simplex(S, lo, hi, A, B, moment)
-        pieces, _ = clip_simplices(S[None], lo[None], hi[None])
-        E = pieces[:, 1:] - pieces[:, :1]
-        v = np.abs(np.linalg.det(E)) / (2 if d == 2 else 6)
-        assert abs(vol - v.sum()) <= 1e-15
-        assert np.abs(moment - (v[:, None] * pieces.mean(axis=1)).sum(axis=0)).max() <= 1e-15
