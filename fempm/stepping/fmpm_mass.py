@@ -42,7 +42,8 @@ class FMPMNodalMass(NodalMass):
     def __init__(self, grid: PointGrid):
         super().__init__(grid)
         self.order = grid.options.mass_model.order
-        self._work = {False: grid.nodal_array(grid.d), True: grid.nodal_array(grid.d + 1)}  # without, with M_C 1_l
+        self._work: dict = {}  # (columns, lumping) -> kept nodal array of M_C y (and M_C 1_l)
+        self._acceleration: tuple | None = None  # (force array, column, a): solved with the velocity
         self.friction = grid.conditions.friction_dofs
         self.lump = np.zeros(0, dtype=np.bool_)
 
@@ -62,28 +63,44 @@ class FMPMNodalMass(NodalMass):
         """:math:`M_C y` without the lumped dofs (and :math:`M_C 1_l` in one more column where
         rows are lumped) on every local dof, ghosts summed and updated (a kept array)."""
         g = self.grid
-        vec, out = self._work[len(self.lump) > 0]
+        key = (y.shape[1], len(self.lump) > 0)
+        if key not in self._work:
+            self._work[key] = g.nodal_array(key[0] + key[1])
+        vec, out = self._work[key]
         out.fill(0.0)
         g.mass_apply(y, self.lump, out)
         sum_ghosts(vec)
         return out
 
-    def solve(self, mass: npt.NDArray, b: npt.NDArray, cb: int, active_min: float) -> npt.NDArray:
+    def solve(self, mass: npt.NDArray, b: npt.NDArray, cb: int, active_min: float, fields: int = 1) -> npt.NDArray:
         r"""k Richardson steps :math:`x \leftarrow x + m^{-1}(b - M_C x)` from :math:`x = m^{-1} b`
         (``b[:, cb:cb+d]``, ``m = mass[:, 0]``) on the free components of the supported dofs
-        (lumped rows keep :math:`m^{-1} b`)."""
+        (lumped rows keep :math:`m^{-1} b`); ``fields`` vector fields side by side
+        (``b[:, cb:cb+fields*d]``), each column solved as on its own, in one particle pass a
+        step."""
         g = self.grid
-        x = np.empty((g.num_dofs, g.d))
-        kf.lumped_solve(b, cb, mass, g.free, active_min, x)
+        free = g.free if fields == 1 else np.tile(g.free, (1, fields))
+        x = np.empty((g.num_dofs, free.shape[1]))
+        kf.lumped_solve(b, cb, mass, free, active_min, x)
         for _ in range(self.order - 1):
             x_new = np.empty_like(x)
-            kf.richardson(x, b, cb, self.mc(x), mass, g.free, active_min, self.lump, x_new)
+            kf.richardson(x, b, cb, self.mc(x), mass, free, active_min, self.lump, x_new)
             x = x_new
         return x
 
     def velocity(self, mass, mom, cv: int, active_min: float, guess=None, centroids=None) -> npt.NDArray:
+        """The velocity solve; where the forces of the step sit next to the momenta in ``mom``
+        (USL and MUSL: one P2G pass maps both) the acceleration is solved with it, its
+        Richardson steps sharing the velocity's particle passes, and kept for :meth:`advance`."""
         g = self.grid
-        v = self.solve(mass, mom, cv, active_min)
+        opts = g.options
+        d = g.d
+        if opts.stages.forces_with_map and not opts.lumped_forces and g.force is mom and g.cf == cv + d:
+            x = self.solve(mass, mom, cv, active_min, fields=2)
+            v = np.ascontiguousarray(x[:, :d])
+            self._acceleration = (mom, g.cf, np.ascontiguousarray(x[:, d:]))
+        else:
+            v = self.solve(mass, mom, cv, active_min)
         g.conditions.apply(v, centroids)
         return v
 
@@ -94,8 +111,11 @@ class FMPMNodalMass(NodalMass):
             m = mass[:, 0]
             active = (m > active_min)[:, None]
             a = np.where(active, force[:, cf:cf + g.d] / np.where(active, m[:, None], 1.0), 0.0)
+        elif self._acceleration is not None and self._acceleration[0] is force and self._acceleration[1] == cf:
+            a = self._acceleration[2]  # solved with this step's velocity
         else:
             a = self.solve(mass, force, cf, active_min)
+        self._acceleration = None
         v_new = np.empty_like(a)
         kc.advance(np.ascontiguousarray(a), v_old, np.ascontiguousarray(mass[:, 0]), weak_max, float(dt),
                    float(g.options.damping), v_new)

@@ -165,6 +165,21 @@ def test_compiled_step_with_lumped_forces(cell, mass):
     assert_close(ref, got)
 
 
+@pytest.mark.parametrize(("scheme", "order", "passes"), [("USL", 2, 1), ("MUSL", 3, 4), ("USF", 2, 2)])
+def test_fmpm_solves_velocity_and_acceleration_in_shared_passes(scheme, order, passes):
+    """Where one P2G pass maps the momenta and the forces (USL, MUSL), FMPM(k) takes the
+    velocity's and the acceleration's Richardson steps in the same k - 1 particle passes (MUSL:
+    k - 1 more for the re-mapped velocity); USF maps the forces later and solves each alone."""
+    solver = make_solver("triangle", StepOptions(scheme=scheme, mass=f"fmpm{order}"))
+    grid = solver.grid
+    calls = []
+    apply = grid.mass_apply
+    grid.mass_apply = lambda *a: (calls.append(a[0].shape[1]), apply(*a))
+    solver.step()
+    assert len(calls) == passes
+    assert calls[0] == (4 if scheme != "USF" else 2)  # [v | a] side by side, or one field
+
+
 @pytest.mark.parametrize("cell", ["triangle", "tetrahedron"])
 def test_compiled_step_with_a_numpy_law_callable_loads_and_particle_motion(cell):
     opts = StepOptions(scheme="USL", flip=0.5, position="particle")
