@@ -1,10 +1,15 @@
-r"""Particle-to-grid kernels for point particles (one cell per particle).
+r"""Particle-to-grid kernels over the per-particle basis arrays of
+:class:`fempm.transfer.basis.ParticleBasis` (dofs, values ``S`` and gradients ``G``, one row
+per particle), local sums (the caller adds the ghost contributions to their owners once):
 
-:func:`nodal_forces`: the internal and external nodal forces in one scatter (local sums; the
-caller adds the ghost contributions to their owners once),
+* :func:`nodal_forces`: the internal and external nodal forces in one scatter,
 
-.. math::
-    f_i = \sum_p \Big(-V_p\, \sigma_p \nabla N_i(x_p) + N_i(x_p)\, f^{ext}_p\Big).
+  .. math::
+      f_i = \sum_p \Big(-V_p\, \sigma_p \nabla N_i(x_p) + N_i(x_p)\, f^{ext}_p\Big);
+
+* :func:`scatter_weighted`: :math:`\sum_p S_{pa} w_{pc}` into the dofs :math:`d(p, a)`;
+* :func:`scatter_gradients`: :math:`\sum_p \sum_b W_{p,rb} G_{p,ab}` (e.g. the mass
+  gradients, :math:`W_p = M_p I`).
 """
 
 from __future__ import annotations
@@ -14,7 +19,8 @@ import numpy.typing as npt
 
 from fempm.kernels.choice import pick
 
-__all__ = ["nodal_forces", "nodal_forces_numpy"]
+__all__ = ["nodal_forces", "nodal_forces_numpy", "scatter_gradients", "scatter_gradients_numpy", "scatter_weighted",
+           "scatter_weighted_numpy"]
 
 
 def nodal_forces_numpy(dofs, S, G, volume, sigma, fext, ndofs):
@@ -25,8 +31,54 @@ def nodal_forces_numpy(dofs, S, G, volume, sigma, fext, ndofs):
     return out
 
 
+def _bincount(dofs, contrib, ndofs):
+    out = np.empty((ndofs, contrib.shape[2]))
+    for c in range(contrib.shape[2]):  # loop over components, not particles
+        out[:, c] = np.bincount(dofs.ravel(), weights=contrib[:, :, c].ravel(), minlength=ndofs)
+    return out
+
+
+def scatter_weighted_numpy(dofs, S, w, ndofs):
+    return _bincount(dofs, S[:, :, None] * w[:, None, :], ndofs)
+
+
+def scatter_gradients_numpy(dofs, G, W, ndofs):
+    return _bincount(dofs, G @ np.swapaxes(W, 1, 2), ndofs)
+
+
 try:
     from numba import njit
+
+    @njit(cache=True)
+    def _weighted(dofs, S, w, out):  # pragma: no cover - compiled
+        n, k = S.shape
+        for p in range(n):
+            for a in range(k):
+                i = dofs[p, a]
+                for c in range(w.shape[1]):
+                    out[i, c] += S[p, a] * w[p, c]
+
+    @njit(cache=True)
+    def _gradients(dofs, G, W, out):  # pragma: no cover - compiled
+        n, k, d = G.shape
+        for p in range(n):
+            for a in range(k):
+                i = dofs[p, a]
+                for r in range(W.shape[1]):
+                    s = 0.0
+                    for b in range(d):
+                        s += G[p, a, b] * W[p, r, b]
+                    out[i, r] += s
+
+    def scatter_weighted_numba(dofs, S, w, ndofs):
+        out = np.zeros((ndofs, w.shape[1]))
+        _weighted(np.ascontiguousarray(dofs), np.ascontiguousarray(S), np.ascontiguousarray(w), out)
+        return out
+
+    def scatter_gradients_numba(dofs, G, W, ndofs):
+        out = np.zeros((ndofs, W.shape[1]))
+        _gradients(np.ascontiguousarray(dofs), np.ascontiguousarray(G), np.ascontiguousarray(W), out)
+        return out
 
     @njit(cache=True)
     def _forces(dofs, S, G, volume, sigma, fext, out):  # pragma: no cover - compiled
@@ -47,6 +99,7 @@ try:
         return out
 except ImportError:  # pragma: no cover
     nodal_forces_numba = nodal_forces_numpy
+    scatter_weighted_numba, scatter_gradients_numba = scatter_weighted_numpy, scatter_gradients_numpy
 
 
 def nodal_forces(dofs: npt.NDArray, S: npt.NDArray, G: npt.NDArray, volume: npt.NDArray, sigma: npt.NDArray,
@@ -54,3 +107,15 @@ def nodal_forces(dofs: npt.NDArray, S: npt.NDArray, G: npt.NDArray, volume: npt.
     """Local nodal forces (ndofs, d) of the particles' stresses and external forces ``fext``
     (n, d); ghost rows are partial sums."""
     return pick(nodal_forces_numba, nodal_forces_numpy)(dofs, S, G, volume, sigma, fext, ndofs)
+
+
+def scatter_weighted(dofs: npt.NDArray, S: npt.NDArray, w: npt.NDArray, ndofs: int) -> npt.NDArray:
+    """Local sums (ndofs, k) of the values ``S`` (n, K) at the dofs ``dofs`` (n, K) times the
+    weights ``w`` (n, k); ghost rows are partial sums."""
+    return pick(scatter_weighted_numba, scatter_weighted_numpy)(dofs, S, w, ndofs)
+
+
+def scatter_gradients(dofs: npt.NDArray, G: npt.NDArray, W: npt.NDArray, ndofs: int) -> npt.NDArray:
+    """Local sums (ndofs, k) of the gradients ``G`` (n, K, d) contracted with the tensors ``W``
+    (n, k, d), :math:`\\sum_b W_{p,rb} G_{p,ab}`; ghost rows are partial sums."""
+    return pick(scatter_gradients_numba, scatter_gradients_numpy)(dofs, G, W, ndofs)

@@ -286,13 +286,14 @@ class ContactGrid(BasisGrid):
         d = p.gdim
         vp, at_grid, L = fld["v"].copy(), fld["v"].copy(), np.zeros((len(p), d, d))
         for g in self.deformable:
-            k = self.masks[g]
+            k = self.masks[g][:, None]
             if blend:
                 blended, grid_v, grads = g2p.blend(self.basis, v_new[g], v_old[g], fld["v"], self.options.flip)
-                vp[k] = blended[k]
+                np.copyto(vp, blended, where=k)  # the group's rows (no fancy-indexed copies)
             else:
                 grid_v, grads = g2p.velocity_and_gradient(self.basis, v_new[g])
-            at_grid[k], L[k] = grid_v[k], grads[k]
+            np.copyto(at_grid, grid_v, where=k)
+            np.copyto(L, grads, where=k[:, :, None])
         if blend:
             fld["v"] = vp
         if kinematics:

@@ -21,6 +21,7 @@ import numpy as np
 import numpy.typing as npt
 
 from fempm.kernels import shape as shape_kernels
+from fempm.kernels.p2g import scatter_weighted
 from fempm.particles.halo import extend_index_map, remote_box_rows, remote_rows
 from fempm.particles.particle_set import Particles
 from fempm.transfer.box_average import BoxIntegrator
@@ -240,7 +241,7 @@ class ParticleBasis:
         S = self.values if values is None else values
         w = np.asarray(weights, dtype=np.float64)
         w2 = w[:, None] if w.ndim == 1 else w.reshape(w.shape[0], int(np.prod(w.shape[1:])))
-        return self.scatter_contributions(S[:, :, None] * w2[:, None, :])
+        return scatter_weighted(self.dofs, S, w2, self.num_dofs_local)
 
     def scatter_contributions(self, contrib: npt.NDArray) -> npt.NDArray:
         """Sum per-particle, per-local-dof contributions (n, ndofs_per_cell, k) into (owned +

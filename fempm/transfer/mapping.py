@@ -11,6 +11,7 @@ import numpy.typing as npt
 from petsc4py import PETSc
 
 from fempm import petsc as fpetsc
+from fempm.kernels.p2g import scatter_gradients
 from fempm.particles.particle_set import Particles
 from fempm.transfer.basis import ParticleBasis
 from fempm.transfer.centres import NodalCentres
@@ -65,8 +66,8 @@ def p2g_gradients(basis: ParticleBasis, vectors: npt.NDArray) -> npt.NDArray:
     r""":math:`\sum_p w_p \cdot \nabla N_i(x_p)` for per-particle tensors ``vectors`` (n, k, d):
     row ``a`` of the result is :math:`\sum_p \sum_b w_{p,a b}\, G[p, i, b]` (e.g. the internal
     force with :math:`w_p = -V_p \sigma_p`); returns (owned + ghost dofs, k)."""
-    contrib = basis.gradients @ np.swapaxes(vectors, 1, 2)  # (n, ndofs_cell, k)
-    return sum_over_ranks(basis.index_map, basis.scatter_contributions(contrib))
+    return sum_over_ranks(basis.index_map, scatter_gradients(basis.dofs, basis.gradients, vectors,
+                                                            basis.num_dofs_local))
 
 
 WEIGHTS = ("mass", "volume")

@@ -55,6 +55,18 @@ def test_kinematics_and_elastic_laws_equal_their_references(d):
         assert np.abs(ref - got).max() < 1e-13 * np.abs(ref).max(), type(law).__name__
 
 
+def test_scatter_kernels_equal_their_references(data):
+    from fempm.kernels import p2g
+
+    dofs, S, G, _, _, _ = data
+    rng = np.random.default_rng(6)
+    n, d = G.shape[0], G.shape[2]
+    w, W = rng.standard_normal((n, 3)), rng.standard_normal((n, 4, d))
+    for ref, got in [(p2g.scatter_weighted_numpy(dofs, S, w, 97), p2g.scatter_weighted_numba(dofs, S, w, 97)),
+                     (p2g.scatter_gradients_numpy(dofs, G, W, 97), p2g.scatter_gradients_numba(dofs, G, W, 97))]:
+        assert ref.shape == got.shape and np.abs(ref - got).max() < 1e-13 * np.abs(ref).max()
+
+
 def test_nodal_force_kernel_equals_reference(data):
     from fempm.kernels import p2g
 
