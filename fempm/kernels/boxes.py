@@ -104,10 +104,23 @@ if AVAILABLE:
         return ng
 
     @njit(inline="always")
-    def _store(p, npiece, covered, piece_cell, piece_vol, piece_cen, sc, Y, w):  # pragma: no cover - compiled
-        """Particle ``p``'s samples: its pieces (weights their shares of the covered volume),
-        then unused ones of no weight in the first piece's cell."""
+    def _store(p, npiece, piece_cell, piece_vol, piece_cen, sc, Y, w):  # pragma: no cover - compiled
+        """Particle ``p``'s samples: its pieces by ascending cell (the same order and sums
+        whether found from the last step's cells or by the flood: a resumed run repeats the
+        steps bit for bit), weights their shares of the covered volume, then unused ones of no
+        weight in the first piece's cell."""
         Q, d = sc.shape[1], Y.shape[1]
+        for r in range(1, npiece):  # insertion sort of the few pieces
+            j = r
+            while j > 0 and piece_cell[j - 1] > piece_cell[j]:
+                piece_cell[j - 1], piece_cell[j] = piece_cell[j], piece_cell[j - 1]
+                piece_vol[j - 1], piece_vol[j] = piece_vol[j], piece_vol[j - 1]
+                for i in range(d):
+                    piece_cen[j - 1, i], piece_cen[j, i] = piece_cen[j, i], piece_cen[j - 1, i]
+                j -= 1
+        covered = 0.0
+        for r in range(npiece):
+            covered += piece_vol[r]
         for r in range(min(npiece, Q)):
             sc[p, r] = piece_cell[r]
             w[p, r] = piece_vol[r] / covered
@@ -198,7 +211,7 @@ def _kernel(d: int, simplex: bool):
                 continue
             if covered < box * (1.0 - COVERED) and ghost:
                 reaching += 1  # part of the box may lie beyond this rank's ghost cells
-            _store(p, npiece, covered, piece_cell, piece_vol, piece_cen, sc, Y, w)
+            _store(p, npiece, piece_cell, piece_vol, piece_cen, sc, Y, w)
         return needed, reaching, failed
 
     return kernel

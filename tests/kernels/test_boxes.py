@@ -84,3 +84,18 @@ def test_box_samples_equal_the_box_integrals(name):
     A_ref, G_ref = averages_from_integrals(V, integ, x - ell, x + ell)
     assert np.abs(A - A_ref).max() <= 1e-13
     assert np.abs(G - G_ref).max() <= 1e-12 * np.abs(G_ref).max()
+
+    # moved a little: the pieces found from the last samples' cells are the flood's, bit for bit
+    x_moved = x + rng.uniform(-0.01, 0.01, x.shape) * size
+    moved_cells, _ = loc.locate(x_moved)
+    keep = moved_cells >= 0
+    got = []
+    for guessed in (True, False):
+        arrays = tuple(a[keep].copy() if a.ndim == 2 and len(a) == n else a.reshape(n, Q, d)[keep].reshape(-1, d).copy()
+                       for a in out)
+        needed, _, _ = box_samples(x_moved[keep], ell[keep], moved_cells[keep], (d, simplex), verts, blo, bhi,
+                                   loc.vertex_star(), len(all_cells), geo.x0, geo.K, arrays, guessed)
+        assert needed <= Q
+        got.append(arrays)
+    for a, b in zip(*got):
+        assert np.array_equal(a, b)
