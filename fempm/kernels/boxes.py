@@ -162,7 +162,7 @@ def _kernel(d: int, simplex: bool):
         return vol
 
     @njit(cache=True, error_model="numpy")
-    def kernel(x, ell, cells, verts, blo, bhi, c2v, v_offsets, v_cells, num_cells, num_owned, x0, K, guessed, sc, Y,
+    def kernel(x, ell, cells, verts, blo, bhi, c2v, v_offsets, v_cells, num_cells, frontier, x0, K, guessed, sc, Y,
                w):  # pragma: no cover - compiled
         n = len(cells)
         Q = sc.shape[1]
@@ -200,7 +200,7 @@ def _kernel(d: int, simplex: bool):
                         continue
                     npiece = _record(npiece, c, vol, cen, piece_cell, piece_vol, piece_cen)
                     covered += vol
-                    ghost = ghost or c >= num_owned
+                    ghost = ghost or frontier[c]
                     if covered >= box * (1.0 - COVERED):
                         break  # no other cell meets the box
                     nvis, full = _enqueue(c, c2v, v_offsets, v_cells, num_cells, blo, bhi, lo, hi, visited, nvis)
@@ -210,14 +210,14 @@ def _kernel(d: int, simplex: bool):
                 failed += 1
                 continue
             if covered < box * (1.0 - COVERED) and ghost:
-                reaching += 1  # part of the box may lie beyond this rank's ghost cells
+                reaching += 1  # part of the box may lie in cells this rank does not have
             _store(p, npiece, piece_cell, piece_vol, piece_cen, sc, Y, w)
         return needed, reaching, failed
 
     return kernel
 
 
-def box_samples(x, ell, cells, cell_type: tuple[int, bool], verts, blo, bhi, star: tuple, num_owned: int, x0, K,
+def box_samples(x, ell, cells, cell_type: tuple[int, bool], verts, blo, bhi, star: tuple, frontier, x0, K,
                 out, guessed: bool = False):
     r"""The exact GIMP samples of boxes ``[x - ell, x + ell]`` (n, d) of particles in ``cells``
     (see the module).
@@ -232,7 +232,9 @@ def box_samples(x, ell, cells, cell_type: tuple[int, bool], verts, blo, bhi, sta
         blo, bhi: The cells' bounding boxes (cells, d).
         star: Cell -> vertices, vertex -> cells offsets and cells, and the number of cells
             searched (:meth:`fempm.particles.location.CellLocator.vertex_star`).
-        num_owned: Cells below it are this rank's own, the others ghosts.
+        frontier: Per cell (bool), whether it has a vertex that another rank's cells share (an
+            uncovered box with a piece in such a cell may reach cells this rank does not have;
+            one whose pieces avoid them is cut by the mesh's boundary). All False on one rank.
         x0, K: The affine map of each cell (:attr:`fempm.meshes.geometry.CellGeometry.kernel_geometry`).
         out: (cells (n, Q) int32, reference coordinates (n Q, d), weights (n, Q)) to fill: the
             pieces of a box first, the other samples of no weight.
@@ -243,12 +245,12 @@ def box_samples(x, ell, cells, cell_type: tuple[int, bool], verts, blo, bhi, sta
 
     Returns:
         The most pieces of one box (more than ``Q``: call again with a larger ``Q``), the number
-        of boxes not wholly covered with a piece in a ghost cell (part of them may lie in
-        cells this rank does not have), and the number of boxes left without samples (that met
+        of boxes not wholly covered with a piece in a ``frontier`` cell (part of them may lie
+        in cells this rank does not have), and the number of boxes left without samples (that met
         more than :data:`MAX_VISITED` cells, or none).
     """
     d, simplex = cell_type
     sc, Y, w = out
     needed, reaching, failed = _kernel(d, simplex)(x, np.ascontiguousarray(ell), cells, verts, blo, bhi, *star,
-                                                    num_owned, x0, K, bool(guessed), sc, Y, w)
+                                                    frontier, x0, K, bool(guessed), sc, Y, w)
     return int(needed), int(reaching), int(failed)

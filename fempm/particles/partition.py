@@ -13,8 +13,11 @@ position :math:`s` where
 of a cell's grid work against a particle's), found by bisection with one ``allreduce`` per
 step over all boxes of a level; each half goes on with its share of the ranks. A cell goes to
 the rank of the box holding its midpoint, and the mesh is built again from the same nodes and
-cells with that partition (:func:`dolfinx.mesh.create_mesh`; no ghost cells, mesh tags are
-not carried). The pieces are boxes, so their boundaries stay short.
+cells with that partition (:func:`dolfinx.mesh.create_mesh`; mesh tags are not carried). The
+pieces are boxes, so their boundaries stay short. Without ``ghosts`` a rank holds its own
+cells only (the point step needs no more); with ``ghosts=True`` it also holds every cell that
+shares a node with one of its own, as ghosts (particle domains reach into the cells around
+their particle's: their compiled passes need those cells, :mod:`fempm.stepping.domain_grid`).
 """
 
 from __future__ import annotations
@@ -27,7 +30,7 @@ from mpi4py import MPI
 
 from fempm.meshes.geometry import coordinate_map
 
-__all__ = ["BISECTIONS", "particle_balanced", "rcb_parts"]
+__all__ = ["BISECTIONS", "node_ghosts", "particle_balanced", "rcb_parts"]
 
 #: bisection steps of each cut (the cut is then within 2^-50 of the box's side)
 BISECTIONS = 50
@@ -73,10 +76,44 @@ def rcb_parts(comm: MPI.Comm, points: npt.NDArray, centres: npt.NDArray, parts: 
     return np.array([lo for lo, _ in ranges])[box[len(points):]]
 
 
-def particle_balanced(mesh: dolfinx.mesh.Mesh, points: npt.NDArray, *, cell_weight: float = 0.1) -> dolfinx.mesh.Mesh:
+def node_ghosts(comm: MPI.Comm, nodes: npt.NDArray[np.int64], part: npt.NDArray[np.int32],
+                num_nodes: int) -> list[npt.NDArray[np.int32]]:
+    """For each of this rank's cells (global node indices ``nodes`` (cells, k), destination
+    ranks ``part``), the other ranks that own a cell sharing one of its nodes (``num_nodes``
+    nodes in all): each (node, rank) pair goes to the node's home rank, which sends back every
+    rank that touches each node. Collective."""
+    size = comm.size
+    flat_nodes = nodes.ravel()
+    flat_part = np.repeat(part, nodes.shape[1])
+    home = (flat_nodes * size // max(num_nodes, 1)).astype(np.int64)
+    order = np.argsort(home, kind="stable")
+    cuts = np.searchsorted(home[order], np.arange(size + 1))
+    sent = [np.stack([flat_nodes[order[cuts[r]:cuts[r + 1]]], flat_part[order[cuts[r]:cuts[r + 1]]]], axis=1)
+            for r in range(size)]
+    got = comm.alltoall(sent)  # (node, rank) pairs of the nodes at home here
+    pairs = np.unique(np.concatenate(got), axis=0) if sum(len(g) for g in got) else np.zeros((0, 2), np.int64)
+    answers = []
+    for g in got:  # to each sender: every (node, rank) pair of the nodes it asked about
+        asked = np.unique(g[:, 0]) if len(g) else np.zeros(0, np.int64)
+        answers.append(pairs[np.isin(pairs[:, 0], asked)])
+    known = np.concatenate(comm.alltoall(answers))
+    ranks_of = {}
+    for node, rank in known:
+        ranks_of.setdefault(int(node), set()).add(int(rank))
+    out = []
+    for c in range(len(nodes)):
+        touching = set().union(*(ranks_of.get(int(v), set()) for v in nodes[c]))
+        touching.discard(int(part[c]))
+        out.append(np.array(sorted(touching), dtype=np.int32))
+    return out
+
+
+def particle_balanced(mesh: dolfinx.mesh.Mesh, points: npt.NDArray, *, cell_weight: float = 0.1,
+                      ghosts: bool = False) -> dolfinx.mesh.Mesh:
     """The cells and nodes of ``mesh`` distributed again so that each rank owns about the same
     number of the ``points`` (n, gdim; the particle positions given on any rank) plus
-    ``cell_weight`` times its number of cells (see the module). Collective."""
+    ``cell_weight`` times its number of cells (see the module); with ``ghosts`` every rank
+    also holds the cells sharing a node with its own. Collective."""
     comm = mesh.comm
     if cell_weight < 0.0:
         raise ValueError(f"cell_weight must be non-negative, got {cell_weight}")
@@ -92,7 +129,15 @@ def particle_balanced(mesh: dolfinx.mesh.Mesh, points: npt.NDArray, *, cell_weig
     nodes = np.asarray(gmap.local_to_global(dofmap.ravel().astype(np.int32)), dtype=np.int64).reshape(dofmap.shape)
     coords = np.ascontiguousarray(x[: gmap.size_local])
 
+    if ghosts and comm.size > 1:
+        extra = node_ghosts(comm, nodes, part, gmap.size_global)
+        dest = [np.concatenate([[p], e]).astype(np.int32) for p, e in zip(part, extra)]
+        data = np.concatenate(dest) if dest else np.zeros(0, np.int32)
+        offsets = np.concatenate([[0], np.cumsum([len(a) for a in dest])]).astype(np.int32)
+    else:
+        data, offsets = part, np.arange(len(part) + 1, dtype=np.int32)
+
     def partitioner(comm_, nparts, cell_types, cells):
-        return dolfinx.graph.adjacencylist(part, np.arange(len(part) + 1, dtype=np.int32))._cpp_object
+        return dolfinx.graph.adjacencylist(data, offsets)._cpp_object
 
     return dolfinx.mesh.create_mesh(comm, nodes, mesh.ufl_domain().ufl_coordinate_element(), coords, partitioner)

@@ -23,6 +23,7 @@ from __future__ import annotations
 
 from typing import TYPE_CHECKING
 
+import dolfinx.la
 import numpy as np
 import numpy.typing as npt
 
@@ -39,7 +40,7 @@ from fempm.transfer.mass_models import FMPM, Lumped
 if TYPE_CHECKING:
     from fempm.stepping.solver import ExplicitSolver
 
-__all__ = ["DomainGrid", "supported"]
+__all__ = ["DomainGrid", "frontier_cells", "supported"]
 
 
 def supported(solver: ExplicitSolver) -> bool:
@@ -54,6 +55,23 @@ def supported(solver: ExplicitSolver) -> bool:
         geo = solver.particles.locator.geometry
         return cell in ("interval", "triangle", "tetrahedron") or (cell in ("quadrilateral", "hexahedron") and geo.axis_aligned)
     return type(dom) in (CPDI1, CPDI2) or type(dom) is GIMP
+
+
+def frontier_cells(locator) -> npt.NDArray[np.bool_]:
+    """Per local cell of ``locator`` (owned and ghost), whether one of its vertices is shared
+    with another rank (a ghost vertex, or an owned one another rank holds as a ghost): the
+    cells around a vertex that no other rank shares are all this rank's own. Collective."""
+    c2v = locator.vertex_star()[0]
+    imap = locator.mesh.topology.index_map(0)
+    if locator.mesh.comm.size == 1:
+        return np.zeros(len(c2v), dtype=np.bool_)
+    held = dolfinx.la.vector(imap, 1)
+    held.array[:] = 0.0
+    held.array[imap.size_local:] = 1.0
+    held.scatter_reverse(dolfinx.la.InsertMode.add)  # owned vertices that another rank holds
+    shared = held.array > 0.0
+    shared[imap.size_local:] = True
+    return np.ascontiguousarray(shared[c2v].any(axis=1))
 
 
 class DomainGrid(PointGrid):
@@ -73,7 +91,7 @@ class DomainGrid(PointGrid):
             self.vertices = np.ascontiguousarray(nodes)
             self.bounds = np.ascontiguousarray(nodes.min(axis=1)), np.ascontiguousarray(nodes.max(axis=1))
             self.pieces = 2**self.d
-            self.num_owned_cells = geo.num_owned
+            self.frontier = frontier_cells(solver.particles.sample_locator)
         self.signs = corner_signs(self.d)
         self.generic: SingleFieldGrid | None = None  # for steps with samples beyond the ghost cells
         self.stencil: tuple = (np.zeros((0, 0), dtype=np.int32),)  # the samples' cells, coordinates, weights
@@ -137,7 +155,7 @@ class DomainGrid(PointGrid):
             guessed = ("boxes", len(p), self.pieces) in self._arrays  # the last step's samples
             out = self._kept("boxes", len(p), self.pieces)
             needed, reaching, failed = box_samples(p.x, ell, p.cells, cell_type, self.vertices, *self.bounds,
-                                                   p.sample_locator.vertex_star(), self.num_owned_cells, self.x0,
+                                                   p.sample_locator.vertex_star(), self.frontier, self.x0,
                                                    self.K, out, guessed)
             if needed <= self.pieces:
                 break

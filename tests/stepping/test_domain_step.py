@@ -128,6 +128,31 @@ def test_samples_beyond_the_ghost_cells_take_the_numpy_step():
         assert set(taken) <= {DomainGrid, SingleFieldGrid}
 
 
+@pytest.mark.parametrize("ghosts", [False, True])
+def test_exact_gimp_on_a_mesh_distributed_by_particles(ghosts, monkeypatch):
+    """On a mesh distributed by particles a rank holds its own cells (and, with ``ghosts``, the
+    cells sharing a vertex with them): a box reaching cells the rank does not have takes the
+    numpy step, never a box cut at the partition as if at the mesh's boundary; with the ghosts
+    every step takes the compiled passes."""
+    from fempm.particles.partition import particle_balanced
+
+    def balanced():
+        seeds = np.random.default_rng(2).uniform(0.2, 0.8, (400, 2))
+        return particle_balanced(dm.create_unit_square(comm, 12, 10), seeds if comm.rank == 0 else np.zeros((0, 2)),
+                                 ghosts=ghosts)
+
+    monkeypatch.setitem(MESHES, "balanced triangle", balanced)
+
+    def build(compiled):
+        return make_solver("balanced triangle", StepOptions(scheme="MUSL", flip=0.9, domain="cpgimp"), compiled=compiled)
+
+    ref, got = run_both(build, steps=6)
+    assert_close(ref, got)
+    solver = build(True)
+    taken = {type(solver.grid.for_step()) for _ in range(2) if solver.step()}
+    assert taken == {DomainGrid} if ghosts or comm.size == 1 else taken <= {DomainGrid, SingleFieldGrid}
+
+
 def test_domain_grid_needs_lumped_mass_and_sample_points():
     mesh = dm.create_unit_square(comm, 4, 4)
     p = fempm.create_particles(mesh, 4)
