@@ -23,19 +23,17 @@ __all__ = ["nodal_forces", "nodal_forces_numpy", "scatter_gradients", "scatter_g
            "scatter_weighted_numpy"]
 
 
-def nodal_forces_numpy(dofs, S, G, volume, sigma, fext, ndofs):
-    contrib = -volume[:, None, None] * np.einsum("nae,nce->nac", G, sigma) + S[:, :, None] * fext[:, None, :]
-    out = np.zeros((ndofs, sigma.shape[1]))
-    for c in range(sigma.shape[1]):  # loop over components, not particles
-        out[:, c] = np.bincount(dofs.ravel(), weights=contrib[:, :, c].ravel(), minlength=ndofs)
-    return out
-
-
 def _bincount(dofs, contrib, ndofs):
+    """Per-particle, per-local-dof contributions (n, K, k) summed into the dofs (ndofs, k)."""
     out = np.empty((ndofs, contrib.shape[2]))
     for c in range(contrib.shape[2]):  # loop over components, not particles
         out[:, c] = np.bincount(dofs.ravel(), weights=contrib[:, :, c].ravel(), minlength=ndofs)
     return out
+
+
+def nodal_forces_numpy(dofs, S, G, volume, sigma, fext, ndofs):
+    contrib = -volume[:, None, None] * np.einsum("nae,nce->nac", G, sigma) + S[:, :, None] * fext[:, None, :]
+    return _bincount(dofs, contrib, ndofs)
 
 
 def scatter_weighted_numpy(dofs, S, w, ndofs):

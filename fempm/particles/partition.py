@@ -77,35 +77,36 @@ def rcb_parts(comm: MPI.Comm, points: npt.NDArray, centres: npt.NDArray, parts: 
 
 
 def node_ghosts(comm: MPI.Comm, nodes: npt.NDArray[np.int64], part: npt.NDArray[np.int32],
-                num_nodes: int) -> list[npt.NDArray[np.int32]]:
-    """For each of this rank's cells (global node indices ``nodes`` (cells, k), destination
-    ranks ``part``), the other ranks that own a cell sharing one of its nodes (``num_nodes``
-    nodes in all): each (node, rank) pair goes to the node's home rank, which sends back every
-    rank that touches each node. Collective."""
+                num_nodes: int) -> tuple[npt.NDArray[np.int32], npt.NDArray[np.int32]]:
+    """The destinations of this rank's cells (global node indices ``nodes`` (cells, k),
+    owners ``part``) with ghosts: each cell's owner first, then every other rank that owns a
+    cell sharing one of its nodes (``num_nodes`` nodes in all), as (data, offsets) of an
+    adjacency list. Each (node, rank) pair goes to the node's home rank, which sends back every
+    rank that touches each node asked about. Collective."""
     size = comm.size
+    k = nodes.shape[1]
     flat_nodes = nodes.ravel()
-    flat_part = np.repeat(part, nodes.shape[1])
+    flat_part = np.repeat(part, k).astype(np.int64)
     home = (flat_nodes * size // max(num_nodes, 1)).astype(np.int64)
     order = np.argsort(home, kind="stable")
     cuts = np.searchsorted(home[order], np.arange(size + 1))
     sent = [np.stack([flat_nodes[order[cuts[r]:cuts[r + 1]]], flat_part[order[cuts[r]:cuts[r + 1]]]], axis=1)
             for r in range(size)]
     got = comm.alltoall(sent)  # (node, rank) pairs of the nodes at home here
-    pairs = np.unique(np.concatenate(got), axis=0) if sum(len(g) for g in got) else np.zeros((0, 2), np.int64)
-    answers = []
-    for g in got:  # to each sender: every (node, rank) pair of the nodes it asked about
-        asked = np.unique(g[:, 0]) if len(g) else np.zeros(0, np.int64)
-        answers.append(pairs[np.isin(pairs[:, 0], asked)])
-    known = np.concatenate(comm.alltoall(answers))
-    ranks_of = {}
-    for node, rank in known:
-        ranks_of.setdefault(int(node), set()).add(int(rank))
-    out = []
-    for c in range(len(nodes)):
-        touching = set().union(*(ranks_of.get(int(v), set()) for v in nodes[c]))
-        touching.discard(int(part[c]))
-        out.append(np.array(sorted(touching), dtype=np.int32))
-    return out
+    pairs = np.unique(np.concatenate(got), axis=0)  # sorted by node, then rank
+    answers = [pairs[np.isin(pairs[:, 0], g[:, 0])] for g in got]  # every rank at the nodes each sender asked
+    known = np.unique(np.concatenate(comm.alltoall(answers)), axis=0)
+    # (cell, rank) for every rank at every node of every cell
+    first = np.searchsorted(known[:, 0], flat_nodes, side="left")
+    count = np.searchsorted(known[:, 0], flat_nodes, side="right") - first
+    cell = np.repeat(np.repeat(np.arange(len(nodes)), k), count)
+    rank = known[np.repeat(first, count) + np.arange(count.sum()) - np.repeat(np.cumsum(count) - count, count), 1]
+    ghost = np.unique(np.stack([cell, rank], axis=1)[rank != part[cell]], axis=0)
+    # the owner first: the owner's key (cell, -1) sorts before the cell's ghost ranks
+    key = np.concatenate([np.stack([np.arange(len(nodes)), np.full(len(nodes), -1)], axis=1), ghost])
+    data = np.concatenate([part, ghost[:, 1]])[np.lexsort((key[:, 1], key[:, 0]))]
+    offsets = np.concatenate([[0], np.cumsum(1 + np.bincount(ghost[:, 0], minlength=len(nodes)))])
+    return data.astype(np.int32), offsets.astype(np.int32)
 
 
 def particle_balanced(mesh: dolfinx.mesh.Mesh, points: npt.NDArray, *, cell_weight: float = 0.1,
@@ -130,10 +131,7 @@ def particle_balanced(mesh: dolfinx.mesh.Mesh, points: npt.NDArray, *, cell_weig
     coords = np.ascontiguousarray(x[: gmap.size_local])
 
     if ghosts and comm.size > 1:
-        extra = node_ghosts(comm, nodes, part, gmap.size_global)
-        dest = [np.concatenate([[p], e]).astype(np.int32) for p, e in zip(part, extra)]
-        data = np.concatenate(dest) if dest else np.zeros(0, np.int32)
-        offsets = np.concatenate([[0], np.cumsum([len(a) for a in dest])]).astype(np.int32)
+        data, offsets = node_ghosts(comm, nodes, part, gmap.size_global)
     else:
         data, offsets = part, np.arange(len(part) + 1, dtype=np.int32)
 

@@ -54,7 +54,7 @@ def supported(solver: ExplicitSolver) -> bool:
     if type(dom) is GIMP and dom.exact:  # pieces averaged at their centroids: simplices and axis-aligned boxes
         geo = solver.particles.locator.geometry
         return cell in ("interval", "triangle", "tetrahedron") or (cell in ("quadrilateral", "hexahedron") and geo.axis_aligned)
-    return type(dom) in (CPDI1, CPDI2) or type(dom) is GIMP
+    return type(dom) in (CPDI1, CPDI2, GIMP)
 
 
 def frontier_cells(locator) -> npt.NDArray[np.bool_]:
@@ -147,7 +147,7 @@ class DomainGrid(PointGrid):
     def _box_samples(self) -> int:
         """Exact GIMP: the pieces of the particles' boxes in the cells as samples
         (:func:`fempm.kernels.boxes.box_samples`); returns the number of boxes that may reach
-        beyond the ghost cells (or meet more cells than the kernel searches)."""
+        cells this rank does not have (or meet more cells than the kernel searches)."""
         p = self.solver.particles
         ell = half_widths(p, self.options.particle_domain.deform)
         cell_type = CELLS[self.cell][0], CELLS[self.cell][2]

@@ -44,6 +44,7 @@ class FMPMNodalMass(NodalMass):
         self.order = grid.options.mass_model.order
         self._work: dict = {}  # (columns, lumping) -> kept nodal array of M_C y (and M_C 1_l)
         self._acceleration: tuple | None = None  # (force array, column, a): solved with the velocity
+        self._free = {1: grid.free}  # fields side by side -> their free components (grid.free is the run's)
         self.friction = grid.conditions.friction_dofs
         self.lump = np.zeros(0, dtype=np.bool_)
 
@@ -79,7 +80,9 @@ class FMPMNodalMass(NodalMass):
         (``b[:, cb:cb+fields*d]``), each column solved as on its own, in one particle pass a
         step."""
         g = self.grid
-        free = g.free if fields == 1 else np.tile(g.free, (1, fields))
+        if fields not in self._free:
+            self._free[fields] = np.ascontiguousarray(np.tile(g.free, (1, fields)))
+        free = self._free[fields]
         x = np.empty((g.num_dofs, free.shape[1]))
         kf.lumped_solve(b, cb, mass, free, active_min, x)
         for _ in range(self.order - 1):

@@ -236,22 +236,13 @@ class ParticleBasis:
         r"""Local P2G sums :math:`\sum_p w_p S[p, a]` into (owned + ghost) dofs, shape (ndofs, k).
 
         ``weights`` is (n,) or (n, k); ``values`` replaces ``S`` (e.g. ``S**2``). Ghost entries
-        are partial sums (see :func:`fempm.transfer.p2g` for the reduced result).
+        are partial sums (see :func:`fempm.transfer.p2g` for the reduced result;
+        :func:`fempm.kernels.p2g.scatter_weighted` sums them).
         """
         S = self.values if values is None else values
         w = np.asarray(weights, dtype=np.float64)
         w2 = w[:, None] if w.ndim == 1 else w.reshape(w.shape[0], int(np.prod(w.shape[1:])))
         return scatter_weighted(self.dofs, S, w2, self.num_dofs_local)
-
-    def scatter_contributions(self, contrib: npt.NDArray) -> npt.NDArray:
-        """Sum per-particle, per-local-dof contributions (n, ndofs_per_cell, k) into (owned +
-        ghost) dofs, shape (ndofs, k); ghost entries are partial sums."""
-        nd = self.num_dofs_local
-        idx = self.dofs.ravel()
-        out = np.empty((nd, contrib.shape[2]))
-        for c in range(contrib.shape[2]):  # loop over value components, not particles
-            out[:, c] = np.bincount(idx, weights=contrib[:, :, c].ravel(), minlength=nd)
-        return out
 
     def gather_samples(self, nodal: npt.NDArray) -> npt.NDArray:
         r"""Nodal (ndofs, k) data at the domain's sample points, :math:`f(y_{pq}) = \sum_a

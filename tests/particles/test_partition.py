@@ -83,3 +83,25 @@ def test_a_run_on_the_balanced_mesh_is_the_run_on_the_mesh():
     np.testing.assert_allclose(x1, x0, rtol=0, atol=1e-10)
     for k in ("kinetic", "strain"):
         assert abs(e1[k] - e0[k]) <= 1e-10 * abs(e0[k])
+
+
+@pytest.mark.parametrize("cell_type", [dolfinx.mesh.CellType.triangle, dolfinx.mesh.CellType.quadrilateral])
+def test_ghosts_hold_every_cell_around_a_rank_s_vertices(cell_type):
+    """With ``ghosts=True`` every vertex of a rank's own cells has all its cells on that rank
+    (owned or ghost): the count of local cells around it equals the count over all ranks."""
+    mesh = dolfinx.mesh.create_unit_square(comm, 20, 16, cell_type)
+    balanced = particle_balanced(mesh, _blob(3000), ghosts=True)
+    top = balanced.topology
+    top.create_connectivity(2, 0)
+    c2v = top.connectivity(2, 0)
+    vmap, owned = top.index_map(0), top.index_map(2).size_local
+    cells = c2v.array.reshape(-1, len(c2v.links(0)))
+    global_vertices = vmap.local_to_global(np.arange(vmap.size_local + vmap.num_ghosts, dtype=np.int32))
+    n = vmap.size_global
+    around_owned = np.bincount(global_vertices[cells[:owned].ravel()], minlength=n)
+    around_local = np.bincount(global_vertices[cells.ravel()], minlength=n)
+    total = comm.allreduce(around_owned)  # each cell counted once, on its owner
+    mine = np.unique(global_vertices[cells[:owned].ravel()])
+    assert np.array_equal(around_local[mine], total[mine])
+    if comm.size > 1:
+        assert top.index_map(2).num_ghosts > 0
