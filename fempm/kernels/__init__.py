@@ -10,14 +10,19 @@ Two modules work on whole passes rather than single operations: :mod:`fempm.kern
 :class:`fempm.meshes.geometry.CellGeometry` are their references) and :mod:`fempm.kernels.lumped`
 (the passes of :class:`fempm.stepping.lumped.PointGrid`, whose reference is the generic
 :meth:`fempm.stepping.ExplicitSolver.step`, ``tests/stepping/test_compiled_step.py``).
+Processes that compile at the same time share numba's cache safely (:mod:`fempm.kernels.cache_lock`).
 """
 
 from __future__ import annotations
 
+from fempm.kernels import cache_lock
 from fempm.kernels.choice import COMPILED
 from fempm.kernels.g2p import g2p_point, velocity_and_gradient
 from fempm.kernels.kinematics import deform, linear_elastic_stress, neo_hookean_stress
 from fempm.kernels.p2g import nodal_forces
+
+if COMPILED:
+    cache_lock.install()  # before any kernel is compiled or loaded (several processes share the cache)
 
 __all__ = ["COMPILED", "deform", "g2p_point", "linear_elastic_stress", "neo_hookean_stress", "nodal_forces",
            "velocity_and_gradient"]

@@ -48,7 +48,10 @@ from fempm.kernels.particle_checks import (
 )
 from fempm.kernels.shape import AVAILABLE, CELLS, MULTILINEAR, is_affine, space_of
 
-__all__ = ["kernels_for"]
+__all__ = ["NO_GROUPS", "kernels_for"]
+
+#: no particle groups: one velocity field (the ``group`` argument of the passes)
+NO_GROUPS = np.zeros(0, dtype=np.int64)
 
 if AVAILABLE:
     from numba import njit
@@ -102,8 +105,8 @@ if AVAILABLE:
                 v_new[i, j] = vo + dt * a
 
     @njit(inline="always")
-    def gather(N, G, cell_dofs, c, v_new, v_old, blend, kinematics, D, NK, vg, dv, Lp):  # pragma: no cover
-        r"""The sums over the dofs of cell ``c``, each loaded once: :math:`\sum_a N_a v_a^+` into
+    def gather(N, G, cell_dofs, c, o, v_new, v_old, blend, kinematics, D, NK, vg, dv, Lp):  # pragma: no cover
+        r"""The sums over the dofs of cell ``c`` (columns from ``o``), each loaded once: :math:`\sum_a N_a v_a^+` into
         ``vg``, with ``blend`` :math:`\sum_a N_a (v_a^+ - v_a)` into ``dv``, with ``kinematics``
         :math:`L_p = \sum_a v_a^+ \otimes \nabla N_a` into ``Lp``."""
         for j in range(D):
@@ -115,10 +118,10 @@ if AVAILABLE:
             i = cell_dofs[c, a]
             w = N[a]
             for j in range(D):
-                vij = v_new[i, j]
+                vij = v_new[i, o + j]
                 vg[j] += w * vij
                 if blend:
-                    dv[j] += w * (vij - v_old[i, j])
+                    dv[j] += w * (vij - v_old[i, o + j])
                 if kinematics:
                     for e in range(D):
                         Lp[j, e] += vij * G[a, e]
@@ -158,20 +161,25 @@ def kernels_for(cell: str) -> SimpleNamespace:
         g2p_kernel = functools.partial(_planar, planar.g2p_kernel, simplex, affine)
 
     def scatter(cells, X, K, cell_dofs, mass, v, volume, sigma, g, fext, out, cm, cv, cf, h, body, modulus, c,
-                bound=False):
+                bound=False, group=NO_GROUPS, stride=0, cg=-1):
         """See :func:`_scatter_kernel`; the columns (negative: skipped) choose the compiled
-        variant; with cell sizes ``h`` the stable time (a lower bound of it with ``bound``)."""
-        kernel = scatter_kernel(cell, cm >= 0, cv >= 0, cf >= 0, h.shape[0] > 0, fext.shape[0] > 0, bool(bound))
-        return kernel(cells, X, K, cell_dofs, mass, v, volume, sigma, g, fext, out, h, body, modulus, c)
+        variant; with cell sizes ``h`` the stable time (a lower bound of it with ``bound``);
+        with a ``group`` per particle the columns of group k start at ``k * stride``; ``cg`` >= 0:
+        also the mass gradients."""
+        kernel = scatter_kernel(cell, cm >= 0, cv >= 0, cf >= 0, h.shape[0] > 0, fext.shape[0] > 0, bool(bound),
+                                group.shape[0] > 0, cg >= 0)
+        return kernel(cells, X, K, cell_dofs, mass, v, volume, sigma, g, fext, out, h, body, modulus, c, group,
+                      stride)
 
-    def g2p_update(cells, X, K, cell_dofs, v_new, v_old, flip, dt, blend, kinematics, move, *rest):
+    def g2p_update(cells, X, K, cell_dofs, v_new, v_old, flip, dt, blend, kinematics, move, *rest, group=NO_GROUPS):
         """See :func:`_g2p_kernel`; the flags choose the compiled variant (a momentum array
         ``rest[-2]`` with a row per dof: the blend pass also re-maps the momenta, MUSL; a sums
-        array ``rest[-1]`` of 3 + d entries: the moving pass also sums the state's energies)."""
+        array ``rest[-1]`` of 3 + d entries: the moving pass also sums the state's energies; a
+        ``group`` per particle: each takes its group's field, columns ``k d`` to ``(k + 1) d``)."""
         remap = blend and rest[-2].shape[0] > 0
         totals = move and rest[-1].shape[0] > 0
-        return g2p_kernel(cell, bool(blend), bool(kinematics), bool(move), remap, totals)(
-            cells, X, K, cell_dofs, v_new, v_old, flip, dt, *rest)
+        return g2p_kernel(cell, bool(blend), bool(kinematics), bool(move), remap, totals, group.shape[0] > 0)(
+            cells, X, K, cell_dofs, v_new, v_old, flip, dt, *rest, group)
 
     return SimpleNamespace(scatter=scatter, g2p_update=g2p_update)
 
@@ -183,7 +191,7 @@ def _planar(make, simplex: bool, affine: bool, cell: str, *flags):
 
 @functools.cache
 def _scatter_kernel(cell: str, with_mass: bool, with_momentum: bool, with_force: bool, with_dt: bool, has_fext: bool,
-                    bound: bool = False):
+                    bound: bool = False, grouped: bool = False, with_gradient: bool = False):
     r"""The P2G pass of :func:`kernels_for` with its terms fixed at compile time: the columns of
     ``out`` are [mass | momentum (d) | force (d)], of the terms present. On a basis with
     negative values (P2 Lagrange) the mass column is :math:`\sum_p M_p |N_{ip}|`, the measure
@@ -193,16 +201,22 @@ def _scatter_kernel(cell: str, with_mass: bool, with_momentum: bool, with_force:
     ``with_dt``: also the stable time of the state, :math:`\min_p h_{c(p)} / (c_p + |v_p|)`;
     with ``bound`` a lower bound of it without square roots per particle (a given step only
     needs to be checked against it), from :math:`(c + |v|)^2 \le 2 (c^2 + |v|^2)`:
-    :math:`\big(2 \max_p (c_p^2 + |v_p|^2) / h_{c(p)}^2\big)^{-1/2}`."""
+    :math:`\big(2 \max_p (c_p^2 + |v_p|^2) / h_{c(p)}^2\big)^{-1/2}`.
+
+    ``grouped`` (multi-field contact, :mod:`fempm.stepping.contact_points`): particle p adds to
+    the columns of its group, shifted by ``group[p] * stride``. ``with_gradient``: d more
+    columns, the mass gradients :math:`\sum_p M_p \nabla N_{ip}`."""
     D, NK, SIMPLEX = CELLS[cell]
     AFFINE = is_affine(cell)
     DEGREE, BERNSTEIN = space_of(cell)
     SIGNED = DEGREE == 2 and not BERNSTEIN  # a basis with negative values: the mass column is its support measure
     CV = 1 if with_mass else 0
     CF = CV + (D if with_momentum else 0)
+    CG = CF + (D if with_force else 0)
 
     @njit(cache=True, error_model="numpy")
-    def scatter(cells, X, K, cell_dofs, mass, v, volume, sigma, g, fext, out, h, body, modulus, c):  # pragma: no cover
+    def scatter(cells, X, K, cell_dofs, mass, v, volume, sigma, g, fext, out, h, body, modulus, c, group,
+                stride):  # pragma: no cover
         """Add the particles' mass, momentum and force to ``out`` (ndofs, ncols). Returns the
         stable time of the particles' state (inf without ``with_dt``)."""
         N = np.empty(NK)
@@ -228,28 +242,45 @@ def _scatter_kernel(cell: str, with_mass: bool, with_momentum: bool, with_force:
                         sg[j, e] = sigma[p, j, e]
             if with_dt:
                 best = stable_time(best, bound, m, V, speed, modulus[body[p]], c, p, h[cp])
+            o = group[p] * stride if grouped else 0
             for a in range(NK):
                 i = cell_dofs[cp, a]
                 w = N[a]
                 if with_mass:
-                    out[i, 0] += (abs(w) if SIGNED else w) * m
+                    out[i, o] += (abs(w) if SIGNED else w) * m
                 if with_momentum:
                     for j in range(D):
-                        out[i, CV + j] += w * mv[j]
+                        out[i, o + CV + j] += w * mv[j]
                 if with_force:
                     for j in range(D):
                         s = 0.0
                         for e in range(D):
                             s += sg[j, e] * G[a, e]
-                        out[i, CF + j] += w * fe[j] - V * s
+                        out[i, o + CF + j] += w * fe[j] - V * s
+                if with_gradient:
+                    for j in range(D):
+                        out[i, o + CG + j] += m * G[a, j]
         return 1.0 / np.sqrt(2.0 * best) if bound else best
 
     return scatter
 
 
 @functools.cache
-def _g2p_kernel(cell: str, blend: bool, kinematics: bool, move: bool, remap: bool, totals: bool = False):
-    """The G2P pass of :func:`kernels_for` with its parts (flags) fixed at compile time."""
+def _g2p_kernel(cell: str, blend: bool, kinematics: bool, move: bool, remap: bool, totals: bool = False,
+                grouped: bool = False):
+    r"""The G2P pass of :func:`kernels_for` with its parts (flags) fixed at compile time,
+    one pass over the particles, in place. ``blend``: ``v`` <- the FLIP/PIC blend of ``v_new``
+    against ``v_old``. ``kinematics``: ``F``, ``volume`` and the compiled laws' ``sigma`` from
+    :math:`L_p` of ``v_new`` (and :math:`L_p` into ``L`` when it has a row per particle). ``move``:
+    ``x`` += dt times the grid velocity (or, ``by_particle``, the particle's), then ``X`` <- the
+    reference coordinates in the same cell (origins ``x0``) and, where they lie outside it (beyond
+    ``tol``), ``cells`` and ``X`` <- the first cell of the vertex star (``c2v``, ``v_offsets``,
+    ``v_cells``, ``num_cells``: :func:`fempm.kernels.shape.star_search`) that contains the particle,
+    else ``left`` <- True. ``totals`` (a moving pass): ``sums`` <- the sums over the particles of
+    the state the pass leaves, :math:`[\sum_p \tfrac12 M_p |v_p|^2,\ \sum_p V^0_p W(F_p),\ \sum_p
+    M_p |v_p|,\ \sum_p M_p v_p]` (W of the compiled laws; 0 for the others). Returns (#non-finite J,
+    #J <= 0, min J, max J, #non-finite x or v). ``grouped``: particle p reads (and re-maps into) the columns ``group[p] d`` to
+    ``(group[p] + 1) d`` of the nodal arrays."""
     D, NK, SIMPLEX = CELLS[cell]
     AFFINE = is_affine(cell)
     DEGREE, BERNSTEIN = space_of(cell)
@@ -257,19 +288,7 @@ def _g2p_kernel(cell: str, blend: bool, kinematics: bool, move: bool, remap: boo
     @njit(cache=True, error_model="numpy")
     def g2p_update(cells, X, K, cell_dofs, v_new, v_old, flip, dt, by_particle,
                    x, v, F, volume0, volume, sigma, body, law, lam, mu, L, x0, tol, left, c2v, v_offsets, v_cells,
-                   num_cells, mass, mom, sums):  # pragma: no cover
-        r"""One pass over the particles, in place. ``blend``: ``v`` <- the FLIP/PIC blend of
-        ``v_new`` against ``v_old``. ``kinematics``: ``F``, ``volume`` and the compiled laws'
-        ``sigma`` from :math:`L_p` of ``v_new`` (and :math:`L_p` into ``L`` when it has a row
-        per particle). ``move``: ``x`` += dt times the grid velocity (or, ``by_particle``, the
-        particle's), then ``X`` <- the reference coordinates in the same cell (origins ``x0``)
-        and, where they lie outside it (beyond ``tol``), ``cells`` and ``X`` <- the first cell
-        of the vertex star (``c2v``, ``v_offsets``, ``v_cells``, ``num_cells``:
-        :func:`fempm.kernels.shape.star_search`) that contains the particle, else ``left`` <-
-        True. ``totals`` (a moving pass): ``sums`` <- the sums over the particles of the state
-        the pass leaves, :math:`[\sum_p \tfrac12 M_p |v_p|^2,\ \sum_p V^0_p W(F_p),\ \sum_p M_p
-        |v_p|,\ \sum_p M_p v_p]` (W of the compiled laws; 0 for the others). Returns (#non-finite
-        J, #J <= 0, min J, max J, #non-finite x or v)."""
+                   num_cells, mass, mom, sums, group):  # pragma: no cover
         n = len(cells)
         N = np.empty(NK)
         G = np.empty((NK, D))
@@ -287,7 +306,8 @@ def _g2p_kernel(cell: str, blend: bool, kinematics: bool, move: bool, remap: boo
         for p in range(n):
             c = cells[p]
             shape(X, p, K, c, SIMPLEX, AFFINE, D, NK, N, G, DEGREE, BERNSTEIN)
-            gather(N, G, cell_dofs, c, v_new, v_old, blend, kinematics, D, NK, vg, dv, Lp)
+            o = group[p] * D if grouped else 0
+            gather(N, G, cell_dofs, c, o, v_new, v_old, blend, kinematics, D, NK, vg, dv, Lp)
             if blend:
                 for j in range(D):
                     v[p, j] = flip * (v[p, j] + dv[j]) + (1.0 - flip) * vg[j]
@@ -295,7 +315,7 @@ def _g2p_kernel(cell: str, blend: bool, kinematics: bool, move: bool, remap: boo
                 for a in range(NK):
                     i = cell_dofs[c, a]
                     for j in range(D):
-                        mom[i, j] += N[a] * (mass[p] * v[p, j])
+                        mom[i, o + j] += N[a] * (mass[p] * v[p, j])
             if kinematics:
                 J = deform_at(F, p, dt, Lp, D, Fn)
                 if keep_L:

@@ -111,15 +111,17 @@ if AVAILABLE:
 
 @functools.cache
 def scatter_kernel(simplex: bool, affine: bool, with_mass: bool, with_momentum: bool, with_force: bool, with_dt: bool,
-                   has_fext: bool, bound: bool):
+                   has_fext: bool, bound: bool, grouped: bool = False, with_gradient: bool = False):
     """:func:`fempm.kernels.lumped._scatter_kernel` for ``triangle`` (``simplex``) or
     ``quadrilateral`` cells, ``affine`` or multilinear."""
     CV = 1 if with_mass else 0
     CF = CV + (2 if with_momentum else 0)
+    CG = CF + (2 if with_force else 0)
     QUAD = not simplex
 
     @njit(cache=True, error_model="numpy")
-    def scatter(cells, X, K, cell_dofs, mass, v, volume, sigma, g, fext, out, h, body, modulus, c):  # pragma: no cover
+    def scatter(cells, X, K, cell_dofs, mass, v, volume, sigma, g, fext, out, h, body, modulus, c, group,
+                stride):  # pragma: no cover
         best = 0.0 if bound else np.inf
         for p in range(len(cells)):
             cp = cells[p]
@@ -134,36 +136,50 @@ def scatter_kernel(simplex: bool, affine: bool, with_mass: bool, with_momentum: 
                 best = stable_time(best, bound, m, V, speed, modulus[body[p]], c, p, h[cp])
             i0, i1, i2 = cell_dofs[cp, 0], cell_dofs[cp, 1], cell_dofs[cp, 2]
             i3 = cell_dofs[cp, 3] if QUAD else i0
+            o = group[p] * stride if grouped else 0
             if with_mass:
-                out[i0, 0] += N0 * m
-                out[i1, 0] += N1 * m
-                out[i2, 0] += N2 * m
+                out[i0, o] += N0 * m
+                out[i1, o] += N1 * m
+                out[i2, o] += N2 * m
                 if QUAD:
-                    out[i3, 0] += N3 * m
+                    out[i3, o] += N3 * m
             if with_momentum:
-                add_pair(out, CV, i0, i1, i2, i3, N0, N1, N2, N3, m * v0, m * v1, QUAD)
+                add_pair(out, o + CV, i0, i1, i2, i3, N0, N1, N2, N3, m * v0, m * v1, QUAD)
             if with_force:
                 fe0, fe1 = m * g[0], m * g[1]
                 if has_fext:
                     fe0 += fext[p, 0]
                     fe1 += fext[p, 1]
                 s00, s01, s10, s11 = sigma[p, 0, 0], sigma[p, 0, 1], sigma[p, 1, 0], sigma[p, 1, 1]
-                out[i0, CF] += N0 * fe0 - V * (s00 * g0x + s01 * g0y)
-                out[i0, CF + 1] += N0 * fe1 - V * (s10 * g0x + s11 * g0y)
-                out[i1, CF] += N1 * fe0 - V * (s00 * g1x + s01 * g1y)
-                out[i1, CF + 1] += N1 * fe1 - V * (s10 * g1x + s11 * g1y)
-                out[i2, CF] += N2 * fe0 - V * (s00 * g2x + s01 * g2y)
-                out[i2, CF + 1] += N2 * fe1 - V * (s10 * g2x + s11 * g2y)
+                f = o + CF
+                out[i0, f] += N0 * fe0 - V * (s00 * g0x + s01 * g0y)
+                out[i0, f + 1] += N0 * fe1 - V * (s10 * g0x + s11 * g0y)
+                out[i1, f] += N1 * fe0 - V * (s00 * g1x + s01 * g1y)
+                out[i1, f + 1] += N1 * fe1 - V * (s10 * g1x + s11 * g1y)
+                out[i2, f] += N2 * fe0 - V * (s00 * g2x + s01 * g2y)
+                out[i2, f + 1] += N2 * fe1 - V * (s10 * g2x + s11 * g2y)
                 if QUAD:
-                    out[i3, CF] += N3 * fe0 - V * (s00 * g3x + s01 * g3y)
-                    out[i3, CF + 1] += N3 * fe1 - V * (s10 * g3x + s11 * g3y)
+                    out[i3, f] += N3 * fe0 - V * (s00 * g3x + s01 * g3y)
+                    out[i3, f + 1] += N3 * fe1 - V * (s10 * g3x + s11 * g3y)
+            if with_gradient:  # sum_p M_p grad N_ip
+                f = o + CG
+                out[i0, f] += m * g0x
+                out[i0, f + 1] += m * g0y
+                out[i1, f] += m * g1x
+                out[i1, f + 1] += m * g1y
+                out[i2, f] += m * g2x
+                out[i2, f + 1] += m * g2y
+                if QUAD:
+                    out[i3, f] += m * g3x
+                    out[i3, f + 1] += m * g3y
         return 1.0 / np.sqrt(2.0 * best) if bound else best
 
     return scatter
 
 
 @functools.cache
-def g2p_kernel(simplex: bool, affine: bool, blend: bool, kinematics: bool, move: bool, remap: bool, totals: bool = False):
+def g2p_kernel(simplex: bool, affine: bool, blend: bool, kinematics: bool, move: bool, remap: bool, totals: bool = False,
+               grouped: bool = False):
     """:func:`fempm.kernels.lumped._g2p_kernel` for ``triangle`` (``simplex``) or
     ``quadrilateral`` cells, ``affine`` or multilinear."""
     QUAD = not simplex
@@ -171,7 +187,7 @@ def g2p_kernel(simplex: bool, affine: bool, blend: bool, kinematics: bool, move:
     @njit(cache=True, error_model="numpy")
     def g2p_update(cells, X, K, cell_dofs, v_new, v_old, flip, dt, by_particle,
                    x, v, F, volume0, volume, sigma, body, law, lam, mu, L, x0, tol, left, c2v, v_offsets, v_cells,
-                   num_cells, mass, mom, sums):  # pragma: no cover
+                   num_cells, mass, mom, sums, group):  # pragma: no cover
         n = len(cells)
         keep_L = L.shape[0] == n
         nonfinite_j, inverted, jmin, jmax, nonfinite = 0, 0, np.inf, -np.inf, 0  # the pass's checks
@@ -183,23 +199,25 @@ def g2p_kernel(simplex: bool, affine: bool, blend: bool, kinematics: bool, move:
             N0, N1, N2, N3, g0x, g0y, g1x, g1y, g2x, g2y, g3x, g3y = basis(X0, X1, k00, k01, k10, k11, simplex)
             i0, i1, i2 = cell_dofs[c, 0], cell_dofs[c, 1], cell_dofs[c, 2]
             i3 = cell_dofs[c, 3] if QUAD else i0
-            a0, b0, a1, b1, a2, b2 = v_new[i0, 0], v_new[i0, 1], v_new[i1, 0], v_new[i1, 1], v_new[i2, 0], v_new[i2, 1]
+            o = group[p] * 2 if grouped else 0
+            o1 = o + 1
+            a0, b0, a1, b1, a2, b2 = v_new[i0, o], v_new[i0, o1], v_new[i1, o], v_new[i1, o1], v_new[i2, o], v_new[i2, o1]
             vg0 = N0 * a0 + N1 * a1 + N2 * a2
             vg1 = N0 * b0 + N1 * b1 + N2 * b2
             if QUAD:
-                a3, b3 = v_new[i3, 0], v_new[i3, 1]
+                a3, b3 = v_new[i3, o], v_new[i3, o1]
                 vg0 += N3 * a3
                 vg1 += N3 * b3
             if blend:
-                dv0 = N0 * (a0 - v_old[i0, 0]) + N1 * (a1 - v_old[i1, 0]) + N2 * (a2 - v_old[i2, 0])
-                dv1 = N0 * (b0 - v_old[i0, 1]) + N1 * (b1 - v_old[i1, 1]) + N2 * (b2 - v_old[i2, 1])
+                dv0 = N0 * (a0 - v_old[i0, o]) + N1 * (a1 - v_old[i1, o]) + N2 * (a2 - v_old[i2, o])
+                dv1 = N0 * (b0 - v_old[i0, o1]) + N1 * (b1 - v_old[i1, o1]) + N2 * (b2 - v_old[i2, o1])
                 if QUAD:
-                    dv0 += N3 * (a3 - v_old[i3, 0])
-                    dv1 += N3 * (b3 - v_old[i3, 1])
+                    dv0 += N3 * (a3 - v_old[i3, o])
+                    dv1 += N3 * (b3 - v_old[i3, o1])
                 v[p, 0] = flip * (v[p, 0] + dv0) + (1.0 - flip) * vg0
                 v[p, 1] = flip * (v[p, 1] + dv1) + (1.0 - flip) * vg1
             if remap:  # MUSL: the blended momenta back to the grid, in the same pass
-                add_pair(mom, 0, i0, i1, i2, i3, N0, N1, N2, N3, mass[p] * v[p, 0], mass[p] * v[p, 1], QUAD)
+                add_pair(mom, o, i0, i1, i2, i3, N0, N1, N2, N3, mass[p] * v[p, 0], mass[p] * v[p, 1], QUAD)
             if kinematics:
                 L00 = a0 * g0x + a1 * g1x + a2 * g2x
                 L01 = a0 * g0y + a1 * g1y + a2 * g2y

@@ -68,7 +68,7 @@ from fempm.transfer.mapping import SUPPORT_TOL, mass_centres, p2g, p2g_gradients
 if TYPE_CHECKING:
     from fempm.stepping.solver import ExplicitSolver
 
-__all__ = ["Contact", "ContactGrid", "correct", "shared_cells"]
+__all__ = ["Contact", "ContactGrid", "correct", "particle_groups", "shared_cells"]
 
 
 @dataclass(frozen=True)
@@ -165,6 +165,35 @@ def correct(m: npt.NDArray, v: npt.NDArray, grad: npt.NDArray, friction: float,
     return contact
 
 
+def particle_groups(contact: Contact, particles) -> tuple[npt.NDArray[np.int64], int]:
+    """(each particle's group of ``fields[contact.field]``, the number of groups G over all
+    ranks), checked: non-negative integers, every rigid group present (collective)."""
+    fld, comm = particles.fields, particles.comm
+    if contact.field not in fld:
+        raise ValueError(f"contact: the particles have no field {contact.field!r} naming their groups")
+    group = np.asarray(fld[contact.field])
+    if group.ndim != 1:
+        bad = 1
+    elif group.dtype.kind in "iu":
+        bad = int(group.min(initial=0) < 0)
+    else:
+        bad = int(np.count_nonzero((group < 0) | (group != np.round(group))))
+    bad = comm.allreduce(bad)
+    if bad:
+        raise ValueError(f"contact: fields[{contact.field!r}] must hold one non-negative integer group per particle")
+    group = group.astype(np.int64)
+    G = comm.allreduce(int(group.max(initial=-1)) + 1, op=MPI.MAX)
+    if contact.rigid:
+        present = np.zeros(max(G, max(contact.rigid) + 1), dtype=np.int64)
+        present[:G] = np.bincount(group, minlength=G)
+        comm.Allreduce(MPI.IN_PLACE, present, op=MPI.SUM)
+        absent = [g for g in contact.rigid if present[g] == 0]
+        if absent:
+            raise ValueError(f"contact: rigid group(s) {absent} hold no particle (fields[{contact.field!r}] has the "
+                             f"groups {np.flatnonzero(present).tolist()})")
+    return group, G
+
+
 def shared_cells(particles, field: str) -> int:
     """The number of cells holding particles of two or more groups of ``fields[field]`` (bodies
     that have not come apart; collective: each particle lives on the rank owning its cell)."""
@@ -184,25 +213,8 @@ class ContactGrid(BasisGrid):
         self.contact = solver.contact
 
     def groups(self) -> npt.NDArray[np.int64]:
-        """Each particle's group, checked: non-negative integers, every rigid group present."""
-        contact, p = self.contact, self.solver.particles
-        fld, comm = p.fields, p.comm
-        if contact.field not in fld:
-            raise ValueError(f"contact: the particles have no field {contact.field!r} naming their groups")
-        group = np.asarray(fld[contact.field])
-        bad = comm.allreduce(int(np.count_nonzero((group < 0) | (group != np.round(group)))) if group.ndim == 1 else 1)
-        if bad:
-            raise ValueError(f"contact: fields[{contact.field!r}] must hold one non-negative integer group per particle")
-        group = group.astype(np.int64)
-        G = comm.allreduce(int(group.max(initial=-1)) + 1, op=MPI.MAX)
-        present = np.zeros(max(G, max(contact.rigid, default=-1) + 1), dtype=np.int64)
-        present[:G] = np.bincount(group, minlength=G)
-        comm.Allreduce(MPI.IN_PLACE, present, op=MPI.SUM)
-        absent = [g for g in contact.rigid if present[g] == 0]
-        if absent:
-            raise ValueError(f"contact: rigid group(s) {absent} hold no particle (fields[{contact.field!r}] has the "
-                             f"groups {np.flatnonzero(present).tolist()})")
-        self.num_groups = G
+        """Each particle's group, checked (:func:`particle_groups`)."""
+        group, self.num_groups = particle_groups(self.contact, self.solver.particles)
         return group
 
     def open(self, dt: float | None) -> float:

@@ -25,6 +25,8 @@ from fempm.meshes.cell_sizes import cell_sizes
 from fempm.particles.particle_set import Particles
 from fempm.stepping import checks, diagnostics
 from fempm.stepping.contact import Contact, ContactGrid
+from fempm.stepping.contact_points import ContactPointGrid
+from fempm.stepping.contact_points import supported as contact_points_supported
 from fempm.stepping.domain_grid import DomainGrid
 from fempm.stepping.domain_grid import supported as domain_grid_supported
 from fempm.stepping.grid import Grid, SingleFieldGrid
@@ -183,7 +185,8 @@ class ExplicitSolver:
     @property
     def grid(self) -> Grid:
         """The grid of the step (made on first use, remade when the options, ``compiled`` or
-        ``contact`` change): a :class:`~fempm.stepping.contact.ContactGrid` with contact, a
+        ``contact`` change): with contact a :class:`~fempm.stepping.contact_points.ContactPointGrid`
+        where its compiled passes apply, else a :class:`~fempm.stepping.contact.ContactGrid`; a
         :class:`~fempm.stepping.lumped.PointGrid` or a
         :class:`~fempm.stepping.domain_grid.DomainGrid` where the compiled passes apply (unless
         ``compiled=False``), else a :class:`~fempm.stepping.grid.SingleFieldGrid`."""
@@ -194,9 +197,12 @@ class ExplicitSolver:
 
     def _make_grid(self) -> Grid:
         if self.contact is not None:  # one velocity field per body
+            if self.compiled is not False and contact_points_supported(self):
+                return ContactPointGrid(self)
             grid = ContactGrid(self)
             if self.compiled:
-                raise ValueError("compiled=True: the compiled step has one velocity field; contact takes the generic step")
+                raise ValueError("compiled=True with contact needs point particles, lumped mass and no rigid group on "
+                                 "a space of the compiled passes; this contact takes the generic step")
             return grid
         if self.compiled is not False and point_grid_supported(self):
             return PointGrid(self)

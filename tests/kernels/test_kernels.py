@@ -189,7 +189,7 @@ def test_planar_kernels_equal_the_generic_ones_bit_for_bit(cell):
             out = np.zeros((90, 5))
             t = kernel(s["cells"], s["X"], s["K"], s["cell_dofs"], s["mass"], s["v"], s["volume"], s["sigma"], s["g"],
                        s["fext"] if has_fext else np.zeros((0, 2)), out, s["h"] if with_dt else np.zeros(0),
-                       s["body"], s["modulus"], s["c"])
+                       s["body"], s["modulus"], s["c"], np.zeros(0, dtype=np.int64), 0)
             results.append((out, t))
         assert same(results[0][0], results[1][0]) and same(results[0][1], results[1][1]), flags
         if with_dt:
@@ -207,7 +207,8 @@ def test_planar_kernels_equal_the_generic_ones_bit_for_bit(cell):
             sums = np.full(5 if totals else 0, np.nan)
             counts = kernel(s["cells"], s["X"], s["K"], s["cell_dofs"], s["v_new"], s["v_old"], 0.9, 1e-2,
                             by_particle, s["x"], s["v"], s["F"], s["volume0"], s["volume"], s["sigma"], s["body"],
-                            s["law"], s["lam"], s["mu"], L, s["x0"], 1e-10, left, *s["star"], s["mass"], mom, sums)
+                            s["law"], s["lam"], s["mu"], L, s["x0"], 1e-10, left, *s["star"], s["mass"], mom, sums,
+                            np.zeros(0, dtype=np.int64))
             results.append((counts, [s[k] for k in ("X", "x", "v", "F", "volume", "sigma", "cells")], L, left, mom,
                             sums))
         (c0, a0, L0, l0, m0, s0), (c1, a1, L1, l1, m1, s1) = results
@@ -217,6 +218,71 @@ def test_planar_kernels_equal_the_generic_ones_bit_for_bit(cell):
         if move:  # some particles stay in their cells, some move to a neighbour, some are not found
             moved = np.count_nonzero(a0[-1] != _pass_state_(simplex, 2)["cells"])
             assert 0 < np.count_nonzero(l0) and 0 < moved and np.count_nonzero(l0) + moved < len(l0)
+
+
+@pytest.mark.parametrize("cell", ["triangle", "quadrilateral-multilinear"])
+def test_grouped_passes_are_the_one_field_passes_of_each_group(cell):
+    """Multi-field contact's passes (a group per particle, fempm.stepping.contact_points): the
+    grouped P2G into G = 3 blocks of columns [m | m v | f | grad m] equals the one-field P2G of
+    each group's particles into its block, the mass gradients equal a force-only P2G with
+    V = M and sigma = -I; the grouped G2P (blend with MUSL's re-map, kinematics, motion) equals
+    the one-field G2P of each group's particles from its block. The generic and the planar
+    kernels alike."""
+    from fempm.kernels import lumped, planar
+
+    simplex, affine = cell == "triangle", not cell.endswith("multilinear")
+    s = _pass_state(simplex, 4, not affine)
+    n, nd, G, S = len(s["cells"]), 90, 3, 7
+    group = np.random.default_rng(5).integers(0, G, n)
+    none = np.zeros(0, dtype=np.int64)
+    args = ("mass", "v", "volume", "sigma", "g", "fext")
+    for grouped, one in ((lumped._scatter_kernel(cell, True, True, True, True, True, False, True, True),
+                          lumped._scatter_kernel(cell, True, True, True, True, True, False)),
+                         (planar.scatter_kernel(simplex, affine, True, True, True, True, True, False, True, True),
+                          planar.scatter_kernel(simplex, affine, True, True, True, True, True, False))):
+        out = np.zeros((nd, G * S))
+        grouped(s["cells"], s["X"], s["K"], s["cell_dofs"], *[s[k] for k in args], out, s["h"], s["body"],
+                s["modulus"], s["c"], group, S)
+        for g in range(G):
+            k = group == g
+            sub = [s[a][k] if a not in ("g",) else s[a] for a in args]
+            ref = np.zeros((nd, 5))
+            one(s["cells"][k], s["X"][k], s["K"], s["cell_dofs"], *sub, ref, s["h"], s["body"][k], s["modulus"],
+                s["c"][k], none, 0)
+            assert np.allclose(out[:, g * S:g * S + 5], ref, rtol=0, atol=1e-12 * np.abs(ref).max())
+            grad = np.zeros((nd, 5))
+            one(s["cells"][k], s["X"][k], s["K"], s["cell_dofs"], s["mass"][k], s["v"][k], s["mass"][k],
+                np.broadcast_to(-np.eye(2), (k.sum(), 2, 2)).copy(), 0.0 * s["g"], np.zeros((k.sum(), 2)), grad,
+                s["h"], s["body"][k], s["modulus"], s["c"][k], none, 0)
+            assert np.abs(out[:, g * S + 5:g * S + 7]).max() > 1.0
+            assert np.allclose(out[:, g * S + 5:g * S + 7], grad[:, 3:5], rtol=0, atol=1e-12 * np.abs(grad).max())
+    rng = np.random.default_rng(6)
+    v_new, v_old = rng.standard_normal((nd, 2 * G)), rng.standard_normal((nd, 2 * G))
+    per_particle = ("cells", "X", "x", "v", "F", "volume0", "volume", "sigma", "body", "mass")
+    for grouped, one in ((lumped._g2p_kernel(cell, True, True, True, True, False, True),
+                          lumped._g2p_kernel(cell, True, True, True, True, False)),
+                         (planar.g2p_kernel(simplex, affine, True, True, True, True, False, True),
+                          planar.g2p_kernel(simplex, affine, True, True, True, True, False))):
+        results = []
+        for g in [None, *range(G)]:
+            t = _pass_state(simplex, 4, not affine)
+            k = np.ones(n, dtype=bool) if g is None else group == g
+            t.update({a: np.ascontiguousarray(t[a][k]) for a in per_particle})
+            m = k.sum()
+            mom, left = np.zeros((nd, 2 * G if g is None else 2)), np.zeros(m, dtype=np.bool_)
+            cols = slice(None) if g is None else slice(2 * g, 2 * g + 2)
+            kernel, last = (grouped, (group,)) if g is None else (one, (none,))
+            kernel(t["cells"], t["X"], t["K"], t["cell_dofs"], np.ascontiguousarray(v_new[:, cols]),
+                   np.ascontiguousarray(v_old[:, cols]), 0.9, 1e-2, False, t["x"], t["v"], t["F"], t["volume0"],
+                   t["volume"], t["sigma"], t["body"], t["law"], t["lam"], t["mu"], np.zeros((0, 2, 2)), t["x0"],
+                   1e-10, left, *t["star"], t["mass"], mom, np.zeros(0), *last)
+            results.append((k, [t[a] for a in ("X", "x", "v", "F", "volume", "sigma", "cells")], mom, left))
+        k0, a0, mom0, left0 = results[0]
+        for g, (k, a, mom, left) in enumerate(results[1:]):
+            assert all(np.allclose(x[k], y, rtol=0, atol=1e-13 * max(1.0, np.nanmax(np.abs(y))), equal_nan=True)
+                       for x, y in zip(a0, a))  # NaN: X of a particle whose pull-back failed, in both
+            assert np.allclose(mom0[:, 2 * g:2 * g + 2], mom, rtol=0, atol=1e-13 * np.abs(mom).max())
+            assert np.array_equal(left0[k], left)
 
 
 @pytest.mark.parametrize("d", [2, 3])

@@ -143,7 +143,7 @@ def test_contact_refuses_what_it_does_not_support():
     solver.options = StepOptions(scheme="USF")
     with pytest.raises(ValueError, match="USL and MUSL"):
         solver.step()
-    solver.options = StepOptions()
+    solver.options = StepOptions(mass="consistent")
     solver.compiled = True
     with pytest.raises(ValueError, match="contact takes the generic step"):
         solver.step()

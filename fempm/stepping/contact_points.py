@@ -1,0 +1,199 @@
+r"""Multi-field contact of point particles in compiled passes (:class:`ContactPointGrid`).
+
+The contact of :mod:`fempm.stepping.contact` (same equations, options and checks;
+:class:`~fempm.stepping.contact.ContactGrid` is the reference it is tested against to
+round-off) on the passes of :class:`~fempm.stepping.lumped.PointGrid`: each particle adds to,
+and reads from, the columns of its own group in one nodal array with a block of columns per
+group (the ``group`` argument of :func:`fempm.kernels.lumped.kernels_for`'s passes),
+
+.. math::
+    [\, m^g \mid m^g v^g \mid f^g \mid \nabla m^g \,]_{g = 0 \dots G-1}, \qquad
+    \nabla m_i^g = \sum_{p \in g} M_p \nabla N_{ip},
+
+so that the mass, momenta, forces and mass gradients of every group come from one P2G pass
+(ghosts summed once), and G2P (blend, MUSL's re-map, kinematics, motion and the state's sums)
+stays one pass. Where every boundary condition holds velocity components at 0, the grid
+update and the correction are one compiled pass over the dofs (:mod:`fempm.kernels.contact`);
+other conditions take the numpy stages on the (G, dofs) views of that array
+(:func:`~fempm.stepping.contact.correct`). With a ``gap`` or a wall that checks contact by
+position, one more pass maps each group's first mass moments.
+
+Applies to point particles with lumped mass on the spaces of the compiled passes, USL and MUSL,
+deformable groups (rigid groups, and consistent or FMPM mass with contact, take
+:class:`~fempm.stepping.contact.ContactGrid`).
+"""
+
+from __future__ import annotations
+
+from typing import TYPE_CHECKING
+
+import numpy as np
+import numpy.typing as npt
+from mpi4py import MPI
+
+from fempm.kernels import contact as kc
+from fempm.stepping.contact import correct, particle_groups
+from fempm.stepping.lumped import BOUND_SAFETY, PointGrid
+from fempm.stepping.lumped import supported as point_supported
+from fempm.stepping.nodal import sum_ghosts
+from fempm.transfer.centres import NodalCentres
+from fempm.transfer.mapping import SUPPORT_TOL, mass_centres
+from fempm.transfer.mass_models import Lumped
+
+if TYPE_CHECKING:
+    from fempm.stepping.solver import ExplicitSolver
+
+__all__ = ["ContactPointGrid", "supported"]
+
+
+def supported(solver: ExplicitSolver) -> bool:
+    """Whether ``solver``'s contact takes a :class:`ContactPointGrid`: the options, space and
+    mesh of a :class:`~fempm.stepping.lumped.PointGrid` with lumped mass, no rigid group."""
+    return (point_supported(solver) and type(solver.options.mass_model) is Lumped and not solver.contact.rigid
+            and solver.options.stages.forces_with_map)
+
+
+class ContactPointGrid(PointGrid):
+    """A velocity field per particle group of ``solver.contact``, corrected where groups meet
+    (:mod:`fempm.stepping.contact`), in the compiled passes (see the module)."""
+
+    def __init__(self, solver: ExplicitSolver):
+        super().__init__(solver)
+        self.contact = solver.contact
+        self.num_groups = 0
+        #: the number of contact nodes (two or more groups with mass) of the last grid update, on this rank
+        self.contacts = 0
+        self.fused = self.conditions.zero_components  # the grid update in one compiled pass over the dofs
+        self.positions = self.conditions.needs_positions or self.contact.gap is not None
+
+    def _layout(self, G: int) -> None:
+        """The kept nodal arrays for ``G`` groups: [m | m v | f | grad m] (``stride`` columns)
+        per group, and d columns per group for MUSL's re-mapped momenta and the mass moments."""
+        if G == self.num_groups:
+            return
+        d = self.d
+        self.num_groups, self.stride = G, 1 + 3 * d
+        self._nodal = self.nodal_array(G * self.stride)
+        self._nodal_d = self.nodal_array(G * d)
+        self._moments = self.nodal_array(G * d) if self.positions else None
+
+    def _by_group(self, array: npt.NDArray, start: int, k: int) -> npt.NDArray:
+        """The (G, dofs, k) view of columns ``start:start+k`` of each group's block of ``array``."""
+        G = self.num_groups
+        return array.reshape(len(array), G, -1)[:, :, start:start + k].transpose(1, 0, 2)
+
+    def open(self, dt: float | None) -> float:
+        s, opts, contact = self.solver, self.options, self.contact
+        p = s.particles
+        f = p.fields
+        d = self.d
+        self.group, G = particle_groups(contact, p)
+        self._layout(G)
+        self.g, self.fext = self._external(s.t)
+        vec, out = self._nodal
+        out.fill(0.0)
+        local = self.kernels.scatter(p.cells, p.X, self.K, self.cell_dofs, p.mass, f["v"], p.volume, f["sigma"],
+                                     self.g, self.fext, out, 0, 1, 1 + d, s.h_cell, f["body"], self.modulus,
+                                     self._wave_speeds(), bound=dt is not None, group=self.group,
+                                     stride=self.stride, cg=1 + 2 * d)
+        sum_ghosts(vec)
+        top = np.array([kc.largest_total(out, self.stride, G, self.num_owned), -local])
+        p.comm.Allreduce(MPI.IN_PLACE, top, op=MPI.MAX)  # one collective: the largest mass and the stable time
+        top, state = float(top[0]), -float(top[1])
+        if dt is not None and not dt <= state * BOUND_SAFETY:
+            state = self._stable_time()
+        # a node with a sliver of one group's mass keeps that group's mapped velocity
+        self.active_min, self.weak_max = SUPPORT_TOL * top, max(opts.mass_cutoff, contact.mass_cutoff) * top
+        m = self._by_group(out, 0, 1)[:, :, 0]  # (G, dofs)
+        self.moments, self.centroids = self._group_moments(m)
+        if not self.fused:  # the numpy stages' (G, dofs) arrays
+            has = m > self.active_min
+            self.m_has = np.where(has, m, 0.0)
+            self.inv = np.where(has, 1.0 / np.where(has, m, 1.0), 0.0)[:, :, None]
+            self.weak = m <= self.weak_max
+            self.force, self.grad = self._by_group(out, 1 + d, d), self._by_group(out, 1 + 2 * d, d)
+        self.nonfinite, self.left = 0, None
+        return opts.cfl * state
+
+    def _group_moments(self, m: npt.NDArray) -> tuple:
+        r"""(each group's first mass moments :math:`\sum_{p \in g} M_p N_{ip} x_p` (G, dofs, d),
+        each group's :class:`~fempm.transfer.centres.NodalCentres` for the walls that check
+        contact by position), one more particle pass; (None, None per group) without a gap or
+        such a wall."""
+        if self._moments is None:
+            return None, [None] * self.num_groups
+        p = self.solver.particles
+        f = p.fields
+        vec, out = self._moments
+        out.fill(0.0)
+        self.kernels.scatter(p.cells, p.X, self.K, self.cell_dofs, p.mass, p.x, p.volume, f["sigma"], np.zeros(self.d),
+                             np.zeros((0, self.d)), out, -1, 0, -1, np.zeros(0), f["body"], self.modulus, np.zeros(0),
+                             group=self.group, stride=self.d)
+        sum_ghosts(vec)
+        moments = self._by_group(out, 0, self.d)
+        centroids = [None] * self.num_groups
+        if self.conditions.needs_positions:
+            centroids = [NodalCentres(c, mg) for c, mg in zip(mass_centres(m, moments), m)]
+        return moments, centroids
+
+    def _constrain(self, v: npt.NDArray) -> npt.NDArray:
+        """Each group's grid conditions on ``v`` (dofs, G d), in place (the zero components
+        only: a fused grid holds no other)."""
+        if not self.fused:
+            by_group = self._by_group(v, 0, self.d)
+            for g in range(self.num_groups):
+                self.conditions.apply(by_group[g], self.centroids[g])
+        return v
+
+    def velocity(self, remapped: bool = False) -> npt.NDArray:
+        """Each group's velocity from its particles' momenta (the mapped ones are not corrected:
+        see :meth:`fempm.stepping.contact.ContactGrid.velocity`)."""
+        mom, stride, cv = (self._nodal_d[1], self.d, 0) if remapped else (self._nodal[1], self.stride, 1)
+        v = np.empty((self.num_dofs, self.num_groups * self.d))
+        kc.group_velocity(self._nodal[1], self.stride, mom, stride, cv, self.free, self.active_min, v)
+        return self._constrain(v)
+
+    def advance(self, v_old: npt.NDArray, dt: float) -> npt.NDArray:
+        """The numpy stages (conditions other than zero components)."""
+        opts, contact = self.options, self.contact
+        old = self._by_group(v_old, 0, self.d)
+        v = np.empty_like(v_old)
+        a = self._by_group(v, 0, self.d)  # the accelerations, then the new velocities, in place
+        np.multiply(self.force, self.inv, out=a)
+        if opts.damping > 0.0:
+            a -= opts.damping * old
+        a[self.weak] = 0.0
+        a *= dt
+        a += old
+        at = correct(self.m_has, a, self.grad, contact.friction, None, self.moments, contact.gap, dt)
+        self.contacts = int(np.count_nonzero(at))
+        return self._constrain(v)
+
+    def update(self, dt: float) -> tuple[npt.NDArray, npt.NDArray]:
+        if not self.fused:
+            v_old = self.velocity()
+            return v_old, self.advance(v_old, dt)
+        shape = (self.num_dofs, self.num_groups * self.d)
+        v_old, v_new = np.empty(shape), np.empty(shape)
+        contact = self.contact
+        gap = -1.0 if contact.gap is None else float(contact.gap)
+        moments = self._moments[1] if self._moments is not None else np.zeros((0, 0))
+        self.contacts = kc.grid_update(self._nodal[1], self.stride, self.free, self.active_min, self.weak_max, float(dt),
+                       float(self.options.damping), float(contact.friction), gap, moments, v_old, v_new)
+        return v_old, v_new
+
+    def forces(self) -> None:  # pragma: no cover - the schemes with contact map the forces with the mass
+        raise ValueError(f"contact supports the schemes USL and MUSL (got {self.options.stages})")
+
+    def gather_pass(self, v_new, v_old, flip: float, dt: float, blend: bool, kinematics: bool, move: bool,
+                    state: tuple) -> tuple:
+        """The G2P pass, each particle with its group's field."""
+        p = self.solver.particles
+        return self.kernels.g2p_update(p.cells, p.X, self.K, self.cell_dofs, v_new, v_old, flip, dt, blend,
+                                       kinematics, move, *state, group=self.group)
+
+    def nodal(self, v: npt.NDArray) -> npt.NDArray:
+        """The centre-of-mass velocity of the groups at each node (owned + ghost dofs)."""
+        out = np.empty((self.num_dofs, self.d))
+        kc.centre_of_mass(self._nodal[1], self.stride, self.active_min, v, out)
+        return out

@@ -1,0 +1,105 @@
+"""Multi-field contact in compiled passes (fempm.stepping.contact_points) against the numpy
+contact step (fempm.stepping.contact.ContactGrid), its reference.
+
+Two bodies pressed into each other from the start (every step corrects nodes where both have
+mass), on every cell type of the compiled passes, 1 and 2 ranks: positions, velocities,
+deformation gradients, stresses, the steps and the grid velocity agree to round-off, with and
+without friction and the contact gap, USL and MUSL, axis-aligned walls (the fused grid update)
+and walls that check contact by position (the numpy grid stages on the grouped arrays).
+"""
+
+import dolfinx.fem
+import dolfinx.mesh as dm
+import fempm
+import numpy as np
+import pytest
+from mpi4py import MPI
+
+from fempm.boundary import fixed, friction, slip
+from fempm.materials import LinearElastic, NeoHookean
+from fempm.stepping import ExplicitSolver, Loads, StepOptions
+from fempm.stepping.contact import Contact, ContactGrid
+from fempm.stepping.contact_points import ContactPointGrid
+
+from tests.matrix import covering
+
+pytestmark = pytest.mark.parallel  # also under mpiexec -n 2 (scripts/run-tests)
+
+comm = MPI.COMM_WORLD
+
+MESHES = {
+    "interval": lambda: dm.create_unit_interval(comm, 30),
+    "triangle": lambda: dm.create_unit_square(comm, 12, 11),
+    "quadrilateral": lambda: dm.create_unit_square(comm, 12, 11, dm.CellType.quadrilateral),
+    "tetrahedron": lambda: dm.create_unit_cube(comm, 5, 4, 5),
+    "hexahedron": lambda: dm.create_unit_cube(comm, 5, 5, 4, dm.CellType.hexahedron),
+}
+
+
+def make_solver(cell: str, options: StepOptions, contact: Contact, walls: str, compiled=None) -> ExplicitSolver:
+    """Two bodies in |x - 0.5| < 0.3, split at x_0 = 0.5, moving into each other at 0.6 (with a
+    per-particle swirl), on a space of degree 1; ``walls``: "axis" (slip and fixed walls) or
+    "position" (and a frictional wall with a gap, which checks contact by position)."""
+    mesh = MESHES[cell]()
+    d = mesh.geometry.dim
+    p = fempm.create_particles(mesh, 2 ** d, density=1.0, jitter=0.3, seed=3,
+                               where=lambda x: np.all(np.abs(x[:d] - 0.5) < 0.3, axis=0))
+    right = p.x[:, 0] > 0.5
+    p.fields["group"] = right.astype(np.int32)
+    p.fields["body"] = right.astype(np.int32)
+    p.fields["v"] = np.where(right, -0.6, 0.6)[:, None] * np.eye(d)[0] + 0.2 * np.sin(5.0 * p.x[:, ::-1])
+    V = dolfinx.fem.functionspace(mesh, ("Lagrange", 1, (d,)))
+    bcs = [slip(V, lambda x: x[0] < 0.15, np.eye(d)[0]), fixed(V, lambda x: x[0] > 0.9)]
+    if walls == "position" and d > 1:
+        bcs.append(friction(V, lambda x: x[1] < 0.22, -np.eye(d)[1], 0.3, gap=0.05))
+    return ExplicitSolver(V, p, [NeoHookean(50.0, 0.3), LinearElastic(40.0, 0.25)], bcs=bcs,
+                          loads=Loads(body_force=-np.eye(d)[d - 1]), options=options, contact=contact,
+                          compiled=compiled)
+
+
+def state(solver):
+    """The particles' state on every rank in the order of their ids, and the grid velocity's
+    largest entry."""
+    p = solver.particles
+    order = np.argsort(np.concatenate(comm.allgather(p.ids)))
+    arrays = [np.concatenate(comm.allgather(a))[order] for a in (p.x, p.fields["v"], p.fields["F"],
+                                                                   p.fields["sigma"], p.volume)]
+    return arrays + [comm.allreduce(float(np.abs(solver.grid_velocity).max(initial=0.0)), op=MPI.MAX)]
+
+
+@pytest.mark.parametrize(("cell", "scheme", "kind"), covering(
+    list(MESHES), ["USL", "MUSL"], ["slip", "friction", "friction and gap", "friction, gap and walls by position"]))
+def test_compiled_contact_equals_the_numpy_contact_step(cell, scheme, kind):
+    mu = 0.0 if kind == "slip" else 0.4
+    contact = Contact(field="group", friction=mu, gap=0.04 if "gap" in kind else None)
+    walls = "position" if "position" in kind else "axis"
+    out = []
+    for compiled in (False, None):
+        solver = make_solver(cell, StepOptions(scheme=scheme, flip=0.95, damping=0.3), contact, walls, compiled)
+        dts = [solver.step() for _ in range(12)]
+        grid = solver.grid
+        assert isinstance(grid, ContactGrid if compiled is False else ContactPointGrid)
+        if compiled is None:
+            assert grid.fused == (walls == "axis" or cell == "interval")
+            assert comm.allreduce(grid.contacts) > 0  # the bodies pressed into each other
+        out.append((state(solver), np.array(dts)))
+    (ref, dt_ref), (got, dt_got) = out
+    assert np.allclose(dt_got, dt_ref, rtol=1e-12, atol=0.0)
+    for a, b in zip(ref, got):
+        scale = max(float(np.abs(a).max()), 1.0)
+        assert np.abs(np.asarray(a) - np.asarray(b)).max() <= 1e-11 * scale
+
+
+def test_contact_takes_the_compiled_passes_only_where_they_apply():
+    """Rigid groups, consistent mass and particle domains keep the numpy contact step;
+    compiled=True names what the compiled contact needs."""
+    cell = "triangle"
+    for contact, options in [(Contact(field="group", rigid=(1,)), StepOptions()),
+                             (Contact(field="group"), StepOptions(mass="consistent")),
+                             (Contact(field="group"), StepOptions(domain="cpdi1"))]:
+        solver = make_solver(cell, options, contact, "axis")
+        assert type(solver.grid) is ContactGrid
+        solver.compiled = True
+        with pytest.raises(ValueError, match="compiled=True with contact needs point particles, lumped mass"):
+            solver.grid
+    assert type(make_solver(cell, StepOptions(), Contact(field="group"), "axis").grid) is ContactPointGrid
