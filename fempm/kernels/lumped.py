@@ -48,10 +48,12 @@ from fempm.kernels.particle_checks import (
 )
 from fempm.kernels.shape import AVAILABLE, CELLS, MULTILINEAR, is_affine, space_of
 
-__all__ = ["NO_GROUPS", "kernels_for"]
+__all__ = ["NO_GROUPS", "NO_RIGID", "kernels_for"]
 
 #: no particle groups: one velocity field (the ``group`` argument of the passes)
 NO_GROUPS = np.zeros(0, dtype=np.int64)
+#: no rigid group (the ``rigid`` argument of the G2P pass)
+NO_RIGID = np.zeros(1, dtype=np.bool_)
 
 if AVAILABLE:
     from numba import njit
@@ -171,15 +173,18 @@ def kernels_for(cell: str) -> SimpleNamespace:
         return kernel(cells, X, K, cell_dofs, mass, v, volume, sigma, g, fext, out, h, body, modulus, c, group,
                       stride)
 
-    def g2p_update(cells, X, K, cell_dofs, v_new, v_old, flip, dt, blend, kinematics, move, *rest, group=NO_GROUPS):
+    def g2p_update(cells, X, K, cell_dofs, v_new, v_old, flip, dt, blend, kinematics, move, *rest, group=NO_GROUPS,
+                   rigid=NO_RIGID):
         """See :func:`_g2p_kernel`; the flags choose the compiled variant (a momentum array
         ``rest[-2]`` with a row per dof: the blend pass also re-maps the momenta, MUSL; a sums
         array ``rest[-1]`` of 3 + d entries: the moving pass also sums the state's energies; a
-        ``group`` per particle: each takes its group's field, columns ``k d`` to ``(k + 1) d``)."""
+        ``group`` per particle: each takes its group's field, columns ``k d`` to ``(k + 1) d``;
+        the particles of a group k with ``rigid[k]`` keep their velocity and F (L = 0) and move
+        with their velocity)."""
         remap = blend and rest[-2].shape[0] > 0
         totals = move and rest[-1].shape[0] > 0
         return g2p_kernel(cell, bool(blend), bool(kinematics), bool(move), remap, totals, group.shape[0] > 0)(
-            cells, X, K, cell_dofs, v_new, v_old, flip, dt, *rest, group)
+            cells, X, K, cell_dofs, v_new, v_old, flip, dt, *rest, group, rigid)
 
     return SimpleNamespace(scatter=scatter, g2p_update=g2p_update)
 
@@ -288,7 +293,7 @@ def _g2p_kernel(cell: str, blend: bool, kinematics: bool, move: bool, remap: boo
     @njit(cache=True, error_model="numpy")
     def g2p_update(cells, X, K, cell_dofs, v_new, v_old, flip, dt, by_particle,
                    x, v, F, volume0, volume, sigma, body, law, lam, mu, L, x0, tol, left, c2v, v_offsets, v_cells,
-                   num_cells, mass, mom, sums, group):  # pragma: no cover
+                   num_cells, mass, mom, sums, group, rigid):  # pragma: no cover
         n = len(cells)
         N = np.empty(NK)
         G = np.empty((NK, D))
@@ -307,8 +312,9 @@ def _g2p_kernel(cell: str, blend: bool, kinematics: bool, move: bool, remap: boo
             c = cells[p]
             shape(X, p, K, c, SIMPLEX, AFFINE, D, NK, N, G, DEGREE, BERNSTEIN)
             o = group[p] * D if grouped else 0
-            gather(N, G, cell_dofs, c, o, v_new, v_old, blend, kinematics, D, NK, vg, dv, Lp)
-            if blend:
+            still = grouped and rigid[group[p]]  # a rigid body's particle: its own velocity, L = 0
+            gather(N, G, cell_dofs, c, o, v_new, v_old, blend, kinematics and not still, D, NK, vg, dv, Lp)
+            if blend and not still:
                 for j in range(D):
                     v[p, j] = flip * (v[p, j] + dv[j]) + (1.0 - flip) * vg[j]
             if remap:  # MUSL: the blended momenta back to the grid, in the same pass
@@ -330,7 +336,7 @@ def _g2p_kernel(cell: str, blend: bool, kinematics: bool, move: bool, remap: boo
                 ok = True
                 speed2 = 0.0
                 for j in range(D):  # the stress of the compiled laws is finite where J is
-                    x[p, j] += dt * (v[p, j] if by_particle else vg[j])
+                    x[p, j] += dt * (v[p, j] if by_particle or still else vg[j])
                     ok = ok and np.isfinite(x[p, j])
                     speed2 += v[p, j] * v[p, j]
                 if not (ok and np.isfinite(speed2)):  # x or v (v.v: the kinetic energy)

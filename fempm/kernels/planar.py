@@ -178,8 +178,8 @@ def scatter_kernel(simplex: bool, affine: bool, with_mass: bool, with_momentum: 
 
 
 @functools.cache
-def g2p_kernel(simplex: bool, affine: bool, blend: bool, kinematics: bool, move: bool, remap: bool, totals: bool = False,
-               grouped: bool = False):
+def g2p_kernel(simplex: bool, affine: bool, blend: bool, kinematics: bool, move: bool, remap: bool,
+               totals: bool = False, grouped: bool = False):
     """:func:`fempm.kernels.lumped._g2p_kernel` for ``triangle`` (``simplex``) or
     ``quadrilateral`` cells, ``affine`` or multilinear."""
     QUAD = not simplex
@@ -187,9 +187,8 @@ def g2p_kernel(simplex: bool, affine: bool, blend: bool, kinematics: bool, move:
     @njit(cache=True, error_model="numpy")
     def g2p_update(cells, X, K, cell_dofs, v_new, v_old, flip, dt, by_particle,
                    x, v, F, volume0, volume, sigma, body, law, lam, mu, L, x0, tol, left, c2v, v_offsets, v_cells,
-                   num_cells, mass, mom, sums, group):  # pragma: no cover
-        n = len(cells)
-        keep_L = L.shape[0] == n
+                   num_cells, mass, mom, sums, group, rigid):  # pragma: no cover
+        n, keep_L = len(cells), L.shape[0] == len(cells)
         nonfinite_j, inverted, jmin, jmax, nonfinite = 0, 0, np.inf, -np.inf, 0  # the pass's checks
         acc = np.zeros(5)  # the state's sums (totals)
         for p in range(n):
@@ -201,6 +200,7 @@ def g2p_kernel(simplex: bool, affine: bool, blend: bool, kinematics: bool, move:
             i3 = cell_dofs[c, 3] if QUAD else i0
             o = group[p] * 2 if grouped else 0
             o1 = o + 1
+            still = grouped and rigid[group[p]]  # a rigid body's particle: its own velocity, L = 0
             a0, b0, a1, b1, a2, b2 = v_new[i0, o], v_new[i0, o1], v_new[i1, o], v_new[i1, o1], v_new[i2, o], v_new[i2, o1]
             vg0 = N0 * a0 + N1 * a1 + N2 * a2
             vg1 = N0 * b0 + N1 * b1 + N2 * b2
@@ -208,7 +208,7 @@ def g2p_kernel(simplex: bool, affine: bool, blend: bool, kinematics: bool, move:
                 a3, b3 = v_new[i3, o], v_new[i3, o1]
                 vg0 += N3 * a3
                 vg1 += N3 * b3
-            if blend:
+            if blend and not still:
                 dv0 = N0 * (a0 - v_old[i0, o]) + N1 * (a1 - v_old[i1, o]) + N2 * (a2 - v_old[i2, o])
                 dv1 = N0 * (b0 - v_old[i0, o1]) + N1 * (b1 - v_old[i1, o1]) + N2 * (b2 - v_old[i2, o1])
                 if QUAD:
@@ -228,6 +228,8 @@ def g2p_kernel(simplex: bool, affine: bool, blend: bool, kinematics: bool, move:
                     L01 += a3 * g3y
                     L10 += b3 * g3x
                     L11 += b3 * g3y
+                if still:
+                    L00, L01, L10, L11 = 0.0, 0.0, 0.0, 0.0
                 n00, n01, n10, n11, J = deform(F, p, dt, L00, L01, L10, L11)
                 if keep_L:
                     L[p, 0, 0], L[p, 0, 1], L[p, 1, 0], L[p, 1, 1] = L00, L01, L10, L11
@@ -237,8 +239,8 @@ def g2p_kernel(simplex: bool, affine: bool, blend: bool, kinematics: bool, move:
                 if ok:
                     law_stress(sigma, p, law[b], lam[b], mu[b], n00, n01, n10, n11, J)
             if move:
-                u0 = dt * (v[p, 0] if by_particle else vg0)
-                u1 = dt * (v[p, 1] if by_particle else vg1)
+                own = by_particle or still
+                u0, u1 = dt * (v[p, 0] if own else vg0), dt * (v[p, 1] if own else vg1)
                 y0, y1 = x[p, 0] + u0, x[p, 1] + u1
                 x[p, 0], x[p, 1] = y0, y1
                 if not (np.isfinite(y0) and np.isfinite(y1) and np.isfinite(v[p, 0] * v[p, 0] + v[p, 1] * v[p, 1])):
@@ -246,9 +248,7 @@ def g2p_kernel(simplex: bool, affine: bool, blend: bool, kinematics: bool, move:
                 if not affine:  # Newton from the first step X + K(X) u, K of the basis above
                     X[p, 0], X[p, 1] = X0 + k00 * u0 + k01 * u1, X1 + k10 * u0 + k11 * u1
                 out = not inside_after_pull_back(x, p, x0, K, c, simplex, 2, tol, X, affine)
-                # the neighbours, while their geometry is in cache (written out here: through a helper
-                # function the pass took 1.8 times as long)
-                if out:
+                if out:  # the neighbours, while in cache (written out: through a helper the pass took 1.8x as long)
                     e = star_search(x, p, x0, K, c, c2v, v_offsets, v_cells, num_cells, simplex, 2, tol, X, affine)
                     out = e < 0
                     cells[p] = c if out else e

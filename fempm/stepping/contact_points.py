@@ -12,14 +12,15 @@ group (the ``group`` argument of :func:`fempm.kernels.lumped.kernels_for`'s pass
 
 so that the mass, momenta, forces and mass gradients of every group come from one P2G pass
 (ghosts summed once), and G2P (blend, MUSL's re-map, kinematics, motion and the state's sums)
-stays one pass. Where every boundary condition holds velocity components at 0, the grid
-update and the correction are one compiled pass over the dofs (:mod:`fempm.kernels.contact`);
-other conditions take the numpy stages on the (G, dofs) views of that array
-(:func:`~fempm.stepping.contact.correct`). With a ``gap`` or a wall that checks contact by
+stays one pass. Where every boundary condition holds velocity components at 0 and no group is
+rigid, the grid update and the correction are one compiled pass over the dofs
+(:mod:`fempm.kernels.contact`); otherwise the grid takes the numpy stages on the (G, dofs)
+views of that array (:func:`~fempm.stepping.contact.correct`). With a ``gap`` or a wall that checks contact by
 position, one more pass maps each group's first mass moments.
 
-Applies to point particles with lumped mass on the spaces of the compiled passes, USL and MUSL,
-deformable groups (rigid groups, and consistent or FMPM mass with contact, take
+The particles of a rigid group keep their velocity and deformation and move with their
+velocity, in the same passes. Applies to point particles with lumped mass on the spaces of the
+compiled passes, USL and MUSL (consistent or FMPM mass with contact, and particle domains, take
 :class:`~fempm.stepping.contact.ContactGrid`).
 """
 
@@ -31,6 +32,7 @@ import numpy as np
 import numpy.typing as npt
 from mpi4py import MPI
 
+from fempm.boundary.patches import Patches
 from fempm.kernels import contact as kc
 from fempm.stepping.contact import correct, particle_groups
 from fempm.stepping.lumped import BOUND_SAFETY, PointGrid
@@ -48,8 +50,8 @@ __all__ = ["ContactPointGrid", "supported"]
 
 def supported(solver: ExplicitSolver) -> bool:
     """Whether ``solver``'s contact takes a :class:`ContactPointGrid`: the options, space and
-    mesh of a :class:`~fempm.stepping.lumped.PointGrid` with lumped mass, no rigid group."""
-    return (point_supported(solver) and type(solver.options.mass_model) is Lumped and not solver.contact.rigid
+    mesh of a :class:`~fempm.stepping.lumped.PointGrid` with lumped mass, USL or MUSL."""
+    return (point_supported(solver) and type(solver.options.mass_model) is Lumped
             and solver.options.stages.forces_with_map)
 
 
@@ -63,8 +65,13 @@ class ContactPointGrid(PointGrid):
         self.num_groups = 0
         #: the number of contact nodes (two or more groups with mass) of the last grid update, on this rank
         self.contacts = 0
-        self.fused = self.conditions.zero_components  # the grid update in one compiled pass over the dofs
+        rigid = bool(self.contact.rigid)
+        # the grid update in one compiled pass over the dofs: walls holding zero components, no rigid group
+        self.fused = self.conditions.zero_components and not rigid
         self.positions = self.conditions.needs_positions or self.contact.gap is not None
+        self.all_free = np.ones_like(self.free)
+        # with a gap, the nodes touching a rigid body share its impulse over their patches
+        self.patches = Patches.of_space(solver.V, index_map=self.index_map).sums if rigid else None
 
     def _layout(self, G: int) -> None:
         """The kept nodal arrays for ``G`` groups: [m | m v | f | grad m] (``stride`` columns)
@@ -73,6 +80,7 @@ class ContactPointGrid(PointGrid):
             return
         d = self.d
         self.num_groups, self.stride = G, 1 + 3 * d
+        self.rigid = np.isin(np.arange(G), self.contact.rigid)
         self._nodal = self.nodal_array(G * self.stride)
         self._nodal_d = self.nodal_array(G * d)
         self._moments = self.nodal_array(G * d) if self.positions else None
@@ -137,11 +145,11 @@ class ContactPointGrid(PointGrid):
         return moments, centroids
 
     def _constrain(self, v: npt.NDArray) -> npt.NDArray:
-        """Each group's grid conditions on ``v`` (dofs, G d), in place (the zero components
-        only: a fused grid holds no other)."""
+        """Each deformable group's grid conditions on ``v`` (dofs, G d), in place (a fused
+        grid's velocities hold them already)."""
         if not self.fused:
             by_group = self._by_group(v, 0, self.d)
-            for g in range(self.num_groups):
+            for g in np.flatnonzero(~self.rigid):
                 self.conditions.apply(by_group[g], self.centroids[g])
         return v
 
@@ -150,11 +158,12 @@ class ContactPointGrid(PointGrid):
         see :meth:`fempm.stepping.contact.ContactGrid.velocity`)."""
         mom, stride, cv = (self._nodal_d[1], self.d, 0) if remapped else (self._nodal[1], self.stride, 1)
         v = np.empty((self.num_dofs, self.num_groups * self.d))
-        kc.group_velocity(self._nodal[1], self.stride, mom, stride, cv, self.free, self.active_min, v)
+        free = self.free if self.fused else self.all_free  # (else the conditions of the deformable groups)
+        kc.group_velocity(self._nodal[1], self.stride, mom, stride, cv, free, self.active_min, v)
         return self._constrain(v)
 
     def advance(self, v_old: npt.NDArray, dt: float) -> npt.NDArray:
-        """The numpy stages (conditions other than zero components)."""
+        """The numpy stages (conditions other than zero components, rigid groups)."""
         opts, contact = self.options, self.contact
         old = self._by_group(v_old, 0, self.d)
         v = np.empty_like(v_old)
@@ -163,9 +172,11 @@ class ContactPointGrid(PointGrid):
         if opts.damping > 0.0:
             a -= opts.damping * old
         a[self.weak] = 0.0
+        a[self.rigid] = 0.0
         a *= dt
         a += old
-        at = correct(self.m_has, a, self.grad, contact.friction, None, self.moments, contact.gap, dt)
+        at = correct(self.m_has, a, self.grad, contact.friction, self.rigid, self.moments, contact.gap, dt,
+                     self.patches)
         self.contacts = int(np.count_nonzero(at))
         return self._constrain(v)
 
@@ -190,7 +201,7 @@ class ContactPointGrid(PointGrid):
         """The G2P pass, each particle with its group's field."""
         p = self.solver.particles
         return self.kernels.g2p_update(p.cells, p.X, self.K, self.cell_dofs, v_new, v_old, flip, dt, blend,
-                                       kinematics, move, *state, group=self.group)
+                                       kinematics, move, *state, group=self.group, rigid=self.rigid)
 
     def nodal(self, v: npt.NDArray) -> npt.NDArray:
         """The centre-of-mass velocity of the groups at each node (owned + ghost dofs)."""

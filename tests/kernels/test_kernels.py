@@ -208,7 +208,7 @@ def test_planar_kernels_equal_the_generic_ones_bit_for_bit(cell):
             counts = kernel(s["cells"], s["X"], s["K"], s["cell_dofs"], s["v_new"], s["v_old"], 0.9, 1e-2,
                             by_particle, s["x"], s["v"], s["F"], s["volume0"], s["volume"], s["sigma"], s["body"],
                             s["law"], s["lam"], s["mu"], L, s["x0"], 1e-10, left, *s["star"], s["mass"], mom, sums,
-                            np.zeros(0, dtype=np.int64))
+                            np.zeros(0, dtype=np.int64), np.zeros(1, dtype=np.bool_))
             results.append((counts, [s[k] for k in ("X", "x", "v", "F", "volume", "sigma", "cells")], L, left, mom,
                             sums))
         (c0, a0, L0, l0, m0, s0), (c1, a1, L1, l1, m1, s1) = results
@@ -226,8 +226,9 @@ def test_grouped_passes_are_the_one_field_passes_of_each_group(cell):
     grouped P2G into G = 3 blocks of columns [m | m v | f | grad m] equals the one-field P2G of
     each group's particles into its block, the mass gradients equal a force-only P2G with
     V = M and sigma = -I; the grouped G2P (blend with MUSL's re-map, kinematics, motion) equals
-    the one-field G2P of each group's particles from its block. The generic and the planar
-    kernels alike."""
+    the one-field G2P of each group's particles from its block, and a rigid group's particles
+    keep their velocity and F and move with their velocity. The generic and the planar kernels
+    alike."""
     from fempm.kernels import lumped, planar
 
     simplex, affine = cell == "triangle", not cell.endswith("multilinear")
@@ -264,6 +265,7 @@ def test_grouped_passes_are_the_one_field_passes_of_each_group(cell):
                          (planar.g2p_kernel(simplex, affine, True, True, True, True, False, True),
                           planar.g2p_kernel(simplex, affine, True, True, True, True, False))):
         results = []
+        rigid = np.array([False, False, True])  # group 2: a rigid body's particles
         for g in [None, *range(G)]:
             t = _pass_state(simplex, 4, not affine)
             k = np.ones(n, dtype=bool) if g is None else group == g
@@ -271,11 +273,14 @@ def test_grouped_passes_are_the_one_field_passes_of_each_group(cell):
             m = k.sum()
             mom, left = np.zeros((nd, 2 * G if g is None else 2)), np.zeros(m, dtype=np.bool_)
             cols = slice(None) if g is None else slice(2 * g, 2 * g + 2)
-            kernel, last = (grouped, (group,)) if g is None else (one, (none,))
-            kernel(t["cells"], t["X"], t["K"], t["cell_dofs"], np.ascontiguousarray(v_new[:, cols]),
-                   np.ascontiguousarray(v_old[:, cols]), 0.9, 1e-2, False, t["x"], t["v"], t["F"], t["volume0"],
-                   t["volume"], t["sigma"], t["body"], t["law"], t["lam"], t["mu"], np.zeros((0, 2, 2)), t["x0"],
-                   1e-10, left, *t["star"], t["mass"], mom, np.zeros(0), *last)
+            vn, vo = np.ascontiguousarray(v_new[:, cols]), np.ascontiguousarray(v_old[:, cols])
+            flip, by_particle = 0.9, False
+            if g is not None and rigid[g]:  # the reference: no grid increment, L = 0, moved by its own velocity
+                vn, vo, flip, by_particle = 0.0 * vn, 0.0 * vo, 1.0, True
+            kernel, last = (grouped, (group, rigid)) if g is None else (one, (none, np.zeros(1, dtype=np.bool_)))
+            kernel(t["cells"], t["X"], t["K"], t["cell_dofs"], vn, vo, flip, 1e-2, by_particle, t["x"], t["v"], t["F"],
+                   t["volume0"], t["volume"], t["sigma"], t["body"], t["law"], t["lam"], t["mu"], np.zeros((0, 2, 2)),
+                   t["x0"], 1e-10, left, *t["star"], t["mass"], mom, np.zeros(0), *last)
             results.append((k, [t[a] for a in ("X", "x", "v", "F", "volume", "sigma", "cells")], mom, left))
         k0, a0, mom0, left0 = results[0]
         for g, (k, a, mom, left) in enumerate(results[1:]):

@@ -4,23 +4,23 @@ contact step (fempm.stepping.contact.ContactGrid), its reference.
 Two bodies pressed into each other from the start (every step corrects nodes where both have
 mass), on every cell type of the compiled passes, 1 and 2 ranks: positions, velocities,
 deformation gradients, stresses, the steps and the grid velocity agree to round-off, with and
-without friction and the contact gap, USL and MUSL, axis-aligned walls (the fused grid update)
-and walls that check contact by position (the numpy grid stages on the grouped arrays).
+without friction and the contact gap, with a rigid body (whose particles keep their velocity in
+the same passes), USL and MUSL, axis-aligned walls (the fused grid update) and walls that check
+contact by position (the numpy grid stages on the grouped arrays).
 """
 
 import dolfinx.fem
 import dolfinx.mesh as dm
-import fempm
 import numpy as np
 import pytest
 from mpi4py import MPI
 
+import fempm
 from fempm.boundary import fixed, friction, slip
 from fempm.materials import LinearElastic, NeoHookean
 from fempm.stepping import ExplicitSolver, Loads, StepOptions
 from fempm.stepping.contact import Contact, ContactGrid
 from fempm.stepping.contact_points import ContactPointGrid
-
 from tests.matrix import covering
 
 pytestmark = pytest.mark.parallel  # also under mpiexec -n 2 (scripts/run-tests)
@@ -68,10 +68,12 @@ def state(solver):
 
 
 @pytest.mark.parametrize(("cell", "scheme", "kind"), covering(
-    list(MESHES), ["USL", "MUSL"], ["slip", "friction", "friction and gap", "friction, gap and walls by position"]))
+    list(MESHES), ["USL", "MUSL"], ["slip", "friction", "friction and gap", "friction, gap and walls by position",
+                                    "rigid", "rigid, friction and gap"]))
 def test_compiled_contact_equals_the_numpy_contact_step(cell, scheme, kind):
-    mu = 0.0 if kind == "slip" else 0.4
-    contact = Contact(field="group", friction=mu, gap=0.04 if "gap" in kind else None)
+    mu = 0.0 if kind in ("slip", "rigid") else 0.4
+    contact = Contact(field="group", friction=mu, gap=0.04 if "gap" in kind else None,
+                      rigid=(1,) if "rigid" in kind else ())
     walls = "position" if "position" in kind else "axis"
     out = []
     for compiled in (False, None):
@@ -80,7 +82,7 @@ def test_compiled_contact_equals_the_numpy_contact_step(cell, scheme, kind):
         grid = solver.grid
         assert isinstance(grid, ContactGrid if compiled is False else ContactPointGrid)
         if compiled is None:
-            assert grid.fused == (walls == "axis" or cell == "interval")
+            assert grid.fused == ((walls == "axis" or cell == "interval") and "rigid" not in kind)
             assert comm.allreduce(grid.contacts) > 0  # the bodies pressed into each other
         out.append((state(solver), np.array(dts)))
     (ref, dt_ref), (got, dt_got) = out
@@ -91,15 +93,14 @@ def test_compiled_contact_equals_the_numpy_contact_step(cell, scheme, kind):
 
 
 def test_contact_takes_the_compiled_passes_only_where_they_apply():
-    """Rigid groups, consistent mass and particle domains keep the numpy contact step;
-    compiled=True names what the compiled contact needs."""
+    """Consistent mass and particle domains keep the numpy contact step; compiled=True names
+    what the compiled contact needs."""
     cell = "triangle"
-    for contact, options in [(Contact(field="group", rigid=(1,)), StepOptions()),
-                             (Contact(field="group"), StepOptions(mass="consistent")),
+    for contact, options in [(Contact(field="group"), StepOptions(mass="consistent")),
                              (Contact(field="group"), StepOptions(domain="cpdi1"))]:
         solver = make_solver(cell, options, contact, "axis")
         assert type(solver.grid) is ContactGrid
         solver.compiled = True
         with pytest.raises(ValueError, match="compiled=True with contact needs point particles, lumped mass"):
-            solver.grid
+            _ = solver.grid
     assert type(make_solver(cell, StepOptions(), Contact(field="group"), "axis").grid) is ContactPointGrid
