@@ -39,7 +39,7 @@ from types import SimpleNamespace
 
 import numpy as np
 
-from fempm.kernels import planar
+from fempm.kernels import planar, solid
 from fempm.kernels.particle_checks import (
     LINEAR_ELASTIC,
     NEO_HOOKEAN,
@@ -154,13 +154,17 @@ if AVAILABLE:
 @functools.cache
 def kernels_for(cell: str) -> SimpleNamespace:
     """The particle passes ``scatter`` and ``g2p_update`` compiled for one cell type (for
-    triangles and quadrilaterals the scalar ones of :mod:`fempm.kernels.planar`)."""
+    triangles and quadrilaterals the scalar ones of :mod:`fempm.kernels.planar`, for tetrahedra
+    and affine hexahedra those of :mod:`fempm.kernels.solid`)."""
 
     scatter_kernel, g2p_kernel = _scatter_kernel, _g2p_kernel
     if cell in ("triangle", "quadrilateral", "quadrilateral" + MULTILINEAR):
         simplex, affine = cell == "triangle", is_affine(cell)
         scatter_kernel = functools.partial(_planar, planar.scatter_kernel, simplex, affine)
         g2p_kernel = functools.partial(_planar, planar.g2p_kernel, simplex, affine)
+    elif cell in ("tetrahedron", "hexahedron"):
+        scatter_kernel = functools.partial(_solid, solid.scatter_kernel, cell == "hexahedron")
+        g2p_kernel = functools.partial(_solid, solid.g2p_kernel, cell == "hexahedron")
 
     def scatter(cells, X, K, cell_dofs, mass, v, volume, sigma, g, fext, out, cm, cv, cf, h, body, modulus, c,
                 bound=False, group=NO_GROUPS, stride=0, cg=-1):
@@ -192,6 +196,11 @@ def kernels_for(cell: str) -> SimpleNamespace:
 def _planar(make, simplex: bool, affine: bool, cell: str, *flags):
     """A kernel of :mod:`fempm.kernels.planar` in the place of a generic one of ``cell``."""
     return make(simplex, affine, *flags)
+
+
+def _solid(make, hexa: bool, cell: str, *flags):
+    """A kernel of :mod:`fempm.kernels.solid` in the place of a generic one of ``cell``."""
+    return make(hexa, *flags)
 
 
 @functools.cache

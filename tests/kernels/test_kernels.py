@@ -127,34 +127,35 @@ def test_closed_form_basis_and_pull_back_equal_basix(cell):
     assert np.abs(Xn[found] - geo.pull_back(cells[found], p.x[found])).max() < 1e-14
 
 
-def _pass_state(simplex: bool, seed: int, multilinear: bool = False):
-    """Random particles in random affine 2D cells (``multilinear``: quadrilaterals that are not
-    parallelograms, their vertices in the place of K and x0), a random grid, two bodies
-    (neo-Hookean and linear elastic), for the particle passes of fempm.kernels.lumped."""
+def _pass_state(simplex: bool, seed: int, multilinear: bool = False, d: int = 2):
+    """Random particles in random affine cells of dimension ``d`` (``multilinear``:
+    quadrilaterals that are not parallelograms, their vertices in the place of K and x0), a
+    random grid, two bodies (neo-Hookean and linear elastic), for the particle passes of
+    fempm.kernels.lumped."""
     rng = np.random.default_rng(seed)
-    n, ncell, nd, k = 400, 60, 90, 3 if simplex else 4
+    n, ncell, nd, k = 400, 60, 90, d + 1 if simplex else 2 ** d
     cells = rng.integers(0, ncell, n).astype(np.int32)
-    X = rng.random((n, 2)) * (0.5 if simplex else 1.0)
-    K = rng.standard_normal((ncell, 2, 2)) * 3.0
-    x0 = corner = rng.random((ncell, 2))
+    X = rng.random((n, d)) * (1.0 / d if simplex else 1.0)
+    K = rng.standard_normal((ncell, d, d)) * 3.0
+    x0 = corner = rng.random((ncell, d))
     if multilinear:
         J = 0.3 * (np.eye(2) + 0.2 * rng.standard_normal((ncell, 2, 2)))
         K = x0[:, None, :] + np.einsum("cgt,at->cag", J, [[0, 0], [1, 0], [0, 1], [1, 1]])
         K[:, 3] += 0.04 * rng.standard_normal((ncell, 2))
         x0 = K
     cell_dofs = rng.integers(0, nd, (ncell, k)).astype(np.int32)
-    F = np.eye(2) + 0.05 * rng.standard_normal((n, 2, 2))
+    F = np.eye(d) + 0.05 * rng.standard_normal((n, d, d))
     c2v = rng.integers(0, 40, (ncell, k)).astype(np.int32)  # a random vertex star
     order = np.argsort(c2v.ravel(), kind="stable")
     v_offsets = np.searchsorted(c2v.ravel()[order], np.arange(41)).astype(np.int32)
     star = (c2v, v_offsets, (order // k).astype(np.int32), ncell - 5)
-    return dict(star=star, cells=cells, X=X, K=K, x0=x0, cell_dofs=cell_dofs, F=F, v=rng.standard_normal((n, 2)),
-                x=corner[cells] + rng.random((n, 2)) * 0.1, v_new=rng.standard_normal((nd, 2)),
-                v_old=rng.standard_normal((nd, 2)), mass=rng.random(n) + 0.5, volume=rng.random(n) + 0.5,
-                volume0=rng.random(n) + 0.5, sigma=rng.standard_normal((n, 2, 2)),
+    return dict(star=star, cells=cells, X=X, K=K, x0=x0, cell_dofs=cell_dofs, F=F, v=rng.standard_normal((n, d)),
+                x=corner[cells] + rng.random((n, d)) * 0.1, v_new=rng.standard_normal((nd, d)),
+                v_old=rng.standard_normal((nd, d)), mass=rng.random(n) + 0.5, volume=rng.random(n) + 0.5,
+                volume0=rng.random(n) + 0.5, sigma=rng.standard_normal((n, d, d)),
                 body=rng.integers(0, 3, n).astype(np.int32), law=np.array([1, 2, 0]), lam=np.array([3.0, 2.0, 0.0]),
                 mu=np.array([1.0, 1.5, 0.0]), modulus=np.array([5.0, 0.0, 6.0]), c=rng.random(n),
-                h=rng.random(ncell) + 0.1, g=np.array([0.3, -9.8]), fext=rng.standard_normal((n, 2)))
+                h=rng.random(ncell) + 0.1, g=np.array([0.3, -9.8, 0.2][:d]), fext=rng.standard_normal((n, d)))
 
 
 @pytest.mark.parametrize("cell", ["triangle", pytest.param("quadrilateral", marks=pytest.mark.slow),
@@ -220,6 +221,61 @@ def test_planar_kernels_equal_the_generic_ones_bit_for_bit(cell):
             assert 0 < np.count_nonzero(l0) and 0 < moved and np.count_nonzero(l0) + moved < len(l0)
 
 
+@pytest.mark.parametrize("cell", ["tetrahedron", "hexahedron"])
+def test_solid_kernels_equal_the_generic_ones(cell):
+    """fempm.kernels.solid (scalar 3D, tetrahedra and affine hexahedra) against the
+    dimension-generic passes of fempm.kernels.lumped: equal to round-off (the gradients sum
+    in another order), in variants that together run every part, grouped and rigid ones too."""
+    import itertools
+
+    from fempm.kernels import lumped, solid
+
+    hexa = cell == "hexahedron"
+    none, G = np.zeros(0, dtype=np.int64), 2
+
+    def same(a, b):
+        a, b = np.asarray(a, dtype=float), np.asarray(b, dtype=float)
+        return np.allclose(a, b, rtol=1e-12, atol=1e-12 * np.abs(a[np.isfinite(a)]).max(initial=1.0), equal_nan=True)
+
+    group = np.random.default_rng(8).integers(0, G, 400)
+    for flags, grouped in [((True, True, True, True, True, True), False), ((True, True, True, True, False, False), True),
+                           ((False, False, True, False, True, False), False)]:
+        results = []
+        for kernel in (lumped._scatter_kernel(cell, *flags, grouped, grouped),
+                       solid.scatter_kernel(hexa, *flags, grouped, grouped)):
+            s = _pass_state(True, 1, d=3) if not hexa else _pass_state(False, 1, d=3)
+            out = np.zeros((90, 20 if grouped else 7))
+            t = kernel(s["cells"], s["X"], s["K"], s["cell_dofs"], s["mass"], s["v"], s["volume"], s["sigma"], s["g"],
+                       s["fext"] if flags[4] else np.zeros((0, 3)), out, s["h"] if flags[3] else np.zeros(0),
+                       s["body"], s["modulus"], s["c"], group if grouped else none, 10)
+            results.append((out, t))
+        assert np.abs(results[0][0]).max() > 1.0
+        assert same(results[0][0], results[1][0]) and same(results[0][1], results[1][1]), flags
+    for (blend, kinematics, move, remap, totals, grouped), by_particle in itertools.product(
+            [(True, True, True, False, True, False), (True, False, False, True, False, True),
+             (False, True, True, False, False, True), (False, False, True, False, True, False)], [False, True]):
+        results = []
+        for kernel in (lumped._g2p_kernel(cell, blend, kinematics, move, remap, totals, grouped),
+                       solid.g2p_kernel(hexa, blend, kinematics, move, remap, totals, grouped)):
+            s = _pass_state(not hexa, 2, d=3)
+            n = len(s["cells"])
+            L = np.zeros((n, 3, 3))
+            left, mom = np.zeros(n, dtype=np.bool_), np.zeros((90 if remap else 0, 3 * G))
+            sums = np.full(6 if totals else 0, np.nan)
+            vn, vo = (np.hstack([s[k], -s[k]]) if grouped else s[k] for k in ("v_new", "v_old"))
+            counts = kernel(s["cells"], s["X"], s["K"], s["cell_dofs"], vn, vo, 0.9, 1e-2, by_particle, s["x"], s["v"],
+                            s["F"], s["volume0"], s["volume"], s["sigma"], s["body"], s["law"], s["lam"], s["mu"], L,
+                            s["x0"], 1e-10, left, *s["star"], s["mass"], mom, sums, group if grouped else none,
+                            np.array([False, True]) if grouped else np.zeros(1, dtype=np.bool_))
+            results.append((counts, [s[k] for k in ("X", "x", "v", "F", "volume", "sigma", "cells")], L, left, mom,
+                            sums))
+        (c0, a0, L0, l0, m0, s0), (c1, a1, L1, l1, m1, s1) = results
+        assert same(c0, c1) and all(same(a, b) for a, b in zip(a0, a1))
+        assert same(L0, L1) and np.array_equal(l0, l1) and same(m0, m1) and same(s0, s1)
+        if kinematics:
+            assert np.abs(L0).max() > 1.0
+
+
 @pytest.mark.parametrize("cell", ["triangle", "quadrilateral-multilinear"])
 def test_grouped_passes_are_the_one_field_passes_of_each_group(cell):
     """Multi-field contact's passes (a group per particle, fempm.stepping.contact_points): the
@@ -282,7 +338,7 @@ def test_grouped_passes_are_the_one_field_passes_of_each_group(cell):
                    t["volume0"], t["volume"], t["sigma"], t["body"], t["law"], t["lam"], t["mu"], np.zeros((0, 2, 2)),
                    t["x0"], 1e-10, left, *t["star"], t["mass"], mom, np.zeros(0), *last)
             results.append((k, [t[a] for a in ("X", "x", "v", "F", "volume", "sigma", "cells")], mom, left))
-        k0, a0, mom0, left0 = results[0]
+        _, a0, mom0, left0 = results[0]
         for g, (k, a, mom, left) in enumerate(results[1:]):
             assert all(np.allclose(x[k], y, rtol=0, atol=1e-13 * max(1.0, np.nanmax(np.abs(y))), equal_nan=True)
                        for x, y in zip(a0, a))  # NaN: X of a particle whose pull-back failed, in both

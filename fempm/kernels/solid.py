@@ -1,0 +1,222 @@
+r"""The particle passes of :mod:`fempm.kernels.lumped` for tetrahedra and affine hexahedra
+(parallelepipeds), with the per-particle quantities in local scalars.
+
+The same equations, arguments and results as :func:`fempm.kernels.lumped._scatter_kernel` and
+:func:`fempm.kernels.lumped._g2p_kernel` (their dimension-generic loops are the reference,
+tested against these to round-off), for :math:`d = 3`: the generic kernels keep the basis
+values and gradients, :math:`L_p` and the stress in small scratch arrays, which the compiler
+must treat as possibly aliasing the nodal and state arrays they write, so every value goes
+through memory; here each node's value and gradient are computed where they are used
+(:func:`node`) and :math:`L_p`, :math:`F_p` are scalars, as :mod:`fempm.kernels.planar` does
+in 2D.
+
+The basis on the reference cell (basix's vertex order), :math:`\nabla N_a = \nabla_X \hat N_a K`:
+
+* tetrahedron: :math:`\hat N = (1 - X_0 - X_1 - X_2,\ X_0,\ X_1,\ X_2)`;
+* hexahedron: :math:`\hat N_a = \prod_k (X_k \text{ if bit } k \text{ of } a \text{ else } 1 - X_k)`.
+"""
+
+from __future__ import annotations
+
+import functools
+
+import numpy as np
+
+from fempm.kernels.shape import AVAILABLE
+
+__all__ = ["g2p_kernel", "scatter_kernel"]
+
+if AVAILABLE:
+    from numba import njit
+
+    from fempm.kernels.kinematics import _det, add_totals, linear_elastic_at, neo_hookean_at
+    from fempm.kernels.particle_checks import LINEAR_ELASTIC, NEO_HOOKEAN, count_j, stable_time
+    from fempm.kernels.shape import inside_after_pull_back, star_search
+
+    @njit(inline="always")
+    def inverse_jacobian(K, c):  # pragma: no cover - compiled
+        """The 9 entries of ``K[c]``, row by row."""
+        return (K[c, 0, 0], K[c, 0, 1], K[c, 0, 2], K[c, 1, 0], K[c, 1, 1], K[c, 1, 2],
+                K[c, 2, 0], K[c, 2, 1], K[c, 2, 2])
+
+    @njit(inline="always")
+    def node(a, X0, X1, X2, k, hexa):  # pragma: no cover - compiled
+        r"""(:math:`N_a`, :math:`\nabla N_a`) at the reference point (X0, X1, X2), ``k`` the 9
+        entries of the inverse Jacobian."""
+        if hexa:
+            f0 = X0 if a & 1 else 1.0 - X0
+            f1 = X1 if a & 2 else 1.0 - X1
+            f2 = X2 if a & 4 else 1.0 - X2
+            d0 = (1.0 if a & 1 else -1.0) * f1 * f2
+            d1 = f0 * (1.0 if a & 2 else -1.0) * f2
+            d2 = f0 * f1 * (1.0 if a & 4 else -1.0)
+            N = f0 * f1 * f2
+        elif a == 0:
+            N, d0, d1, d2 = 1.0 - X0 - X1 - X2, -1.0, -1.0, -1.0
+        else:
+            N = X0 if a == 1 else (X1 if a == 2 else X2)
+            d0, d1, d2 = 1.0 if a == 1 else 0.0, 1.0 if a == 2 else 0.0, 1.0 if a == 3 else 0.0
+        return (N, d0 * k[0] + d1 * k[3] + d2 * k[6], d0 * k[1] + d1 * k[4] + d2 * k[7],
+                d0 * k[2] + d1 * k[5] + d2 * k[8])
+
+    @njit(inline="always")
+    def gather(c, o, X0, X1, X2, k, cell_dofs, v_new, v_old, blend, kinematics, NK, hexa):  # pragma: no cover
+        r"""(:math:`\sum_a N_a v_a^+` (3), with ``blend`` :math:`\sum_a N_a (v_a^+ - v_a)` (3),
+        with ``kinematics`` :math:`L = \sum_a v_a^+ \otimes \nabla N_a` (9, row by row)), over
+        the dofs of cell ``c`` (columns from ``o``)."""
+        vg0 = vg1 = vg2 = dv0 = dv1 = dv2 = 0.0
+        L00 = L01 = L02 = L10 = L11 = L12 = L20 = L21 = L22 = 0.0
+        for a in range(NK):
+            N, gx, gy, gz = node(a, X0, X1, X2, k, hexa)
+            i = cell_dofs[c, a]
+            a0, a1, a2 = v_new[i, o], v_new[i, o + 1], v_new[i, o + 2]
+            vg0 += N * a0
+            vg1 += N * a1
+            vg2 += N * a2
+            if blend:
+                dv0 += N * (a0 - v_old[i, o])
+                dv1 += N * (a1 - v_old[i, o + 1])
+                dv2 += N * (a2 - v_old[i, o + 2])
+            if kinematics:
+                L00, L01, L02 = L00 + a0 * gx, L01 + a0 * gy, L02 + a0 * gz
+                L10, L11, L12 = L10 + a1 * gx, L11 + a1 * gy, L12 + a1 * gz
+                L20, L21, L22 = L20 + a2 * gx, L21 + a2 * gy, L22 + a2 * gz
+        return vg0, vg1, vg2, dv0, dv1, dv2, (L00, L01, L02, L10, L11, L12, L20, L21, L22)
+
+    @njit(inline="always")
+    def deform(F, p, dt, L):  # pragma: no cover - compiled
+        r""":math:`F_p \leftarrow (I + \Delta t L) F_p` (``L`` 9 entries, row by row); returns
+        :math:`\det F_p`."""
+        f = (F[p, 0, 0], F[p, 0, 1], F[p, 0, 2], F[p, 1, 0], F[p, 1, 1], F[p, 1, 2], F[p, 2, 0], F[p, 2, 1],
+             F[p, 2, 2])
+        for i in range(3):
+            for j in range(3):
+                F[p, i, j] = (f[3 * i + j] + dt * L[3 * i] * f[j] + dt * L[3 * i + 1] * f[3 + j]
+                              + dt * L[3 * i + 2] * f[6 + j])
+        return _det(F, p)
+
+    @njit(inline="always")
+    def move_to(x, p, v, vg0, vg1, vg2, own, dt):  # pragma: no cover - compiled
+        """``x[p]`` += dt times the grid velocity (or, ``own``, the particle's); whether x and v
+        are finite."""
+        x[p, 0] += dt * (v[p, 0] if own else vg0)
+        x[p, 1] += dt * (v[p, 1] if own else vg1)
+        x[p, 2] += dt * (v[p, 2] if own else vg2)
+        speed2 = v[p, 0] * v[p, 0] + v[p, 1] * v[p, 1] + v[p, 2] * v[p, 2]
+        return np.isfinite(x[p, 0]) and np.isfinite(x[p, 1]) and np.isfinite(x[p, 2]) and np.isfinite(speed2)
+
+
+@functools.cache
+def scatter_kernel(hexa: bool, with_mass: bool, with_momentum: bool, with_force: bool, with_dt: bool, has_fext: bool,
+                   bound: bool, grouped: bool = False, with_gradient: bool = False):
+    """:func:`fempm.kernels.lumped._scatter_kernel` for ``tetrahedron`` or (``hexa``) affine
+    ``hexahedron`` cells."""
+    NK = 8 if hexa else 4
+    CV = 1 if with_mass else 0
+    CF = CV + (3 if with_momentum else 0)
+    CG = CF + (3 if with_force else 0)
+
+    @njit(cache=True, error_model="numpy")
+    def scatter(cells, X, K, cell_dofs, mass, v, volume, sigma, g, fext, out, h, body, modulus, c, group,
+                stride):  # pragma: no cover
+        best = 0.0 if bound else np.inf
+        fe0 = fe1 = fe2 = s00 = s01 = s02 = s10 = s11 = s12 = s20 = s21 = s22 = 0.0
+        for p in range(len(cells)):
+            cp = cells[p]
+            X0, X1, X2 = X[p, 0], X[p, 1], X[p, 2]
+            k = inverse_jacobian(K, cp)
+            m, V = mass[p], volume[p]
+            mv0, mv1, mv2 = m * v[p, 0], m * v[p, 1], m * v[p, 2]
+            if with_dt:
+                speed = v[p, 0] * v[p, 0] + v[p, 1] * v[p, 1] + v[p, 2] * v[p, 2]
+                best = stable_time(best, bound, m, V, speed, modulus[body[p]], c, p, h[cp])
+            if with_force:
+                fe0, fe1, fe2 = m * g[0], m * g[1], m * g[2]
+                if has_fext:
+                    fe0, fe1, fe2 = fe0 + fext[p, 0], fe1 + fext[p, 1], fe2 + fext[p, 2]
+                s00, s01, s02 = sigma[p, 0, 0], sigma[p, 0, 1], sigma[p, 0, 2]
+                s10, s11, s12 = sigma[p, 1, 0], sigma[p, 1, 1], sigma[p, 1, 2]
+                s20, s21, s22 = sigma[p, 2, 0], sigma[p, 2, 1], sigma[p, 2, 2]
+            o = group[p] * stride if grouped else 0
+            for a in range(NK):
+                N, gx, gy, gz = node(a, X0, X1, X2, k, hexa)
+                i = cell_dofs[cp, a]
+                if with_mass:
+                    out[i, o] += N * m
+                if with_momentum:
+                    out[i, o + CV] += N * mv0
+                    out[i, o + CV + 1] += N * mv1
+                    out[i, o + CV + 2] += N * mv2
+                if with_force:
+                    out[i, o + CF] += N * fe0 - V * (s00 * gx + s01 * gy + s02 * gz)
+                    out[i, o + CF + 1] += N * fe1 - V * (s10 * gx + s11 * gy + s12 * gz)
+                    out[i, o + CF + 2] += N * fe2 - V * (s20 * gx + s21 * gy + s22 * gz)
+                if with_gradient:
+                    out[i, o + CG] += m * gx
+                    out[i, o + CG + 1] += m * gy
+                    out[i, o + CG + 2] += m * gz
+        return 1.0 / np.sqrt(2.0 * best) if bound else best
+
+    return scatter
+
+
+@functools.cache
+def g2p_kernel(hexa: bool, blend: bool, kinematics: bool, move: bool, remap: bool, totals: bool = False,
+               grouped: bool = False):
+    """:func:`fempm.kernels.lumped._g2p_kernel` for ``tetrahedron`` or (``hexa``) affine
+    ``hexahedron`` cells."""
+    NK = 8 if hexa else 4
+
+    @njit(cache=True, error_model="numpy")
+    def g2p_update(cells, X, K, cell_dofs, v_new, v_old, flip, dt, by_particle,
+                   x, v, F, volume0, volume, sigma, body, law, lam, mu, L, x0, tol, left, c2v, v_offsets, v_cells,
+                   num_cells, mass, mom, sums, group, rigid):  # pragma: no cover
+        n, keep_L = len(cells), L.shape[0] == len(cells)
+        nonfinite_j, inverted, jmin, jmax, nonfinite = 0, 0, np.inf, -np.inf, 0  # the pass's checks
+        acc = np.zeros(6)  # the state's sums (totals)
+        for p in range(n):
+            c = cells[p]
+            X0, X1, X2 = X[p, 0], X[p, 1], X[p, 2]
+            k = inverse_jacobian(K, c)
+            o = group[p] * 3 if grouped else 0
+            still = grouped and rigid[group[p]]  # a rigid body's particle: its own velocity, L = 0
+            vg0, vg1, vg2, dv0, dv1, dv2, Lp = gather(c, o, X0, X1, X2, k, cell_dofs, v_new, v_old, blend,
+                                                      kinematics and not still, NK, hexa)
+            if blend and not still:
+                v[p, 0] = flip * (v[p, 0] + dv0) + (1.0 - flip) * vg0
+                v[p, 1] = flip * (v[p, 1] + dv1) + (1.0 - flip) * vg1
+                v[p, 2] = flip * (v[p, 2] + dv2) + (1.0 - flip) * vg2
+            if remap:  # MUSL: the blended momenta back to the grid, in the same pass
+                for a in range(NK):
+                    i = cell_dofs[c, a]
+                    N = node(a, X0, X1, X2, k, hexa)[0]
+                    for j in range(3):
+                        mom[i, o + j] += N * (mass[p] * v[p, j])
+            if kinematics:
+                J = deform(F, p, dt, Lp)
+                if keep_L:
+                    for i in range(9):
+                        L[p, i // 3, i % 3] = Lp[i]
+                volume[p] = J * volume0[p]
+                b = body[p]
+                ok, nonfinite_j, inverted, jmin, jmax = count_j(J, nonfinite_j, inverted, jmin, jmax)
+                if ok and law[b] == NEO_HOOKEAN:
+                    neo_hookean_at(F, p, 3, J, lam[b], mu[b], sigma)
+                elif ok and law[b] == LINEAR_ELASTIC:
+                    linear_elastic_at(F, p, 3, lam[b], mu[b], sigma)
+            if move:
+                if not move_to(x, p, v, vg0, vg1, vg2, by_particle or still, dt):
+                    nonfinite += 1  # x or v (v.v: the kinetic energy); the compiled laws' stress is finite where J is
+                out = not inside_after_pull_back(x, p, x0, K, c, not hexa, 3, tol, X, True)
+                if out:  # the neighbours, while their geometry is in cache
+                    e = star_search(x, p, x0, K, c, c2v, v_offsets, v_cells, num_cells, not hexa, 3, tol, X, True)
+                    out = e < 0
+                    cells[p] = c if out else e
+                left[p] = out
+            if totals:
+                add_totals(acc, p, mass, v, F, volume0, law[body[p]], lam[body[p]], mu[body[p]], 3)
+        if totals:
+            sums[:] = acc
+        return nonfinite_j, inverted, jmin, jmax, nonfinite
+
+    return g2p_update
