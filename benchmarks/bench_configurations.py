@@ -33,7 +33,9 @@ scene         two disks, ``fempm.run`` (energies, health checks)    the same dis
 
 (``contact`` and ``scene``: ``fempm.scenes.two_disks`` on the benchmark's mesh, CFL step, about
 the same number of particles.) Each (size, mesh, ranks) runs in its own process under
-``mpiexec -n R`` (this script with ``--worker``); a step's time is the slowest rank's.
+``mpiexec -n R`` (this script with ``--worker``); a step's time is the slowest rank's. On
+more than one rank the reference problem's mesh is distributed by the particles, every cell
+sharing a node with a rank's own ghosted there (``particle_balanced(..., ghosts=True)``).
 """
 
 from __future__ import annotations
@@ -140,6 +142,10 @@ def reference_problem(n_target: int, mesh_kind: str, reference: Path, case: Case
     ppc = 2**dim
     x, n_cells, dx, _ = seed_block(n_target, ppc, dim)
     mesh = make_mesh(comm, mesh_kind, n_cells, dx)
+    if comm.size > 1:  # balanced by particles, every cell sharing a node with a rank's own ghosted there
+        from fempm.particles.partition import particle_balanced  # (domains reaching them keep the compiled passes)
+
+        mesh = particle_balanced(mesh, x, ghosts=True)
     mine = x if comm.rank == 0 else np.zeros((0, dim))
     vol = dx**dim / ppc
     lp = np.full_like(mine, 0.25 * dx)  # the 2^d seeding sub-cells' half-widths
