@@ -37,7 +37,6 @@ from fempm.kernels import contact as kc
 from fempm.stepping.contact import correct, particle_groups
 from fempm.stepping.lumped import BOUND_SAFETY, PointGrid
 from fempm.stepping.lumped import supported as point_supported
-from fempm.stepping.nodal import sum_ghosts
 from fempm.transfer.centres import NodalCentres
 from fempm.transfer.mapping import SUPPORT_TOL, mass_centres
 from fempm.transfer.mass_models import Lumped
@@ -93,18 +92,12 @@ class ContactPointGrid(PointGrid):
     def open(self, dt: float | None) -> float:
         s, opts, contact = self.solver, self.options, self.contact
         p = s.particles
-        f = p.fields
         d = self.d
         self.group, G = particle_groups(contact, p)
         self._layout(G)
         self.g, self.fext = self._external(s.t)
-        vec, out = self._nodal
-        out.fill(0.0)
-        local = self.kernels.scatter(p.cells, p.X, self.K, self.cell_dofs, p.mass, f["v"], p.volume, f["sigma"],
-                                     self.g, self.fext, out, 0, 1, 1 + d, s.h_cell, f["body"], self.modulus,
-                                     self._wave_speeds(), bound=dt is not None, group=self.group,
-                                     stride=self.stride, cg=1 + 2 * d)
-        sum_ghosts(vec)
+        out, local = self._scatter(self._nodal, self.g, self.fext, 0, 1, 1 + d, stable="exact" if dt is None else "bound",
+                                   group=self.group, stride=self.stride, cg=1 + 2 * d)
         top = np.array([kc.largest_total(out, self.stride, G, self.num_owned), -local])
         p.comm.Allreduce(MPI.IN_PLACE, top, op=MPI.MAX)  # one collective: the largest mass and the stable time
         top, state = float(top[0]), -float(top[1])
@@ -130,15 +123,7 @@ class ContactPointGrid(PointGrid):
         such a wall."""
         if self._moments is None:
             return None, [None] * self.num_groups
-        p = self.solver.particles
-        f = p.fields
-        vec, out = self._moments
-        out.fill(0.0)
-        self.kernels.scatter(p.cells, p.X, self.K, self.cell_dofs, p.mass, p.x, p.volume, f["sigma"], np.zeros(self.d),
-                             np.zeros((0, self.d)), out, -1, 0, -1, np.zeros(0), f["body"], self.modulus, np.zeros(0),
-                             group=self.group, stride=self.d)
-        sum_ghosts(vec)
-        moments = self._by_group(out, 0, self.d)
+        moments = self._by_group(self.mass_moments(group=self.group, stride=self.d), 0, self.d)
         centroids = [None] * self.num_groups
         if self.conditions.needs_positions:
             centroids = [NodalCentres(c, mg) for c, mg in zip(mass_centres(m, moments), m)]
@@ -181,16 +166,16 @@ class ContactPointGrid(PointGrid):
         return self._constrain(v)
 
     def update(self, dt: float) -> tuple[npt.NDArray, npt.NDArray]:
-        if not self.fused:
-            v_old = self.velocity()
-            return v_old, self.advance(v_old, dt)
+        if not self.fused:  # velocity() then advance()
+            return super().update(dt)
         shape = (self.num_dofs, self.num_groups * self.d)
         v_old, v_new = np.empty(shape), np.empty(shape)
         contact = self.contact
         gap = -1.0 if contact.gap is None else float(contact.gap)
         moments = self._moments[1] if self._moments is not None else np.zeros((0, 0))
-        self.contacts = kc.grid_update(self._nodal[1], self.stride, self.free, self.active_min, self.weak_max, float(dt),
-                       float(self.options.damping), float(contact.friction), gap, moments, v_old, v_new)
+        self.contacts = kc.grid_update(self._nodal[1], self.stride, self.free, self.active_min, self.weak_max,
+                                       float(dt), float(self.options.damping), float(contact.friction), gap, moments,
+                                       v_old, v_new)
         return v_old, v_new
 
     def forces(self) -> None:  # pragma: no cover - the schemes with contact map the forces with the mass

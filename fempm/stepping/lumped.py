@@ -155,18 +155,20 @@ class PointGrid(Grid):
             return g, np.zeros((0, self.d))
         return np.zeros(self.d), np.ascontiguousarray(external_forces(loads, s.particles, t))
 
-    def _scatter(self, nodal, g, fext, cm: int, cv: int, cf: int, stable: str = ""):
+    def _scatter(self, nodal, g, fext, cm: int, cv: int, cf: int, stable: str = "", velocity=None, **groups):
         """P2G of the chosen columns into the kept ``nodal`` (vector, array), summed over
         ranks; with ``stable`` ("exact" or "bound") also this rank's stable time of the state
-        or a lower bound of it (:func:`fempm.kernels.lumped._scatter_kernel`; else inf)."""
+        or a lower bound of it (:func:`fempm.kernels.lumped._scatter_kernel`; else inf);
+        ``velocity``: the vectors the momentum column maps in the place of the particles'
+        velocities; ``groups``: the passes' ``group``, ``stride`` and ``cg`` (multi-field contact)."""
         s = self.solver
         p = s.particles
         f = p.fields
         vec, out = nodal
         out.fill(0.0)
         h, c = (s.h_cell, self._wave_speeds()) if stable else (np.zeros(0), np.zeros(0))
-        local = self.scatter_pass(p.mass, f["v"], p.volume, f["sigma"], g, fext, out, cm, cv, cf, h, f["body"],
-                                  self.modulus, c, bound=stable == "bound")
+        local = self.scatter_pass(p.mass, f["v"] if velocity is None else velocity, p.volume, f["sigma"], g, fext, out, cm, cv, cf, h, f["body"],
+                                  self.modulus, c, bound=stable == "bound", **groups)
         sum_ghosts(vec)
         return out, local
 
@@ -176,10 +178,10 @@ class PointGrid(Grid):
         p = self.solver.particles
         kf.mass_apply(self.cell)(p.cells, p.X, self.K, self.cell_dofs, p.mass, y, lump, out)
 
-    def scatter_pass(self, *args, bound: bool = False) -> float:
+    def scatter_pass(self, *args, bound: bool = False, **groups) -> float:
         """The P2G pass (:func:`fempm.kernels.lumped.kernels_for`) with the particles' basis."""
         p = self.solver.particles
-        return self.kernels.scatter(p.cells, p.X, self.K, self.cell_dofs, *args, bound=bound)
+        return self.kernels.scatter(p.cells, p.X, self.K, self.cell_dofs, *args, bound=bound, **groups)
 
     def gather_pass(self, v_new, v_old, flip: float, dt: float, blend: bool, kinematics: bool, move: bool,
                     state: tuple) -> tuple:
@@ -193,14 +195,14 @@ class PointGrid(Grid):
         pass) and masses when a wall checks contact by position, else None."""
         if self._moments is None:
             return None
+        return NodalCentres(mass_centres(nodal[:, 0], self.mass_moments()), nodal[:, 0])
+
+    def mass_moments(self, **groups) -> npt.NDArray:
+        r"""The first mass moments :math:`\sum_p M_p N_{ip} x_p` into the kept ``_moments``
+        array, summed over ranks (``groups``: as for :meth:`_scatter`)."""
         p = self.solver.particles
-        f = p.fields
-        vec, out = self._moments
-        out.fill(0.0)
-        self.kernels.scatter(p.cells, p.X, self.K, self.cell_dofs, p.mass, p.x, p.volume, f["sigma"], np.zeros(self.d),
-                             np.zeros((0, self.d)), out, -1, 0, -1, np.zeros(0), f["body"], self.modulus, np.zeros(0))
-        sum_ghosts(vec)
-        return NodalCentres(mass_centres(nodal[:, 0], out), nodal[:, 0])
+        return self._scatter(self._moments, np.zeros(self.d), np.zeros((0, self.d)), -1, 0, -1, velocity=p.x,
+                             **groups)[0]
 
     def _stable_time(self) -> float:
         r"""The stable time of the state, :math:`\min_p h_{c(p)} / (c_p + |v_p|)` over all ranks."""
