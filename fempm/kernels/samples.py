@@ -32,52 +32,19 @@ from types import SimpleNamespace
 
 import numpy as np
 
-from fempm.kernels.shape import AVAILABLE, CELLS, is_affine
+from fempm.kernels import planar_samples
+from fempm.kernels.shape import AVAILABLE, CELLS, MULTILINEAR, is_affine
 
-__all__ = ["at_samples", "cpdi1_samples", "kernels_for", "locate_samples"]
+__all__ = ["at_samples", "kernels_for", "locate_samples"]
 
 if AVAILABLE:
     from numba import njit
 
-    from fempm.kernels.corners import inverse
+    from fempm.kernels.cpdi1 import corner_frame
     from fempm.kernels.kinematics import add_totals
     from fempm.kernels.lumped import deform_at, law_at
     from fempm.kernels.particle_checks import count_j, stable_time
     from fempm.kernels.shape import inside_after_pull_back, shape, shape_values, star_search
-
-    @njit(cache=True, error_model="numpy")
-    def _cpdi1_samples(x, F, lp, signs, y, w, g):  # pragma: no cover - compiled
-        n, d = x.shape
-        Q = signs.shape[0]
-        R = np.empty((d, d))
-        Ri = np.empty((d, d))
-        share = 1.0 / Q
-        for p in range(n):
-            for i in range(d):
-                for j in range(d):
-                    R[i, j] = F[p, i, j] * lp[p, j]
-            inverse(R, d, Ri)
-            for q in range(Q):
-                w[p, q] = share
-                for i in range(d):
-                    s = x[p, i]
-                    t = 0.0
-                    for j in range(d):
-                        s += R[i, j] * signs[q, j]
-                        t += Ri[j, i] * signs[q, j]  # (R^-T s)_i
-                    y[p * Q + q, i] = s
-                    g[p, q, i] = share * t
-
-
-def cpdi1_samples(x, F, lp, signs, out=None):
-    """CPDI1 samples of particles at ``x`` (n, d) with ``F`` (n, d, d), half-widths ``lp``
-    (n, d) and corner ``signs`` (Q, d): (y (n Q, d), w (n, Q), g (n, Q, d)), into ``out`` if
-    given (arrays of those shapes)."""
-    n, d = x.shape
-    Q = len(signs)
-    y, w, g = out if out is not None else (np.empty((n * Q, d)), np.empty((n, Q)), np.empty((n, Q, d)))
-    _cpdi1_samples(x, F, np.ascontiguousarray(lp), signs, y, w, g)
-    return y, w, g
 
 
 @functools.cache
@@ -156,43 +123,60 @@ def at_samples(cell: str, sc, Y, K, cell_dofs, u):
 
 
 @functools.cache
-def kernels_for(cell: str, grad_from_values: bool) -> SimpleNamespace:
+def kernels_for(cell: str, grad_from_values: bool, planar: bool = True) -> SimpleNamespace:
     """The sample passes ``scatter`` and ``g2p_update`` of one cell type; with
     ``grad_from_values`` the gradient of the average is :math:`\\sum_q w_{pq} \\nabla N_i(y_{pq})`
     (Gauss GIMP), else :math:`\\sum_q g_{pq} N_i(y_{pq})` (CPDI)."""
 
-    def scatter(cells, sc, Y, w, gw, K, cell_dofs, mass, v, volume, sigma, g, fext, out, cm, cv, cf, h, body,
-                modulus, c, bound=False):
-        kernel = _scatter_kernel(cell, grad_from_values, cm >= 0, cv >= 0, cf >= 0, h.shape[0] > 0,
-                                 fext.shape[0] > 0, bool(bound))
-        return kernel(cells, sc, Y, w, gw, K, cell_dofs, mass, v, volume, sigma, g, fext, out, h, body, modulus, c)
+    scatter_kernel, g2p_kernel = _scatter_kernel, _g2p_kernel
+    if cell in ("triangle", "quadrilateral", "quadrilateral" + MULTILINEAR) and planar:
+        scatter_kernel = functools.partial(_planar, planar_samples.scatter_kernel)
+        g2p_kernel = functools.partial(_planar, planar_samples.g2p_kernel)
 
-    def g2p_update(cells, sc, Y, w, gw, K, cell_dofs, v_new, v_old, flip, dt, blend, kinematics, move, *rest):
+    def scatter(cells, sc, Y, w, gw, Fw, lp, signs, K, cell_dofs, mass, v, volume, sigma, g, fext, out, cm, cv, cf,
+                h, body, modulus, c, bound=False):
+        kernel = scatter_kernel(cell, grad_from_values, Fw.shape[0] > 0, cm >= 0, cv >= 0, cf >= 0, h.shape[0] > 0,
+                                fext.shape[0] > 0, bool(bound))
+        return kernel(cells, sc, Y, w, gw, Fw, lp, signs, K, cell_dofs, mass, v, volume, sigma, g, fext, out, h,
+                      body, modulus, c)
+
+    def g2p_update(cells, sc, Y, w, gw, Fw, lp, signs, K, cell_dofs, v_new, v_old, flip, dt, blend, kinematics,
+                   move, *rest):
         remap = blend and rest[-2].shape[0] > 0
         totals = move and rest[-1].shape[0] > 0
-        return _g2p_kernel(cell, grad_from_values, bool(blend), bool(kinematics), bool(move), remap, totals)(
-            cells, sc, Y, w, gw, K, cell_dofs, v_new, v_old, flip, dt, *rest)
+        return g2p_kernel(cell, grad_from_values, Fw.shape[0] > 0, bool(blend), bool(kinematics), bool(move), remap,
+                          totals)(cells, sc, Y, w, gw, Fw, lp, signs, K, cell_dofs, v_new, v_old, flip, dt, *rest)
 
-    def mass_apply(cells, sc, Y, w, gw, K, cell_dofs, mass, y, lump, out):
+    def mass_apply(cells, sc, Y, w, gw, Fw, lp, signs, K, cell_dofs, mass, y, lump, out):
         """:func:`fempm.kernels.fmpm.mass_apply` with the averaged basis,
         :math:`(M_C y)_i = \\sum_p M_p \\langle N_i \\rangle_p \\sum_j \\langle N_j \\rangle_p y_j`."""
-        _mass_apply_kernel(cell, grad_from_values)(cells, sc, Y, w, gw, K, cell_dofs, mass, y, lump, out)
+        _mass_apply_kernel(cell, grad_from_values, Fw.shape[0] > 0)(cells, sc, Y, w, gw, Fw, lp, signs, K, cell_dofs,
+                                                                    mass, y, lump, out)
 
     return SimpleNamespace(scatter=scatter, g2p_update=g2p_update, mass_apply=mass_apply)
 
 
+def _planar(make, cell: str, *flags):
+    """A kernel of :mod:`fempm.kernels.planar_samples` in the place of a generic one of ``cell``."""
+    return make(cell == "triangle", is_affine(cell), *flags)
+
+
 if AVAILABLE:
     @njit(inline="always")
-    def _particle_basis(p, sc, Y, w, gw, K, simplex, affine, D, NK, grad_from_values, N, G, cells, W,
-                        GW):  # pragma: no cover
+    def _particle_basis(p, sc, Y, w, gw, Fw, lp, signs, K, simplex, affine, D, NK, grad_from_values, corners, N,
+                        G, cells, W, GW, R, Ri):  # pragma: no cover
         r"""The averaged basis of particle ``p`` by cell: the distinct cells its samples lie in
         (``cells``, returned their number) and in row ``k`` the weighted values ``W[k]`` (NK,)
         and gradients ``GW[k]`` (NK, D) of the samples in ``cells[k]`` summed (samples sharing a
-        cell share its nodes: one scatter or gather per cell instead of per sample)."""
+        cell share its nodes: one scatter or gather per cell instead of per sample). With
+        ``corners`` the weights are CPDI1's of ``Fw[p]`` and ``lp[p]`` (:mod:`fempm.kernels.cpdi1`)."""
         Q = sc.shape[1]
+        share = 1.0 / Q
+        if corners:
+            corner_frame(Fw, lp, p, D, R, Ri)
         ncell = 0
         for q in range(Q):
-            wq = w[p, q]
+            wq = share if corners else w[p, q]
             if grad_from_values and wq == 0.0:
                 continue  # a sample of no weight (GIMP's cut or unused samples)
             c = sc[p, q]
@@ -210,16 +194,26 @@ if AVAILABLE:
                 shape(Y, p * Q + q, K, c, simplex, affine, D, NK, N, G)
             else:  # CPDI: the gradient weights times the values
                 shape_values(Y, p * Q + q, simplex, D, NK, N)
+            for e in range(D):
+                if grad_from_values:
+                    pass
+                elif corners:  # (R^-T s_q)_e / Q
+                    t = 0.0
+                    for j in range(D):
+                        t += Ri[j, e] * signs[q, j]
+                    G[0, e] = share * t
+                else:
+                    G[0, e] = gw[p, q, e]
             for a in range(NK):
                 W[k, a] += wq * N[a]
                 for e in range(D):
-                    GW[k, a, e] += wq * G[a, e] if grad_from_values else gw[p, q, e] * N[a]
+                    GW[k, a, e] += wq * G[a, e] if grad_from_values else G[0, e] * N[a]
         return ncell
 
 
 @functools.cache
-def _scatter_kernel(cell: str, grad_from_values: bool, with_mass: bool, with_momentum: bool, with_force: bool,
-                    with_dt: bool, has_fext: bool, bound: bool):
+def _scatter_kernel(cell: str, grad_from_values: bool, corners: bool, with_mass: bool, with_momentum: bool,
+                    with_force: bool, with_dt: bool, has_fext: bool, bound: bool):
     """:func:`fempm.kernels.lumped._scatter_kernel` over the samples."""
     D, NK, SIMPLEX = CELLS[cell]
     AFFINE = is_affine(cell)
@@ -227,11 +221,11 @@ def _scatter_kernel(cell: str, grad_from_values: bool, with_mass: bool, with_mom
     CF = CV + (D if with_momentum else 0)
 
     @njit(cache=True, error_model="numpy")
-    def scatter(cells, sc, Y, w, gw, K, cell_dofs, mass, v, volume, sigma, g, fext, out, h, body, modulus,
-                c):  # pragma: no cover
+    def scatter(cells, sc, Y, w, gw, Fw, lp, signs, K, cell_dofs, mass, v, volume, sigma, g, fext, out, h, body,
+                modulus, c):  # pragma: no cover
         Q = sc.shape[1]
         N, G, cs = np.empty(NK), np.empty((NK, D)), np.empty(Q, np.int32)
-        W, GW = np.empty((Q, NK)), np.empty((Q, NK, D))
+        W, GW, R, Ri = np.empty((Q, NK)), np.empty((Q, NK, D)), np.empty((D, D)), np.empty((D, D))
         mv, fe, sg = np.empty(D), np.empty(D), np.empty((D, D))
         best = 0.0 if bound else np.inf
         for p in range(len(cells)):
@@ -247,7 +241,8 @@ def _scatter_kernel(cell: str, grad_from_values: bool, with_mass: bool, with_mom
                         sg[j, e] = sigma[p, j, e]
             if with_dt:
                 best = stable_time(best, bound, m, V, speed, modulus[body[p]], c, p, h[cells[p]])
-            ncell = _particle_basis(p, sc, Y, w, gw, K, SIMPLEX, AFFINE, D, NK, grad_from_values, N, G, cs, W, GW)
+            ncell = _particle_basis(p, sc, Y, w, gw, Fw, lp, signs, K, SIMPLEX, AFFINE, D, NK, grad_from_values,
+                                    corners, N, G, cs, W, GW, R, Ri)
             for k in range(ncell):
                 cq = cs[k]
                 for a in range(NK):
@@ -270,21 +265,21 @@ def _scatter_kernel(cell: str, grad_from_values: bool, with_mass: bool, with_mom
 
 
 @functools.cache
-def _g2p_kernel(cell: str, grad_from_values: bool, blend: bool, kinematics: bool, move: bool, remap: bool,
-                totals: bool):
+def _g2p_kernel(cell: str, grad_from_values: bool, corners: bool, blend: bool, kinematics: bool, move: bool,
+                remap: bool, totals: bool):
     """:func:`fempm.kernels.lumped._g2p_kernel` over the samples (the particle itself moves and
     is relocated as there)."""
     D, NK, SIMPLEX = CELLS[cell]
     AFFINE = is_affine(cell)
 
     @njit(cache=True, error_model="numpy")
-    def g2p_update(cells, sc, Y, w, gw, K, cell_dofs, v_new, v_old, flip, dt, by_particle, X, x, v, F, volume0,
-                   volume, sigma, body, law, lam, mu, L, x0, tol, left, c2v, v_offsets, v_cells, num_cells, mass, mom,
-                   sums):  # pragma: no cover
+    def g2p_update(cells, sc, Y, w, gw, Fw, lp, signs, K, cell_dofs, v_new, v_old, flip, dt, by_particle, X, x, v,
+                   F, volume0, volume, sigma, body, law, lam, mu, L, x0, tol, left, c2v, v_offsets, v_cells, num_cells,
+                   mass, mom, sums):  # pragma: no cover
         n = len(cells)
         Q = sc.shape[1]
         N, G, cs = np.empty(NK), np.empty((NK, D)), np.empty(Q, np.int32)
-        W, GW = np.empty((Q, NK)), np.empty((Q, NK, D))
+        W, GW, R, Ri = np.empty((Q, NK)), np.empty((Q, NK, D)), np.empty((D, D)), np.empty((D, D))
         vg, dv, Lp, Fn = np.empty(D), np.empty(D), np.empty((D, D)), np.empty((D, D))
         keep_L = L.shape[0] == n
         nonfinite_j, inverted, jmin, jmax, nonfinite = 0, 0, np.inf, -np.inf, 0
@@ -293,7 +288,8 @@ def _g2p_kernel(cell: str, grad_from_values: bool, blend: bool, kinematics: bool
             vg[:] = 0.0
             dv[:] = 0.0
             Lp[:] = 0.0
-            ncell = _particle_basis(p, sc, Y, w, gw, K, SIMPLEX, AFFINE, D, NK, grad_from_values, N, G, cs, W, GW)
+            ncell = _particle_basis(p, sc, Y, w, gw, Fw, lp, signs, K, SIMPLEX, AFFINE, D, NK, grad_from_values,
+                                    corners, N, G, cs, W, GW, R, Ri)
             for k in range(ncell):
                 cq = cs[k]
                 for a in range(NK):
@@ -354,21 +350,22 @@ def _g2p_kernel(cell: str, grad_from_values: bool, blend: bool, kinematics: bool
 
 
 @functools.cache
-def _mass_apply_kernel(cell: str, grad_from_values: bool):
+def _mass_apply_kernel(cell: str, grad_from_values: bool, corners: bool):
     """:func:`fempm.kernels.fmpm.mass_apply` over the samples."""
     D, NK, SIMPLEX = CELLS[cell]
     AFFINE = is_affine(cell)
 
     @njit(cache=True, error_model="numpy")
-    def kernel(cells, sc, Y, w, gw, K, cell_dofs, mass, y, lump, out):  # pragma: no cover - compiled
+    def kernel(cells, sc, Y, w, gw, Fw, lp, signs, K, cell_dofs, mass, y, lump, out):  # pragma: no cover - compiled
         Q = sc.shape[1]
         N, G, cs = np.empty(NK), np.empty((NK, D)), np.empty(Q, np.int32)
-        W, GW = np.empty((Q, NK)), np.empty((Q, NK, D))
+        W, GW, R, Ri = np.empty((Q, NK)), np.empty((Q, NK, D)), np.empty((D, D)), np.empty((D, D))
         k = y.shape[1]
         u = np.empty(k)
         lumping = lump.shape[0] > 0
         for p in range(len(cells)):
-            ncell = _particle_basis(p, sc, Y, w, gw, K, SIMPLEX, AFFINE, D, NK, grad_from_values, N, G, cs, W, GW)
+            ncell = _particle_basis(p, sc, Y, w, gw, Fw, lp, signs, K, SIMPLEX, AFFINE, D, NK, grad_from_values,
+                                    corners, N, G, cs, W, GW, R, Ri)
             for j in range(k):
                 u[j] = 0.0
             ul = 0.0

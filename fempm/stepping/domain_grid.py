@@ -29,6 +29,7 @@ import numpy.typing as npt
 
 from fempm.kernels import samples as ks
 from fempm.kernels.boxes import box_samples
+from fempm.kernels.cpdi1 import cpdi1_samples, locate_corners
 from fempm.kernels.shape import CELLS, space_of
 from fempm.particles.corners import corner_signs, domain_geometry
 from fempm.stepping.grid import Grid, SingleFieldGrid
@@ -84,7 +85,9 @@ class DomainGrid(PointGrid):
         self.cpdi1 = isinstance(dom, CPDI1)
         self.exact = isinstance(dom, GIMP) and dom.exact
         self.passes = ks.kernels_for(self.cell, grad_from_values=isinstance(dom, GIMP))
-        self.no_gradient_weights = np.zeros((1, 1, self.d))  # GIMP's (not read)
+        self.no_gradient_weights = np.zeros((1, 1, self.d))  # GIMP's and CPDI1's (not read)
+        self.no_weights = np.zeros((0, 2**self.d))  # CPDI1's (not read)
+        self.no_corners = (np.zeros((0, self.d, self.d)), np.zeros((0, self.d)), np.zeros((0, self.d)))
         if self.exact:  # the cells' vertices and bounding boxes, the most pieces of a box so far
             geo = solver.particles.locator.geometry
             nodes = geo.x[geo.dofmap[:, : CELLS[self.cell][1]]]
@@ -118,9 +121,8 @@ class DomainGrid(PointGrid):
         if self.exact:
             return self._box_samples()
         if self.cpdi1:
-            y, w, g = ks.cpdi1_samples(p.x, p.fields["F"], half_widths(p), self.signs, self._kept("cpdi1", n, Q))
-            beyond = "clamp"
-        elif isinstance(dom, CPDI2):  # the tracked corners
+            return self._corners()
+        if isinstance(dom, CPDI2):  # the tracked corners
             corners = dom.corners(p)
             n, Q, _ = corners.shape
             y = np.ascontiguousarray(corners.reshape(n * Q, d))
@@ -141,7 +143,29 @@ class DomainGrid(PointGrid):
                                            guess, self._kept("located", n, Q))
         if missing:
             missing = self._place(y, sc, Y, w, beyond)
-        self.stencil = (sc, Y, np.ascontiguousarray(w), g)
+        self.stencil = (sc, Y, np.ascontiguousarray(w), g, *self.no_corners)
+        return missing
+
+    def _corners(self) -> int:
+        """CPDI1: the corners made and located in one pass (:func:`fempm.kernels.cpdi1.locate_corners`),
+        their weights left to the passes (from F at the start of the step: a copy of it where the
+        stress is updated before the forces are mapped, USF); returns the number left on no
+        local cell."""
+        p = self.solver.particles
+        n, Q = len(p), len(self.signs)
+        F, lp = p.fields["F"], np.ascontiguousarray(half_widths(p))
+        if not self.options.stages.forces_with_map:
+            kept = self._kept("F", n, Q)[0]
+            np.copyto(kept, F)
+            F = kept
+        loc = p.sample_locator
+        guess = self.stencil[0] if self.stencil[0].shape == (n, Q) else None
+        sc, Y, missing = locate_corners(p.x, F, lp, self.signs, p.cells, self.x0, self.K, loc.vertex_star(), self.cell,
+                                        loc.tol, guess, self._kept("located", n, Q))
+        if missing:
+            y = cpdi1_samples(p.x, F, lp, self.signs)[0]
+            missing = self._place(y, sc, Y, self.no_weights, "clamp")
+        self.stencil = (sc, Y, self.no_weights, self.no_gradient_weights, F, lp, self.signs)
         return missing
 
     def _box_samples(self) -> int:
@@ -160,18 +184,18 @@ class DomainGrid(PointGrid):
             if needed <= self.pieces:
                 break
             self.pieces = needed  # and again with room for every piece
-        self.stencil = (*out, self.no_gradient_weights)
+        self.stencil = (*out, self.no_gradient_weights, *self.no_corners)
         return reaching + failed
 
     def _kept(self, what: str, n: int, Q: int) -> tuple:
         """Arrays kept from step to step for ``n`` particles of ``Q`` samples (made anew when
-        ``n`` changes): the CPDI1 samples (y, w, g), the located ones (cells, coordinates) or
+        ``n`` changes): a copy of F (CPDI1 with USF), the located samples (cells, coordinates) or
         the exact GIMP ones (cells, coordinates, weights)."""
         key = (what, n, Q)
         if key not in self._arrays:
             self._arrays = {k: a for k, a in self._arrays.items() if k[0] != what}
             d = self.d
-            self._arrays[key] = {"cpdi1": lambda: (np.empty((n * Q, d)), np.empty((n, Q)), np.empty((n, Q, d))),
+            self._arrays[key] = {"F": lambda: (np.empty((n, d, d)),),
                                  "located": lambda: (np.full((n, Q), -1, dtype=np.int32), np.zeros((n * Q, d))),
                                  "boxes": lambda: (np.empty((n, Q), dtype=np.int32), np.empty((n * Q, d)),
                                                    np.empty((n, Q)))}[what]()

@@ -1,0 +1,268 @@
+r"""The sample passes of :mod:`fempm.kernels.samples` for triangles and quadrilaterals, in
+scalar code and sample by sample.
+
+The same equations, arguments and results as :func:`fempm.kernels.samples._scatter_kernel` and
+:func:`fempm.kernels.samples._g2p_kernel` (the reference they are tested against), written out
+for :math:`d = 2` in local scalars, as :mod:`fempm.kernels.planar` writes the point passes, and
+summed sample by sample instead of cell by cell. With CPDI's gradient weights :math:`g_{pq}`
+the averaged gradient factorises over the samples:
+
+.. math::
+    \sum_i v_i \otimes \langle \nabla N_i \rangle_p = \sum_q v(y_{pq}) \otimes g_{pq},
+    \qquad v(y_{pq}) = \sum_a N_a(y_{pq})\, v_{d(pq, a)},
+
+and a node's force share is :math:`N_a(y_{pq}) (w_{pq} f^{ext}_p - V_p \sigma_p g_{pq})`: the
+per-node work is that of the point pass, with no :math:`d \times d` product per node. Gauss GIMP
+and exact GIMP (``grad_from_values``) weight each sample's point-pass terms by :math:`w_{pq}`.
+"""
+
+from __future__ import annotations
+
+import functools
+
+import numpy as np
+
+from fempm.kernels.shape import AVAILABLE
+
+__all__ = ["g2p_kernel", "scatter_kernel"]
+
+if AVAILABLE:
+    from numba import njit
+
+    from fempm.kernels.kinematics import add_totals
+    from fempm.kernels.particle_checks import count_j, stable_time
+    from fempm.kernels.planar import add_pair, basis, deform, inverse_jacobian, law_stress
+    from fempm.kernels.shape import inside_after_pull_back, star_search
+
+    @njit(inline="always")
+    def corner_inverse(F, lp, p):  # pragma: no cover - compiled
+        r""":math:`R^{-1}` of CPDI1's :math:`R = F_p \operatorname{diag}(\ell_p)` (:mod:`fempm.kernels.cpdi1`)."""
+        a, b = F[p, 0, 0] * lp[p, 0], F[p, 0, 1] * lp[p, 1]
+        c, d = F[p, 1, 0] * lp[p, 0], F[p, 1, 1] * lp[p, 1]
+        det = a * d - b * c
+        return d / det, -b / det, -c / det, a / det
+
+    @njit(inline="always")
+    def corner_weight(r00, r01, r10, r11, signs, q, share):  # pragma: no cover - compiled
+        """CPDI1's gradient weight :math:`Q^{-1} R^{-T} s_q` of corner ``q``."""
+        s0, s1 = signs[q, 0], signs[q, 1]
+        return share * (r00 * s0 + r10 * s1), share * (r01 * s0 + r11 * s1)
+
+
+@functools.cache
+def scatter_kernel(simplex: bool, affine: bool, grad_from_values: bool, corners: bool, with_mass: bool,
+                   with_momentum: bool, with_force: bool, with_dt: bool, has_fext: bool, bound: bool):
+    """:func:`fempm.kernels.samples._scatter_kernel` for ``triangle`` (``simplex``) or
+    ``quadrilateral`` cells, ``affine`` or multilinear."""
+    CV = 1 if with_mass else 0
+    CF = CV + (2 if with_momentum else 0)
+    QUAD = not simplex
+
+    @njit(cache=True, error_model="numpy")
+    def scatter(cells, sc, Y, w, gw, Fw, lp, signs, K, cell_dofs, mass, v, volume, sigma, g, fext, out, h, body,
+                modulus, c):  # pragma: no cover
+        Q = sc.shape[1]
+        share = 1.0 / Q
+        best = 0.0 if bound else np.inf
+        for p in range(len(cells)):
+            m = mass[p]
+            V = volume[p]
+            v0, v1 = v[p, 0], v[p, 1]
+            if with_dt:
+                best = stable_time(best, bound, m, V, v0 * v0 + v1 * v1, modulus[body[p]], c, p, h[cells[p]])
+            fe0, fe1 = m * g[0], m * g[1]
+            if has_fext:
+                fe0 += fext[p, 0]
+                fe1 += fext[p, 1]
+            s00, s01, s10, s11 = sigma[p, 0, 0], sigma[p, 0, 1], sigma[p, 1, 0], sigma[p, 1, 1]
+            if corners:
+                r00, r01, r10, r11 = corner_inverse(Fw, lp, p)
+            for q in range(Q):
+                wq = share if corners else w[p, q]
+                if grad_from_values and wq == 0.0:
+                    continue  # a sample of no weight (GIMP's cut or unused samples)
+                r = p * Q + q
+                cq = sc[p, q]
+                X0, X1 = Y[r, 0], Y[r, 1]
+                k00, k01, k10, k11 = inverse_jacobian(X0, X1, K, cq, affine)
+                N0, N1, N2, N3, g0x, g0y, g1x, g1y, g2x, g2y, g3x, g3y = basis(X0, X1, k00, k01, k10, k11, simplex)
+                i0, i1, i2 = cell_dofs[cq, 0], cell_dofs[cq, 1], cell_dofs[cq, 2]
+                i3 = cell_dofs[cq, 3] if QUAD else i0
+                if with_mass:
+                    out[i0, 0] += N0 * (wq * m)
+                    out[i1, 0] += N1 * (wq * m)
+                    out[i2, 0] += N2 * (wq * m)
+                    if QUAD:
+                        out[i3, 0] += N3 * (wq * m)
+                if with_momentum:
+                    add_pair(out, CV, i0, i1, i2, i3, N0, N1, N2, N3, wq * m * v0, wq * m * v1, QUAD)
+                if with_force and grad_from_values:  # w_q (N_a f - V sigma grad N_a)
+                    a0, a1 = wq * fe0, wq * fe1
+                    b00, b01, b10, b11 = wq * V * s00, wq * V * s01, wq * V * s10, wq * V * s11
+                    out[i0, CF] += N0 * a0 - (b00 * g0x + b01 * g0y)
+                    out[i0, CF + 1] += N0 * a1 - (b10 * g0x + b11 * g0y)
+                    out[i1, CF] += N1 * a0 - (b00 * g1x + b01 * g1y)
+                    out[i1, CF + 1] += N1 * a1 - (b10 * g1x + b11 * g1y)
+                    out[i2, CF] += N2 * a0 - (b00 * g2x + b01 * g2y)
+                    out[i2, CF + 1] += N2 * a1 - (b10 * g2x + b11 * g2y)
+                    if QUAD:
+                        out[i3, CF] += N3 * a0 - (b00 * g3x + b01 * g3y)
+                        out[i3, CF + 1] += N3 * a1 - (b10 * g3x + b11 * g3y)
+                elif with_force:  # N_a (w_q f - V sigma g_q)
+                    if corners:
+                        t0, t1 = corner_weight(r00, r01, r10, r11, signs, q, share)
+                    else:
+                        t0, t1 = gw[p, q, 0], gw[p, q, 1]
+                    f0 = wq * fe0 - V * (s00 * t0 + s01 * t1)
+                    f1 = wq * fe1 - V * (s10 * t0 + s11 * t1)
+                    add_pair(out, CF, i0, i1, i2, i3, N0, N1, N2, N3, f0, f1, QUAD)
+        return 1.0 / np.sqrt(2.0 * best) if bound else best
+
+    return scatter
+
+
+@functools.cache
+def g2p_kernel(simplex: bool, affine: bool, grad_from_values: bool, corners: bool, blend: bool, kinematics: bool,
+               move: bool, remap: bool, totals: bool):
+    """:func:`fempm.kernels.samples._g2p_kernel` for ``triangle`` (``simplex``) or
+    ``quadrilateral`` cells, ``affine`` or multilinear."""
+    add_momentum = _momentum_kernel(simplex, grad_from_values, corners)
+    gather = _gather_kernel(simplex, affine, grad_from_values, corners, blend, kinematics)
+
+    @njit(cache=True, error_model="numpy")
+    def g2p_update(cells, sc, Y, w, gw, Fw, lp, signs, K, cell_dofs, v_new, v_old, flip, dt, by_particle, X, x, v,
+                   F, volume0, volume, sigma, body, law, lam, mu, L, x0, tol, left, c2v, v_offsets, v_cells, num_cells,
+                   mass, mom, sums):  # pragma: no cover
+        n, keep_L = len(cells), L.shape[0] == len(cells)
+        nonfinite_j, inverted, jmin, jmax, nonfinite = 0, 0, np.inf, -np.inf, 0  # the pass's checks
+        acc = np.zeros(5)  # the state's sums (totals)
+        for p in range(n):
+            vg0, vg1, dv0, dv1, L00, L01, L10, L11 = gather(p, sc, Y, w, gw, Fw, lp, signs, K, cell_dofs, v_new, v_old)
+            if blend:
+                v[p, 0] = flip * (v[p, 0] + dv0) + (1.0 - flip) * vg0
+                v[p, 1] = flip * (v[p, 1] + dv1) + (1.0 - flip) * vg1
+            if remap:  # MUSL: the blended momenta back to the grid
+                add_momentum(p, sc, Y, w, cell_dofs, mass[p] * v[p, 0], mass[p] * v[p, 1], mom)
+            if kinematics:
+                n00, n01, n10, n11, J = deform(F, p, dt, L00, L01, L10, L11)
+                if keep_L:
+                    L[p, 0, 0], L[p, 0, 1], L[p, 1, 0], L[p, 1, 1] = L00, L01, L10, L11
+                volume[p] = J * volume0[p]
+                b = body[p]
+                ok, nonfinite_j, inverted, jmin, jmax = count_j(J, nonfinite_j, inverted, jmin, jmax)
+                if ok:
+                    law_stress(sigma, p, law[b], lam[b], mu[b], n00, n01, n10, n11, J)
+            if move:
+                y0 = x[p, 0] + dt * (v[p, 0] if by_particle else vg0)
+                y1 = x[p, 1] + dt * (v[p, 1] if by_particle else vg1)
+                x[p, 0], x[p, 1] = y0, y1
+                if not (np.isfinite(y0) and np.isfinite(y1) and np.isfinite(v[p, 0] * v[p, 0] + v[p, 1] * v[p, 1])):
+                    nonfinite += 1
+                c = cells[p]
+                out = not inside_after_pull_back(x, p, x0, K, c, simplex, 2, tol, X, affine)
+                if out:
+                    e = star_search(x, p, x0, K, c, c2v, v_offsets, v_cells, num_cells, simplex, 2, tol, X, affine)
+                    out = e < 0
+                    cells[p] = c if out else e
+                left[p] = out
+            if totals:
+                add_totals(acc, p, mass, v, F, volume0, law[body[p]], lam[body[p]], mu[body[p]], 2)
+        if totals:
+            sums[:] = acc
+        return nonfinite_j, inverted, jmin, jmax, nonfinite
+
+    return g2p_update
+
+
+@functools.cache
+def _momentum_kernel(simplex: bool, grad_from_values: bool, corners: bool):
+    r"""MUSL's re-map of particle ``p``'s blended momentum ``(m0, m1)`` over its samples,
+    :math:`m_i \mathrel{+}= \sum_q w_{pq} N_i(y_{pq}) M_p v_p` (inlined into the G2P pass)."""
+    QUAD = not simplex
+
+    @njit(inline="always")
+    def add_momentum(p, sc, Y, w, cell_dofs, m0, m1, mom):  # pragma: no cover - compiled
+        Q = sc.shape[1]
+        for q in range(Q):
+            wq = 1.0 / Q if corners else w[p, q]
+            if grad_from_values and wq == 0.0:
+                continue
+            r = p * Q + q
+            cq = sc[p, q]
+            N0, N1, N2, N3 = basis(Y[r, 0], Y[r, 1], 0.0, 0.0, 0.0, 0.0, simplex)[:4]
+            i0, i1, i2 = cell_dofs[cq, 0], cell_dofs[cq, 1], cell_dofs[cq, 2]
+            i3 = cell_dofs[cq, 3] if QUAD else i0
+            add_pair(mom, 0, i0, i1, i2, i3, N0, N1, N2, N3, wq * m0, wq * m1, QUAD)
+
+    return add_momentum
+
+
+@functools.cache
+def _gather_kernel(simplex: bool, affine: bool, grad_from_values: bool, corners: bool, blend: bool, kinematics: bool):
+    """Particle ``p``'s grid velocity, FLIP increment and velocity gradient summed over its
+    samples, (vg0, vg1, dv0, dv1, L00, L01, L10, L11) (inlined into the G2P pass)."""
+    QUAD = not simplex
+
+    @njit(inline="always")
+    def gather(p, sc, Y, w, gw, Fw, lp, signs, K, cell_dofs, v_new, v_old):  # pragma: no cover - compiled
+        Q = sc.shape[1]
+        share = 1.0 / Q
+        vg0, vg1, dv0, dv1 = 0.0, 0.0, 0.0, 0.0
+        L00, L01, L10, L11 = 0.0, 0.0, 0.0, 0.0
+        if corners:  # of F before this pass updates it
+            r00, r01, r10, r11 = corner_inverse(Fw, lp, p)
+        for q in range(Q):
+            wq = share if corners else w[p, q]
+            if grad_from_values and wq == 0.0:
+                continue
+            r = p * Q + q
+            cq = sc[p, q]
+            X0, X1 = Y[r, 0], Y[r, 1]
+            k00, k01, k10, k11 = inverse_jacobian(X0, X1, K, cq, affine)
+            N0, N1, N2, N3, g0x, g0y, g1x, g1y, g2x, g2y, g3x, g3y = basis(X0, X1, k00, k01, k10, k11, simplex)
+            i0, i1, i2 = cell_dofs[cq, 0], cell_dofs[cq, 1], cell_dofs[cq, 2]
+            i3 = cell_dofs[cq, 3] if QUAD else i0
+            a0, b0, a1, b1 = v_new[i0, 0], v_new[i0, 1], v_new[i1, 0], v_new[i1, 1]
+            a2, b2 = v_new[i2, 0], v_new[i2, 1]
+            u0 = N0 * a0 + N1 * a1 + N2 * a2
+            u1 = N0 * b0 + N1 * b1 + N2 * b2
+            if QUAD:
+                a3, b3 = v_new[i3, 0], v_new[i3, 1]
+                u0 += N3 * a3
+                u1 += N3 * b3
+            vg0 += wq * u0
+            vg1 += wq * u1
+            if blend:
+                e0 = N0 * (a0 - v_old[i0, 0]) + N1 * (a1 - v_old[i1, 0]) + N2 * (a2 - v_old[i2, 0])
+                e1 = N0 * (b0 - v_old[i0, 1]) + N1 * (b1 - v_old[i1, 1]) + N2 * (b2 - v_old[i2, 1])
+                if QUAD:
+                    e0 += N3 * (a3 - v_old[i3, 0])
+                    e1 += N3 * (b3 - v_old[i3, 1])
+                dv0 += wq * e0
+                dv1 += wq * e1
+            if kinematics and grad_from_values:
+                l00 = a0 * g0x + a1 * g1x + a2 * g2x
+                l01 = a0 * g0y + a1 * g1y + a2 * g2y
+                l10 = b0 * g0x + b1 * g1x + b2 * g2x
+                l11 = b0 * g0y + b1 * g1y + b2 * g2y
+                if QUAD:
+                    l00 += a3 * g3x
+                    l01 += a3 * g3y
+                    l10 += b3 * g3x
+                    l11 += b3 * g3y
+                L00 += wq * l00
+                L01 += wq * l01
+                L10 += wq * l10
+                L11 += wq * l11
+            elif kinematics:  # v(y_q) (x) g_q
+                if corners:
+                    t0, t1 = corner_weight(r00, r01, r10, r11, signs, q, share)
+                else:
+                    t0, t1 = gw[p, q, 0], gw[p, q, 1]
+                L00 += u0 * t0
+                L01 += u0 * t1
+                L10 += u1 * t0
+                L11 += u1 * t1
+        return vg0, vg1, dv0, dv1, L00, L01, L10, L11
+
+    return gather
