@@ -25,7 +25,7 @@ import numpy as np
 
 from fempm.kernels.shape import AVAILABLE, CELLS, is_affine
 
-__all__ = ["corner_frame", "cpdi1_samples", "locate_corners"]
+__all__ = ["corner_frame", "corner_gradient", "cpdi1_samples", "locate_corners"]
 
 if AVAILABLE:
     from numba import njit
@@ -42,6 +42,15 @@ if AVAILABLE:
                 R[i, j] = F[p, i, j] * lp[p, j]
         inverse(R, d, Ri)
 
+    @njit(inline="always")
+    def corner_gradient(Ri, signs, q, i, d):  # pragma: no cover - compiled
+        r""":math:`(R^{-T} s_q)_i = \sum_j R^{-1}_{ji} s_{qj}` (times :math:`Q^{-1}`, corner
+        ``q``'s gradient weight)."""
+        t = 0.0
+        for j in range(d):
+            t += Ri[j, i] * signs[q, j]
+        return t
+
     @njit(cache=True, error_model="numpy")
     def _cpdi1_samples(x, F, lp, signs, y, w, g):  # pragma: no cover - compiled
         n, d = x.shape
@@ -55,12 +64,10 @@ if AVAILABLE:
                 w[p, q] = share
                 for i in range(d):
                     s = x[p, i]
-                    t = 0.0
                     for j in range(d):
                         s += R[i, j] * signs[q, j]
-                        t += Ri[j, i] * signs[q, j]  # (R^-T s)_i
                     y[p * Q + q, i] = s
-                    g[p, q, i] = share * t
+                    g[p, q, i] = share * corner_gradient(Ri, signs, q, i, d)
 
 
 def cpdi1_samples(x, F, lp, signs, out=None):

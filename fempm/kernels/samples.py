@@ -40,7 +40,7 @@ __all__ = ["at_samples", "kernels_for", "locate_samples"]
 if AVAILABLE:
     from numba import njit
 
-    from fempm.kernels.cpdi1 import corner_frame
+    from fempm.kernels.cpdi1 import corner_frame, corner_gradient
     from fempm.kernels.kinematics import add_totals
     from fempm.kernels.lumped import deform_at, law_at
     from fempm.kernels.particle_checks import count_j, stable_time
@@ -194,16 +194,9 @@ if AVAILABLE:
                 shape(Y, p * Q + q, K, c, simplex, affine, D, NK, N, G)
             else:  # CPDI: the gradient weights times the values
                 shape_values(Y, p * Q + q, simplex, D, NK, N)
-            for e in range(D):
-                if grad_from_values:
-                    pass
-                elif corners:  # (R^-T s_q)_e / Q
-                    t = 0.0
-                    for j in range(D):
-                        t += Ri[j, e] * signs[q, j]
-                    G[0, e] = share * t
-                else:
-                    G[0, e] = gw[p, q, e]
+            if not grad_from_values:  # CPDI: the sample's gradient weight into row 0 of G
+                for e in range(D):
+                    G[0, e] = share * corner_gradient(Ri, signs, q, e, D) if corners else gw[p, q, e]
             for a in range(NK):
                 W[k, a] += wq * N[a]
                 for e in range(D):

@@ -162,8 +162,11 @@ class DomainGrid(PointGrid):
         guess = self.stencil[0] if self.stencil[0].shape == (n, Q) else None
         sc, Y, missing = locate_corners(p.x, F, lp, self.signs, p.cells, self.x0, self.K, loc.vertex_star(), self.cell,
                                         loc.tol, guess, self._kept("located", n, Q))
-        if missing:
-            y = cpdi1_samples(p.x, F, lp, self.signs)[0]
+        if missing:  # the corners of the particles with one the search did not find (the rows _place reads)
+            parts = np.flatnonzero((sc < 0).any(axis=1))
+            y = np.empty((n * Q, self.d))
+            y[(parts[:, None] * Q + np.arange(Q)).ravel()] = cpdi1_samples(p.x[parts], F[parts], lp[parts],
+                                                                           self.signs)[0]
             missing = self._place(y, sc, Y, self.no_weights, "clamp")
         self.stencil = (sc, Y, self.no_weights, self.no_gradient_weights, F, lp, self.signs)
         return missing
