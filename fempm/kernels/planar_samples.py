@@ -24,7 +24,7 @@ import numpy as np
 
 from fempm.kernels.shape import AVAILABLE
 
-__all__ = ["g2p_kernel", "scatter_kernel"]
+__all__ = ["corner_geometry", "g2p_kernel", "scatter_kernel"]
 
 if AVAILABLE:
     from numba import njit
@@ -47,6 +47,54 @@ if AVAILABLE:
         """CPDI1's gradient weight :math:`Q^{-1} R^{-T} s_q` of corner ``q``."""
         s0, s1 = signs[q, 0], signs[q, 1]
         return share * (r00 * s0 + r10 * s1), share * (r01 * s0 + r11 * s1)
+
+    @njit(inline="always")
+    def corner_geometry(yc, p, w, gw):  # pragma: no cover - compiled
+        r"""CPDI2: the weights ``w[p]``, ``gw[p]`` of domain ``p`` of corners ``yc[p]`` (a triangle,
+        or a quadrilateral in :func:`fempm.particles.corners.corner_signs` order) in closed form;
+        returns (volume, centroid, twisted). With the map
+        :math:`x = a + b\xi + c\eta + e\xi\eta` of the quadrilateral,
+        :math:`\det J = A_0 + A_1 \xi + A_2 \eta` (:math:`A_0 = b \times c`,
+        :math:`A_1 = b \times e`, :math:`A_2 = e \times c`), so :math:`|\Omega| = 4 |A_0|`,
+        :math:`w_c = (A_0 + (A_1 s_{c0} + A_2 s_{c1}) / 3) / (4 A_0)`; and by the divergence
+        theorem :math:`g_c = |\Omega|^{-1} \oint \phi_c n = (y_{c^+} - y_{c^-})^\perp / (2
+        \Omega_\pm)` with :math:`c^\pm` the corners after and before :math:`c` around the
+        domain, :math:`(u, v)^\perp = (v, -u)` and :math:`\Omega_\pm` the signed area (a
+        triangle: :math:`w_c = 1/3`, :math:`g_c = \nabla \lambda_c`). A twisted domain: the
+        Jacobian zero or of two signs at the 2-point Gauss rule's points (as
+        :func:`fempm.kernels.corners.tensor_geometry`)."""
+        x0, y0, x1, y1, x2, y2 = yc[p, 0, 0], yc[p, 0, 1], yc[p, 1, 0], yc[p, 1, 1], yc[p, 2, 0], yc[p, 2, 1]
+        if yc.shape[1] == 3:
+            a2 = (x1 - x0) * (y2 - y0) - (y1 - y0) * (x2 - x0)  # twice the signed area; corners 0 -> 1 -> 2
+            for c in range(3):
+                w[p, c] = 1.0 / 3.0
+            gw[p, 0, 0], gw[p, 0, 1] = (y1 - y2) / a2, (x2 - x1) / a2
+            gw[p, 1, 0], gw[p, 1, 1] = (y2 - y0) / a2, (x0 - x2) / a2
+            gw[p, 2, 0], gw[p, 2, 1] = (y0 - y1) / a2, (x1 - x0) / a2
+            return 0.5 * abs(a2), (x0 + x1 + x2) / 3.0, (y0 + y1 + y2) / 3.0, not (a2 > 0.0 or a2 < 0.0)
+        x3, y3 = yc[p, 3, 0], yc[p, 3, 1]
+        bx, by = 0.25 * (-x0 - x1 + x2 + x3), 0.25 * (-y0 - y1 + y2 + y3)
+        cx, cy = 0.25 * (-x0 + x1 - x2 + x3), 0.25 * (-y0 + y1 - y2 + y3)
+        ex, ey = 0.25 * (x0 - x1 - x2 + x3), 0.25 * (y0 - y1 - y2 + y3)
+        A0, A1, A2 = bx * cy - by * cx, bx * ey - by * ex, ex * cy - ey * cx
+        r = 1.0 / np.sqrt(3.0)
+        pos, neg = 0, 0
+        for t in (A0 + r * (A1 + A2), A0 + r * (A1 - A2), A0 - r * (A1 - A2), A0 - r * (A1 + A2)):
+            if t > 0.0:
+                pos += 1
+            elif t < 0.0:
+                neg += 1
+        a4 = 4.0 * A0  # the signed area; around the domain 0 -> 2 -> 3 -> 1
+        w0, w1 = (A0 - (A1 + A2) / 3.0) / a4, (A0 + (A2 - A1) / 3.0) / a4
+        w2, w3 = (A0 + (A1 - A2) / 3.0) / a4, (A0 + (A1 + A2) / 3.0) / a4
+        w[p, 0], w[p, 1], w[p, 2], w[p, 3] = w0, w1, w2, w3
+        h = 0.5 / a4
+        gw[p, 0, 0], gw[p, 0, 1] = h * (y2 - y1), h * (x1 - x2)
+        gw[p, 2, 0], gw[p, 2, 1] = h * (y3 - y0), h * (x0 - x3)
+        gw[p, 3, 0], gw[p, 3, 1] = h * (y1 - y2), h * (x2 - x1)
+        gw[p, 1, 0], gw[p, 1, 1] = h * (y0 - y3), h * (x3 - x0)
+        return (abs(a4), w0 * x0 + w1 * x1 + w2 * x2 + w3 * x3, w0 * y0 + w1 * y1 + w2 * y2 + w3 * y3,
+                not (pos == 4 or neg == 4))
 
 
 @functools.cache
@@ -123,21 +171,31 @@ def scatter_kernel(simplex: bool, affine: bool, grad_from_values: bool, corners:
 
 @functools.cache
 def g2p_kernel(simplex: bool, affine: bool, grad_from_values: bool, corners: bool, blend: bool, kinematics: bool,
-               move: bool, remap: bool, totals: bool):
+               move: bool, remap: bool, totals: bool, track: bool = False):
     """:func:`fempm.kernels.samples._g2p_kernel` for ``triangle`` (``simplex``) or
-    ``quadrilateral`` cells, ``affine`` or multilinear."""
+    ``quadrilateral`` cells, ``affine`` or multilinear. With ``track`` (CPDI2, moving) the
+    pass also moves the domains' corners ``yc`` (n, Q, 2) with the grid velocity at them into
+    ``moved``, puts their weights (:func:`corner_geometry`) into ``w`` and ``gw`` (each
+    particle's, once the pass has read them), moves each particle to its domain's centroid
+    with the domain's volume, locates the moved corners in ``sc`` and ``Y`` (as
+    :func:`fempm.kernels.samples.locate_samples`, over the first ``sample_cells`` cells; -1
+    where the search fails), and counts the twisted domains in ``bad[0]`` and the corners not
+    found in ``bad[1]``."""
     add_momentum = _momentum_kernel(simplex, grad_from_values, corners)
-    gather = _gather_kernel(simplex, affine, grad_from_values, corners, blend, kinematics)
+    gather = _gather_kernel(simplex, affine, grad_from_values, corners, blend, kinematics, track)
 
     @njit(cache=True, error_model="numpy")
     def g2p_update(cells, sc, Y, w, gw, Fw, lp, signs, K, cell_dofs, v_new, v_old, flip, dt, by_particle, X, x, v,
                    F, volume0, volume, sigma, body, law, lam, mu, L, x0, tol, left, c2v, v_offsets, v_cells, num_cells,
-                   mass, mom, sums):  # pragma: no cover
+                   mass, mom, sums, yc, moved, bad, sample_cells):  # pragma: no cover
         n, keep_L = len(cells), L.shape[0] == len(cells)
+        Q = sc.shape[1]
+        ys = moved.reshape((moved.shape[0] * moved.shape[1], 2))  # the moved corners, one a row
         nonfinite_j, inverted, jmin, jmax, nonfinite = 0, 0, np.inf, -np.inf, 0  # the pass's checks
         acc = np.zeros(5)  # the state's sums (totals)
         for p in range(n):
-            vg0, vg1, dv0, dv1, L00, L01, L10, L11 = gather(p, sc, Y, w, gw, Fw, lp, signs, K, cell_dofs, v_new, v_old)
+            vg0, vg1, dv0, dv1, L00, L01, L10, L11 = gather(p, sc, Y, w, gw, Fw, lp, signs, K, cell_dofs, v_new, v_old,
+                                                            moved)
             if blend:
                 v[p, 0] = flip * (v[p, 0] + dv0) + (1.0 - flip) * vg0
                 v[p, 1] = flip * (v[p, 1] + dv1) + (1.0 - flip) * vg1
@@ -152,9 +210,17 @@ def g2p_kernel(simplex: bool, affine: bool, grad_from_values: bool, corners: boo
                 ok, nonfinite_j, inverted, jmin, jmax = count_j(J, nonfinite_j, inverted, jmin, jmax)
                 if ok:
                     law_stress(sigma, p, law[b], lam[b], mu[b], n00, n01, n10, n11, J)
-            if move:
+            if move and track:  # the corners with the grid velocity at them (gathered), the particle to the centroid
+                for q in range(yc.shape[1]):
+                    moved[p, q, 0] = yc[p, q, 0] + dt * moved[p, q, 0]
+                    moved[p, q, 1] = yc[p, q, 1] + dt * moved[p, q, 1]
+                volume[p], y0, y1, twisted = corner_geometry(moved, p, w, gw)
+                if twisted:
+                    bad[0] += 1
+            elif move:
                 y0 = x[p, 0] + dt * (v[p, 0] if by_particle else vg0)
                 y1 = x[p, 1] + dt * (v[p, 1] if by_particle else vg1)
+            if move:
                 x[p, 0], x[p, 1] = y0, y1
                 if not (np.isfinite(y0) and np.isfinite(y1) and np.isfinite(v[p, 0] * v[p, 0] + v[p, 1] * v[p, 1])):
                     nonfinite += 1
@@ -165,6 +231,20 @@ def g2p_kernel(simplex: bool, affine: bool, grad_from_values: bool, corners: boo
                     out = e < 0
                     cells[p] = c if out else e
                 left[p] = out
+            if move and track:  # each moved corner: in its cell, the particle's or the particle's vertex star
+                for q in range(Q):
+                    r, e = p * Q + q, sc[p, q]
+                    if e >= 0 and inside_after_pull_back(ys, r, x0, K, e, simplex, 2, tol, Y, affine):
+                        continue
+                    c = cells[p]
+                    if e != c and inside_after_pull_back(ys, r, x0, K, c, simplex, 2, tol, Y, affine):
+                        sc[p, q] = c
+                    else:
+                        e = star_search(ys, r, x0, K, c, c2v, v_offsets, v_cells, sample_cells, simplex, 2, tol, Y,
+                                        affine)
+                        sc[p, q] = e
+                        if e < 0:
+                            bad[1] += 1
             if totals:
                 add_totals(acc, p, mass, v, F, volume0, law[body[p]], lam[body[p]], mu[body[p]], 2)
         if totals:
@@ -198,13 +278,15 @@ def _momentum_kernel(simplex: bool, grad_from_values: bool, corners: bool):
 
 
 @functools.cache
-def _gather_kernel(simplex: bool, affine: bool, grad_from_values: bool, corners: bool, blend: bool, kinematics: bool):
+def _gather_kernel(simplex: bool, affine: bool, grad_from_values: bool, corners: bool, blend: bool, kinematics: bool,
+                   track: bool):
     """Particle ``p``'s grid velocity, FLIP increment and velocity gradient summed over its
-    samples, (vg0, vg1, dv0, dv1, L00, L01, L10, L11) (inlined into the G2P pass)."""
+    samples, (vg0, vg1, dv0, dv1, L00, L01, L10, L11) (inlined into the G2P pass); with
+    ``track`` the grid velocity at each sample into ``at[p, q]``."""
     QUAD = not simplex
 
     @njit(inline="always")
-    def gather(p, sc, Y, w, gw, Fw, lp, signs, K, cell_dofs, v_new, v_old):  # pragma: no cover - compiled
+    def gather(p, sc, Y, w, gw, Fw, lp, signs, K, cell_dofs, v_new, v_old, at):  # pragma: no cover - compiled
         Q = sc.shape[1]
         share = 1.0 / Q
         vg0, vg1, dv0, dv1 = 0.0, 0.0, 0.0, 0.0
@@ -232,6 +314,8 @@ def _gather_kernel(simplex: bool, affine: bool, grad_from_values: bool, corners:
                 u1 += N3 * b3
             vg0 += wq * u0
             vg1 += wq * u1
+            if track:
+                at[p, q, 0], at[p, q, 1] = u0, u1
             if blend:
                 e0 = N0 * (a0 - v_old[i0, 0]) + N1 * (a1 - v_old[i1, 0]) + N2 * (a2 - v_old[i2, 0])
                 e1 = N0 * (b0 - v_old[i0, 1]) + N1 * (b1 - v_old[i1, 1]) + N2 * (b2 - v_old[i2, 1])

@@ -126,10 +126,14 @@ def at_samples(cell: str, sc, Y, K, cell_dofs, u):
 def kernels_for(cell: str, grad_from_values: bool, planar: bool = True) -> SimpleNamespace:
     """The sample passes ``scatter`` and ``g2p_update`` of one cell type; with
     ``grad_from_values`` the gradient of the average is :math:`\\sum_q w_{pq} \\nabla N_i(y_{pq})`
-    (Gauss GIMP), else :math:`\\sum_q g_{pq} N_i(y_{pq})` (CPDI)."""
+    (Gauss GIMP), else :math:`\\sum_q g_{pq} N_i(y_{pq})` (CPDI). Where ``tracks`` (the
+    scalar 2D passes of :mod:`fempm.kernels.planar_samples`), ``g2p_update(..., corners=(yc,
+    moved, bad, sample_cells))`` moves and locates CPDI2's corners in the moving pass
+    (:func:`~fempm.kernels.planar_samples.g2p_kernel`)."""
 
     scatter_kernel, g2p_kernel = _scatter_kernel, _g2p_kernel
-    if cell in ("triangle", "quadrilateral", "quadrilateral" + MULTILINEAR) and planar:
+    tracks = cell in ("triangle", "quadrilateral", "quadrilateral" + MULTILINEAR) and planar
+    if tracks:
         scatter_kernel = functools.partial(_planar, planar_samples.scatter_kernel)
         g2p_kernel = functools.partial(_planar, planar_samples.g2p_kernel)
 
@@ -141,11 +145,14 @@ def kernels_for(cell: str, grad_from_values: bool, planar: bool = True) -> Simpl
                       body, modulus, c)
 
     def g2p_update(cells, sc, Y, w, gw, Fw, lp, signs, K, cell_dofs, v_new, v_old, flip, dt, blend, kinematics,
-                   move, *rest):
+                   move, *rest, corners=None):
         remap = blend and rest[-2].shape[0] > 0
         totals = move and rest[-1].shape[0] > 0
-        return g2p_kernel(cell, grad_from_values, Fw.shape[0] > 0, bool(blend), bool(kinematics), bool(move), remap,
-                          totals)(cells, sc, Y, w, gw, Fw, lp, signs, K, cell_dofs, v_new, v_old, flip, dt, *rest)
+        flags = (cell, grad_from_values, Fw.shape[0] > 0, bool(blend), bool(kinematics), bool(move), remap, totals)
+        args = (cells, sc, Y, w, gw, Fw, lp, signs, K, cell_dofs, v_new, v_old, flip, dt, *rest)
+        if not tracks:
+            return g2p_kernel(*flags)(*args)
+        return g2p_kernel(*flags, corners is not None)(*args, *(corners if corners is not None else NOT_TRACKED))
 
     def mass_apply(cells, sc, Y, w, gw, Fw, lp, signs, K, cell_dofs, mass, y, lump, out):
         """:func:`fempm.kernels.fmpm.mass_apply` with the averaged basis,
@@ -153,7 +160,11 @@ def kernels_for(cell: str, grad_from_values: bool, planar: bool = True) -> Simpl
         _mass_apply_kernel(cell, grad_from_values, Fw.shape[0] > 0)(cells, sc, Y, w, gw, Fw, lp, signs, K, cell_dofs,
                                                                     mass, y, lump, out)
 
-    return SimpleNamespace(scatter=scatter, g2p_update=g2p_update, mass_apply=mass_apply)
+    return SimpleNamespace(scatter=scatter, g2p_update=g2p_update, mass_apply=mass_apply, tracks=tracks)
+
+
+#: the corner arrays of a G2P pass that does not move CPDI2 corners (:func:`kernels_for`)
+NOT_TRACKED = (np.zeros((0, 0, 2)), np.zeros((0, 0, 2)), np.zeros(2, dtype=np.int64), 0)
 
 
 def _planar(make, cell: str, *flags):

@@ -3,7 +3,8 @@ r"""The compiled passes of particle domains given by sample points (:class:`Doma
 The stages and checks of :class:`fempm.stepping.lumped.PointGrid` with the domain-averaged
 basis of :mod:`fempm.kernels.samples` in place of the point basis: CPDI1 (the corners of
 :math:`x_p + F_p \operatorname{diag}(\ell_p) [-1, 1]^d`, made in a compiled pass), CPDI2 (the
-tracked corners, moved with the grid velocity at them after the moving pass) and GIMP with a
+tracked corners, moved with the grid velocity at them, their weights made and the corners
+located in the moving pass on triangles and quadrilaterals, in passes after it on the other cells) and GIMP with a
 Gauss rule (``gimp_order``), on degree-1 cells (affine or multilinear); exact GIMP
 (uGIMP, cpGIMP) on simplices and axis-aligned boxes, the pieces of each box in the cells it
 meets as samples (:mod:`fempm.kernels.boxes`); lumped mass or FMPM(k), whose :math:`M_C y`
@@ -14,7 +15,7 @@ the mesh are treated as :class:`~fempm.transfer.basis.ParticleBasis` treats them
 at the closest point of the mesh, Gauss points dropped and the weights renormalised). A step
 with a sample on no local cell on some rank (a domain reaching over the partition beyond the
 ghost cells) is handed to the numpy :class:`~fempm.stepping.grid.SingleFieldGrid`, the
-reference, which exchanges the samples between ranks. CPDI2 keeps the corner weights of the
+reference, which exchanges the samples between ranks. CPDI2 keeps the corner weights (and in 2D the cells) of the
 corners a step moved for the next step (the same array in ``fields["corners"]``: corners
 changed between steps are given as a new array, as the moving step does).
 """
@@ -99,7 +100,8 @@ class DomainGrid(PointGrid):
         self.generic: SingleFieldGrid | None = None  # for steps with samples beyond the ghost cells
         self.stencil: tuple = (np.zeros((0, 0), dtype=np.int32),)  # the samples' cells, coordinates, weights
         self._arrays: dict = {}  # kept sample arrays (_kept)
-        self._corner_weights: tuple | None = None  # CPDI2: (corners, w, g) after the last move
+        self._corner_weights: tuple | None = None  # CPDI2: (corners, w, g, corners not found) after the last move
+        self.moved: tuple | None = None  # CPDI2: (corners, twisted count) of the moving pass that moved them
 
     def for_step(self) -> Grid:
         super().for_step()
@@ -126,8 +128,11 @@ class DomainGrid(PointGrid):
             corners = dom.corners(p)
             n, Q, _ = corners.shape
             y = np.ascontiguousarray(corners.reshape(n * Q, d))
-            if self._corner_weights is not None and self._corner_weights[0] is corners:
-                w, g = self._corner_weights[1:]  # of the corners the last step moved
+            kept = self._corner_weights
+            if kept is not None and kept[0] is corners:  # the corners the last step moved
+                w, g, missing = kept[1:]
+                if missing is not None:  # and located, in self.stencil
+                    return self._place(y, *self.stencil[:2], w, "clamp") if missing else 0
             else:
                 w, g, _, _ = domain_geometry(corners, p.comm)
             beyond = "clamp"
@@ -239,24 +244,37 @@ class DomainGrid(PointGrid):
     def to_particles(self, v_new: npt.NDArray, v_old: npt.NDArray, dt: float, *, blend: bool = False,
                      kinematics: bool = False, move: bool = False, remap: bool = False) -> None:
         """The passes of :class:`~fempm.stepping.lumped.PointGrid`; with domains tracked by their
-        corners (CPDI2) a moving pass then moves the corners with the grid velocity at them
-        (:func:`fempm.kernels.samples.at_samples`), and each particle to its domain's centroid
-        with its volume (:meth:`fempm.transfer.domains.CPDI2.move`)."""
+        corners (CPDI2) the moving pass also moves the corners with the grid velocity at them and
+        each particle to its domain's centroid with its volume (the scalar 2D passes,
+        ``corners=`` of :func:`fempm.kernels.samples.kernels_for`), or a pass after it does
+        (:func:`fempm.kernels.samples.at_samples`, :meth:`fempm.transfer.domains.CPDI2.move`)."""
+        tracked = move and self.options.particle_domain.tracks_corners
+        self.moved = None
         super().to_particles(v_new, v_old, dt, blend=blend, kinematics=kinematics, move=move, remap=remap)
-        if not (move and self.options.particle_domain.tracks_corners):
+        if not tracked:
             return
         s = self.solver
         p = s.particles
-        sc, Y = self.stencil[:2]
-        at = ks.at_samples(self.cell, sc, Y, self.K, self.cell_dofs, v_new)
-        corners = p.fields["corners"] + dt * at
-        try:
-            w, g, volume, centroid = domain_geometry(corners, p.comm)
-        except ValueError as e:  # collective
-            s.fail(f"inverted particle domain: {e}")
-        p.fields["corners"], p.x, p.volume = corners, centroid, volume
-        self._corner_weights = (corners, w, g)  # the next step's, while the particles keep this array
-        self.left = None  # moved to their centroids: relocated from their cells (Particles.relocate)
+        if self.moved is not None:  # moved and located in the pass
+            corners, bad = self.moved
+            w, g = self.stencil[2:4]
+            missing = int(bad[1])
+            if p.comm.allreduce(int(bad[0])) if p.comm.size > 1 else bad[0]:
+                s.fail(f"inverted particle domain: {int(bad[0])} CPDI2 domain(s) on this rank are degenerate or "
+                       "twisted (corner Jacobian zero or changing sign)")
+        else:
+            sc, Y = self.stencil[:2]
+            at = ks.at_samples(self.cell, sc, Y, self.K, self.cell_dofs, v_new)
+            corners = p.fields["corners"] + dt * at
+            try:
+                w, g, volume, centroid = domain_geometry(corners, p.comm)
+            except ValueError as e:  # collective
+                s.fail(f"inverted particle domain: {e}")
+            p.x, p.volume = centroid, volume
+            self.left = None  # moved to their centroids: relocated from their cells (Particles.relocate)
+            missing = None  # the corners are located at the next step
+        p.fields["corners"] = corners
+        self._corner_weights = (corners, w, g, missing)  # the next step's, while the particles keep this array
 
     def scatter_pass(self, *args, bound: bool = False) -> float:
         p = self.solver.particles
@@ -270,5 +288,10 @@ class DomainGrid(PointGrid):
     def gather_pass(self, v_new, v_old, flip: float, dt: float, blend: bool, kinematics: bool, move: bool,
                     state: tuple) -> tuple:
         p = self.solver.particles
+        corners = None
+        if move and self.passes.tracks and self.options.particle_domain.tracks_corners:  # CPDI2: corners moved here
+            yc = np.ascontiguousarray(p.fields["corners"], dtype=np.float64)
+            corners = (yc, np.empty_like(yc), np.zeros(2, dtype=np.int64), p.sample_locator.vertex_star()[3])
+            self.moved = corners[1:3]
         return self.passes.g2p_update(p.cells, *self.stencil, self.K, self.cell_dofs, v_new, v_old, flip, dt, blend,
-                                      kinematics, move, state[0], p.X, *state[1:])
+                                      kinematics, move, state[0], p.X, *state[1:], corners=corners)

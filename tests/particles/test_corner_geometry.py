@@ -55,3 +55,33 @@ def test_degenerate_domains_are_an_error(simplex):
         domain_geometry(corners)
     with pytest.raises(ValueError, match="1 CPDI2 .* degenerate or twisted"):
         domain_geometry_numpy(corners)
+
+
+@pytest.mark.parametrize("simplex", [True, False])
+def test_closed_form_2d_geometry_of_the_moving_pass(simplex):
+    """fempm.kernels.planar_samples.corner_geometry (the closed forms CPDI2's moving pass uses:
+    the divergence theorem for g, det J linear for w) equals the numpy reference on distorted
+    and mirrored triangles and quadrilaterals, and counts the twisted ones."""
+    numba = pytest.importorskip("numba")
+    from fempm.kernels.planar_samples import corner_geometry
+
+    @numba.njit
+    def geometry(corners, w, g, vol, centroid, twisted):
+        for p in range(len(corners)):
+            vol[p], centroid[p, 0], centroid[p, 1], twisted[p] = corner_geometry(corners, p, w, g)
+
+    corners = domains(2, simplex, n=200, seed=3)
+    corners[::7] = corners[::7, ::-1]  # mirrored
+    n, k, _ = corners.shape
+    out = np.empty((n, k)), np.empty((n, k, 2)), np.empty(n), np.empty((n, 2))
+    twisted = np.zeros(n, dtype=np.bool_)
+    geometry(corners, *out, twisted)
+    ok = np.ones(n, dtype=bool)
+    for p, c in enumerate(corners):
+        try:
+            domain_geometry_numpy(c[None])
+        except ValueError:
+            ok[p] = False
+    assert np.array_equal(twisted, ~ok) and (simplex or 0 < np.count_nonzero(twisted) < n // 4)
+    for a, b in zip(out, domain_geometry_numpy(corners[ok])):
+        assert np.allclose(a[ok], b, rtol=1e-12, atol=1e-12 * np.abs(b).max())

@@ -1,4 +1,4 @@
-"""The compiled passes of particle domains (fempm.stepping.domain_grid: CPDI1, Gauss-rule GIMP)
+"""The compiled passes of particle domains (fempm.stepping.domain_grid: CPDI1, CPDI2, GIMP)
 against the numpy step, their reference: the same state to round-off after every scheme, on
 every cell type, inside the mesh and with domains reaching beyond it (CPDI corners clamped onto
 the mesh, Gauss points cut), on 1 and 2 ranks (where a step hands samples beyond the ghost cells
@@ -53,7 +53,8 @@ EXACT_DEFAULT = [("interval", "MUSL", "cpgimp"), ("triangle", "USL", "cpgimp"), 
 # the default run: every cell, every scheme and every domain at least once
 CASES = (cases("cpdi1", ["USL", "MUSL", "USF"], [("interval", "USL"), ("triangle", "MUSL"),
                                                 ("distorted quadrilateral", "USF"), ("distorted hexahedron", "USL")])
-         + cases("cpdi2", ["USL", "MUSL"], [("quadrilateral", "USL"), ("tetrahedron", "MUSL"), ("hexahedron", "MUSL")])
+         + cases("cpdi2", ["USL", "MUSL"], [("triangle", "MUSL"), ("quadrilateral", "USL"), ("tetrahedron", "MUSL"),
+                                            ("hexahedron", "MUSL")])
          + cases("gimp2", ["USL", "MUSL", "USF"], [("triangle", "USL"), ("hexahedron", "USF")])
          + [("quadrilateral", "MUSL", "cpgimp3"), ("tetrahedron", "USL", "cpgimp3")]
          + [pytest.param(cell, scheme, domain, marks=() if (cell, scheme, domain) in EXACT_DEFAULT else pytest.mark.slow)
