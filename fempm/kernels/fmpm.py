@@ -13,7 +13,8 @@ diagonal); ghost entries are partial sums.
 
 :func:`richardson` (one pass over the dofs): :math:`x \leftarrow x + m^{-1} (b - M_C' x)` on
 the free components of the coupled dofs, :math:`M_C' x = M_C (x \odot 1_{\bar l}) + (M_C 1_l)
-\odot x`; :func:`lumped_solve`: :math:`x = m^{-1} b` on the free components.
+\odot x`; :func:`lumped_solve`: :math:`x = m^{-1} b` on the free components. Both clear the
+kept output of the next :func:`mass_apply` in their pass.
 """
 
 from __future__ import annotations
@@ -22,30 +23,39 @@ import functools
 
 import numpy as np
 
-from fempm.kernels.shape import AVAILABLE, CELLS, is_affine, space_of
+from fempm.kernels.shape import AVAILABLE, CELLS, MULTILINEAR, is_affine, space_of
 
-__all__ = ["lumped_solve", "mass_apply", "richardson"]
+__all__ = ["generic_mass_apply", "lumped_solve", "mass_apply", "planar_mass_apply", "richardson"]
 
 if AVAILABLE:
     from numba import njit
 
-    from fempm.kernels.shape import shape
+    from fempm.kernels.planar import add_pair, basis
+    from fempm.kernels.shape import shape, shape_values
 
     @njit(cache=True, error_model="numpy")
-    def lumped_solve(b, cb, mass, free, active_min, x):  # pragma: no cover - compiled
+    def lumped_solve(b, cb, mass, free, active_min, x, zero):  # pragma: no cover - compiled
         """``x`` = ``b[:, cb:cb+k]`` / ``mass[:, 0]`` on the free components of dofs with mass
-        above ``active_min``, else 0."""
+        above ``active_min``, else 0; the rows of ``zero`` (a kept :func:`mass_apply` output, or
+        none) set to 0 in the same pass."""
+        zeroing = zero.shape[0] > 0
         for i in range(len(x)):
             m = mass[i, 0]
             for j in range(x.shape[1]):
                 x[i, j] = b[i, cb + j] / m if (m > active_min and free[i, j]) else 0.0
+            if zeroing:
+                for j in range(zero.shape[1]):
+                    zero[i, j] = 0.0
 
     @njit(cache=True, error_model="numpy")
-    def richardson(x, b, cb, Mx, mass, free, active_min, lump, out):  # pragma: no cover - compiled
-        """``out`` = one Richardson step from ``x`` for ``b[:, cb:cb+k]`` (``Mx``:
-        :func:`mass_apply` of ``x``, its last column :math:`M_C 1_l` where ``lump`` has an entry
-        per dof; the masses ``mass[:, 0]``)."""
+    def richardson(x, b, cb, Mx, mass, free, active_min, lump, out, rest, zero):  # pragma: no cover - compiled
+        """One Richardson step from ``x`` for ``b[:, cb:cb+k]`` (``Mx``: :func:`mass_apply` of
+        ``x``, its last column :math:`M_C 1_l` where ``lump`` has an entry per dof; the masses
+        ``mass[:, 0]``) into ``out`` and, past its columns, ``rest`` (e.g. a velocity and an
+        acceleration solved side by side, each contiguous); with ``zero`` each row of ``Mx``
+        is set to 0 once read (for the next :func:`mass_apply`)."""
         k = x.shape[1]
+        k1 = out.shape[1]
         lumping = lump.shape[0] > 0
         for i in range(len(x)):
             m = mass[i, 0]
@@ -55,14 +65,72 @@ if AVAILABLE:
                 if m > active_min and free[i, j] and coupled:
                     mx = Mx[i, j] + (Mx[i, k] * x[i, j] if lumping else 0.0)
                     r += (b[i, cb + j] - mx) / m
-                out[i, j] = r
+                if j < k1:
+                    out[i, j] = r
+                else:
+                    rest[i, j - k1] = r
+            if zero:
+                for j in range(Mx.shape[1]):
+                    Mx[i, j] = 0.0
 
 
 @functools.cache
 def mass_apply(cell: str):
     """``kernel(cells, X, K, cell_dofs, mass, y, lump, out)``: ``out[:, :k]`` += :math:`M_C y`
     for ``y`` (dofs, k) without its lumped dofs, and, where ``lump`` has an entry per dof,
-    ``out[:, k]`` += :math:`M_C 1_l`; compiled for one cell type."""
+    ``out[:, k]`` += :math:`M_C 1_l`; compiled for one cell type (on triangles and
+    quadrilaterals of degree 1 in scalar code, two columns at a time: :func:`planar_mass_apply`)."""
+    if cell in ("triangle", "quadrilateral", "quadrilateral" + MULTILINEAR):
+        planar = planar_mass_apply(cell == "triangle")
+        generic = generic_mass_apply(cell)
+        return lambda cells, X, K, cell_dofs, mass, y, lump, out: (
+            planar if y.shape[1] % 2 == 0 else generic)(cells, X, K, cell_dofs, mass, y, lump, out)
+    return generic_mass_apply(cell)
+
+
+@functools.cache
+def planar_mass_apply(simplex: bool):
+    """:func:`mass_apply` on triangles (``simplex``) or quadrilaterals (affine or not: the
+    values alone) for an even number of columns, in local scalars."""
+    QUAD = not simplex
+
+    @njit(cache=True, error_model="numpy")
+    def kernel(cells, X, K, cell_dofs, mass, y, lump, out):  # pragma: no cover - compiled
+        k = y.shape[1]
+        lumping = lump.shape[0] > 0
+        for p in range(len(cells)):
+            c = cells[p]
+            N0, N1, N2, N3 = basis(X[p, 0], X[p, 1], 0.0, 0.0, 0.0, 0.0, simplex)[:4]
+            i0, i1, i2 = cell_dofs[c, 0], cell_dofs[c, 1], cell_dofs[c, 2]
+            i3 = cell_dofs[c, 3] if QUAD else i0
+            e0, e1, e2, e3 = N0, N1, N2, N3  # the coupled dofs' values
+            if lumping:
+                e0 = 0.0 if lump[i0] else N0
+                e1 = 0.0 if lump[i1] else N1
+                e2 = 0.0 if lump[i2] else N2
+                e3 = 0.0 if (QUAD and lump[i3]) else N3
+            m = mass[p]
+            for j in range(0, k, 2):
+                u0 = e0 * y[i0, j] + e1 * y[i1, j] + e2 * y[i2, j]
+                u1 = e0 * y[i0, j + 1] + e1 * y[i1, j + 1] + e2 * y[i2, j + 1]
+                if QUAD:
+                    u0 += e3 * y[i3, j]
+                    u1 += e3 * y[i3, j + 1]
+                add_pair(out, j, i0, i1, i2, i3, N0, N1, N2, N3, m * u0, m * u1, QUAD)
+            if lumping:
+                ul = m * ((N0 - e0) + (N1 - e1) + (N2 - e2) + ((N3 - e3) if QUAD else 0.0))
+                out[i0, k] += N0 * ul
+                out[i1, k] += N1 * ul
+                out[i2, k] += N2 * ul
+                if QUAD:
+                    out[i3, k] += N3 * ul
+
+    return kernel
+
+
+@functools.cache
+def generic_mass_apply(cell: str):
+    """:func:`mass_apply` of any kernel cell type (the reference of :func:`planar_mass_apply`)."""
     D, NK, SIMPLEX = CELLS[cell]
     AFFINE = is_affine(cell)
     DEGREE, BERNSTEIN = space_of(cell)
@@ -76,7 +144,10 @@ def mass_apply(cell: str):
         lumping = lump.shape[0] > 0
         for p in range(len(cells)):
             c = cells[p]
-            shape(X, p, K, c, SIMPLEX, AFFINE, D, NK, N, G, DEGREE, BERNSTEIN)
+            if DEGREE == 1:  # the values alone: no Jacobian
+                shape_values(X, p, SIMPLEX, D, NK, N)
+            else:
+                shape(X, p, K, c, SIMPLEX, AFFINE, D, NK, N, G, DEGREE, BERNSTEIN)
             for j in range(k):
                 u[j] = 0.0
             ul = 0.0

@@ -33,6 +33,8 @@ if TYPE_CHECKING:
 
 __all__ = ["FMPMNodalMass"]
 
+NO_ROWS = np.zeros((0, 0))  # no array to clear (lumped_solve)
+
 
 class FMPMNodalMass(NodalMass):
     """FMPM(k) as the grid mass of a :class:`~fempm.stepping.lumped.PointGrid` (see the module)."""
@@ -60,36 +62,47 @@ class FMPMNodalMass(NodalMass):
             return 1.0
         return 1.0 / float(np.sqrt(self.order))
 
-    def mc(self, y: npt.NDArray) -> npt.NDArray:
-        """:math:`M_C y` without the lumped dofs (and :math:`M_C 1_l` in one more column where
-        rows are lumped) on every local dof, ghosts summed and updated (a kept array)."""
-        g = self.grid
-        key = (y.shape[1], len(self.lump) > 0)
+    def work(self, columns: int) -> tuple:
+        """The kept nodal arrays (vector, array) of :meth:`mc` for ``columns`` columns."""
+        key = (columns, len(self.lump) > 0)
         if key not in self._work:
-            self._work[key] = g.nodal_array(key[0] + key[1])
-        vec, out = self._work[key]
-        out.fill(0.0)
-        g.mass_apply(y, self.lump, out)
+            self._work[key] = self.grid.nodal_array(key[0] + key[1])
+        return self._work[key]
+
+    def mc(self, y: npt.NDArray, zeroed: bool = False) -> npt.NDArray:
+        """:math:`M_C y` without the lumped dofs (and :math:`M_C 1_l` in one more column where
+        rows are lumped) on every local dof, ghosts summed and updated (the array of
+        :meth:`work`, set to 0 first unless ``zeroed``)."""
+        vec, out = self.work(y.shape[1])
+        if not zeroed:
+            out.fill(0.0)
+        self.grid.mass_apply(y, self.lump, out)
         sum_ghosts(vec)
         return out
 
-    def solve(self, mass: npt.NDArray, b: npt.NDArray, cb: int, active_min: float, fields: int = 1) -> npt.NDArray:
+    def solve(self, mass: npt.NDArray, b: npt.NDArray, cb: int, active_min: float, fields: int = 1) -> list:
         r"""k Richardson steps :math:`x \leftarrow x + m^{-1}(b - M_C x)` from :math:`x = m^{-1} b`
         (``b[:, cb:cb+d]``, ``m = mass[:, 0]``) on the free components of the supported dofs
         (lumped rows keep :math:`m^{-1} b`); ``fields`` vector fields side by side
         (``b[:, cb:cb+fields*d]``), each column solved as on its own, in one particle pass a
-        step."""
+        step. Returns the fields' solutions, each a contiguous (dofs, d) array; the passes over
+        the dofs also clear the next :meth:`mc`'s output."""
         g = self.grid
+        d = g.d
         if fields not in self._free:
             self._free[fields] = np.ascontiguousarray(np.tile(g.free, (1, fields)))
         free = self._free[fields]
-        x = np.empty((g.num_dofs, free.shape[1]))
-        kf.lumped_solve(b, cb, mass, free, active_min, x)
-        for _ in range(self.order - 1):
-            x_new = np.empty_like(x)
-            kf.richardson(x, b, cb, self.mc(x), mass, free, active_min, self.lump, x_new)
-            x = x_new
-        return x
+        k = free.shape[1]
+        x = np.empty((g.num_dofs, k))
+        kf.lumped_solve(b, cb, mass, free, active_min, x, self.work(k)[1] if self.order > 1 else NO_ROWS)
+        if self.order == 1:
+            return [np.ascontiguousarray(x[:, f * d:(f + 1) * d]) for f in range(fields)]
+        for step in range(1, self.order):
+            last = step == self.order - 1
+            out = [np.empty((g.num_dofs, d if last else k)), np.empty((g.num_dofs, (k - d) if last else 0))]
+            kf.richardson(x, b, cb, self.mc(x, zeroed=True), mass, free, active_min, self.lump, *out, not last)
+            x = out[0]
+        return out if fields == 2 else [out[0]]
 
     def velocity(self, mass, mom, cv: int, active_min: float, guess=None, centroids=None) -> npt.NDArray:
         """The velocity solve; where the forces of the step sit next to the momenta in ``mom``
@@ -99,11 +112,10 @@ class FMPMNodalMass(NodalMass):
         opts = g.options
         d = g.d
         if opts.stages.forces_with_map and not opts.lumped_forces and g.force is mom and g.cf == cv + d:
-            x = self.solve(mass, mom, cv, active_min, fields=2)
-            v = np.ascontiguousarray(x[:, :d])
-            self._acceleration = (mom, g.cf, np.ascontiguousarray(x[:, d:]))
+            v, a = self.solve(mass, mom, cv, active_min, fields=2)
+            self._acceleration = (mom, g.cf, a)
         else:
-            v = self.solve(mass, mom, cv, active_min)
+            v = self.solve(mass, mom, cv, active_min)[0]
         g.conditions.apply(v, centroids)
         return v
 
@@ -117,7 +129,7 @@ class FMPMNodalMass(NodalMass):
         elif self._acceleration is not None and self._acceleration[0] is force and self._acceleration[1] == cf:
             a = self._acceleration[2]  # solved with this step's velocity
         else:
-            a = self.solve(mass, force, cf, active_min)
+            a = self.solve(mass, force, cf, active_min)[0]
         self._acceleration = None
         v_new = np.empty_like(a)
         kc.advance(np.ascontiguousarray(a), v_old, np.ascontiguousarray(mass[:, 0]), weak_max, float(dt),

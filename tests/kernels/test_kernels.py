@@ -395,3 +395,27 @@ def test_drucker_prager_kernel_equals_its_reference():
     assert 0.1 < plastic.mean() < 0.9
     assert (plastic & no_deviator).any() and (plastic & ~no_deviator).any()  # the apex and the cone
     assert np.isclose(p_ref, 0.5).any()  # the tension cut-off
+
+
+@pytest.mark.parametrize("cell", ["triangle", "quadrilateral", "quadrilateral-multilinear"])
+@pytest.mark.parametrize(("columns", "lumping"), [(2, False), (4, True)])
+def test_planar_mass_apply_equals_the_generic_one(cell, columns, lumping):
+    """FMPM's M_C y in scalar code (fempm.kernels.fmpm.planar_mass_apply) against the kernel of
+    any cell type, with lumped dofs left out of y and M_C 1_l in the last column."""
+    from fempm.kernels import fmpm as kf
+
+    rng = np.random.default_rng(columns)
+    n, nd, nk = 400, 60, 3 if cell == "triangle" else 4
+    cells = rng.integers(0, 30, size=n).astype(np.int32)
+    cell_dofs = rng.integers(0, nd, size=(30, nk)).astype(np.int32)
+    X = rng.random((n, 2))
+    if cell == "triangle":
+        X *= 0.5  # inside the reference triangle
+    K = rng.random((30, nk, 2))  # the vertices of multilinear cells, read only for gradients
+    mass, y = rng.random(n), rng.standard_normal((nd, columns))
+    lump = rng.random(nd) < 0.3 if lumping else np.zeros(0, dtype=np.bool_)
+    out = [np.zeros((nd, columns + lumping)) for _ in range(2)]
+    kf.planar_mass_apply(cell == "triangle")(cells, X, K, cell_dofs, mass, y, lump, out[0])
+    kf.generic_mass_apply(cell)(cells, X, K, cell_dofs, mass, y, lump, out[1])
+    assert np.abs(out[0]).max() > 1.0
+    assert np.allclose(out[0], out[1], rtol=1e-13, atol=1e-13 * np.abs(out[1]).max())
