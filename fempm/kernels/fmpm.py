@@ -36,39 +36,48 @@ if AVAILABLE:
     @njit(cache=True, error_model="numpy")
     def lumped_solve(b, cb, mass, free, active_min, x, zero):  # pragma: no cover - compiled
         """``x`` = ``b[:, cb:cb+k]`` / ``mass[:, 0]`` on the free components of dofs with mass
-        above ``active_min``, else 0; the rows of ``zero`` (a kept :func:`mass_apply` output, or
-        none) set to 0 in the same pass."""
+        above ``active_min`` (``x`` zero elsewhere: its other rows are not written); the rows
+        of ``zero`` (a kept :func:`mass_apply` output, or none) with mass set to 0 in the same
+        pass (the rows :func:`mass_apply` adds to)."""
         zeroing = zero.shape[0] > 0
         for i in range(len(x)):
             m = mass[i, 0]
-            for j in range(x.shape[1]):
-                x[i, j] = b[i, cb + j] / m if (m > active_min and free[i, j]) else 0.0
+            if not m > 0.0:
+                continue
             if zeroing:
                 for j in range(zero.shape[1]):
                     zero[i, j] = 0.0
+            if m > active_min:
+                for j in range(x.shape[1]):
+                    x[i, j] = b[i, cb + j] / m if free[i, j] else 0.0
 
     @njit(cache=True, error_model="numpy")
     def richardson(x, b, cb, Mx, mass, free, active_min, lump, out, rest, zero):  # pragma: no cover - compiled
         """One Richardson step from ``x`` for ``b[:, cb:cb+k]`` (``Mx``: :func:`mass_apply` of
         ``x``, its last column :math:`M_C 1_l` where ``lump`` has an entry per dof; the masses
         ``mass[:, 0]``) into ``out`` and, past its columns, ``rest`` (e.g. a velocity and an
-        acceleration solved side by side, each contiguous); with ``zero`` each row of ``Mx``
-        is set to 0 once read (for the next :func:`mass_apply`)."""
+        acceleration solved side by side, each contiguous), on the dofs with mass above
+        ``active_min`` (``x``, ``out`` and ``rest`` zero on the others: not read or written);
+        with ``zero`` the rows of ``Mx`` with mass are set to 0 once read (for the next
+        :func:`mass_apply`)."""
         k = x.shape[1]
         k1 = out.shape[1]
         lumping = lump.shape[0] > 0
         for i in range(len(x)):
             m = mass[i, 0]
-            coupled = not (lumping and lump[i])
-            for j in range(k):
-                r = x[i, j]
-                if m > active_min and free[i, j] and coupled:
-                    mx = Mx[i, j] + (Mx[i, k] * x[i, j] if lumping else 0.0)
-                    r += (b[i, cb + j] - mx) / m
-                if j < k1:
-                    out[i, j] = r
-                else:
-                    rest[i, j - k1] = r
+            if not m > 0.0:
+                continue
+            if m > active_min:
+                coupled = not (lumping and lump[i])
+                for j in range(k):
+                    r = x[i, j]
+                    if free[i, j] and coupled:
+                        mx = Mx[i, j] + (Mx[i, k] * x[i, j] if lumping else 0.0)
+                        r += (b[i, cb + j] - mx) / m
+                    if j < k1:
+                        out[i, j] = r
+                    else:
+                        rest[i, j - k1] = r
             if zero:
                 for j in range(Mx.shape[1]):
                     Mx[i, j] = 0.0

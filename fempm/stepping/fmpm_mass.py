@@ -67,6 +67,7 @@ class FMPMNodalMass(NodalMass):
         key = (columns, len(self.lump) > 0)
         if key not in self._work:
             self._work[key] = self.grid.nodal_array(key[0] + key[1])
+            self._work[key][1].fill(0.0)  # rows without mass are never cleared (nor read)
         return self._work[key]
 
     def mc(self, y: npt.NDArray, zeroed: bool = False) -> npt.NDArray:
@@ -93,13 +94,13 @@ class FMPMNodalMass(NodalMass):
             self._free[fields] = np.ascontiguousarray(np.tile(g.free, (1, fields)))
         free = self._free[fields]
         k = free.shape[1]
-        x = np.empty((g.num_dofs, k))
+        x = np.zeros((g.num_dofs, k))  # (the kernels write the rows with mass alone)
         kf.lumped_solve(b, cb, mass, free, active_min, x, self.work(k)[1] if self.order > 1 else NO_ROWS)
         if self.order == 1:
             return [np.ascontiguousarray(x[:, f * d:(f + 1) * d]) for f in range(fields)]
         for step in range(1, self.order):
             last = step == self.order - 1
-            out = [np.empty((g.num_dofs, d if last else k)), np.empty((g.num_dofs, (k - d) if last else 0))]
+            out = [np.zeros((g.num_dofs, d if last else k)), np.zeros((g.num_dofs, (k - d) if last else 0))]
             kf.richardson(x, b, cb, self.mc(x, zeroed=True), mass, free, active_min, self.lump, *out, not last)
             x = out[0]
         return out if fields == 2 else [out[0]]
