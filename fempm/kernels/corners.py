@@ -4,7 +4,9 @@ the corner weights :math:`w_c = |\Omega_p|^{-1} \int_{\Omega_p} \phi_c`, gradien
 :math:`g_c = |\Omega_p|^{-1} \int_{\Omega_p} \nabla \phi_c`, volumes and centroids
 :math:`\sum_c w_c y_c` of simplices (:math:`w_c = 1/(d+1)`, :math:`g_c = \nabla \lambda_c`) and of
 quadrilaterals / hexahedra (the 2-point Gauss rule of the multilinear map), in one pass, with
-the number of degenerate or twisted domains (a Jacobian determinant zero or changing sign)."""
+the number of degenerate or twisted domains (a Jacobian determinant zero or changing sign);
+and :func:`corner_geometry`, one 2D domain's in closed form, for CPDI2's moving pass
+(:mod:`fempm.kernels.planar_samples`)."""
 
 from __future__ import annotations
 
@@ -12,7 +14,7 @@ import numpy as np
 
 from fempm.kernels.shape import AVAILABLE
 
-__all__ = ["AVAILABLE", "inverse", "simplex_geometry", "tensor_geometry"]
+__all__ = ["AVAILABLE", "corner_geometry", "inverse", "simplex_geometry", "tensor_geometry"]
 
 if AVAILABLE:
     from numba import njit
@@ -126,3 +128,51 @@ if AVAILABLE:
                     g[p, c, i] /= V
             _centroid(corners, w, p, centroid)
         return bad
+
+    @njit(inline="always")
+    def corner_geometry(yc, p, w, gw):  # pragma: no cover - compiled
+        r"""CPDI2: the weights ``w[p]``, ``gw[p]`` of domain ``p`` of corners ``yc[p]`` (a triangle,
+        or a quadrilateral in :func:`fempm.particles.corners.corner_signs` order) in closed form;
+        returns (volume, centroid, twisted). With the map
+        :math:`x = a + b\xi + c\eta + e\xi\eta` of the quadrilateral,
+        :math:`\det J = A_0 + A_1 \xi + A_2 \eta` (:math:`A_0 = b \times c`,
+        :math:`A_1 = b \times e`, :math:`A_2 = e \times c`), so :math:`|\Omega| = 4 |A_0|`,
+        :math:`w_c = (A_0 + (A_1 s_{c0} + A_2 s_{c1}) / 3) / (4 A_0)`; and by the divergence
+        theorem :math:`g_c = |\Omega|^{-1} \oint \phi_c n = (y_{c^+} - y_{c^-})^\perp / (2
+        \Omega_\pm)` with :math:`c^\pm` the corners after and before :math:`c` around the
+        domain, :math:`(u, v)^\perp = (v, -u)` and :math:`\Omega_\pm` the signed area (a
+        triangle: :math:`w_c = 1/3`, :math:`g_c = \nabla \lambda_c`). A twisted domain: the
+        Jacobian zero or of two signs at the 2-point Gauss rule's points (as
+        :func:`fempm.kernels.corners.tensor_geometry`)."""
+        x0, y0, x1, y1, x2, y2 = yc[p, 0, 0], yc[p, 0, 1], yc[p, 1, 0], yc[p, 1, 1], yc[p, 2, 0], yc[p, 2, 1]
+        if yc.shape[1] == 3:
+            a2 = (x1 - x0) * (y2 - y0) - (y1 - y0) * (x2 - x0)  # twice the signed area; corners 0 -> 1 -> 2
+            for c in range(3):
+                w[p, c] = 1.0 / 3.0
+            gw[p, 0, 0], gw[p, 0, 1] = (y1 - y2) / a2, (x2 - x1) / a2
+            gw[p, 1, 0], gw[p, 1, 1] = (y2 - y0) / a2, (x0 - x2) / a2
+            gw[p, 2, 0], gw[p, 2, 1] = (y0 - y1) / a2, (x1 - x0) / a2
+            return 0.5 * abs(a2), (x0 + x1 + x2) / 3.0, (y0 + y1 + y2) / 3.0, not (a2 > 0.0 or a2 < 0.0)
+        x3, y3 = yc[p, 3, 0], yc[p, 3, 1]
+        bx, by = 0.25 * (-x0 - x1 + x2 + x3), 0.25 * (-y0 - y1 + y2 + y3)
+        cx, cy = 0.25 * (-x0 + x1 - x2 + x3), 0.25 * (-y0 + y1 - y2 + y3)
+        ex, ey = 0.25 * (x0 - x1 - x2 + x3), 0.25 * (y0 - y1 - y2 + y3)
+        A0, A1, A2 = bx * cy - by * cx, bx * ey - by * ex, ex * cy - ey * cx
+        r = 1.0 / np.sqrt(3.0)
+        pos, neg = 0, 0
+        for t in (A0 + r * (A1 + A2), A0 + r * (A1 - A2), A0 - r * (A1 - A2), A0 - r * (A1 + A2)):
+            if t > 0.0:
+                pos += 1
+            elif t < 0.0:
+                neg += 1
+        a4 = 4.0 * A0  # the signed area; around the domain 0 -> 2 -> 3 -> 1
+        w0, w1 = (A0 - (A1 + A2) / 3.0) / a4, (A0 + (A2 - A1) / 3.0) / a4
+        w2, w3 = (A0 + (A1 - A2) / 3.0) / a4, (A0 + (A1 + A2) / 3.0) / a4
+        w[p, 0], w[p, 1], w[p, 2], w[p, 3] = w0, w1, w2, w3
+        h = 0.5 / a4
+        gw[p, 0, 0], gw[p, 0, 1] = h * (y2 - y1), h * (x1 - x2)
+        gw[p, 2, 0], gw[p, 2, 1] = h * (y3 - y0), h * (x0 - x3)
+        gw[p, 3, 0], gw[p, 3, 1] = h * (y1 - y2), h * (x2 - x1)
+        gw[p, 1, 0], gw[p, 1, 1] = h * (y0 - y3), h * (x3 - x0)
+        return (abs(a4), w0 * x0 + w1 * x1 + w2 * x2 + w3 * x3, w0 * y0 + w1 * y1 + w2 * y2 + w3 * y3,
+                not (pos == 4 or neg == 4))

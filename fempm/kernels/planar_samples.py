@@ -24,11 +24,12 @@ import numpy as np
 
 from fempm.kernels.shape import AVAILABLE
 
-__all__ = ["corner_geometry", "g2p_kernel", "scatter_kernel"]
+__all__ = ["g2p_kernel", "mass_apply_kernel", "scatter_kernel"]
 
 if AVAILABLE:
     from numba import njit
 
+    from fempm.kernels.corners import corner_geometry
     from fempm.kernels.kinematics import add_totals
     from fempm.kernels.particle_checks import count_j, stable_time
     from fempm.kernels.planar import add_pair, basis, deform, inverse_jacobian, law_stress
@@ -47,54 +48,6 @@ if AVAILABLE:
         """CPDI1's gradient weight :math:`Q^{-1} R^{-T} s_q` of corner ``q``."""
         s0, s1 = signs[q, 0], signs[q, 1]
         return share * (r00 * s0 + r10 * s1), share * (r01 * s0 + r11 * s1)
-
-    @njit(inline="always")
-    def corner_geometry(yc, p, w, gw):  # pragma: no cover - compiled
-        r"""CPDI2: the weights ``w[p]``, ``gw[p]`` of domain ``p`` of corners ``yc[p]`` (a triangle,
-        or a quadrilateral in :func:`fempm.particles.corners.corner_signs` order) in closed form;
-        returns (volume, centroid, twisted). With the map
-        :math:`x = a + b\xi + c\eta + e\xi\eta` of the quadrilateral,
-        :math:`\det J = A_0 + A_1 \xi + A_2 \eta` (:math:`A_0 = b \times c`,
-        :math:`A_1 = b \times e`, :math:`A_2 = e \times c`), so :math:`|\Omega| = 4 |A_0|`,
-        :math:`w_c = (A_0 + (A_1 s_{c0} + A_2 s_{c1}) / 3) / (4 A_0)`; and by the divergence
-        theorem :math:`g_c = |\Omega|^{-1} \oint \phi_c n = (y_{c^+} - y_{c^-})^\perp / (2
-        \Omega_\pm)` with :math:`c^\pm` the corners after and before :math:`c` around the
-        domain, :math:`(u, v)^\perp = (v, -u)` and :math:`\Omega_\pm` the signed area (a
-        triangle: :math:`w_c = 1/3`, :math:`g_c = \nabla \lambda_c`). A twisted domain: the
-        Jacobian zero or of two signs at the 2-point Gauss rule's points (as
-        :func:`fempm.kernels.corners.tensor_geometry`)."""
-        x0, y0, x1, y1, x2, y2 = yc[p, 0, 0], yc[p, 0, 1], yc[p, 1, 0], yc[p, 1, 1], yc[p, 2, 0], yc[p, 2, 1]
-        if yc.shape[1] == 3:
-            a2 = (x1 - x0) * (y2 - y0) - (y1 - y0) * (x2 - x0)  # twice the signed area; corners 0 -> 1 -> 2
-            for c in range(3):
-                w[p, c] = 1.0 / 3.0
-            gw[p, 0, 0], gw[p, 0, 1] = (y1 - y2) / a2, (x2 - x1) / a2
-            gw[p, 1, 0], gw[p, 1, 1] = (y2 - y0) / a2, (x0 - x2) / a2
-            gw[p, 2, 0], gw[p, 2, 1] = (y0 - y1) / a2, (x1 - x0) / a2
-            return 0.5 * abs(a2), (x0 + x1 + x2) / 3.0, (y0 + y1 + y2) / 3.0, not (a2 > 0.0 or a2 < 0.0)
-        x3, y3 = yc[p, 3, 0], yc[p, 3, 1]
-        bx, by = 0.25 * (-x0 - x1 + x2 + x3), 0.25 * (-y0 - y1 + y2 + y3)
-        cx, cy = 0.25 * (-x0 + x1 - x2 + x3), 0.25 * (-y0 + y1 - y2 + y3)
-        ex, ey = 0.25 * (x0 - x1 - x2 + x3), 0.25 * (y0 - y1 - y2 + y3)
-        A0, A1, A2 = bx * cy - by * cx, bx * ey - by * ex, ex * cy - ey * cx
-        r = 1.0 / np.sqrt(3.0)
-        pos, neg = 0, 0
-        for t in (A0 + r * (A1 + A2), A0 + r * (A1 - A2), A0 - r * (A1 - A2), A0 - r * (A1 + A2)):
-            if t > 0.0:
-                pos += 1
-            elif t < 0.0:
-                neg += 1
-        a4 = 4.0 * A0  # the signed area; around the domain 0 -> 2 -> 3 -> 1
-        w0, w1 = (A0 - (A1 + A2) / 3.0) / a4, (A0 + (A2 - A1) / 3.0) / a4
-        w2, w3 = (A0 + (A1 - A2) / 3.0) / a4, (A0 + (A1 + A2) / 3.0) / a4
-        w[p, 0], w[p, 1], w[p, 2], w[p, 3] = w0, w1, w2, w3
-        h = 0.5 / a4
-        gw[p, 0, 0], gw[p, 0, 1] = h * (y2 - y1), h * (x1 - x2)
-        gw[p, 2, 0], gw[p, 2, 1] = h * (y3 - y0), h * (x0 - x3)
-        gw[p, 3, 0], gw[p, 3, 1] = h * (y1 - y2), h * (x2 - x1)
-        gw[p, 1, 0], gw[p, 1, 1] = h * (y0 - y3), h * (x3 - x0)
-        return (abs(a4), w0 * x0 + w1 * x1 + w2 * x2 + w3 * x3, w0 * y0 + w1 * y1 + w2 * y2 + w3 * y3,
-                not (pos == 4 or neg == 4))
 
 
 @functools.cache
@@ -175,8 +128,8 @@ def g2p_kernel(simplex: bool, affine: bool, grad_from_values: bool, corners: boo
     """:func:`fempm.kernels.samples._g2p_kernel` for ``triangle`` (``simplex``) or
     ``quadrilateral`` cells, ``affine`` or multilinear. With ``track`` (CPDI2, moving) the
     pass also moves the domains' corners ``yc`` (n, Q, 2) with the grid velocity at them into
-    ``moved``, puts their weights (:func:`corner_geometry`) into ``w`` and ``gw`` (each
-    particle's, once the pass has read them), moves each particle to its domain's centroid
+    ``moved``, puts their weights (:func:`fempm.kernels.corners.corner_geometry`) into ``w``
+    and ``gw`` (each particle's, once the pass has read them), moves each particle to its domain's centroid
     with the domain's volume, locates the moved corners in ``sc`` and ``Y`` (as
     :func:`fempm.kernels.samples.locate_samples`, over the first ``sample_cells`` cells; -1
     where the search fails), and counts the twisted domains in ``bad[0]`` and the corners not
@@ -350,3 +303,60 @@ def _gather_kernel(simplex: bool, affine: bool, grad_from_values: bool, corners:
         return vg0, vg1, dv0, dv1, L00, L01, L10, L11
 
     return gather
+
+
+@functools.cache
+def mass_apply_kernel(simplex: bool, grad_from_values: bool, corners: bool):
+    r""":func:`fempm.kernels.samples.kernels_for`'s ``mass_apply`` (FMPM's
+    :math:`(M_C y)_i = \sum_p M_p \langle N_i \rangle_p \sum_j \langle N_j \rangle_p y_j`)
+    for ``triangle`` (``simplex``) or ``quadrilateral`` cells, sample by sample and two columns
+    of ``y`` at a time (an even number), the values alone."""
+    QUAD = not simplex
+
+    @njit(cache=True, error_model="numpy")
+    def mass_apply(cells, sc, Y, w, gw, Fw, lp, signs, K, cell_dofs, mass, y, lump, out):  # pragma: no cover
+        Q = sc.shape[1]
+        k = y.shape[1]
+        lumping = lump.shape[0] > 0
+        u = np.empty(k + 1)  # <N_j> y_j over the coupled dofs, and <N_j> 1_l
+        for p in range(len(cells)):
+            u[:] = 0.0
+            for q in range(Q):
+                wq = 1.0 / Q if corners else w[p, q]
+                if grad_from_values and wq == 0.0:
+                    continue
+                r, cq = p * Q + q, sc[p, q]
+                N0, N1, N2, N3 = basis(Y[r, 0], Y[r, 1], 0.0, 0.0, 0.0, 0.0, simplex)[:4]
+                i0, i1, i2 = cell_dofs[cq, 0], cell_dofs[cq, 1], cell_dofs[cq, 2]
+                i3 = cell_dofs[cq, 3] if QUAD else i0
+                e0, e1, e2, e3 = wq * N0, wq * N1, wq * N2, wq * N3
+                if lumping:
+                    e0 = 0.0 if lump[i0] else e0
+                    e1 = 0.0 if lump[i1] else e1
+                    e2 = 0.0 if lump[i2] else e2
+                    e3 = 0.0 if (QUAD and lump[i3]) else e3
+                    u[k] += wq * (N0 + N1 + N2 + (N3 if QUAD else 0.0)) - (e0 + e1 + e2 + (e3 if QUAD else 0.0))
+                for j in range(k):
+                    t = e0 * y[i0, j] + e1 * y[i1, j] + e2 * y[i2, j]
+                    u[j] += t + e3 * y[i3, j] if QUAD else t
+            m = mass[p]
+            for q in range(Q):
+                wq = 1.0 / Q if corners else w[p, q]
+                if grad_from_values and wq == 0.0:
+                    continue
+                r, cq = p * Q + q, sc[p, q]
+                N0, N1, N2, N3 = basis(Y[r, 0], Y[r, 1], 0.0, 0.0, 0.0, 0.0, simplex)[:4]
+                i0, i1, i2 = cell_dofs[cq, 0], cell_dofs[cq, 1], cell_dofs[cq, 2]
+                i3 = cell_dofs[cq, 3] if QUAD else i0
+                s = wq * m
+                for j in range(0, k, 2):
+                    add_pair(out, j, i0, i1, i2, i3, N0, N1, N2, N3, s * u[j], s * u[j + 1], QUAD)
+                if lumping:
+                    t = s * u[k]
+                    out[i0, k] += N0 * t
+                    out[i1, k] += N1 * t
+                    out[i2, k] += N2 * t
+                    if QUAD:
+                        out[i3, k] += N3 * t
+
+    return mass_apply

@@ -157,8 +157,9 @@ def kernels_for(cell: str, grad_from_values: bool, planar: bool = True) -> Simpl
     def mass_apply(cells, sc, Y, w, gw, Fw, lp, signs, K, cell_dofs, mass, y, lump, out):
         """:func:`fempm.kernels.fmpm.mass_apply` with the averaged basis,
         :math:`(M_C y)_i = \\sum_p M_p \\langle N_i \\rangle_p \\sum_j \\langle N_j \\rangle_p y_j`."""
-        _mass_apply_kernel(cell, grad_from_values, Fw.shape[0] > 0)(cells, sc, Y, w, gw, Fw, lp, signs, K, cell_dofs,
-                                                                    mass, y, lump, out)
+        kernel = (planar_samples.mass_apply_kernel(cell == "triangle", grad_from_values, Fw.shape[0] > 0)
+                  if tracks and y.shape[1] % 2 == 0 else _mass_apply_kernel(cell, grad_from_values, Fw.shape[0] > 0))
+        kernel(cells, sc, Y, w, gw, Fw, lp, signs, K, cell_dofs, mass, y, lump, out)
 
     return SimpleNamespace(scatter=scatter, g2p_update=g2p_update, mass_apply=mass_apply, tracks=tracks)
 

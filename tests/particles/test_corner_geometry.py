@@ -59,11 +59,11 @@ def test_degenerate_domains_are_an_error(simplex):
 
 @pytest.mark.parametrize("simplex", [True, False])
 def test_closed_form_2d_geometry_of_the_moving_pass(simplex):
-    """fempm.kernels.planar_samples.corner_geometry (the closed forms CPDI2's moving pass uses:
+    """fempm.kernels.corners.corner_geometry (the closed forms CPDI2's moving pass uses:
     the divergence theorem for g, det J linear for w) equals the numpy reference on distorted
     and mirrored triangles and quadrilaterals, and counts the twisted ones."""
     numba = pytest.importorskip("numba")
-    from fempm.kernels.planar_samples import corner_geometry
+    from fempm.kernels.corners import corner_geometry
 
     @numba.njit
     def geometry(corners, w, g, vol, centroid, twisted):
