@@ -11,14 +11,15 @@ its Jacobian :math:`J(X) = \sum_a x_a \otimes \nabla_X \hat N_a(X)` varies over 
     X \leftarrow X - J(X)^{-1} \big(x(X) - x\big)
 
 (:func:`multilinear_pull_back`; the numpy reference is
-:meth:`fempm.meshes.geometry.CellGeometry.pull_back`).
+:meth:`fempm.meshes.geometry.CellGeometry.pull_back`). :func:`quad_pull_back` is its closed
+form on quadrilaterals for a moving particle, which knows the size of its first step.
 """
 
 from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["NEWTON_FLOOR", "NEWTON_MAX", "NEWTON_TOL"]
+__all__ = ["NEWTON_FLOOR", "NEWTON_MAX", "NEWTON_TOL", "quad_pull_back"]
 
 #: a step of Newton's pull-back on multilinear cells below which it has converged (reference
 #: coordinates; the numpy pull-back's tolerance)
@@ -150,3 +151,46 @@ if njit is not None:
             G[a, 1] = g0 * k01 + g1 * k11 + g2 * k21
             if t == 3:
                 G[a, 2] = g0 * k02 + g1 * k12 + g2 * k22
+
+    @njit(cache=True)  # not inlined: compiled once, not into every kernel
+    def quad_pull_back(x, p, xc, c, tol, X, seed):  # pragma: no cover - compiled
+        r""":func:`multilinear_pull_back` on a quadrilateral in closed form (:math:`2 \times 2`),
+        from ``X[p]``, itself a Newton step of size ``seed`` from a converged point (a particle
+        moved by :math:`u`: :math:`X + K(X) u`; ``inf`` if not). Newton converges
+        quadratically, :math:`s_{k+1} \approx C s_k^2`; it also stops once the next step, so
+        estimated from the last two (:math:`s_k^3 / s_{k-1}^2`), is below :data:`NEWTON_TOL`
+        and the step below :data:`NEWTON_FLOOR`: from a seeded start one iteration instead of
+        two. Whether the point lies in the reference cell within ``tol``."""
+        X0, X1 = X[p, 0], X[p, 1]
+        last = seed
+        if not (abs(X0 - 0.5) < 1.5 and abs(X1 - 0.5) < 1.5):  # also NaN
+            X0 = X1 = 0.5
+            last = np.inf
+        z0, z1 = x[p, 0], x[p, 1]
+        a0, a1 = xc[c, 0, 0], xc[c, 0, 1]
+        b0, b1 = xc[c, 1, 0] - a0, xc[c, 1, 1] - a1  # x = a + b X0 + e X1 + f X0 X1
+        e0, e1 = xc[c, 2, 0] - a0, xc[c, 2, 1] - a1
+        f0, f1 = xc[c, 3, 0] - xc[c, 2, 0] - b0, xc[c, 3, 1] - xc[c, 2, 1] - b1
+        done = False
+        for _ in range(NEWTON_MAX):
+            r0 = a0 + b0 * X0 + e0 * X1 + f0 * X0 * X1 - z0
+            r1 = a1 + b1 * X0 + e1 * X1 + f1 * X0 * X1 - z1
+            j00, j01 = b0 + f0 * X1, e0 + f0 * X0
+            j10, j11 = b1 + f1 * X1, e1 + f1 * X0
+            det = j00 * j11 - j01 * j10
+            d0 = (j11 * r0 - j01 * r1) / det
+            d1 = (j00 * r1 - j10 * r0) / det
+            X0 -= d0
+            X1 -= d1
+            step = max(abs(d0), abs(d1))
+            if not (step < 1e3):  # diverged, or NaN
+                break
+            if step < NEWTON_TOL or (step < NEWTON_FLOOR
+                                     and (step > 0.5 * last or step * step * step < NEWTON_TOL * last * last)):
+                done = True  # converged, at round-off, or the next step below the tolerance
+                break
+            last = step
+        if not done:
+            X0 = X1 = np.nan
+        X[p, 0], X[p, 1] = X0, X1
+        return done and X0 >= -tol and X1 >= -tol and X0 <= 1.0 + tol and X1 <= 1.0 + tol

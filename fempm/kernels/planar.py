@@ -30,6 +30,7 @@ if AVAILABLE:
     from numba import njit
 
     from fempm.kernels.kinematics import add_totals
+    from fempm.kernels.multilinear import quad_pull_back
     from fempm.kernels.particle_checks import count_j, stable_time
     from fempm.kernels.shape import inside_after_pull_back, star_search
 
@@ -245,9 +246,12 @@ def g2p_kernel(simplex: bool, affine: bool, blend: bool, kinematics: bool, move:
                 x[p, 0], x[p, 1] = y0, y1
                 if not (np.isfinite(y0) and np.isfinite(y1) and np.isfinite(v[p, 0] * v[p, 0] + v[p, 1] * v[p, 1])):
                     nonfinite += 1  # x or v (v.v: the kinetic energy); the compiled laws' stress is finite where J is
-                if not affine:  # Newton from the first step X + K(X) u, K of the basis above
-                    X[p, 0], X[p, 1] = X0 + k00 * u0 + k01 * u1, X1 + k10 * u0 + k11 * u1
-                out = not inside_after_pull_back(x, p, x0, K, c, simplex, 2, tol, X, affine)
+                if affine:
+                    out = not inside_after_pull_back(x, p, x0, K, c, simplex, 2, tol, X, affine)
+                else:  # Newton from the first step X + K(X) u, K of the basis above
+                    s0, s1 = k00 * u0 + k01 * u1, k10 * u0 + k11 * u1
+                    X[p, 0], X[p, 1] = X0 + s0, X1 + s1
+                    out = not quad_pull_back(x, p, K, c, tol, X, max(abs(s0), abs(s1)))
                 if out:  # the neighbours, while in cache (written out: through a helper the pass took 1.8x as long)
                     e = star_search(x, p, x0, K, c, c2v, v_offsets, v_cells, num_cells, simplex, 2, tol, X, affine)
                     out = e < 0

@@ -419,3 +419,42 @@ def test_planar_mass_apply_equals_the_generic_one(cell, columns, lumping):
     kf.generic_mass_apply(cell)(cells, X, K, cell_dofs, mass, y, lump, out[1])
     assert np.abs(out[0]).max() > 1.0
     assert np.allclose(out[0], out[1], rtol=1e-13, atol=1e-13 * np.abs(out[1]).max())
+
+
+def test_quadrilateral_pull_back_of_a_moved_particle_equals_newtons():
+    """fempm.kernels.multilinear.quad_pull_back (closed form, stopping once the next step is
+    estimated below the tolerance) against multilinear_pull_back on distorted quadrilaterals:
+    points moved from converged reference points, seeded by the first Newton step as the G2P
+    pass seeds them, and unseeded points, inside and outside the cells."""
+    numba = pytest.importorskip("numba")
+    from fempm.kernels.multilinear import multilinear_pull_back, quad_pull_back
+
+    rng = np.random.default_rng(5)
+    n = 2000
+    square = np.array([[0.0, 0.0], [1.0, 0.0], [0.0, 1.0], [1.0, 1.0]])  # basix order
+    xc = (square[None] + 0.2 * rng.standard_normal((n, 4, 2))) * rng.uniform(0.01, 10.0, (n, 1, 1))
+    xc += rng.uniform(-50.0, 50.0, (n, 1, 2))  # cells far from the origin too
+    cells = np.arange(n)
+
+    @numba.njit
+    def both(x, seed_X, seeds, X_new, X_ref, inside):
+        for p in range(len(x)):
+            X_new[p] = seed_X[p]
+            X_ref[p] = seed_X[p]
+            inside[p, 0] = quad_pull_back(x, p, xc, cells[p], 1e-10, X_new, seeds[p])
+            inside[p, 1] = multilinear_pull_back(x, p, xc, cells[p], 2, 1e-10, X_ref)
+
+    X = rng.uniform(-0.2, 1.2, (n, 2))  # half of them outside
+    N = np.stack([(1 - X[:, 0]) * (1 - X[:, 1]), X[:, 0] * (1 - X[:, 1]), (1 - X[:, 0]) * X[:, 1], X[:, 0] * X[:, 1]], 1)
+    x_old = np.einsum("na,nai->ni", N, xc)
+    u = 1e-3 * rng.standard_normal((n, 2)) * np.abs(xc[:, 1] - xc[:, 0]).max(axis=1)[:, None]
+    J = np.stack([np.einsum("na,nai->ni", np.stack([-(1 - X[:, 1]), 1 - X[:, 1], -X[:, 1], X[:, 1]], 1), xc),
+                  np.einsum("na,nai->ni", np.stack([-(1 - X[:, 0]), -X[:, 0], 1 - X[:, 0], X[:, 0]], 1), xc)], axis=2)
+    step = np.linalg.solve(J, u[:, :, None])[:, :, 0]  # the first Newton step from X
+    X_new, X_ref, inside = np.empty((n, 2)), np.empty((n, 2)), np.zeros((n, 2), dtype=np.bool_)
+    for seed_X, seeds in ((X + step, np.abs(step).max(axis=1)), (np.full((n, 2), 0.5), np.full(n, np.inf))):
+        both(x_old + u, seed_X, seeds, X_new, X_ref, inside)
+        assert np.array_equal(inside[:, 0], inside[:, 1]) and 0.4 < inside[:, 0].mean() < 0.65
+        ok = np.isfinite(X_ref).all(axis=1)
+        assert ok.mean() > 0.95 and np.array_equal(ok, np.isfinite(X_new).all(axis=1))
+        assert np.abs(X_new[ok] - X_ref[ok]).max() < 1e-12
