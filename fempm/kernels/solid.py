@@ -29,7 +29,7 @@ __all__ = ["g2p_kernel", "scatter_kernel"]
 if AVAILABLE:
     from numba import njit
 
-    from fempm.kernels.kinematics import _det, add_totals, linear_elastic_at, neo_hookean_at
+    from fempm.kernels.kinematics import add_totals
     from fempm.kernels.particle_checks import LINEAR_ELASTIC, NEO_HOOKEAN, count_j, stable_time
     from fempm.kernels.shape import inside_after_pull_back, star_search
 
@@ -86,14 +86,49 @@ if AVAILABLE:
     @njit(inline="always")
     def deform(F, p, dt, L):  # pragma: no cover - compiled
         r""":math:`F_p \leftarrow (I + \Delta t L) F_p` (``L`` 9 entries, row by row); returns
-        :math:`\det F_p`."""
-        f = (F[p, 0, 0], F[p, 0, 1], F[p, 0, 2], F[p, 1, 0], F[p, 1, 1], F[p, 1, 2], F[p, 2, 0], F[p, 2, 1],
-             F[p, 2, 2])
-        for i in range(3):
-            for j in range(3):
-                F[p, i, j] = (f[3 * i + j] + dt * L[3 * i] * f[j] + dt * L[3 * i + 1] * f[3 + j]
-                              + dt * L[3 * i + 2] * f[6 + j])
-        return _det(F, p)
+        the new entries (9, row by row) and :math:`\det F_p`, in scalars (not read back)."""
+        f00, f01, f02 = F[p, 0, 0], F[p, 0, 1], F[p, 0, 2]
+        f10, f11, f12 = F[p, 1, 0], F[p, 1, 1], F[p, 1, 2]
+        f20, f21, f22 = F[p, 2, 0], F[p, 2, 1], F[p, 2, 2]
+        a0, a1, a2 = dt * L[0], dt * L[1], dt * L[2]
+        n00, n01, n02 = f00 + a0 * f00 + a1 * f10 + a2 * f20, f01 + a0 * f01 + a1 * f11 + a2 * f21, \
+            f02 + a0 * f02 + a1 * f12 + a2 * f22
+        a0, a1, a2 = dt * L[3], dt * L[4], dt * L[5]
+        n10, n11, n12 = f10 + a0 * f00 + a1 * f10 + a2 * f20, f11 + a0 * f01 + a1 * f11 + a2 * f21, \
+            f12 + a0 * f02 + a1 * f12 + a2 * f22
+        a0, a1, a2 = dt * L[6], dt * L[7], dt * L[8]
+        n20, n21, n22 = f20 + a0 * f00 + a1 * f10 + a2 * f20, f21 + a0 * f01 + a1 * f11 + a2 * f21, \
+            f22 + a0 * f02 + a1 * f12 + a2 * f22
+        F[p, 0, 0], F[p, 0, 1], F[p, 0, 2] = n00, n01, n02
+        F[p, 1, 0], F[p, 1, 1], F[p, 1, 2] = n10, n11, n12
+        F[p, 2, 0], F[p, 2, 1], F[p, 2, 2] = n20, n21, n22
+        J = n00 * (n11 * n22 - n12 * n21) - n01 * (n10 * n22 - n12 * n20) + n02 * (n10 * n21 - n11 * n20)
+        return (n00, n01, n02, n10, n11, n12, n20, n21, n22), J
+
+    @njit(inline="always")
+    def law_stress(sigma, p, code, lam, mu, n, J):  # pragma: no cover - compiled
+        r"""``sigma[p]`` of the compiled law ``code`` (else left as it is) for :math:`F` of the
+        9 entries ``n`` (row by row), :math:`J = \det F > 0`: the laws of
+        :func:`fempm.kernels.kinematics.neo_hookean_at` and
+        :func:`~fempm.kernels.kinematics.linear_elastic_at` in scalars."""
+        if code == NEO_HOOKEAN:
+            inv = 1.0 / J
+            vol = lam * np.log(J)
+            for i in range(3):
+                for j in range(i, 3):
+                    b = n[3 * i] * n[3 * j] + n[3 * i + 1] * n[3 * j + 1] + n[3 * i + 2] * n[3 * j + 2]
+                    if i == j:
+                        sigma[p, i, i] = (mu * (b - 1.0) + vol) * inv
+                    else:
+                        sigma[p, i, j] = sigma[p, j, i] = mu * b * inv
+        elif code == LINEAR_ELASTIC:
+            tr = (n[0] - 1.0) + (n[4] - 1.0) + (n[8] - 1.0)
+            for i in range(3):
+                for j in range(i, 3):
+                    if i == j:
+                        sigma[p, i, i] = lam * tr + 2.0 * mu * (n[4 * i] - 1.0)
+                    else:
+                        sigma[p, i, j] = sigma[p, j, i] = 2.0 * mu * (0.5 * (n[3 * i + j] + n[3 * j + i]))
 
     @njit(inline="always")
     def move_to(x, p, v, vg0, vg1, vg2, own, dt):  # pragma: no cover - compiled
@@ -193,17 +228,15 @@ def g2p_kernel(hexa: bool, blend: bool, kinematics: bool, move: bool, remap: boo
                     for j in range(3):
                         mom[i, o + j] += N * (mass[p] * v[p, j])
             if kinematics:
-                J = deform(F, p, dt, Lp)
+                nF, J = deform(F, p, dt, Lp)
                 if keep_L:
                     for i in range(9):
                         L[p, i // 3, i % 3] = Lp[i]
                 volume[p] = J * volume0[p]
                 b = body[p]
                 ok, nonfinite_j, inverted, jmin, jmax = count_j(J, nonfinite_j, inverted, jmin, jmax)
-                if ok and law[b] == NEO_HOOKEAN:
-                    neo_hookean_at(F, p, 3, J, lam[b], mu[b], sigma)
-                elif ok and law[b] == LINEAR_ELASTIC:
-                    linear_elastic_at(F, p, 3, lam[b], mu[b], sigma)
+                if ok:
+                    law_stress(sigma, p, law[b], lam[b], mu[b], nF, J)
             if move:
                 if not move_to(x, p, v, vg0, vg1, vg2, by_particle or still, dt):
                     nonfinite += 1  # x or v (v.v: the kinetic energy); the compiled laws' stress is finite where J is
