@@ -121,6 +121,57 @@ def _locate_kernel(cell: str):
     return locate
 
 
+@functools.cache
+def _planar_locate_kernel(simplex: bool):
+    """:func:`_locate_kernel` on affine triangles (``simplex``) or quadrilaterals in local
+    scalars (the same arithmetic): a corner and its pull-back never go through scratch arrays
+    the compiler must take as aliasing the outputs."""
+
+    @njit(inline="always")
+    def pull(y0, y1, x0, K, e, tol):  # pragma: no cover - compiled
+        """(inside, X0, X1): :func:`fempm.kernels.shape.inside_after_pull_back` in cell ``e``."""
+        d0, d1 = y0 - x0[e, 0], y1 - x0[e, 1]
+        X0 = K[e, 0, 0] * d0 + K[e, 0, 1] * d1
+        X1 = K[e, 1, 0] * d0 + K[e, 1, 1] * d1
+        if simplex:
+            return X0 >= -tol and X1 >= -tol and X0 + X1 <= 1.0 + tol, X0, X1
+        return X0 >= -tol and X1 >= -tol and X0 <= 1.0 + tol and X1 <= 1.0 + tol, X0, X1
+
+    @njit(cache=True, error_model="numpy")
+    def locate(x, F, lp, signs, cells, x0, K, c2v, v_offsets, v_cells, num_cells, tol, guess, sc,
+               Y):  # pragma: no cover - compiled
+        Q = signs.shape[0]
+        y, X = np.empty((1, 2)), np.empty((1, 2))  # for the vertex-star search
+        missing = 0
+        guessed = guess.shape[0] == len(cells)
+        for p in range(len(cells)):
+            r00, r01 = F[p, 0, 0] * lp[p, 0], F[p, 0, 1] * lp[p, 1]
+            r10, r11 = F[p, 1, 0] * lp[p, 0], F[p, 1, 1] * lp[p, 1]
+            c = cells[p]
+            for q in range(Q):
+                s0, s1 = signs[q, 0], signs[q, 1]
+                y0 = x[p, 0] + r00 * s0 + r01 * s1
+                y1 = x[p, 1] + r10 * s0 + r11 * s1
+                e = guess[p, q] if guessed else -1
+                found, X0, X1 = False, 0.0, 0.0
+                if e >= 0 and e != c:
+                    found, X0, X1 = pull(y0, y1, x0, K, e, tol)
+                if not found:
+                    e = c
+                    found, X0, X1 = pull(y0, y1, x0, K, c, tol)
+                if not found:
+                    y[0, 0], y[0, 1] = y0, y1
+                    e = star_search(y, 0, x0, K, c, c2v, v_offsets, v_cells, num_cells, simplex, 2, tol, X, True)
+                    X0, X1 = X[0, 0], X[0, 1]
+                    if e < 0:
+                        missing += 1
+                sc[p, q] = e
+                Y[p * Q + q, 0], Y[p * Q + q, 1] = X0, X1
+        return missing
+
+    return locate
+
+
 def locate_corners(x, F, lp, signs, cells, x0, K, star: tuple, cell: str, tol: float, guess=None, out=None):
     """Cells (n, Q) and reference coordinates (n Q, t) of the CPDI1 corners of particles at
     ``x`` in ``cells`` (:func:`fempm.kernels.samples.locate_samples` with the corners made in the
@@ -129,5 +180,6 @@ def locate_corners(x, F, lp, signs, cells, x0, K, star: tuple, cell: str, tol: f
     Q, t = len(signs), CELLS[cell][0]
     sc, Y = out if out is not None else (np.full((n, Q), -1, dtype=np.int32), np.zeros((n * Q, t)))
     guess = np.zeros((0, Q), dtype=np.int32) if guess is None else guess
-    missing = _locate_kernel(cell)(x, F, lp, signs, cells, x0, K, *star, float(tol), guess, sc, Y)
+    kernel = _planar_locate_kernel(cell == "triangle") if cell in ("triangle", "quadrilateral") else _locate_kernel(cell)
+    missing = kernel(x, F, lp, signs, cells, x0, K, *star, float(tol), guess, sc, Y)
     return sc, Y, int(missing)

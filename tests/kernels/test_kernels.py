@@ -458,3 +458,28 @@ def test_quadrilateral_pull_back_of_a_moved_particle_equals_newtons():
         ok = np.isfinite(X_ref).all(axis=1)
         assert ok.mean() > 0.95 and np.array_equal(ok, np.isfinite(X_new).all(axis=1))
         assert np.abs(X_new[ok] - X_ref[ok]).max() < 1e-12
+
+
+@pytest.mark.parametrize("cell", ["triangle", "quadrilateral"])
+def test_planar_corner_location_equals_the_generic_one_bit_for_bit(cell):
+    """CPDI1's corners made and located in scalar code (fempm.kernels.cpdi1, affine triangles
+    and quadrilaterals) against the dimension-generic kernel: the same cells and reference
+    coordinates, with and without the last step's cells as guesses, found in the guess, the
+    particle's cell, its vertex star or nowhere."""
+    from fempm.kernels import cpdi1
+    from fempm.particles.corners import corner_signs
+
+    s = _pass_state(cell == "triangle", 4)
+    n, signs = len(s["cells"]), corner_signs(2)
+    lp = np.full((n, 2), 0.05) * (1.0 + np.random.default_rng(2).random((n, 1)))
+    guesses = [np.zeros((0, 4), dtype=np.int32), np.random.default_rng(3).integers(-1, 60, (n, 4)).astype(np.int32)]
+    for guess in guesses:
+        got = []
+        for kernel in (cpdi1._planar_locate_kernel(cell == "triangle"), cpdi1._locate_kernel(cell)):
+            sc, Y = np.full((n, 4), -7, dtype=np.int32), np.zeros((4 * n, 2))
+            missing = kernel(s["x"], s["F"], lp, signs, s["cells"], s["x0"], s["K"], *s["star"], 1e-10, guess, sc, Y)
+            got.append((missing, sc, Y))
+        (m0, sc0, Y0), (m1, sc1, Y1) = got
+        found = sc0 >= 0
+        assert m0 == m1 and np.array_equal(sc0, sc1) and m0 > 0 and found.sum() > n
+        assert np.array_equal(Y0[found.ravel()], Y1[found.ravel()])
