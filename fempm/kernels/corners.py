@@ -14,7 +14,7 @@ import numpy as np
 
 from fempm.kernels.shape import AVAILABLE
 
-__all__ = ["AVAILABLE", "corner_geometry", "inverse", "simplex_geometry", "tensor_geometry"]
+__all__ = ["AVAILABLE", "corner_geometry", "inverse", "planar_geometry", "simplex_geometry", "tensor_geometry"]
 
 if AVAILABLE:
     from numba import njit
@@ -176,3 +176,15 @@ if AVAILABLE:
         gw[p, 1, 0], gw[p, 1, 1] = h * (y0 - y3), h * (x3 - x0)
         return (abs(a4), w0 * x0 + w1 * x1 + w2 * x2 + w3 * x3, w0 * y0 + w1 * y1 + w2 * y2 + w3 * y3,
                 not (pos == 4 or neg == 4))
+
+    @njit(cache=True, error_model="numpy")
+    def planar_geometry(corners, w, g, vol, centroid):  # pragma: no cover - compiled
+        """Triangles or quadrilaterals (n, 3 or 4, 2) by :func:`corner_geometry` (the weights
+        CPDI2's moving pass gives the corners it moves, bit for bit); returns the number of
+        degenerate or twisted ones."""
+        bad = 0
+        for p in range(len(corners)):
+            vol[p], centroid[p, 0], centroid[p, 1], twisted = corner_geometry(corners, p, w, g)
+            if twisted:
+                bad += 1
+        return bad

@@ -25,13 +25,30 @@ import numpy as np
 
 from fempm.kernels.shape import AVAILABLE, CELLS, MULTILINEAR, is_affine, space_of
 
-__all__ = ["generic_mass_apply", "lumped_solve", "mass_apply", "planar_mass_apply", "richardson"]
+__all__ = ["add_column", "coupled", "generic_mass_apply", "lumped_solve", "mass_apply", "planar_mass_apply",
+           "richardson"]
 
 if AVAILABLE:
     from numba import njit
 
     from fempm.kernels.planar import add_pair, basis
     from fempm.kernels.shape import shape, shape_values
+
+    @njit(inline="always")
+    def coupled(lump, i0, i1, i2, i3, e0, e1, e2, e3, quad):  # pragma: no cover - compiled
+        """The values ``e`` of a cell's dofs with those of the lumped dofs (``lump``) set to 0
+        (the fourth on a quadrilateral only)."""
+        return (0.0 if lump[i0] else e0, 0.0 if lump[i1] else e1, 0.0 if lump[i2] else e2,
+                0.0 if (quad and lump[i3]) else e3)
+
+    @njit(inline="always")
+    def add_column(out, col, i0, i1, i2, i3, N0, N1, N2, N3, t, quad):  # pragma: no cover - compiled
+        """``out[i_a, col] += N_a t`` over the cell's dofs (the fourth on a quadrilateral only)."""
+        out[i0, col] += N0 * t
+        out[i1, col] += N1 * t
+        out[i2, col] += N2 * t
+        if quad:
+            out[i3, col] += N3 * t
 
     @njit(cache=True, error_model="numpy")
     def lumped_solve(b, cb, mass, free, active_min, x, zero):  # pragma: no cover - compiled
@@ -114,10 +131,7 @@ def planar_mass_apply(simplex: bool):
             i3 = cell_dofs[c, 3] if QUAD else i0
             e0, e1, e2, e3 = N0, N1, N2, N3  # the coupled dofs' values
             if lumping:
-                e0 = 0.0 if lump[i0] else N0
-                e1 = 0.0 if lump[i1] else N1
-                e2 = 0.0 if lump[i2] else N2
-                e3 = 0.0 if (QUAD and lump[i3]) else N3
+                e0, e1, e2, e3 = coupled(lump, i0, i1, i2, i3, N0, N1, N2, N3, QUAD)
             m = mass[p]
             for j in range(0, k, 2):
                 u0 = e0 * y[i0, j] + e1 * y[i1, j] + e2 * y[i2, j]
@@ -128,11 +142,7 @@ def planar_mass_apply(simplex: bool):
                 add_pair(out, j, i0, i1, i2, i3, N0, N1, N2, N3, m * u0, m * u1, QUAD)
             if lumping:
                 ul = m * ((N0 - e0) + (N1 - e1) + (N2 - e2) + ((N3 - e3) if QUAD else 0.0))
-                out[i0, k] += N0 * ul
-                out[i1, k] += N1 * ul
-                out[i2, k] += N2 * ul
-                if QUAD:
-                    out[i3, k] += N3 * ul
+                add_column(out, k, i0, i1, i2, i3, N0, N1, N2, N3, ul, QUAD)
 
     return kernel
 

@@ -229,8 +229,7 @@ def g2p_kernel(simplex: bool, affine: bool, blend: bool, kinematics: bool, move:
                     L01 += a3 * g3y
                     L10 += b3 * g3x
                     L11 += b3 * g3y
-                if still:
-                    L00, L01, L10, L11 = 0.0, 0.0, 0.0, 0.0
+                L00, L01, L10, L11 = (0.0, 0.0, 0.0, 0.0) if still else (L00, L01, L10, L11)
                 n00, n01, n10, n11, J = deform(F, p, dt, L00, L01, L10, L11)
                 if keep_L:
                     L[p, 0, 0], L[p, 0, 1], L[p, 1, 0], L[p, 1, 1] = L00, L01, L10, L11
@@ -246,12 +245,10 @@ def g2p_kernel(simplex: bool, affine: bool, blend: bool, kinematics: bool, move:
                 x[p, 0], x[p, 1] = y0, y1
                 if not (np.isfinite(y0) and np.isfinite(y1) and np.isfinite(v[p, 0] * v[p, 0] + v[p, 1] * v[p, 1])):
                     nonfinite += 1  # x or v (v.v: the kinetic energy); the compiled laws' stress is finite where J is
-                if affine:
-                    out = not inside_after_pull_back(x, p, x0, K, c, simplex, 2, tol, X, affine)
-                else:  # Newton from the first step X + K(X) u, K of the basis above
-                    s0, s1 = k00 * u0 + k01 * u1, k10 * u0 + k11 * u1
-                    X[p, 0], X[p, 1] = X0 + s0, X1 + s1
-                    out = not quad_pull_back(x, p, K, c, tol, X, max(abs(s0), abs(s1)))
+                if not affine:  # Newton from the first step X + K(X) u (K of the basis above), its size the seed's
+                    X[p, 0], X[p, 1] = X0 + k00 * u0 + k01 * u1, X1 + k10 * u0 + k11 * u1
+                out = not (inside_after_pull_back(x, p, x0, K, c, simplex, 2, tol, X, affine) if affine else
+                           quad_pull_back(x, p, K, c, tol, X, max(abs(X[p, 0] - X0), abs(X[p, 1] - X1))))
                 if out:  # the neighbours, while in cache (written out: through a helper the pass took 1.8x as long)
                     e = star_search(x, p, x0, K, c, c2v, v_offsets, v_cells, num_cells, simplex, 2, tol, X, affine)
                     out = e < 0

@@ -30,6 +30,7 @@ if AVAILABLE:
     from numba import njit
 
     from fempm.kernels.corners import corner_geometry
+    from fempm.kernels.fmpm import add_column, coupled
     from fempm.kernels.kinematics import add_totals
     from fempm.kernels.particle_checks import count_j, stable_time
     from fempm.kernels.planar import add_pair, basis, deform, inverse_jacobian, law_stress
@@ -313,6 +314,15 @@ def mass_apply_kernel(simplex: bool, grad_from_values: bool, corners: bool):
     of ``y`` at a time (an even number), the values alone."""
     QUAD = not simplex
 
+    @njit(inline="always")
+    def sample(p, q, Q, sc, Y, w, cell_dofs):  # pragma: no cover - compiled
+        """Sample ``q`` of particle ``p``: its weight (0: none), basis values and cell's dofs."""
+        wq = 1.0 / Q if corners else w[p, q]
+        r, cq = p * Q + q, sc[p, q]
+        N0, N1, N2, N3 = basis(Y[r, 0], Y[r, 1], 0.0, 0.0, 0.0, 0.0, simplex)[:4]
+        i0, i1, i2 = cell_dofs[cq, 0], cell_dofs[cq, 1], cell_dofs[cq, 2]
+        return wq, N0, N1, N2, N3, i0, i1, i2, cell_dofs[cq, 3] if QUAD else i0
+
     @njit(cache=True, error_model="numpy")
     def mass_apply(cells, sc, Y, w, gw, Fw, lp, signs, K, cell_dofs, mass, y, lump, out):  # pragma: no cover
         Q = sc.shape[1]
@@ -322,41 +332,25 @@ def mass_apply_kernel(simplex: bool, grad_from_values: bool, corners: bool):
         for p in range(len(cells)):
             u[:] = 0.0
             for q in range(Q):
-                wq = 1.0 / Q if corners else w[p, q]
+                wq, N0, N1, N2, N3, i0, i1, i2, i3 = sample(p, q, Q, sc, Y, w, cell_dofs)
                 if grad_from_values and wq == 0.0:
                     continue
-                r, cq = p * Q + q, sc[p, q]
-                N0, N1, N2, N3 = basis(Y[r, 0], Y[r, 1], 0.0, 0.0, 0.0, 0.0, simplex)[:4]
-                i0, i1, i2 = cell_dofs[cq, 0], cell_dofs[cq, 1], cell_dofs[cq, 2]
-                i3 = cell_dofs[cq, 3] if QUAD else i0
                 e0, e1, e2, e3 = wq * N0, wq * N1, wq * N2, wq * N3
                 if lumping:
-                    e0 = 0.0 if lump[i0] else e0
-                    e1 = 0.0 if lump[i1] else e1
-                    e2 = 0.0 if lump[i2] else e2
-                    e3 = 0.0 if (QUAD and lump[i3]) else e3
+                    e0, e1, e2, e3 = coupled(lump, i0, i1, i2, i3, e0, e1, e2, e3, QUAD)
                     u[k] += wq * (N0 + N1 + N2 + (N3 if QUAD else 0.0)) - (e0 + e1 + e2 + (e3 if QUAD else 0.0))
                 for j in range(k):
                     t = e0 * y[i0, j] + e1 * y[i1, j] + e2 * y[i2, j]
                     u[j] += t + e3 * y[i3, j] if QUAD else t
             m = mass[p]
             for q in range(Q):
-                wq = 1.0 / Q if corners else w[p, q]
+                wq, N0, N1, N2, N3, i0, i1, i2, i3 = sample(p, q, Q, sc, Y, w, cell_dofs)
                 if grad_from_values and wq == 0.0:
                     continue
-                r, cq = p * Q + q, sc[p, q]
-                N0, N1, N2, N3 = basis(Y[r, 0], Y[r, 1], 0.0, 0.0, 0.0, 0.0, simplex)[:4]
-                i0, i1, i2 = cell_dofs[cq, 0], cell_dofs[cq, 1], cell_dofs[cq, 2]
-                i3 = cell_dofs[cq, 3] if QUAD else i0
                 s = wq * m
                 for j in range(0, k, 2):
                     add_pair(out, j, i0, i1, i2, i3, N0, N1, N2, N3, s * u[j], s * u[j + 1], QUAD)
                 if lumping:
-                    t = s * u[k]
-                    out[i0, k] += N0 * t
-                    out[i1, k] += N1 * t
-                    out[i2, k] += N2 * t
-                    if QUAD:
-                        out[i3, k] += N3 * t
+                    add_column(out, k, i0, i1, i2, i3, N0, N1, N2, N3, s * u[k], QUAD)
 
     return mass_apply

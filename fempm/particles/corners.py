@@ -48,14 +48,17 @@ def domain_geometry(corners: npt.NDArray, comm=None) -> tuple[npt.NDArray, npt.N
 
     with the volumes :math:`|\Omega_p|` and centroids :math:`\sum_c w_c y_c`. Simplices:
     :math:`w_c = 1/(d + 1)`, :math:`g_c = \nabla \lambda_c`; tensor domains: the 2-point Gauss
-    rule of the isoparametric map (exact for its polynomial integrands). Returns (w (n, k),
+    rule of the isoparametric map (exact for its polynomial integrands; in 2D in closed form,
+    :func:`fempm.kernels.corners.corner_geometry`). Returns (w (n, k),
     g (n, k, d), volume (n,), centroid (n, d)); a degenerate or twisted domain is a ValueError,
     raised on every rank of ``comm`` when one is given (collective)."""
     n, k, d = corners.shape
     if COMPILED and kc.AVAILABLE and k in (d + 1, 2**d):
         corners = np.ascontiguousarray(corners, dtype=np.float64)
         w, g, vol, centroid = np.empty((n, k)), np.empty((n, k, d)), np.empty(n), np.empty((n, d))
-        if k == d + 1:
+        if d == 2:  # in closed form, as the moving pass makes them
+            bad, kind = kc.planar_geometry(corners, w, g, vol, centroid), "triangle" if k == 3 else "quadrilateral"
+        elif k == d + 1:
             bad, kind = kc.simplex_geometry(corners, w, g, vol, centroid), "simplex"
         else:
             bad, kind = kc.tensor_geometry(corners, *_tensor_corner_rule(d), w, g, vol, centroid), \
