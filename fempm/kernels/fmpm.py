@@ -85,10 +85,10 @@ if AVAILABLE:
             if not m > 0.0:
                 continue
             if m > active_min:
-                coupled = not (lumping and lump[i])
+                coupled_row = not (lumping and lump[i])
                 for j in range(k):
                     r = x[i, j]
-                    if free[i, j] and coupled:
+                    if free[i, j] and coupled_row:
                         mx = Mx[i, j] + (Mx[i, k] * x[i, j] if lumping else 0.0)
                         r += (b[i, cb + j] - mx) / m
                     if j < k1:

@@ -70,13 +70,12 @@ class FMPMNodalMass(NodalMass):
             self._work[key][1].fill(0.0)  # rows without mass are never cleared (nor read)
         return self._work[key]
 
-    def mc(self, y: npt.NDArray, zeroed: bool = False) -> npt.NDArray:
+    def mc(self, y: npt.NDArray) -> npt.NDArray:
         """:math:`M_C y` without the lumped dofs (and :math:`M_C 1_l` in one more column where
-        rows are lumped) on every local dof, ghosts summed and updated (the array of
-        :meth:`work`, set to 0 first unless ``zeroed``)."""
+        rows are lumped) on every local dof, ghosts summed and updated, into the array of
+        :meth:`work` (its rows with mass cleared by the pass over the dofs before: the lumped
+        solve or the last Richardson step)."""
         vec, out = self.work(y.shape[1])
-        if not zeroed:
-            out.fill(0.0)
         self.grid.mass_apply(y, self.lump, out)
         sum_ghosts(vec)
         return out
@@ -101,9 +100,9 @@ class FMPMNodalMass(NodalMass):
         for step in range(1, self.order):
             last = step == self.order - 1
             out = [np.zeros((g.num_dofs, d if last else k)), np.zeros((g.num_dofs, (k - d) if last else 0))]
-            kf.richardson(x, b, cb, self.mc(x, zeroed=True), mass, free, active_min, self.lump, *out, not last)
+            kf.richardson(x, b, cb, self.mc(x), mass, free, active_min, self.lump, *out, not last)
             x = out[0]
-        return out if fields == 2 else [out[0]]
+        return out[:fields]  # (fields = 1: the second is empty)
 
     def velocity(self, mass, mom, cv: int, active_min: float, guess=None, centroids=None) -> npt.NDArray:
         """The velocity solve; where the forces of the step sit next to the momenta in ``mom``
