@@ -17,10 +17,11 @@ __all__ = [
 ]
 
 
-def local_to_global_map(index_map: dolfinx.common.IndexMap) -> PETSc.LGMap:
+def local_to_global_map(index_map: dolfinx.common.IndexMap, bs: int = 1) -> PETSc.LGMap:
+    """The local (owned + ghost) to global map of ``index_map``'s blocks of size ``bs``."""
     n = index_map.size_local + index_map.num_ghosts
     g = index_map.local_to_global(np.arange(n, dtype=np.int32)).astype(PETSc.IntType)
-    return PETSc.LGMap().create(g, comm=index_map.comm)
+    return PETSc.LGMap().create(g, bsize=bs, comm=index_map.comm)
 
 
 def coo_pattern(
@@ -28,15 +29,17 @@ def coo_pattern(
     rows: npt.NDArray,
     cols: npt.NDArray,
     lgmap: PETSc.LGMap | None = None,
+    bs: int = 1,
 ) -> PETSc.Mat:
-    """Square AIJ matrix on ``index_map`` with the sparsity of COO entries in *local* indices
+    """Square AIJ matrix on ``index_map`` (blocks of ``bs`` rows: local row ``i bs + c`` is
+    component ``c`` of dof ``i``) with the sparsity of COO entries in *local* indices
     (owned + ghost); its values come with ``setValuesCOO`` (one per entry, in this order;
     repeated entries are summed, entries in rows owned by another rank are sent there)."""
-    n, N = index_map.size_local, index_map.size_global
+    n, N = index_map.size_local * bs, index_map.size_global * bs
     A = PETSc.Mat().create(comm=index_map.comm)
-    A.setSizes(((n, N), (n, N)))
+    A.setSizes(((n, N), (n, N)), bsize=bs)
     A.setType(PETSc.Mat.Type.AIJ)
-    A.setLGMap(lgmap or local_to_global_map(index_map))
+    A.setLGMap(lgmap or local_to_global_map(index_map, bs))
     A.setPreallocationCOOLocal(
         np.asarray(rows, dtype=PETSc.IntType).ravel().copy(),
         np.asarray(cols, dtype=PETSc.IntType).ravel().copy(),

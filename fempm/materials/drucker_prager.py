@@ -137,6 +137,47 @@ class DruckerPrager(HypoelasticPlastic):
         lam, G = self.lame
         return drucker_prager_return(S, eps_p, *self.parameters(d), G, lam + 2 * G / 3)
 
+    def return_tangent(self, S: npt.NDArray, eps_p: npt.NDArray, d: int) -> npt.NDArray:
+        r""":math:`\partial \sigma_{ij} / \partial \sigma^{tr}_{ab}` (n, 3, 3, 3, 3) of the return
+        mapping of trial stresses ``S`` in ``d`` dimensions (the algorithmic tangent). On the
+        cone, with :math:`r = \sqrt{J_2^{tr}}`, :math:`\Delta\gamma = f^{tr} / (G + K \eta\bar\eta)`,
+        :math:`s = (1 - G\Delta\gamma / r)\, s^{tr}`, :math:`p = p^{tr} - K\bar\eta\,\Delta\gamma`:
+        the derivatives of these through :math:`\partial r / \partial \sigma^{tr} = s^{tr} / (2 r)`
+        and :math:`\partial p^{tr} / \partial \sigma^{tr} = I / 3`. At the apex the stress is
+        fixed (a zero tangent: the stress no longer depends on the strain; a step with every
+        particle at the apex has no stiffness but the inertia's). Where the tension cut-off
+        holds the mean stress, its row of the derivative is zero."""
+        lam, G = self.lame
+        K = lam + 2 * G / 3
+        eta, k, eta_bar, p_t = self.parameters(d)
+        p, dev, ss = split(S)
+        root = np.sqrt(0.5 * ss)
+        f = root + eta * p - k
+        den = G + K * eta * eta_bar
+        dgamma = np.where(f > 0, f, 0.0) / den
+        apex = (f > 0) & (root - G * dgamma < 0)
+        cone_ = (f > 0) & ~apex
+        r = np.where(cone_, root, 1.0)
+        e = np.eye(3)
+        iso = np.einsum("ij,ab->ijab", e, e) / 3.0
+        ddev = np.einsum("ia,jb->ijab", e, e) - iso  # d s_ij / d S_ab
+        dp = np.broadcast_to(e / 3.0, S.shape)
+        droot = np.where(cone_[:, None, None], dev / (2.0 * r[:, None, None]), 0.0)
+        ddg = (droot + eta * dp) / den
+        scale = np.where(cone_, (root - G * dgamma) / r, 1.0)
+        dscale = np.where(cone_[:, None, None], (droot - G * ddg - scale[:, None, None] * droot) / r[:, None, None],
+                          0.0)
+        dp_new = np.where(cone_[:, None, None], dp - K * eta_bar * ddg, dp)
+        p_new = np.where(cone_, p - K * eta_bar * dgamma, p)
+        if eta > 0:  # the apex: the stress is the apex point
+            p_new[apex] = k / eta
+            dp_new = np.where(apex[:, None, None], 0.0, dp_new)
+        dp_new = np.where((p_new > p_t)[:, None, None], 0.0, dp_new)  # held by the tension cut-off
+        R = (np.einsum("nij,nab->nijab", dev, dscale) + scale[:, None, None, None, None] * ddev
+             + np.einsum("ij,nab->nijab", e, dp_new))
+        R[apex] = np.einsum("ij,nab->nijab", e, dp_new[apex])
+        return R
+
     def stress(self, F, L, sigma, dt, rho, state) -> npt.NDArray:
         d = L.shape[1]
         S, state["eps_p"] = self.return_map(self.trial(L, sigma, dt, state), state["eps_p"], d)

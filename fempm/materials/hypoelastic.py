@@ -46,6 +46,35 @@ class HypoelasticPlastic(IsotropicElastic):
             raise ValueError(f"{type(self).__name__} needs a 2D (plane strain) or 3D space, not {d}D")
         return jaumann_trial(L, sigma, state.get("sigma_zz"), dt, *self.lame)
 
+    def trial_tangent(self, sigma: npt.NDArray, state: dict) -> npt.NDArray:
+        r""":math:`\partial \sigma^{tr}_{ij} / \partial G_{kl}` (n, 3, 3, d, d) of the trial stress of
+        an increment, :math:`L\,\Delta t = G` (:mod:`fempm.materials.tangent`), on (n, d, d)
+        stresses at the step's start :math:`S`:
+
+        .. math::
+            \tfrac12 (\delta_{ik} S_{lj} - \delta_{il} S_{kj} - S_{ik} \delta_{jl} + S_{il} \delta_{jk})
+            + \lambda\, \delta_{ij} \delta_{kl} + \mu (\delta_{ik} \delta_{jl} + \delta_{il} \delta_{jk}).
+        """
+        d = sigma.shape[1]
+        lam, mu = self.lame
+        S = to3(sigma, state.get("sigma_zz"))
+        e3, e = np.eye(3), np.eye(3)[:, :d]
+        Sr, Sc = S[:, :d, :], S[:, :, :d]  # S_lj and S_ik with l, k < d
+        T = 0.5 * (np.einsum("ik,nlj->nijkl", e, Sr) - np.einsum("il,nkj->nijkl", e, Sr)
+                   - np.einsum("nik,jl->nijkl", Sc, e) + np.einsum("nil,jk->nijkl", Sc, e))
+        T += lam * np.einsum("ij,kl->ijkl", e3, np.eye(d)) + mu * (np.einsum("ik,jl->ijkl", e, e)
+                                                                   + np.einsum("il,jk->ijkl", e, e))
+        return T
+
+    def tangent(self, F, G, sigma, state) -> npt.NDArray:
+        r""":math:`\partial \sigma / \partial G` (n, d, d, d, d) of the increment (the consistent,
+        algorithmic tangent): the return mapping's derivative (``return_tangent``) applied to
+        the trial stress's (:meth:`trial_tangent`), at the step's internal variables ``state``."""
+        d = G.shape[1]
+        S = self.trial(G, sigma, 1.0, state)
+        R = self.return_tangent(S, state["eps_p"], d)
+        return np.einsum("nijab,nabkl->nijkl", R, self.trial_tangent(sigma, state))[:, :d, :d]
+
     def finish(self, S: npt.NDArray, d: int, state: dict) -> npt.NDArray:
         """The (n, d, d) stresses of returned (n, 3, 3) ones; the out-of-plane stress into ``state``."""
         if d == 2:

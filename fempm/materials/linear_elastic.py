@@ -41,6 +41,16 @@ class LinearElastic(IsotropicElastic):
         eps = self.strain(F)
         return lam * trace(eps)[:, None, None] * identity(len(F), F.shape[1]) + 2 * mu * eps
 
+    def tangent(self, F, G, sigma=None, state=None) -> npt.NDArray:
+        r""":math:`\partial \sigma_{ij} / \partial G_{kl}` (n, d, d, d, d) of the increment
+        :math:`F = (I + G) F_n` (:mod:`fempm.materials.tangent`):
+        :math:`\lambda\, \delta_{ij} F_{n,lk} + \mu (\delta_{ik} F_{n,lj} + \delta_{jk} F_{n,li})`,
+        independent of ``G`` (the law is linear in F)."""
+        lam, mu = self.lame
+        eye = np.eye(F.shape[1])
+        return (lam * np.einsum("ij,nlk->nijkl", eye, F) + mu * np.einsum("ik,nlj->nijkl", eye, F)
+                + mu * np.einsum("jk,nli->nijkl", eye, F))
+
     def energy_density(self, F) -> npt.NDArray:
         lam, mu = self.lame
         eps = self.strain(F)

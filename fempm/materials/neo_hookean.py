@@ -40,6 +40,28 @@ class NeoHookean(IsotropicElastic):
         d = F.shape[1]
         return (mu * (B - identity(len(F), d)) + (lam * np.log(J))[:, None, None] * identity(len(F), d)) / J[:, None, None]
 
+    def tangent(self, F, G, sigma=None, state=None) -> npt.NDArray:
+        r""":math:`\partial \sigma_{ij} / \partial G_{kl}` (n, d, d, d, d) of the increment
+        :math:`F = \Delta F\, F_n`, :math:`\Delta F = I + G` (:mod:`fempm.materials.tangent`),
+        with :math:`J = \det F`, :math:`B = F F^T`:
+
+        .. math::
+            \Big(\frac{\lambda (1 - \ln J)}{J} \delta_{ij} - \frac{\mu}{J} (B - I)_{ij}\Big) \Delta F^{-1}_{lk}
+            + \frac{\mu}{J} \big(\delta_{ik} (F F_n^T)_{jl} + \delta_{jk} (F F_n^T)_{il}\big).
+        """
+        lam, mu = self.lame
+        d = F.shape[1]
+        eye = np.eye(d)
+        Fnew = F + G @ F
+        J = np.linalg.det(Fnew)
+        B = Fnew @ np.swapaxes(Fnew, 1, 2)
+        volumetric = ((lam * (1.0 - np.log(J)) / J)[:, None, None] * eye - (mu / J)[:, None, None] * (B - eye))
+        FFn = Fnew @ np.swapaxes(F, 1, 2)
+        dFinv = np.linalg.inv(eye + G)
+        return (np.einsum("nij,nlk->nijkl", volumetric, dFinv)
+                + (mu / J)[:, None, None, None, None] * (np.einsum("ik,njl->nijkl", eye, FFn)
+                                                           + np.einsum("jk,nil->nijkl", eye, FFn)))
+
     def energy_density(self, F) -> npt.NDArray:
         lam, mu = self.lame
         lnJ = np.log(np.linalg.det(F))

@@ -61,6 +61,32 @@ class VonMises(HypoelasticPlastic):
         (:func:`fempm.kernels.plasticity.von_mises_return`, compiled)."""
         return von_mises_return(S, eps_p, self.yield_stress, self.hardening, self.lame[1])
 
+    def return_tangent(self, S: npt.NDArray, eps_p: npt.NDArray, d: int | None = None) -> npt.NDArray:
+        r""":math:`\partial \sigma_{ij} / \partial \sigma^{tr}_{ab}` (n, 3, 3, 3, 3) of the radial
+        return of trial stresses ``S``: the identity where elastic; where plastic, with
+        :math:`\beta = 3\mu\Delta\gamma / q^{tr}` and :math:`k = \sigma_y + H \bar\varepsilon_p`,
+
+        .. math::
+            \tfrac13 \delta_{ij}\delta_{ab} + (1 - \beta)\big(\delta_{ia}\delta_{jb}
+            - \tfrac13 \delta_{ij}\delta_{ab}\big)
+            - \frac{3\mu}{3\mu + H} \frac{3 k}{2 (q^{tr})^3}\, s^{tr}_{ij} s^{tr}_{ab}
+
+        (the algorithmic tangent: :math:`\beta` varies with :math:`q^{tr}`)."""
+        mu = self.lame[1]
+        H = self.hardening
+        _, dev, ss = split(S)
+        q = np.sqrt(1.5 * ss)
+        k = self.yield_stress + H * eps_p
+        plastic = q - k > 0
+        qp = np.where(plastic, q, 1.0)
+        beta = np.where(plastic, 3 * mu / (3 * mu + H) * (1.0 - k / qp), 0.0)
+        c = np.where(plastic, 3 * mu / (3 * mu + H) * 1.5 * k / qp**3, 0.0)
+        e = np.eye(3)
+        iso = np.einsum("ij,ab->ijab", e, e) / 3.0
+        unit = np.einsum("ia,jb->ijab", e, e)
+        return (iso + (1.0 - beta)[:, None, None, None, None] * (unit - iso)
+                - c[:, None, None, None, None] * np.einsum("nij,nab->nijab", dev, dev))
+
     def stress(self, F, L, sigma, dt, rho, state) -> npt.NDArray:
         S, state["eps_p"] = self.return_map(self.trial(L, sigma, dt, state), state["eps_p"])
         return self.finish(S, L.shape[1], state)

@@ -6,6 +6,7 @@ from dataclasses import dataclass
 from typing import Literal
 
 from fempm.arguments import check_numbers
+from fempm.implicit.dynamics import time_integration
 from fempm.stepping.schemes import scheme
 from fempm.transfer.domains import step_domain
 from fempm.transfer.mass_models import mass_model
@@ -50,6 +51,14 @@ class StepOptions:
     damping rate :math:`c` (1/s) of the grid acceleration, :math:`a_i \leftarrow a_i - c\, v_i`
     (it leaves a static solution unchanged; :math:`c \approx 2\omega_1` damps the lowest mode
     critically, for loading to a static state).
+    integrator: explicit (the default) or implicit (:mod:`fempm.implicit`: each step solves the
+    grid's momentum balance for the displacement increment by Newton's method, PETSc SNES with
+    the options prefix ``fempm_implicit_``). dynamics (implicit): newmark (``newmark_beta``,
+    ``newmark_gamma``; the trapezoidal rule by default) or quasi-static. tangent (implicit):
+    analytic (the laws' own ``tangent``) or finite-difference (central differences of the
+    stress update, for a law without one). max_cuts (implicit): how often a step that does not
+    converge is halved before the run stops. load_ramp (implicit, quasi-static): the loads are
+    scaled by :math:`\min(1, t / t_{ramp})` at a step's end time t (None: the loads as given).
     """
 
     scheme: Scheme = "MUSL"
@@ -66,6 +75,13 @@ class StepOptions:
     petsc_options_prefix: str = "fempm_step_"
     damping: float = 0.0
     fmpm_order: int | None = None
+    integrator: Literal["explicit", "implicit"] = "explicit"
+    dynamics: Literal["newmark", "quasi-static"] = "newmark"
+    newmark_beta: float = 0.25
+    newmark_gamma: float = 0.5
+    tangent: Literal["analytic", "finite-difference"] = "analytic"
+    max_cuts: int = 6
+    load_ramp: float | None = None
 
     def __post_init__(self):
         check_numbers(self)
@@ -77,6 +93,17 @@ class StepOptions:
         if not 0.0 <= self.flip <= 1.0:
             raise ValueError(f"flip={self.flip} must lie in [0, 1]")
         self.particle_domain = step_domain(self.domain, self.gimp_order, self.gimp_deform)
+        if self.integrator not in ("explicit", "implicit"):
+            raise ValueError(f"unknown option integrator={self.integrator!r}; expected explicit or implicit")
+        #: the implicit step's time integration (None: explicit)
+        self.integration = (time_integration(self.dynamics, self.newmark_beta, self.newmark_gamma)
+                            if self.integrator == "implicit" else None)
+        if self.tangent not in ("analytic", "finite-difference"):
+            raise ValueError(f"unknown option tangent={self.tangent!r}; expected analytic or finite-difference")
+        if self.load_ramp is not None and not 0.0 < self.load_ramp < float("inf"):
+            raise ValueError(f"load_ramp={self.load_ramp} must be a positive time (or None)")
+        if self.max_cuts < 0:
+            raise ValueError(f"max_cuts={self.max_cuts} must be a number of halvings >= 0")
         if self.particle_domain.tracks_corners and self.position == "particle":
             raise ValueError(f"domain={self.domain!r} moves the particle domains' corners with the grid velocity and "
                              "the particle with its domain's centroid: position='particle' would detach them")

@@ -20,6 +20,7 @@ import numpy.typing as npt
 from mpi4py import MPI
 
 from fempm.boundary.conditions import GridConditions
+from fempm.implicit.step import ImplicitStep
 from fempm.materials.base import check_materials, identity
 from fempm.meshes.cell_sizes import cell_sizes
 from fempm.particles.particle_set import Particles
@@ -48,12 +49,16 @@ class StepRecord:
         j_range: the global (min, max) of J after the last step (None before the first).
         mass_ratio: the last estimate of :math:`\lambda_{min}(M_L^{-1} M_C)` (consistent mass).
         extended_steps: steps whose particle domains reached beyond this rank's ghost cells.
+        newton_iterations: the Newton iterations of the implicit steps so far.
+        cut_steps: how often an implicit step that did not converge was halved.
     """
 
     terms: Counter = field(default_factory=Counter)
     j_range: tuple[float, float] | None = None
     mass_ratio: float = 1.0
     extended_steps: int = 0
+    newton_iterations: int = 0
+    cut_steps: int = 0
 
 
 @dataclass
@@ -130,6 +135,7 @@ class ExplicitSolver:
         self._stress_space: dolfinx.fem.FunctionSpace | None = None  # tensor space of grid_stress, on first use
         self._grid: Grid | None = None
         self._grid_key: tuple | None = None
+        self._implicit: tuple | None = None  # (id of the options, ImplicitStep)
 
     # the record's entries, read and set as the solver's (checkpoints restore them)
     terms = property(lambda self: self.record.terms, lambda self, v: setattr(self.record, "terms", v))
@@ -195,6 +201,14 @@ class ExplicitSolver:
             self._grid, self._grid_key = self._make_grid(), key
         return self._grid
 
+    @property
+    def implicit(self) -> ImplicitStep:
+        """The implicit step (``StepOptions(integrator="implicit")``, :mod:`fempm.implicit.step`),
+        made on first use and remade when the options change."""
+        if self._implicit is None or self._implicit[0] != id(self.options):
+            self._implicit = (id(self.options), ImplicitStep(self))
+        return self._implicit[1]
+
     def _make_grid(self) -> Grid:
         if self.contact is not None:  # one velocity field per body
             if self.compiled is not False and contact_points_supported(self):
@@ -226,6 +240,11 @@ class ExplicitSolver:
             Collective.
         """
         checks.check_step_arguments(self.particles, dt, dt_max)
+        if self.options.integration is not None:  # implicit
+            dt = self.implicit.step(dt)
+            self.t += dt
+            self.step_count += 1
+            return dt
         grid = self.grid.for_step()
         grid.totals = totals
         stable = grid.open(dt)

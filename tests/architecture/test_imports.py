@@ -20,7 +20,7 @@ LAYERS = (
     ("fempm.particles",),
     ("fempm.transfer",),
     ("fempm.boundary",),
-    ("fempm.stepping",),
+    ("fempm.stepping", "fempm.implicit"),  # the implicit step is a stepping of its own
     ("fempm.verification",),
     ("fempm.io",),
     ("fempm.scene",),

@@ -1,0 +1,115 @@
+"""Newton's method on PETSc SNES for the implicit step, with the options prefix
+``fempm_implicit_`` (:class:`Newton`)."""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+import numpy.typing as npt
+from petsc4py import PETSc
+
+from fempm.petsc import temporary_options
+
+__all__ = ["NEWTON_OPTIONS", "NULL_PIVOT", "Newton", "NewtonResult", "null_pivots"]
+
+#: fempm's defaults under the prefix (the options database wins): Newton with a backtracking
+#: line search, each linear solve GMRES preconditioned by a parallel LU factorization (MUMPS;
+#: for large 3D problems e.g. ``-fempm_implicit_pc_type gamg``)
+NEWTON_OPTIONS: dict[str, Any] = {
+    "snes_type": "newtonls",
+    "snes_linesearch_type": "bt",
+    "snes_rtol": 1e-10,
+    "snes_atol": 1e-300,
+    "snes_stol": 0.0,
+    "snes_max_it": 25,
+    "ksp_type": "gmres",
+    "ksp_rtol": 1e-12,
+    "pc_type": "lu",
+    "pc_factor_mat_solver_type": "mumps",
+}
+
+
+#: a pivot below this fraction of the tangent's norm counts as null in :func:`null_pivots`
+NULL_PIVOT = 1e-10
+
+
+@dataclass
+class NewtonResult:
+    """What a Newton solve did.
+
+    Attributes:
+        converged: whether SNES reports convergence.
+        reason: SNES's converged reason (its name).
+        iterations: Newton iterations.
+        residuals: the residual norm before each iteration and after the last.
+    """
+
+    converged: bool
+    reason: str
+    iterations: int
+    residuals: npt.NDArray
+
+
+class Newton:
+    """A SNES with options prefix ``prefix`` (defaults :data:`NEWTON_OPTIONS`, then ``options``,
+    then the options database under the prefix).
+
+    Note:
+        Construction and :meth:`solve` are collective.
+    """
+
+    def __init__(self, comm, prefix: str = "fempm_implicit_", options: dict[str, Any] | None = None):
+        self.snes = PETSc.SNES().create(comm)
+        self.snes.setOptionsPrefix(prefix)
+        with temporary_options(prefix, {**NEWTON_OPTIONS, **(options or {})}):
+            self.snes.setFromOptions()
+            self.snes.getKSP().setFromOptions()
+            self.snes.getKSP().getPC().setFromOptions()
+            self.snes.getLineSearch().setFromOptions()
+
+    def solve(self, residual: Callable[[PETSc.Vec, PETSc.Vec], None], jacobian: Callable[[PETSc.Vec, PETSc.Mat], None],
+              J: PETSc.Mat, x: PETSc.Vec) -> NewtonResult:
+        """Solve ``residual(x, r) = 0`` from the guess in ``x`` (the solution left there), with
+        ``jacobian(x, J)`` filling the tangent ``J``; ``residual`` may call
+        :meth:`domain_error` where ``x`` is outside its domain (the line search then steps back)."""
+        snes = self.snes
+        r = x.duplicate()
+        snes.setFunction(lambda _snes, xx, rr: residual(xx, rr), r)
+        snes.setJacobian(lambda _snes, xx, JJ, _P: jacobian(xx, JJ), J, J)
+        snes.setConvergenceHistory(length=snes.getTolerances()[3] + 1, reset=True)
+        snes.solve(None, x)
+        reason = snes.getConvergedReason()
+        norms = np.asarray(snes.getConvergenceHistory()[0], dtype=float).copy()
+        names = {v: k for k, v in vars(PETSc.SNES.ConvergedReason).items() if isinstance(v, int)}
+        r.destroy()
+        return NewtonResult(reason > 0, names.get(reason, str(reason)), snes.getIterationNumber(), norms)
+
+    def domain_error(self) -> None:
+        """Flag the residual being evaluated as outside its domain (an increment that inverts a particle)."""
+        self.snes.setFunctionDomainError()
+
+
+def null_pivots(J: PETSc.Mat) -> int | None:
+    r"""The rank deficiency of the assembled tangent ``J``: the null pivots of its MUMPS LU
+    factorization with null-pivot detection (``ICNTL(24) = 1``, a pivot below
+    :data:`NULL_PIVOT` :math:`\|J\|` null), made apart from the Newton solves (whose
+    factorizations stay exact); None without MUMPS. Collective."""
+    if not PETSc.Sys.hasExternalPackage("mumps"):
+        return None
+    ksp = PETSc.KSP().create(J.getComm())
+    ksp.setType(PETSc.KSP.Type.PREONLY)
+    pc = ksp.getPC()
+    pc.setType(PETSc.PC.Type.LU)
+    pc.setFactorSolverType("mumps")
+    ksp.setOperators(J, J)
+    pc.setFactorSetUpSolverType()
+    F = pc.getFactorMatrix()
+    F.setMumpsIcntl(24, 1)
+    F.setMumpsCntl(3, NULL_PIVOT)
+    ksp.setUp()
+    count = int(F.getMumpsInfog(28))
+    ksp.destroy()
+    return count

@@ -1,0 +1,122 @@
+r"""The particles' side of an implicit step: what a displacement increment of the grid does to
+them, and the residual's tangent as per-particle blocks.
+
+The basis (values :math:`N_a(x_p)`, gradients :math:`\nabla N_a(x_p)`, averaged over the
+particle domain where there is one) is tabulated once, where the particles sit at the step's
+start, and stays fixed while Newton iterates (:mod:`fempm.implicit.nominal`). For an increment
+:math:`\Delta u` of the grid,
+
+.. math::
+    G_p = \sum_a \Delta u_a \otimes \nabla N_a(x_p), \qquad
+    f^{int}_a = \sum_p V_p^n P_p \nabla N_a(x_p), \qquad
+    K_{a i, b k} = \sum_p V_p^n\, \partial_m N_a\, \mathbb{A}_{p, imkl}\, \partial_l N_b
+    + c \sum_p M_p\, N_a N_b\, \delta_{ik},
+
+the last term the inertia of Newmark's method (:math:`c = 1/(\beta \Delta t^2)`), with the
+consistent mass or, lumped, :math:`c\, \delta_{ab} \sum_p M_p N_a`.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+
+import numpy as np
+import numpy.typing as npt
+
+from fempm.implicit.nominal import nominal_stress
+from fempm.materials.tangent import stress_after, tangent_of
+from fempm.particles.particle_set import Particles
+from fempm.stepping.laws import law_state, material_groups
+from fempm.transfer.basis import ParticleBasis
+from fempm.transfer.mapping import p2g, p2g_gradients
+
+__all__ = ["IncrementOperator"]
+
+
+class IncrementOperator:
+    """The increment's action on the particles of a step (see the module).
+
+    Args:
+        basis: The basis at the particles at the step's start, with gradients.
+        particles: The particles (their state at the step's start is read, not changed).
+        materials: The laws, one per body index.
+        finite_difference: Take the laws' tangents by central differences
+            (:func:`fempm.materials.tangent.finite_difference_tangent`) instead of their own.
+    """
+
+    def __init__(self, basis: ParticleBasis, particles: Particles, materials: Sequence,
+                 finite_difference: bool = False):
+        f = particles.fields
+        self.basis = basis
+        self.d = particles.gdim
+        self.volume = particles.volume.copy()
+        self.mass = particles.mass
+        self.rho = particles.mass / particles.volume
+        self.F, self.sigma = f["F"], f["sigma"]
+        self.groups = [(mat, idx, law_state(mat, f, idx)) for mat, idx in material_groups(f, materials)]
+        self.finite_difference = finite_difference
+
+    def gradients(self, du: npt.NDArray) -> npt.NDArray:
+        r""":math:`G_p = \sum_a \Delta u_a \otimes \nabla N_a(x_p)` (n, d, d) of an increment ``du``
+        (owned + ghost dofs, d)."""
+        b = self.basis
+        return np.einsum("pak,pal->pkl", du[b.dofs], b.gradients)
+
+    def stresses(self, G: npt.NDArray, tangent: bool) -> tuple[npt.NDArray, npt.NDArray | None]:
+        r"""The nominal stresses :math:`P_p` (n, d, d) after the increments of gradients ``G``,
+        and with ``tangent`` their tangents :math:`\mathbb{A}_p` (n, d, d, d, d) (else None)."""
+        n, d = len(G), self.d
+        sigma = np.empty((n, d, d))
+        D = np.empty((n, d, d, d, d)) if tangent else None
+        for mat, idx, state in self.groups:
+            sigma[idx] = stress_after(mat, self.F[idx], G[idx], self.sigma[idx], self.rho[idx], state)[0]
+            if D is not None:
+                D[idx] = tangent_of(mat, self.F[idx], G[idx], self.sigma[idx], self.rho[idx], state,
+                                    finite_difference=self.finite_difference)
+        return nominal_stress(sigma, D, G)
+
+    def internal_force(self, P: npt.NDArray) -> npt.NDArray:
+        r""":math:`f^{int}_a = \sum_p V_p^n P_p \nabla N_a` (owned + ghost dofs, d), summed over ranks."""
+        return p2g_gradients(self.basis, self.volume[:, None, None] * P)
+
+    def nodal(self, values: npt.NDArray) -> npt.NDArray:
+        r""":math:`\sum_p N_a(x_p)\, w_p` of per-particle ``values`` (n, k), summed over ranks."""
+        return p2g(self.basis, values)
+
+    def mass_times(self, a: npt.NDArray, consistent: bool, lumped: npt.NDArray) -> npt.NDArray:
+        r""":math:`M a` of nodal vectors ``a`` (owned + ghost dofs, d): the consistent mass
+        :math:`\sum_p M_p N_a(x_p) \sum_b N_b(x_p) a_b`, else the ``lumped`` masses times ``a``."""
+        if consistent:
+            return self.nodal(self.mass[:, None] * self.basis.gather(a))
+        return lumped[:, None] * a
+
+    def pattern(self) -> tuple[npt.NDArray, npt.NDArray]:
+        """(rows, columns) of the tangent's entries in local scalar indices (dof d + component):
+        each particle's block over its dofs (:meth:`tangent_values`' order), then the
+        diagonal of every local dof (zeros where no particle reaches: their rows are held)."""
+        d = self.d
+        dofs = self.basis.dofs
+        idx = (dofs[:, :, None] * d + np.arange(d)).reshape(len(dofs), -1)  # (n, k d)
+        m = idx.shape[1]
+        diagonal = np.arange(self.basis.num_dofs_local * d)
+        rows = np.concatenate([np.broadcast_to(idx[:, :, None], (len(idx), m, m)).ravel(), diagonal])
+        cols = np.concatenate([np.broadcast_to(idx[:, None, :], (len(idx), m, m)).ravel(), diagonal])
+        return rows, cols
+
+    def tangent_values(self, A: npt.NDArray, mass_factor: float, consistent: bool) -> npt.NDArray:
+        r"""The entries of :meth:`pattern`: each particle's
+        :math:`V_p^n \nabla N_a \cdot \mathbb{A}_p \cdot \nabla N_b` plus ``mass_factor`` times
+        its mass block (consistent, or lumped on the block's diagonal), then zeros."""
+        b, d = self.basis, self.d
+        k = b.dofs.shape[1]
+        K = np.einsum("p,pam,pimkl,pbl->paibk", self.volume, b.gradients, A, b.gradients)
+        if mass_factor:
+            S = b.values
+            eye = np.eye(d)
+            if consistent:
+                block = (mass_factor * self.mass)[:, None, None] * S[:, :, None] * S[:, None, :]
+                K += block[:, :, None, :, None] * eye[None, None, :, None, :]
+            else:
+                a = np.arange(k)
+                K[:, a, :, a, :] += ((mass_factor * self.mass)[:, None] * S).T[:, :, None, None] * eye
+        return np.concatenate([K.ravel(), np.zeros(b.num_dofs_local * d)])

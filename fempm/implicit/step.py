@@ -1,0 +1,219 @@
+r"""The implicit step (``StepOptions(integrator="implicit")``): Newton's method on the grid's
+displacement increment, then the particles updated as in the explicit step.
+
+A step of :math:`\Delta t` from the particles' state at :math:`t_n`:
+
+1. the basis at the particles, the lumped masses :math:`m_a = \sum_p M_p N_a(x_p)`, the dofs
+   that hold: components held by the conditions (fixed, axis-aligned slip) and dofs that no
+   particle reaches; with Newmark's method the grid velocity and acceleration of the particles',
+   :math:`v_a = \sum_p M_p N_a v_p / m_a` (likewise :math:`a_a`);
+2. Newton's method (:class:`fempm.implicit.newton.Newton`, PETSc SNES, prefix
+   ``fempm_implicit_``) on
+
+   .. math::
+       R(\Delta u) = M a^{+}(\Delta u) + f^{int}(\Delta u) - f^{ext}(t_n + \Delta t) = 0
+
+   (:mod:`fempm.implicit.operator`; :mod:`fempm.implicit.dynamics` for :math:`a^{+}`, no
+   inertia when quasi-static, the loads then scaled by ``StepOptions.load_ramp``), the held
+   components' rows :math:`\Delta u_{ai} = 0`;
+3. the particles: :math:`F_p \leftarrow (I + G_p) F_p`, the laws' stress and internal
+   variables of the converged increment, :math:`V_p = J_p V^0_p`,
+   :math:`x_p \leftarrow x_p + \sum_a N_a \Delta u_a`; with Newmark's method
+   :math:`a_p = \sum_a N_a a^{+}_a` and the velocity blended as in the explicit G2P
+   (FLIP :math:`v_p + \sum_a N_a (v^{+}_a - v_a)`, PIC :math:`\sum_a N_a v^{+}_a`); quasi-static,
+   :math:`v_p = a_p = 0`.
+
+A step whose Newton iterations do not converge is not accepted: it is taken again as two halves
+(each of which may be halved again, up to ``StepOptions.max_cuts`` times), and every cut is
+counted in :attr:`fempm.stepping.solver.StepRecord.cut_steps`.
+"""
+
+from __future__ import annotations
+
+from typing import TYPE_CHECKING
+
+import dolfinx.la
+import numpy as np
+import numpy.typing as npt
+from mpi4py import MPI
+from petsc4py import PETSc
+
+from fempm import petsc as fpetsc
+from fempm.implicit.newton import Newton, null_pivots
+from fempm.implicit.operator import IncrementOperator
+from fempm.stepping.grid import BasisGrid
+from fempm.stepping.loads import external_forces
+from fempm.transfer.mapping import SUPPORT_TOL
+from fempm.transfer.mass_models import FMPM
+
+if TYPE_CHECKING:
+    from fempm.stepping.solver import ExplicitSolver
+
+__all__ = ["ImplicitStep"]
+
+
+class ImplicitStep(BasisGrid):
+    """The implicit step of ``solver`` (see the module).
+
+    Raises:
+        ValueError: Options or conditions the implicit step does not take (FMPM mass, contact,
+            conditions other than fixed dofs and axis-aligned slip).
+        TypeError: A law without a tangent, unless ``StepOptions(tangent="finite-difference")``.
+    """
+
+    def __init__(self, solver: ExplicitSolver):
+        super().__init__(solver)
+        opts = solver.options
+        if isinstance(opts.mass_model, FMPM):
+            raise ValueError(  # noqa: TRY004 - an option's value
+                "the implicit step takes lumped or consistent mass, not FMPM (an explicit step's approximation of "
+                "the consistent mass): give mass='consistent'")
+        if solver.contact is not None:
+            raise ValueError("the implicit step does not take contact between bodies (contact=...) yet")
+        if opts.position == "particle":
+            raise ValueError("the implicit step moves the particles with the grid's displacement: position='particle' "
+                             "does not apply")
+        if not solver.conditions.zero_components:
+            raise ValueError("the implicit step takes fixed dofs and slip walls normal to a coordinate axis; other "
+                             "conditions (friction, prescribed velocities, inclined walls) need the explicit step")
+        if opts.tangent == "analytic":
+            for mat in solver.materials:
+                if not hasattr(mat, "tangent"):
+                    raise TypeError(f"{type(mat).__name__} has no tangent(F, G, sigma, state), which the implicit step "
+                                    "needs: give the law one, or take StepOptions(tangent='finite-difference')")
+        self.integration = opts.integration
+        self.consistent = opts.mass_model.matrix
+        self.newton = Newton(solver.particles.comm)
+        self.last = None  # the NewtonResult of the last accepted (sub)step
+        self.last_failure = ""  # what the last failed Newton solve reported
+
+    def step(self, dt: float) -> float:
+        """Advance the particles by ``dt`` (in halves where Newton fails, see the module); returns ``dt``.
+
+        Note:
+            Collective.
+        """
+        if dt is None or not dt > 0.0:
+            raise ValueError(f"the implicit step needs a time step dt > 0 (got {dt}): it is not bound by the CFL "
+                             "condition, so there is no stable step to default to")
+        self._advance(self.solver.t, dt, 0)
+        return dt
+
+    def _advance(self, t: float, dt: float, cuts: int) -> None:
+        s = self.solver
+        if self._try(t, dt):
+            return
+        if cuts == self.options.max_cuts:
+            s.fail(f"the implicit step did not converge ({self.last_failure}) after {cuts} halving(s) of dt, "
+                   f"down to dt = {dt:.3g}")
+        s.record.cut_steps += 1
+        self._advance(t, 0.5 * dt, cuts + 1)
+        self._advance(t + 0.5 * dt, 0.5 * dt, cuts + 1)
+
+    def _try(self, t: float, dt: float) -> bool:
+        """One Newton solve over [t, t + dt]; the particles updated if it converged."""
+        s, p, integ = self.solver, self.solver.particles, self.integration
+        d = p.gdim
+        basis = self.open_basis()
+        op = IncrementOperator(basis, p, s.materials, finite_difference=self.options.tangent == "finite-difference")
+        m = op.nodal(p.mass[:, None])[:, 0]
+        free = self._free(m, basis.num_dofs_local)
+        v, a = np.zeros_like(free, dtype=float), np.zeros_like(free, dtype=float)
+        if integ.inertia:
+            f = p.fields
+            f.setdefault("a", np.zeros((len(p), d)))
+            mv = op.nodal(p.mass[:, None] * np.hstack([f["v"], f["a"]]))
+            safe = np.where(m > 0, m, 1.0)[:, None]
+            v, a = np.where(free, mv[:, :d] / safe, 0.0), np.where(free, mv[:, d:] / safe, 0.0)
+        fext = op.nodal(external_forces(s.loads, p, t + dt))
+        if not integ.inertia and self.options.load_ramp is not None:
+            fext *= min(1.0, (t + dt) / self.options.load_ramp)
+        c = integ.mass_factor(dt)
+        imap = basis.index_map
+        owned = imap.size_local
+        held = np.flatnonzero(~free[:owned].ravel()).astype(np.int32)
+        ghosted = dolfinx.la.vector(imap, bs=d)
+
+        def increment(x) -> npt.NDArray:
+            ghosted.array[: owned * d] = x.array_r
+            ghosted.scatter_forward()
+            return ghosted.array.reshape(-1, d).copy()
+
+        def inverts(G) -> bool:
+            bad = int(np.count_nonzero(~(np.linalg.det(np.eye(d) + G) > 0.0)))
+            return bool(p.comm.allreduce(bad))
+
+        def residual(x, r) -> None:
+            du = increment(x)
+            G = op.gradients(du)
+            if inverts(G):
+                self.newton.domain_error()
+                return
+            P, _ = op.stresses(G, tangent=False)
+            R = op.internal_force(P) - fext
+            if integ.inertia:
+                R += op.mass_times(integ.acceleration(du, v, a, dt), self.consistent, m)
+            R[~free] = du[~free]
+            r.array[:] = R[:owned].ravel()
+
+        rows, cols = op.pattern()
+        J = fpetsc.coo_pattern(imap, rows, cols, bs=d)
+
+        def jacobian(x, JJ) -> None:
+            du = increment(x)
+            G = op.gradients(du)
+            _, A = op.stresses(G, tangent=True)
+            JJ.setValuesCOO(op.tangent_values(A, c, self.consistent), addv=PETSc.InsertMode.INSERT_VALUES)
+            JJ.assemble()
+            JJ.zeroRowsColumnsLocal(held, diag=1.0)
+
+        x = J.createVecRight()
+        x.array[:] = (dt * v[:owned] if integ.inertia else np.zeros((owned, d))).ravel()  # constant velocity
+        result = self.newton.solve(residual, jacobian, J, x)
+        if not result.converged:
+            self.last_failure = f"SNES {result.reason} after {result.iterations} iteration(s)"
+            deficiency = None if integ.inertia else null_pivots(J)  # (with inertia the tangent is regular)
+            if deficiency:  # a smaller step cannot help
+                s.fail(f"singular tangent in the quasi-static step ({deficiency} null pivot(s)): a body whose rigid "
+                       "motions no condition holds (give it supports, or take dynamics='newmark')")
+            J.destroy()
+            x.destroy()
+            return False
+        self.last = result
+        s.record.newton_iterations += result.iterations
+        du = increment(x)
+        J.destroy()
+        x.destroy()
+        self._update(basis, op, du, v, a, dt)
+        return True
+
+    def _free(self, m: npt.NDArray, num_local: int) -> npt.NDArray[np.bool_]:
+        """(owned + ghost dofs, d): the components solved for: not held by a condition, on dofs
+        that particles reach (lumped mass above :data:`SUPPORT_TOL` of the largest)."""
+        s = self.solver
+        d = s.particles.gdim
+        free = np.ones((num_local, d), dtype=np.bool_)
+        space = s.conditions.free(d)
+        free[: len(space)] = space
+        largest = s.particles.comm.allreduce(float(m.max(initial=0.0)), op=MPI.MAX)
+        free &= (m > SUPPORT_TOL * largest)[:, None]
+        return free
+
+    def _update(self, basis, op: IncrementOperator, du: npt.NDArray, v: npt.NDArray, a: npt.NDArray, dt: float) -> None:
+        """The particles after the converged increment ``du`` (see the module)."""
+        s, p, integ = self.solver, self.solver.particles, self.integration
+        f = p.fields
+        if integ.inertia:
+            a_new = integ.acceleration(du, v, a, dt)
+            v_new = integ.velocity(v, a, a_new, dt)
+            flip = self.options.flip
+            f["v"] = flip * (f["v"] + basis.gather(v_new - v)) + (1.0 - flip) * basis.gather(v_new)
+            f["a"] = basis.gather(a_new)
+            s.grid_velocity = v_new[: basis.num_dofs_space]
+        else:
+            f["v"] = np.zeros_like(f["v"])
+            s.grid_velocity = np.zeros((basis.num_dofs_space, p.gdim))
+        self.update_kinematics(op.gradients(du), 1.0)
+        self.move(basis.gather(du), lambda: basis.gather_samples(du), 1.0)
+        self.close()
+        self.relocate()

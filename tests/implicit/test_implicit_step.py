@@ -1,0 +1,181 @@
+"""The implicit step (fempm.implicit): Newton's quadratic convergence, Cook's membrane against the
+finite element reference, Newmark's method on the vibrating bar, step cuts, and its errors; on 1
+and 2 ranks (the 2-rank run against the same problem on one rank)."""
+
+import numpy as np
+import pytest
+from mpi4py import MPI
+from petsc4py import PETSc
+
+import fempm  # before dolfinx
+from fempm.materials import NeoHookean
+from fempm.scenes.bar import vibrating_bar
+from fempm.scenes.cook import cook_membrane, corner_displacement
+from fempm.stepping import ExplicitSolver, Loads, SimulationError, StepOptions
+
+pytestmark = pytest.mark.parallel  # also under mpiexec -n 2 (scripts/run-tests)
+
+#: the vertical displacement of C per unit load, DOLFINx Taylor-Hood P2/P1 at h = 0.5, nu = 1/3
+#: (docs/verification.md, fempm.scenes.cook.fe_reference)
+COOK_REFERENCE = 22.592
+QUASI_STATIC = {"integrator": "implicit", "dynamics": "quasi-static"}
+
+
+def cook_solver(h, comm=MPI.COMM_WORLD, **options):
+    scene = cook_membrane(h=h, nu=1 / 3, load=1e-3, comm=comm)
+    scene.options = StepOptions(**{**QUASI_STATIC, **options})
+    return scene.solver()
+
+
+@pytest.fixture
+def petsc_options():
+    """Options set in the PETSc database for one test, removed after it."""
+    opts = PETSc.Options()
+    added = []
+
+    def put(**values):
+        for k, v in values.items():
+            opts[k] = v
+            added.append(k)
+
+    yield put
+    for k in added:
+        opts.delValue(k)
+
+
+@pytest.mark.parametrize("law, load", [(None, 1e-3), (NeoHookean(1.0, 1 / 3), 0.02)],
+                         ids=["linear-elastic", "neo-hookean-finite-strain"])
+def test_newton_converges_quadratically_on_cooks_membrane(law, load):
+    scene = cook_membrane(h=4.0, nu=1 / 3, load=load)
+    scene.options = StepOptions(**QUASI_STATIC)
+    if law is not None:
+        scene.materials = [law]
+    s = scene.solver()
+    s.step(1.0)
+    r = s.implicit.last.residuals
+    print("SNES residual norms:", " ".join(f"{v:.3e}" for v in r))
+    assert s.implicit.last.converged and 2 <= s.implicit.last.iterations <= 5
+    e = r / r[0]
+    # the order q of e_(k+1) = e_k^q, where Newton is in its asymptotic range (e_k < 1e-2) and
+    # above the round-off floor (about 2e-11)
+    orders = [np.log(e[k + 1]) / np.log(e[k]) for k in range(len(e) - 1) if e[k] < 1e-2 and e[k + 1] > 1e-10]
+    assert orders and min(orders) >= 1.8, orders
+
+
+@pytest.mark.parametrize("steps", [1, 4])
+def test_cook_corner_displacement_within_1p5_percent_quasi_static(steps):
+    s = cook_solver(2.0, load_ramp=1.0)
+    for _ in range(steps):
+        s.step(1.0 / steps)
+    uy = corner_displacement(s.particles)[1] / 1e-3
+    assert abs(uy / COOK_REFERENCE - 1.0) < 0.015, uy
+    assert s.t == pytest.approx(1.0) and s.record.cut_steps == 0
+
+
+def test_two_ranks_equal_one_rank():
+    world = cook_solver(4.0)
+    world.step(1.0)
+    alone = cook_solver(4.0, comm=MPI.COMM_SELF)
+    alone.step(1.0)
+    u_world, u_alone = corner_displacement(world.particles), corner_displacement(alone.particles)
+    np.testing.assert_allclose(u_world, u_alone, rtol=1e-9)
+    assert world.implicit.last.iterations == alone.implicit.last.iterations
+
+
+@pytest.mark.parametrize("mass", ["lumped", "consistent"])
+def test_newmark_on_the_vibrating_bar_at_courant_4(mass):
+    scene = vibrating_bar(cells=16)
+    pr = scene.params
+    scene.options = StepOptions(integrator="implicit", dynamics="newmark", mass=mass)
+    s = scene.solver()
+    c = np.sqrt(pr["E"] / pr["rho"])
+    dt = 4.0 * (pr["L"] / pr["cells"]) / c  # Courant number 4: ten explicit steps at CFL 0.4
+    period = 2 * np.pi / pr["omega"]
+    e0 = s.energies()["total"]
+    p = s.particles
+    amplitude = pr["v0"] / (pr["beta"] * pr["L"])
+    worst = 0.0
+    for _ in range(round(period / dt)):
+        s.step(dt)
+        v_cm = p.comm.allreduce(float(np.sum(p.mass * p.fields["v"][:, 0]))) / p.comm.allreduce(float(np.sum(p.mass)))
+        worst = max(worst, abs(v_cm - amplitude * np.cos(pr["omega"] * s.t)) / amplitude)
+    # the trapezoidal rule's period error, (omega dt)^2 / 12 = 1.3 %, costs 8 % of the amplitude in a period
+    assert worst < 0.12, worst
+    assert abs(s.energies()["total"] / e0 - 1.0) < 0.01
+    assert s.record.newton_iterations == round(period / dt)  # linear: one Newton step each
+
+
+def test_a_step_newton_cannot_take_is_halved(petsc_options):
+    petsc_options(fempm_implicit_snes_max_it=1)  # too few for this nonlinear step
+    s = cook_solver(6.0, max_cuts=2)
+    with pytest.raises(SimulationError, match=r"did not converge \(SNES DIVERGED_MAX_IT.*after 2 halving\(s\)"):
+        s.step(1.0)
+    assert s.record.cut_steps == 2 and s.t == 0.0
+
+
+def test_a_free_body_in_a_quasi_static_step_has_a_singular_tangent():
+    import dolfinx.fem
+    import dolfinx.mesh
+
+    mesh = dolfinx.mesh.create_unit_square(MPI.COMM_WORLD, 6, 6, dolfinx.mesh.CellType.triangle)
+    V = dolfinx.fem.functionspace(mesh, ("Lagrange", 1, (2,)))
+    p = fempm.create_particles(mesh, 4)
+    s = ExplicitSolver(V, p, [NeoHookean(100.0, 0.3)], loads=Loads(body_force=(0.0, -1.0)),
+                       options=StepOptions(**QUASI_STATIC))
+    with pytest.raises(SimulationError, match=r"singular tangent in the quasi-static step \(3 null pivot"):
+        s.step(0.1)
+
+
+@pytest.mark.parametrize("options, message", [
+    ({"integrator": "implicitly"}, r"unknown option integrator='implicitly'; expected explicit or implicit"),
+    ({"integrator": "implicit", "dynamics": "static"}, r"unknown option dynamics='static'"),
+    ({"integrator": "implicit", "newmark_beta": 0.6}, r"newmark_beta=0.6 must lie in \(0, 1/2\]"),
+    ({"integrator": "implicit", "newmark_gamma": 0.4}, r"newmark_gamma=0.4 must lie in \[1/2, 1\]"),
+    ({"integrator": "implicit", "tangent": "numeric"}, r"unknown option tangent='numeric'"),
+    ({"integrator": "implicit", "load_ramp": 0.0}, r"load_ramp=0.0 must be a positive time"),
+])
+def test_bad_implicit_options(options, message):
+    with pytest.raises(ValueError, match=message):
+        StepOptions(**options)
+
+
+class SmallStrain:
+    """A user law with a stress and no tangent: LinearElastic(E = 1, nu = 1/3) written out."""
+
+    history = ()
+
+    def stress(self, F, L, sigma, dt, rho):
+        lam, mu = 0.75, 0.375  # E = 1, nu = 1/3
+        eps = 0.5 * (F + np.swapaxes(F, 1, 2)) - np.eye(F.shape[1])
+        return lam * np.trace(eps, axis1=1, axis2=2)[:, None, None] * np.eye(F.shape[1]) + 2 * mu * eps
+
+    def wave_speed(self, F, rho):
+        return np.sqrt(1.5 / rho)
+
+    def energy_density(self, F):
+        return np.zeros(len(F))
+
+
+def test_a_law_without_tangent_runs_with_the_finite_difference_one_asked_for_by_name():
+    scene = cook_membrane(h=4.0, nu=1 / 3, load=1e-3)
+    scene.materials = [SmallStrain()]
+    scene.options = StepOptions(**QUASI_STATIC)
+    with pytest.raises(TypeError, match=r"SmallStrain has no tangent.*StepOptions\(tangent='finite-difference'\)"):
+        scene.solver().step(1.0)
+    scene = cook_membrane(h=4.0, nu=1 / 3, load=1e-3)
+    scene.materials = [SmallStrain()]
+    scene.options = StepOptions(**QUASI_STATIC, tangent="finite-difference")
+    s = scene.solver()
+    s.step(1.0)
+    analytic = cook_solver(4.0)
+    analytic.step(1.0)
+    np.testing.assert_allclose(corner_displacement(s.particles), corner_displacement(analytic.particles), rtol=1e-9)
+    assert s.implicit.last.iterations == analytic.implicit.last.iterations
+
+
+def test_implicit_step_refuses_what_it_cannot_take():
+    with pytest.raises(ValueError, match=r"lumped or consistent mass, not FMPM"):
+        cook_solver(6.0, mass="fmpm2").step(1.0)
+    s = cook_solver(6.0)
+    with pytest.raises(ValueError, match=r"the implicit step needs a time step dt > 0"):
+        s.step()
