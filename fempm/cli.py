@@ -23,7 +23,6 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
-import math
 import sys
 from pathlib import Path
 
@@ -39,6 +38,7 @@ from fempm.io.writers import (
     OutputWriteError,
 )
 from fempm.particles.location import OutsideMeshError
+from fempm.run_options import UsageError, health_options, scene_options, stepping_options, with_stepping
 from fempm.scene.loop import run
 from fempm.scenes import SCENES
 from fempm.stepping.health import Health
@@ -48,10 +48,6 @@ from fempm.studies.harness import Provenance
 from fempm.transfer.mapping import SingularMassError
 
 __all__ = ["UsageError", "main"]
-
-
-class UsageError(SystemExit):
-    """A mistake in the command line: its message on one line, exit code 2, no traceback."""
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -173,83 +169,6 @@ _STUDY_RUNS = {"mapping": _mapping, "particle-basis": _particle_basis, "converge
                "stability": _stability, "error-vs-time": _error_vs_time}
 
 
-def _scene_options(builder, rest: list[str]) -> dict:
-    """``--name value`` pairs typed after the builder's defaults; unknown names are errors."""
-    import inspect
-
-    signature = inspect.signature(builder).parameters
-    params = {k: v.default for k, v in signature.items() if k != "comm"}
-    opts = {}
-    it = iter(rest)
-    for flag in it:
-        if not flag.startswith("--"):
-            raise UsageError(f"fempm run: expected --option value, got {flag!r}")
-        name = flag[2:].replace("-", "_")
-        if name not in params:
-            raise UsageError(f"fempm run: unknown option --{flag[2:]}; options: "
-                             f"{', '.join('--' + k.replace('_', '-') for k in sorted(params))}")
-        value = next(it, None)
-        if value is None:
-            raise UsageError(f"fempm run: option {flag} needs a value")
-        default = params[name]
-        if isinstance(default, bool):
-            opts[name] = _boolean(flag, value)
-        elif isinstance(default, (int, float)):
-            kind = "an integer" if isinstance(default, int) else "a number"
-            try:
-                opts[name] = type(default)(value)
-            except ValueError:
-                raise UsageError(f"fempm run: option {flag} expects {kind}, got {value!r}") from None
-            if not math.isfinite(opts[name]):
-                raise UsageError(f"fempm run: option {flag} expects a finite number, got {value!r}")
-        elif default is None:  # an optional number, an integer where annotated so (or a name)
-            kinds = [k.strip() for k in str(signature[name].annotation).split("|")]
-            try:
-                opts[name] = int(value) if "int" in kinds else float(value)
-            except ValueError:
-                if "int" in kinds:
-                    raise UsageError(f"fempm run: option {flag} expects an integer, got {value!r}") from None
-                opts[name] = value
-            if isinstance(opts[name], float) and not math.isfinite(opts[name]):
-                raise UsageError(f"fempm run: option {flag} expects a finite number, got {value!r}")
-        else:
-            opts[name] = value
-    return opts
-
-
-def _boolean(flag: str, value: str) -> bool:
-    """``true/false``, ``yes/no``, ``on/off``, ``1/0`` (any case) as a boolean option."""
-    table = {"true": True, "yes": True, "on": True, "1": True, "false": False, "no": False, "off": False, "0": False}
-    if value.lower() not in table:
-        raise UsageError(f"fempm run: option {flag} expects true or false, got {value!r}")
-    return table[value.lower()]
-
-
-def _health_options(rest: list[str]) -> tuple[dict, list[str]]:
-    """Split the run-health limits (``--energy-tolerance X|none``, ``--j-min``, ``--j-max``,
-    ``--dt-floor``) from the scene options."""
-
-    defaults = Health().asdict()
-    health, others = {}, []
-    it = iter(rest)
-    for flag in it:
-        name = flag[2:].replace("-", "_") if flag.startswith("--") else ""
-        if name not in defaults:
-            others.append(flag)
-            continue
-        value = next(it, None)
-        if value is None:
-            raise UsageError(f"fempm run: option {flag} needs a value")
-        if name == "energy_tolerance" and value.lower() in ("none", "off"):
-            health[name] = None
-            continue
-        try:
-            health[name] = float(value)
-        except ValueError:
-            raise UsageError(f"fempm run: option {flag} expects a number, got {value!r}") from None
-    return health, others
-
-
 def _summary(builder) -> str:
     """The first paragraph of a scene's module docstring, on one line."""
     import inspect
@@ -278,14 +197,18 @@ def _run(args, rest: list[str]) -> int:
         for k, v in inspect.signature(builder).parameters.items():
             if k != "comm":
                 print(f"  --{k.replace('_', '-')} {v.default}")
+        print("stepping (every scene): --integrator explicit|implicit, --dynamics newmark|quasi-static (implicit), "
+              "--steps N (fixed steps to t_end; implicit runs need it)")
         print("run health (fempm.stepping.health.Health; a crossed limit stops the run with exit code 3):")
         for k, v in Health().asdict().items():
             print(f"  --{k.replace('_', '-')} {v}")
         return 0
-    health, rest = _health_options(rest)
-    options = _scene_options(builder, rest)
+    health, rest = health_options(rest)
+    stepping, rest = stepping_options(rest)
+    options = scene_options(builder, rest)
     _check_every(args.checkpoint_every, "run")
-    rebuild = {"scene": args.scene, "options": options, "health": health, "checkpoint_every": args.checkpoint_every}
+    rebuild = {"scene": args.scene, "options": options, "health": health, "stepping": stepping,
+               "checkpoint_every": args.checkpoint_every}
     scene = _build(rebuild)
     return _execute(scene, args.out or Path("output") / args.scene, args.scene, checkpoint_every=args.checkpoint_every,
                     rebuild=rebuild, overwrite=args.overwrite, output_limit=None if args.force else OUTPUT_LIMIT)
@@ -302,6 +225,7 @@ def _build(rebuild: dict):
     try:
         scene = SCENES[rebuild["scene"]](**rebuild["options"])
         scene.health = dataclasses.replace(scene.health, **rebuild["health"])
+        scene = with_stepping(scene, rebuild.get("stepping", {}))
     except (ValueError, TypeError) as e:  # the builders and Health check their arguments
         raise UsageError(f"fempm run {rebuild['scene']}: {e}") from None
     return scene

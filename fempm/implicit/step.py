@@ -44,7 +44,6 @@ from fempm.implicit.operator import IncrementOperator
 from fempm.stepping.grid import BasisGrid
 from fempm.stepping.loads import external_forces
 from fempm.transfer.mapping import SUPPORT_TOL
-from fempm.transfer.mass_models import FMPM
 
 if TYPE_CHECKING:
     from fempm.stepping.solver import ExplicitSolver
@@ -56,23 +55,16 @@ class ImplicitStep(BasisGrid):
     """The implicit step of ``solver`` (see the module).
 
     Raises:
-        ValueError: Options or conditions the implicit step does not take (FMPM mass, contact,
-            conditions other than fixed dofs and axis-aligned slip).
+        ValueError: What the implicit step does not take (contact, conditions other than fixed
+            dofs and axis-aligned slip; the options it refuses, :class:`~fempm.stepping.StepOptions`).
         TypeError: A law without a tangent, unless ``StepOptions(tangent="finite-difference")``.
     """
 
     def __init__(self, solver: ExplicitSolver):
         super().__init__(solver)
         opts = solver.options
-        if isinstance(opts.mass_model, FMPM):
-            raise ValueError(  # noqa: TRY004 - an option's value
-                "the implicit step takes lumped or consistent mass, not FMPM (an explicit step's approximation of "
-                "the consistent mass): give mass='consistent'")
         if solver.contact is not None:
             raise ValueError("the implicit step does not take contact between bodies (contact=...) yet")
-        if opts.position == "particle":
-            raise ValueError("the implicit step moves the particles with the grid's displacement: position='particle' "
-                             "does not apply")
         if not solver.conditions.zero_components:
             raise ValueError("the implicit step takes fixed dofs and slip walls normal to a coordinate axis; other "
                              "conditions (friction, prescribed velocities, inclined walls) need the explicit step")

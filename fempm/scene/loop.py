@@ -129,6 +129,9 @@ def run(
     """
     if (checkpoint_every is not None or resume) and out is None:
         raise ValueError("checkpoints need an output folder (out)")
+    if scene.options.integration is not None and scene.dt is None:
+        raise ValueError("an implicit run takes fixed steps: give the scene a dt (Scene(dt=...), or --steps N on the "
+                         "command line); the CFL condition does not bound it")
     if checkpoint_every is not None and (isinstance(checkpoint_every, bool) or int(checkpoint_every) != checkpoint_every
                                          or checkpoint_every < 1):
         raise ValueError(f"checkpoint_every={checkpoint_every!r} must be a positive number of steps")

@@ -101,6 +101,7 @@ def cook_membrane(
         options=StepOptions(scheme=scheme, flip=flip, mass=mass, cfl=cfl, domain=domain,
                             damping=2.0 * omega1 if damping is None else damping),
         degree=degree, variant=variant, params=params,
+        results=lambda scene, solver: {"corner_displacement": corner_displacement(solver.particles).tolist()},
     )
 
 

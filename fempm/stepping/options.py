@@ -9,7 +9,7 @@ from fempm.arguments import check_numbers
 from fempm.implicit.dynamics import time_integration
 from fempm.stepping.schemes import scheme
 from fempm.transfer.domains import step_domain
-from fempm.transfer.mass_models import mass_model
+from fempm.transfer.mass_models import FMPM, mass_model
 
 __all__ = ["Scheme", "SimulationError", "StepOptions"]
 
@@ -98,6 +98,12 @@ class StepOptions:
         #: the implicit step's time integration (None: explicit)
         self.integration = (time_integration(self.dynamics, self.newmark_beta, self.newmark_gamma)
                             if self.integrator == "implicit" else None)
+        if self.integration is not None and isinstance(self.mass_model, FMPM):
+            raise ValueError("the implicit step takes lumped or consistent mass, not FMPM (an explicit step's "
+                             "approximation of the consistent mass): give mass='consistent'")
+        if self.integration is not None and self.position == "particle":
+            raise ValueError("the implicit step moves the particles with the grid's displacement: position='particle' "
+                             "does not apply")
         if self.tangent not in ("analytic", "finite-difference"):
             raise ValueError(f"unknown option tangent={self.tangent!r}; expected analytic or finite-difference")
         if self.load_ramp is not None and not 0.0 < self.load_ramp < float("inf"):

@@ -175,7 +175,9 @@ def test_a_law_without_tangent_runs_with_the_finite_difference_one_asked_for_by_
 
 def test_implicit_step_refuses_what_it_cannot_take():
     with pytest.raises(ValueError, match=r"lumped or consistent mass, not FMPM"):
-        cook_solver(6.0, mass="fmpm2").step(1.0)
+        StepOptions(**QUASI_STATIC, mass="fmpm2")
+    with pytest.raises(ValueError, match=r"position='particle' does not apply"):
+        StepOptions(**QUASI_STATIC, position="particle")
     s = cook_solver(6.0)
     with pytest.raises(ValueError, match=r"the implicit step needs a time step dt > 0"):
         s.step()

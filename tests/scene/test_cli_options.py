@@ -6,7 +6,7 @@ import dataclasses
 import pytest
 from mpi4py import MPI
 
-from fempm.cli import _scene_options
+from fempm.run_options import scene_options as _scene_options
 from fempm.scene import run
 from fempm.scenes import vibrating_bar as bar
 

@@ -1,0 +1,141 @@
+"""The options of ``python -m fempm run`` and ``resume``: a scene builder's typed options, the
+run-health limits and the stepping options every scene takes, and the usage error they raise."""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+
+from fempm.stepping.health import Health
+
+__all__ = ["STEPPING_FLAGS", "UsageError", "boolean", "health_options", "scene_options", "stepping_options",
+           "with_stepping"]
+
+
+class UsageError(SystemExit):
+    """A mistake in the command line: its message on one line, exit code 2, no traceback."""
+
+
+def scene_options(builder, rest: list[str]) -> dict:
+    """``--name value`` pairs typed after the builder's defaults; unknown names are errors."""
+    import inspect
+
+    signature = inspect.signature(builder).parameters
+    params = {k: v.default for k, v in signature.items() if k != "comm"}
+    opts = {}
+    it = iter(rest)
+    for flag in it:
+        if not flag.startswith("--"):
+            raise UsageError(f"fempm run: expected --option value, got {flag!r}")
+        name = flag[2:].replace("-", "_")
+        if name not in params:
+            raise UsageError(f"fempm run: unknown option --{flag[2:]}; options: "
+                             f"{', '.join('--' + k.replace('_', '-') for k in sorted(params))}")
+        value = next(it, None)
+        if value is None:
+            raise UsageError(f"fempm run: option {flag} needs a value")
+        default = params[name]
+        if isinstance(default, bool):
+            opts[name] = boolean(flag, value)
+        elif isinstance(default, (int, float)):
+            kind = "an integer" if isinstance(default, int) else "a number"
+            try:
+                opts[name] = type(default)(value)
+            except ValueError:
+                raise UsageError(f"fempm run: option {flag} expects {kind}, got {value!r}") from None
+            if not math.isfinite(opts[name]):
+                raise UsageError(f"fempm run: option {flag} expects a finite number, got {value!r}")
+        elif default is None:  # an optional number, an integer where annotated so (or a name)
+            kinds = [k.strip() for k in str(signature[name].annotation).split("|")]
+            try:
+                opts[name] = int(value) if "int" in kinds else float(value)
+            except ValueError:
+                if "int" in kinds:
+                    raise UsageError(f"fempm run: option {flag} expects an integer, got {value!r}") from None
+                opts[name] = value
+            if isinstance(opts[name], float) and not math.isfinite(opts[name]):
+                raise UsageError(f"fempm run: option {flag} expects a finite number, got {value!r}")
+        else:
+            opts[name] = value
+    return opts
+
+
+def boolean(flag: str, value: str) -> bool:
+    """``true/false``, ``yes/no``, ``on/off``, ``1/0`` (any case) as a boolean option."""
+    table = {"true": True, "yes": True, "on": True, "1": True, "false": False, "no": False, "off": False, "0": False}
+    if value.lower() not in table:
+        raise UsageError(f"fempm run: option {flag} expects true or false, got {value!r}")
+    return table[value.lower()]
+
+
+def health_options(rest: list[str]) -> tuple[dict, list[str]]:
+    """Split the run-health limits (``--energy-tolerance X|none``, ``--j-min``, ``--j-max``,
+    ``--dt-floor``) from the scene options."""
+
+    defaults = Health().asdict()
+    health, others = {}, []
+    it = iter(rest)
+    for flag in it:
+        name = flag[2:].replace("-", "_") if flag.startswith("--") else ""
+        if name not in defaults:
+            others.append(flag)
+            continue
+        value = next(it, None)
+        if value is None:
+            raise UsageError(f"fempm run: option {flag} needs a value")
+        if name == "energy_tolerance" and value.lower() in ("none", "off"):
+            health[name] = None
+            continue
+        try:
+            health[name] = float(value)
+        except ValueError:
+            raise UsageError(f"fempm run: option {flag} expects a number, got {value!r}") from None
+    return health, others
+
+
+#: the stepping options every scene takes on the command line, with the values they accept
+STEPPING_FLAGS = {"integrator": ("explicit", "implicit"), "dynamics": ("newmark", "quasi-static"), "steps": None}
+
+
+def stepping_options(rest: list[str]) -> tuple[dict, list[str]]:
+    """Split the stepping options every scene takes (``--integrator explicit|implicit``,
+    ``--dynamics newmark|quasi-static``, ``--steps N``) from the scene options."""
+    stepping, others = {}, []
+    it = iter(rest)
+    for flag in it:
+        name = flag[2:].replace("-", "_") if flag.startswith("--") else ""
+        if name not in STEPPING_FLAGS:
+            others.append(flag)
+            continue
+        value = next(it, None)
+        if value is None:
+            raise UsageError(f"fempm run: option {flag} needs a value")
+        choices = STEPPING_FLAGS[name]
+        if choices is None:  # --steps
+            if not (value.isdigit() and int(value) >= 1):
+                raise UsageError(f"fempm run: option {flag} expects a positive number of steps, got {value!r}")
+            stepping[name] = int(value)
+        elif value not in choices:
+            raise UsageError(f"fempm run: option {flag} expects one of {', '.join(choices)}, got {value!r}")
+        else:
+            stepping[name] = value
+    if stepping.get("integrator") != "implicit" and "dynamics" in stepping:
+        raise UsageError("fempm run: option --dynamics applies to --integrator implicit")
+    return stepping, others
+
+
+def with_stepping(scene, stepping: dict):
+    """``scene`` with the command line's stepping options: the integrator and its dynamics
+    (quasi-static: the loads ramped to ``t_end``), ``--steps`` fixed steps to ``t_end``."""
+    if not stepping:
+        return scene
+    changes = {k: stepping[k] for k in ("integrator", "dynamics") if k in stepping}
+    if stepping.get("integrator") == "implicit" and stepping.get("dynamics") == "quasi-static":
+        changes["load_ramp"] = scene.t_end
+    if changes:
+        scene.options = dataclasses.replace(scene.options, **changes)
+    if "steps" in stepping:
+        scene.dt = scene.t_end / stepping["steps"]
+    elif scene.options.integration is not None and scene.dt is None:
+        raise ValueError("an implicit run takes fixed steps: give --steps N (the steps to t_end)")
+    return scene
