@@ -13,7 +13,7 @@ from petsc4py import PETSc
 
 from fempm.petsc import temporary_options
 
-__all__ = ["NEWTON_OPTIONS", "NULL_PIVOT", "Newton", "NewtonResult", "null_pivots"]
+__all__ = ["FORCE_ATOL", "NEWTON_OPTIONS", "NULL_PIVOT", "Newton", "NewtonResult", "null_pivots"]
 
 #: fempm's defaults under the prefix (the options database wins): Newton with a backtracking
 #: line search, each linear solve GMRES preconditioned by a parallel LU factorization (MUMPS;
@@ -31,6 +31,9 @@ NEWTON_OPTIONS: dict[str, Any] = {
     "pc_factor_mat_solver_type": "mumps",
 }
 
+
+#: a residual below this fraction of the forces it balances has converged (:meth:`Newton.solve`)
+FORCE_ATOL = 1e-9
 
 #: a pivot below this fraction of the tangent's norm counts as null in :func:`null_pivots`
 NULL_PIVOT = 1e-10
@@ -64,6 +67,7 @@ class Newton:
     def __init__(self, comm, prefix: str = "fempm_implicit_", options: dict[str, Any] | None = None):
         self.snes = PETSc.SNES().create(comm)
         self.snes.setOptionsPrefix(prefix)
+        self.prefix = prefix
         with temporary_options(prefix, {**NEWTON_OPTIONS, **(options or {})}):
             self.snes.setFromOptions()
             self.snes.getKSP().setFromOptions()
@@ -71,11 +75,19 @@ class Newton:
             self.snes.getLineSearch().setFromOptions()
 
     def solve(self, residual: Callable[[PETSc.Vec, PETSc.Vec], None], jacobian: Callable[[PETSc.Vec, PETSc.Mat], None],
-              J: PETSc.Mat, x: PETSc.Vec) -> NewtonResult:
+              J: PETSc.Mat, x: PETSc.Vec, force_scale: float = 0.0) -> NewtonResult:
         """Solve ``residual(x, r) = 0`` from the guess in ``x`` (the solution left there), with
         ``jacobian(x, J)`` filling the tangent ``J``; ``residual`` may call
-        :meth:`domain_error` where ``x`` is outside its domain (the line search then steps back)."""
+        :meth:`domain_error` where ``x`` is outside its domain (the line search then steps back).
+        ``force_scale``: the norm of the forces the residual balances; a residual below
+        :data:`FORCE_ATOL` of it has converged (the round-off floor of a small load increment on
+        a loaded body lies above the relative tolerance), unless the options database sets
+        ``snes_atol``."""
         snes = self.snes
+        if not PETSc.Options().hasName(self.prefix + "snes_atol"):
+            rtol, _, stol, max_it = snes.getTolerances()
+            snes.setTolerances(rtol=rtol, atol=max(FORCE_ATOL * force_scale, NEWTON_OPTIONS["snes_atol"]), stol=stol,
+                               max_it=max_it)
         r = x.duplicate()
         snes.setFunction(lambda _snes, xx, rr: residual(xx, rr), r)
         snes.setJacobian(lambda _snes, xx, JJ, _P: jacobian(xx, JJ), J, J)

@@ -48,6 +48,7 @@ def nominal_stress(sigma: npt.NDArray, D: npt.NDArray | None, G: npt.NDArray) ->
     Pt = sigma @ np.swapaxes(inv, 1, 2)
     if D is None:
         return J[:, None, None] * Pt, None
-    A = (np.einsum("nim,nlk->nimkl", Pt, inv) + np.einsum("nijkl,nmj->nimkl", D, inv)
-         - np.einsum("nil,nmk->nimkl", Pt, inv))
+    A = np.einsum("nijkl,nmj->nimkl", D, inv, optimize=True)
+    A += Pt[:, :, :, None, None] * np.swapaxes(inv, 1, 2)[:, None, None, :, :]  # P~_im inv_lk
+    A -= Pt[:, :, None, None, :] * inv[:, None, :, :, None]  # P~_il inv_mk
     return J[:, None, None] * Pt, J[:, None, None, None, None] * A

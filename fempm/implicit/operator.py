@@ -109,7 +109,9 @@ class IncrementOperator:
         its mass block (consistent, or lumped on the block's diagonal), then zeros."""
         b, d = self.basis, self.d
         k = b.dofs.shape[1]
-        K = np.einsum("p,pam,pimkl,pbl->paibk", self.volume, b.gradients, A, b.gradients)
+        VA = self.volume[:, None, None, None, None] * A
+        K = np.einsum("paikl,pbl->paibk", np.einsum("pam,pimkl->paikl", b.gradients, VA, optimize=True), b.gradients,
+                      optimize=True)
         if mass_factor:
             S = b.values
             eye = np.eye(d)

@@ -161,7 +161,9 @@ class ImplicitStep(BasisGrid):
 
         x = J.createVecRight()
         x.array[:] = (dt * v[:owned] if integ.inertia else np.zeros((owned, d))).ravel()  # constant velocity
-        result = self.newton.solve(residual, jacobian, J, x)
+        forces = np.concatenate([fext[:owned].ravel(), op.internal_force(op.sigma)[:owned].ravel()])
+        scale = float(np.sqrt(p.comm.allreduce(float(forces @ forces))))  # what the residual balances
+        result = self.newton.solve(residual, jacobian, J, x, force_scale=scale)
         if not result.converged:
             self.last_failure = f"SNES {result.reason} after {result.iterations} iteration(s)"
             deficiency = None if integ.inertia else null_pivots(J)  # (with inertia the tangent is regular)

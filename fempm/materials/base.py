@@ -86,6 +86,8 @@ class IsotropicElastic:
     E: float
     nu: float = 0.0
     history: ClassVar[tuple[Internal, ...]] = ()  # a law's internal variables (none: elastic)
+    #: the law takes F-bar's averaged deformation (fempm.stepping.fbar): its stress comes from F or L
+    volumetric_average: ClassVar[bool] = True
 
     def __post_init__(self):
         check_numbers(self)  # every numeric parameter of the law (subclasses' too)

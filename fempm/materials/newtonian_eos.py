@@ -7,6 +7,7 @@ sound speed :math:`c = \sqrt{\kappa\gamma/\rho_0\, (\rho/\rho_0)^{\gamma - 1}}`.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import ClassVar
 
 import numpy as np
 import numpy.typing as npt
@@ -35,6 +36,9 @@ class NewtonianTait:
     gamma: float = 7.0
     viscosity: float = 1.0e-3
     history: tuple = ()
+    #: the law takes F-bar's averaged deformation (fempm.stepping.fbar): its pressure from the
+    #: density, which follows the averaged volume, its viscous stress from L
+    volumetric_average: ClassVar[bool] = True
 
     def __post_init__(self):
         check_numbers(self)

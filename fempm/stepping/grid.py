@@ -194,10 +194,15 @@ class BasisGrid(Grid):
 
     def update_kinematics(self, L: npt.NDArray, dt: float) -> None:
         r""":math:`F_p^+ = (I + \Delta t L_p) F_p`, :math:`V_p = J_p V_p^0` and the laws' stress,
-        with the checks of J (one collective)."""
+        with the checks of J (one collective); with F-bar :math:`L_p` is first replaced by
+        :math:`(\overline{\Delta F}_p - I) / \Delta t` (:mod:`fempm.stepping.fbar`)."""
         s = self.solver
         p = s.particles
         f = p.fields
+        average = self.options.volumetric_average
+        if average is not None:  # F-bar: the increments' volume change averaged over the patches
+            eye = np.eye(p.gdim)
+            L = (average.average(self.basis, p.volume, f["body"], eye + dt * L) - eye) / dt
         F, J = kernels.deform(f["F"], L, dt)
         nonfinite = ~np.isfinite(J)
         bad = J <= 0

@@ -7,6 +7,7 @@ from typing import Literal
 
 from fempm.arguments import check_numbers
 from fempm.implicit.dynamics import time_integration
+from fempm.stepping.fbar import volumetric
 from fempm.stepping.schemes import scheme
 from fempm.transfer.domains import step_domain
 from fempm.transfer.mass_models import FMPM, mass_model
@@ -59,6 +60,8 @@ class StepOptions:
     stress update, for a law without one). max_cuts (implicit): how often a step that does not
     converge is halved before the run stops. load_ramp (implicit, quasi-static): the loads are
     scaled by :math:`\min(1, t / t_{ramp})` at a step's end time t (None: the loads as given).
+    volumetric: standard, or fbar (:mod:`fempm.stepping.fbar`: each particle's volume change
+    averaged over its nodal patch, against volumetric locking; the numpy step).
     """
 
     scheme: Scheme = "MUSL"
@@ -82,6 +85,7 @@ class StepOptions:
     tangent: Literal["analytic", "finite-difference"] = "analytic"
     max_cuts: int = 6
     load_ramp: float | None = None
+    volumetric: Literal["standard", "fbar"] = "standard"
 
     def __post_init__(self):
         check_numbers(self)
@@ -104,6 +108,8 @@ class StepOptions:
         if self.integration is not None and self.position == "particle":
             raise ValueError("the implicit step moves the particles with the grid's displacement: position='particle' "
                              "does not apply")
+        #: the volumetric average of the deformation increments (None: standard)
+        self.volumetric_average = volumetric(self.volumetric)
         if self.tangent not in ("analytic", "finite-difference"):
             raise ValueError(f"unknown option tangent={self.tangent!r}; expected analytic or finite-difference")
         if self.load_ramp is not None and not 0.0 < self.load_ramp < float("inf"):

@@ -30,6 +30,7 @@ from fempm.stepping.contact_points import ContactPointGrid
 from fempm.stepping.contact_points import supported as contact_points_supported
 from fempm.stepping.domain_grid import DomainGrid
 from fempm.stepping.domain_grid import supported as domain_grid_supported
+from fempm.stepping.fbar import check_laws
 from fempm.stepping.grid import Grid, SingleFieldGrid
 from fempm.stepping.laws import material_groups
 from fempm.stepping.loads import Loads
@@ -112,6 +113,8 @@ class ExplicitSolver:
             raise ValueError("the particles were made on another mesh than the velocity space's: make them on V.mesh "
                              "(fempm.create_particles(V.mesh, ...) or fempm.Particles(V.mesh, ...))")
         check_materials(self.materials)
+        if self.options.volumetric_average is not None:
+            check_laws(self.materials)
         d = p.gdim
         n = len(p)
         f = p.fields
@@ -210,17 +213,20 @@ class ExplicitSolver:
         return self._implicit[1]
 
     def _make_grid(self) -> Grid:
+        compiled = self.compiled is not False and self.options.volumetric_average is None  # F-bar: the numpy step
+        if self.compiled and not compiled:
+            raise ValueError("compiled=True with volumetric='fbar': F-bar runs on the numpy step (compiled=None)")
         if self.contact is not None:  # one velocity field per body
-            if self.compiled is not False and contact_points_supported(self):
+            if compiled and contact_points_supported(self):
                 return ContactPointGrid(self)
             grid = ContactGrid(self)
             if self.compiled:
                 raise ValueError("compiled=True with contact needs point particles, lumped mass and no rigid group on "
                                  "a space of the compiled passes; this contact takes the generic step")
             return grid
-        if self.compiled is not False and point_grid_supported(self):
+        if compiled and point_grid_supported(self):
             return PointGrid(self)
-        if self.compiled is not False and domain_grid_supported(self):
+        if compiled and domain_grid_supported(self):
             return DomainGrid(self)
         if self.compiled:
             raise ValueError("compiled=True needs numba and a Lagrange space of degree 1 (any simplex, "
