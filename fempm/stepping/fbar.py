@@ -6,21 +6,27 @@ constraint: with P1 triangles there are about as many as displacement dofs. F-ba
 Neto et al. 1996; Coombs et al. 2018 for MPM) keeps each particle's isochoric increment and
 replaces its volume change by a patch average. Here the patch of a particle is the cells around
 the nodes of its cell, weighted by the basis: the increments' volume ratios
-:math:`\Delta J_p = \det \Delta F_p` are projected on the nodes with the volume weights of the
-particle's body, and interpolated back,
+:math:`\Delta J_p = \det \Delta F_p`, :math:`\Delta F_p = I + \Delta t L_p`, are projected on the
+nodes with the volumes :math:`V^n` of the particle's body, and interpolated back,
 
 .. math::
-    \Delta J_i = \frac{\sum_p V_p N_{ip} \Delta J_p}{\sum_p V_p N_{ip}}, \qquad
+    \Delta J_i = \frac{\sum_q V^n_q N_{iq} \Delta J_q}{\sum_q V^n_q N_{iq}}, \qquad
     \overline{\Delta J}_p = \sum_i N_{ip} \Delta J_i, \qquad
-    \overline{\Delta F}_p = \Big(\frac{\overline{\Delta J}_p}{\Delta J_p}\Big)^{1/d} \Delta F_p,
+    \overline{\Delta F}_p = \Big(\frac{\overline{\Delta J}_p}{\Delta J_p}\Big)^{1/d} \Delta F_p
 
-so that one volumetric constraint remains per node (as the averaged nodal pressure of Bonet and
-Burton 1998 for linear tetrahedra), a uniform dilation is left as it is and the average
-conserves volume, :math:`\sum_p V_p \overline{\Delta J}_p = \sum_p V_p \Delta J_p`. The
-patches do not cross bodies (one average per value of ``fields["body"]``). A law takes the
-averaged :math:`F = \overline{\Delta F} F_n` and, for the rate laws,
-:math:`L = (\overline{\Delta F} - I) / \Delta t`; it says it can with the class attribute
-``volumetric_average = True`` (every law of :mod:`fempm.materials`).
+(:func:`patch_average`), so that one volumetric constraint remains per node (as the averaged
+nodal pressure of Bonet and Burton 1998 for linear tetrahedra). A uniform dilation is left as it
+is and the average conserves volume, :math:`\sum_p V^n_p \overline{\Delta J}_p = \sum_p V^n_p
+\Delta J_p`. The step then runs with :math:`\bar L = (\overline{\Delta F} - I) / \Delta t`
+(:meth:`FBar.rate`): :math:`F \leftarrow \overline{\Delta F} F`, :math:`V = \det F\, V^0`.
+
+The internal force takes the patch-averaged pressure (:meth:`FBar.force_stress`): the average
+is self-adjoint in the weights :math:`V^n`, so the force is the derivative of the stored energy
+of the averaged increments and a run conserves it. (Averaging the total volume ratio instead
+makes the averaged volume change when a particle moves from patch to patch, which the forces do
+not see: a near-incompressible body gains energy.) The patches do not cross bodies (one average
+per value of ``fields["body"]``). A law says that it takes the averaged deformation with the
+class attribute ``volumetric_average = True`` (every law of :mod:`fempm.materials`).
 """
 
 from __future__ import annotations
@@ -34,7 +40,7 @@ import numpy.typing as npt
 from fempm.transfer.basis import ParticleBasis
 from fempm.transfer.mapping import p2g
 
-__all__ = ["VOLUMETRIC", "FBar", "check_laws", "volumetric"]
+__all__ = ["VOLUMETRIC", "FBar", "check_laws", "patch_average", "volumetric"]
 
 #: the names ``StepOptions(volumetric=...)`` takes
 VOLUMETRIC = ("standard", "fbar")
@@ -46,26 +52,46 @@ class FBar:
 
     name = "fbar"
 
-    def average(self, basis: ParticleBasis, volume: npt.NDArray, body: npt.NDArray,
-                dF: npt.NDArray) -> npt.NDArray:
-        r""":math:`\overline{\Delta F}_p` (n, d, d) of the increments ``dF`` (n, d, d) of particles
-        of volumes ``volume`` (at the step's start) and bodies ``body``.
+    def rate(self, basis: ParticleBasis, volume: npt.NDArray, body: npt.NDArray, bodies: int, L: npt.NDArray,
+             dt: float) -> npt.NDArray:
+        r""":math:`\bar L` (n, d, d) of a step with velocity gradients ``L`` of particles of volumes
+        ``volume`` (:math:`V^n`) and bodies ``body`` (of ``bodies``):
+        :math:`I + \Delta t \bar L = \overline{\Delta F}` (see the module).
 
         Note:
             Collective (the nodal sums over ranks).
         """
-        d = dF.shape[1]
+        d = L.shape[1]
+        dF = np.eye(d) + dt * L
         dJ = np.linalg.det(dF)
-        bodies = np.unique(body)
-        weights = np.stack([np.where(body == b, volume, 0.0) for b in bodies], axis=1)  # one column per body
-        nodal = p2g(basis, np.hstack([weights, weights * dJ[:, None]]))
-        k = len(bodies)
-        mass = nodal[:, :k]
-        dJ_nodes = np.where(mass > 0.0, nodal[:, k:] / np.where(mass > 0.0, mass, 1.0), 1.0)
-        at_particles = basis.gather(dJ_nodes)  # (n, bodies)
-        mine = np.searchsorted(bodies, body)
-        dJ_bar = at_particles[np.arange(len(body)), mine]
-        return (dJ_bar / dJ)[:, None, None] ** (1.0 / d) * dF
+        scale = (patch_average(basis, volume, body, bodies, dJ) / dJ) ** (1.0 / d)
+        return (scale[:, None, None] * dF - np.eye(d)) / dt
+
+    def force_stress(self, basis: ParticleBasis, volume: npt.NDArray, body: npt.NDArray, bodies: int,
+                     sigma: npt.NDArray) -> npt.NDArray:
+        r"""The stresses whose divergence is the internal force of the averaged kinematics,
+        :math:`\sigma_p - p_p I + \bar p_p I` with :math:`p = \mathrm{tr}\,\sigma / d` and
+        :math:`\bar p` its patch average (the same weights): the virtual work
+        :math:`\sum_p V_p p_p \delta \bar\theta_p` of the averaged volume change equals
+        :math:`\sum_q V_q \bar p_q \delta\theta_q`, the operator being self-adjoint in the
+        volume weights. (Without it the forces are not the derivative of the stored energy and
+        an explicit run gains energy.) Collective."""
+        d = sigma.shape[1]
+        pressure = np.trace(sigma, axis1=1, axis2=2) / d
+        return sigma + (patch_average(basis, volume, body, bodies, pressure) - pressure)[:, None, None] * np.eye(d)
+
+
+def patch_average(basis: ParticleBasis, volume: npt.NDArray, body: npt.NDArray, bodies: int,
+                  values: npt.NDArray) -> npt.NDArray:
+    r"""The nodal-patch average of per-particle ``values`` (n,), within each of the ``bodies``
+    bodies (``body`` (n,) the particles' indices, the same count on every rank):
+    :math:`\bar f_p = \sum_i N_{ip} \sum_q V_q N_{iq} f_q / \sum_q V_q N_{iq}` over the
+    particles q of p's body. Collective."""
+    weights = np.stack([np.where(body == b, volume, 0.0) for b in range(bodies)], axis=1)  # one column per body
+    nodal = p2g(basis, np.hstack([weights, weights * values[:, None]]))
+    mass = nodal[:, :bodies]
+    averaged = np.where(mass > 0.0, nodal[:, bodies:] / np.where(mass > 0.0, mass, 1.0), 0.0)
+    return basis.gather(averaged)[np.arange(len(body)), body]  # (n, bodies): each particle's own body
 
 
 def volumetric(name: str) -> FBar | None:

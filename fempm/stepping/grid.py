@@ -183,11 +183,15 @@ class BasisGrid(Grid):
         volume = p.volume if weights is None else p.volume * weights
         if weights is not None:
             fext = fext * weights[:, None]
+        sigma = p.fields["sigma"]
+        if self.options.volumetric_average is not None:  # F-bar: the patch-averaged pressure
+            sigma = self.options.volumetric_average.force_stress(basis, p.volume, p.fields["body"], len(s.materials),
+                                                                 sigma)
         if weights is None and basis.cells is not None and not basis.extended:
-            local = kernels.nodal_forces(basis.dofs, basis.values, basis.gradients, p.volume, p.fields["sigma"],
-                                         fext, basis.num_dofs_local)
+            local = kernels.nodal_forces(basis.dofs, basis.values, basis.gradients, p.volume, sigma, fext,
+                                         basis.num_dofs_local)
             return sum_over_ranks(basis.index_map, local)
-        f = p2g_gradients(basis, -volume[:, None, None] * p.fields["sigma"])
+        f = p2g_gradients(basis, -volume[:, None, None] * sigma)
         if s.loads.body_force is not None or s.loads.traction is not None:
             f += p2g(basis, fext)
         return f
@@ -195,14 +199,13 @@ class BasisGrid(Grid):
     def update_kinematics(self, L: npt.NDArray, dt: float) -> None:
         r""":math:`F_p^+ = (I + \Delta t L_p) F_p`, :math:`V_p = J_p V_p^0` and the laws' stress,
         with the checks of J (one collective); with F-bar :math:`L_p` is first replaced by
-        :math:`(\overline{\Delta F}_p - I) / \Delta t` (:mod:`fempm.stepping.fbar`)."""
+        :math:`\bar L_p` (:meth:`fempm.stepping.fbar.FBar.rate`)."""
         s = self.solver
         p = s.particles
         f = p.fields
         average = self.options.volumetric_average
         if average is not None:  # F-bar: the increments' volume change averaged over the patches
-            eye = np.eye(p.gdim)
-            L = (average.average(self.basis, p.volume, f["body"], eye + dt * L) - eye) / dt
+            L = average.rate(self.basis, p.volume, f["body"], len(s.materials), L, dt)
         F, J = kernels.deform(f["F"], L, dt)
         nonfinite = ~np.isfinite(J)
         bad = J <= 0

@@ -1,0 +1,117 @@
+"""The figures of docs/implicit.md: implicit against explicit runs of Cook's membrane and of the
+vibrating bar, and F-bar on Cook's membrane near incompressibility.
+
+    python benchmarks/implicit_figures.py [--cook 2 1] [--bar] [--fbar 2]
+
+* ``--cook H ...``: Cook's membrane (nu = 1/3, E = 1, load 1e-3), at each triangle size H: the
+  scene's explicit damped run and quasi-static implicit runs in 1 and 10 load steps; the
+  vertical displacement of C per unit load against the Taylor-Hood reference 22.592, and the
+  wall time of each run (``fempm.scene.run``, no output);
+* ``--bar``: the vibrating bar (16 cells, 2 particles a cell), the explicit run at CFL 0.4 and
+  Newmark's method (beta = 1/4, gamma = 1/2) at a Courant number of 4, over two periods: the
+  period measured from the zero crossings of the centre-of-mass velocity against the exact
+  :math:`2\\pi/\\omega`, the largest error of that velocity over the amplitude, the energy at the
+  end over the initial one;
+* ``--fbar H ...``: Cook's membrane at nu = 0.4999 (P1 triangles of size H), the explicit damped
+  run with and without F-bar, against the Taylor-Hood reference 19.411.
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import time
+
+import numpy as np
+
+import fempm
+from fempm.scenes.bar import vibrating_bar
+from fempm.scenes.cook import cook_membrane
+from fempm.stepping import StepOptions
+
+REFERENCE = {1 / 3: 22.592, 0.4999: 19.411}  # docs/verification.md (Taylor-Hood P2/P1, h = 0.5)
+COOK_HEADER = ("| h | nu | run | steps | u_y(C) per unit load | against the reference | wall (s) |\n"
+               "|---|---|---|---|---|---|---|")
+
+
+def timed_run(scene) -> tuple[dict, float]:
+    t0 = time.perf_counter()
+    out = fempm.scene.run(scene, None, progress=False)
+    return out, time.perf_counter() - t0
+
+
+def cook_row(h: float, nu: float, label: str, change) -> str:
+    scene = cook_membrane(h=h, nu=nu, load=1e-3, frames=0)
+    change(scene)
+    out, wall = timed_run(scene)
+    uy = out["corner_displacement"][1] / 1e-3
+    error = 100 * (uy / REFERENCE[nu] - 1)
+    return f"| {h:g} | {nu:g} | {label} | {out['steps']} | {uy:.3f} | {error:+.2f} % | {wall:.3f} |"
+
+
+def implicit(steps: int):
+    def change(scene):
+        scene.options = StepOptions(integrator="implicit", dynamics="quasi-static", load_ramp=scene.t_end)
+        scene.dt = scene.t_end / steps
+    return change
+
+
+def fbar(volumetric: str):
+    def change(scene):
+        scene.options = dataclasses.replace(scene.options, volumetric=volumetric)
+    return change
+
+
+def bar_row(label: str, options: StepOptions, courant: float) -> str:
+    scene = vibrating_bar(cells=16, ppc=2)
+    pr = scene.params
+    s = dataclasses.replace(scene, options=options).solver()
+    dt = courant * (pr["L"] / pr["cells"]) / np.sqrt(pr["E"] / pr["rho"])
+    omega, amplitude = pr["omega"], pr["v0"] / (pr["beta"] * pr["L"])
+    period = 2 * np.pi / omega
+    p = s.particles
+    e0 = s.energies()["total"]
+    t0 = time.perf_counter()
+    ts, vs = [0.0], [amplitude]
+    while s.t < 2 * period - 1e-9 * period:
+        s.step(min(dt, 2 * period - s.t))
+        ts.append(s.t)
+        vs.append(p.comm.allreduce(float(p.mass @ p.fields["v"][:, 0])) / p.comm.allreduce(float(p.mass.sum())))
+    wall = time.perf_counter() - t0
+    ts, vs = np.array(ts), np.array(vs)
+    worst = np.abs(vs - amplitude * np.cos(omega * ts)).max() / amplitude
+    k = np.flatnonzero(np.sign(vs[1:]) != np.sign(vs[:-1]))  # zero crossings, linearly interpolated
+    zeros = ts[k] - vs[k] * (ts[k + 1] - ts[k]) / (vs[k + 1] - vs[k])
+    measured = 2 * np.mean(np.diff(zeros)) if len(zeros) > 1 else np.nan
+    energy = s.energies()["total"] / e0
+    return (f"| {label} | {courant:g} | {len(ts) - 1} | {measured:.4f} | {period:.4f} | "
+            f"{100 * (measured / period - 1):+.2f} % | {worst:.3f} | {energy:.4f} | {wall:.3f} |")
+
+
+def main() -> None:
+    a = argparse.ArgumentParser()
+    a.add_argument("--cook", type=float, nargs="*", default=[])
+    a.add_argument("--bar", action="store_true")
+    a.add_argument("--fbar", type=float, nargs="*", default=[])
+    args = a.parse_args()
+    if args.cook:
+        print(COOK_HEADER)
+        for h in args.cook:
+            print(cook_row(h, 1 / 3, "explicit, damped", lambda scene: None))
+            print(cook_row(h, 1 / 3, "implicit, quasi-static, 1 step", implicit(1)))
+            print(cook_row(h, 1 / 3, "implicit, quasi-static, 10 steps", implicit(10)))
+    if args.bar:
+        print("| run | Courant | steps | period | exact | period error | max v_cm error / amplitude | E(end) / E(0) "
+              "| wall (s) |\n|---|---|---|---|---|---|---|---|---|")
+        print(bar_row("explicit, MUSL, lumped", StepOptions(), 0.4))
+        print(bar_row("implicit, Newmark, lumped", StepOptions(integrator="implicit"), 4.0))
+        print(bar_row("implicit, Newmark, consistent", StepOptions(integrator="implicit", mass="consistent"), 4.0))
+    if args.fbar:
+        print(COOK_HEADER)
+        for h in args.fbar:
+            print(cook_row(h, 0.4999, "explicit, damped, F-bar", fbar("fbar")))
+            print(cook_row(h, 0.4999, "explicit, damped, standard", fbar("standard")))
+
+
+if __name__ == "__main__":
+    main()
