@@ -5,6 +5,7 @@ from fempm.scenes.bar import vibrating_bar
 from fempm.scenes.block import hanging_block, largest_neighbour_gap
 from fempm.scenes.cantilever import cantilever, cantilever_reference, cantilever_tip
 from fempm.scenes.column import column_collapse, deposit
+from fempm.scenes.compaction import compaction, stress_error
 from fempm.scenes.cook import cook_membrane
 from fempm.scenes.dam import MARTIN_MOYCE, dam_break, surge_front
 from fempm.scenes.disks import two_disks
@@ -13,11 +14,13 @@ from fempm.scenes.incline import incline
 from fempm.scenes.manufactured import manufactured_scene
 
 SCENES = {"bar": vibrating_bar, "disks": two_disks, "cantilever": cantilever, "dam": dam_break, "block": hanging_block,
-          "cook": cook_membrane, "column": column_collapse, "incline": incline, "impact": disk_impact}
+          "cook": cook_membrane, "column": column_collapse, "incline": incline, "impact": disk_impact,
+          "compaction": compaction}
 
 __all__ = [
-    "MARTIN_MOYCE", "SCENES", "cantilever", "cantilever_reference", "cantilever_tip", "column_collapse", "cook_membrane",
+    "MARTIN_MOYCE", "SCENES", "cantilever", "cantilever_reference", "cantilever_tip", "column_collapse", "compaction",
+    "cook_membrane",
     "dam_break", "deposit", "disk_impact",
     "hanging_block", "incline",
-    "largest_neighbour_gap", "manufactured_scene", "surge_front", "two_disks", "vibrating_bar",
+    "largest_neighbour_gap", "manufactured_scene", "stress_error", "surge_front", "two_disks", "vibrating_bar",
 ]

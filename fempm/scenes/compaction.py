@@ -1,0 +1,69 @@
+r"""Elastic compaction of a column under its own weight, in quasi-static implicit steps (the
+verification problem of AMPLE, Coombs and Augarde 2020, and of Coombs et al. 2018).
+
+A column of height :math:`l_0` = ``height`` and one cell's width stands on a fixed base between
+rollers (slip walls normal to x), plane strain, linear elastic (``E``, ``nu`` = 0), density
+:math:`\rho_0`; gravity :math:`g` is ramped from 0 to its value over the quasi-static steps
+(``StepOptions(integrator="implicit", dynamics="quasi-static")``). Whatever the law, the
+equilibrium of the part above a particle gives its vertical Cauchy stress from the particle's
+initial height :math:`Y`,
+
+.. math::
+    \sigma_{yy}(Y) = -\rho_0 g\, (l_0 - Y)
+
+(the rollers keep the column's width, so the weight above acts on the same area), and the
+summary holds ``stress_error``, the relative, volume-weighted L2 error of the particles'
+:math:`\sigma_{yy}` against it (:func:`stress_error`).
+"""
+
+from __future__ import annotations
+
+import dolfinx.mesh as dm
+import numpy as np
+from mpi4py import MPI
+
+from fempm.boundary.walls import fixed, slip
+from fempm.materials.linear_elastic import LinearElastic
+from fempm.particles.seeding import create_particles, per_direction
+from fempm.scene.definition import Scene, check_counts
+from fempm.stepping.loads import Loads
+from fempm.stepping.options import StepOptions
+from fempm.transfer.domains import step_domain
+
+__all__ = ["compaction", "stress_error"]
+
+
+def compaction(
+    cells: int = 8, ppc: int = 4, domain: str = "point", mass: str = "lumped", steps: int = 5, height: float = 50.0,
+    E: float = 1.0e6, nu: float = 0.0, rho: float = 80.0, g: float = 10.0, frames: int = 5,
+    comm: MPI.Comm = MPI.COMM_WORLD,
+) -> Scene:
+    """The column with ``cells`` quadrilaterals over its height (one across), ``ppc`` particles a
+    cell, loaded in ``steps`` quasi-static steps to t = 1 (see the module)."""
+    check_counts(cells=cells, ppc=ppc, steps=steps)
+    per_direction(ppc, 2)
+    h = height / cells
+    mesh = dm.create_rectangle(comm, [[0.0, 0.0], [h, height + h]], [1, cells + 1], dm.CellType.quadrilateral)
+    p = create_particles(mesh, ppc, density=rho, cells=lambda x: x[1] < height,
+                         corners=step_domain(domain).tracks_corners)
+    params = {"cells": cells, "ppc": ppc, "domain": domain, "mass": mass, "steps": steps, "height": height, "E": E,
+              "nu": nu, "rho": rho, "g": g}
+    return Scene(
+        name="compaction", mesh=mesh, particles=p, materials=[LinearElastic(E, nu)], t_end=1.0, dt=1.0 / steps,
+        bcs=lambda V: [fixed(V, lambda x: np.isclose(x[1], 0.0)),
+                       slip(V, lambda x: np.isclose(x[0], 0.0) | np.isclose(x[0], h), (1.0, 0.0))],
+        loads=Loads(body_force=(0.0, -g)), frames=frames, params=params,
+        options=StepOptions(integrator="implicit", dynamics="quasi-static", load_ramp=1.0, mass=mass, domain=domain),
+        results=lambda scene, solver: {"stress_error": stress_error(solver.particles, height, rho, g)},
+    )
+
+
+def stress_error(particles, height: float, rho: float, g: float) -> float:
+    r"""The relative, volume-weighted L2 error of the particles' :math:`\sigma_{yy}` against
+    :math:`-\rho_0 g (l_0 - Y)`, with :math:`Y` the initial heights and the initial volumes as
+    weights, over all ranks."""
+    f = particles.fields
+    exact = -rho * g * (height - f["X0"][:, 1])
+    w = f["volume0"]
+    sums = particles.comm.allreduce(np.array([float(w @ (f["sigma"][:, 1, 1] - exact) ** 2), float(w @ exact**2)]))
+    return float(np.sqrt(sums[0] / sums[1]))
