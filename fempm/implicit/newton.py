@@ -77,8 +77,8 @@ class Newton:
     def solve(self, residual: Callable[[PETSc.Vec, PETSc.Vec], None], jacobian: Callable[[PETSc.Vec, PETSc.Mat], None],
               J: PETSc.Mat, x: PETSc.Vec, force_scale: float = 0.0) -> NewtonResult:
         """Solve ``residual(x, r) = 0`` from the guess in ``x`` (the solution left there), with
-        ``jacobian(x, J)`` filling the tangent ``J``; ``residual`` may call
-        :meth:`domain_error` where ``x`` is outside its domain (the line search then steps back).
+        ``jacobian(x, J)`` filling the tangent ``J``; ``residual`` may fill ``r`` with infinities
+        where ``x`` is outside its domain (the line search then steps back, or the solve fails).
         ``force_scale``: the norm of the forces the residual balances; a residual below
         :data:`FORCE_ATOL` of it has converged (the round-off floor of a small load increment on
         a loaded body lies above the relative tolerance), unless the options database sets
@@ -98,10 +98,6 @@ class Newton:
         names = {v: k for k, v in vars(PETSc.SNES.ConvergedReason).items() if isinstance(v, int)}
         r.destroy()
         return NewtonResult(reason > 0, names.get(reason, str(reason)), snes.getIterationNumber(), norms)
-
-    def domain_error(self) -> None:
-        """Flag the residual being evaluated as outside its domain (an increment that inverts a particle)."""
-        self.snes.setFunctionDomainError()
 
 
 def null_pivots(J: PETSc.Mat) -> int | None:

@@ -138,8 +138,8 @@ class ImplicitStep(BasisGrid):
         def residual(x, r) -> None:
             du = increment(x)
             G = op.gradients(du)
-            if inverts(G):
-                self.newton.domain_error()
+            if inverts(G):  # outside the residual's domain: an infinite norm, which the line search steps back from
+                r.set(np.inf)
                 return
             P, _ = op.stresses(G, tangent=False)
             R = op.internal_force(P) - fext

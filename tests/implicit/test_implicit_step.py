@@ -8,7 +8,7 @@ from mpi4py import MPI
 from petsc4py import PETSc
 
 import fempm  # before dolfinx
-from fempm.materials import NeoHookean
+from fempm.materials import NeoHookean, VonMises
 from fempm.scenes.bar import vibrating_bar
 from fempm.scenes.cook import cook_membrane, corner_displacement
 from fempm.stepping import ExplicitSolver, Loads, SimulationError, StepOptions
@@ -60,6 +60,21 @@ def test_newton_converges_quadratically_on_cooks_membrane(law, load):
     # above the round-off floor (about 2e-11)
     orders = [np.log(e[k + 1]) / np.log(e[k]) for k in range(len(e) - 1) if e[k] < 1e-2 and e[k + 1] > 1e-10]
     assert orders and min(orders) >= 1.8, orders
+
+
+def test_a_plastic_membrane_converges_in_load_steps():
+    """Cook's membrane with J2 plasticity yielding from the third of five load steps: each step
+    converges (the algorithmic tangent: quadratic once the plastic zone settles), no cut."""
+    scene = cook_membrane(h=4.0, nu=1 / 3, load=1e-3)
+    scene.materials = [VonMises(1.0, 1 / 3, yield_stress=2e-4, hardening=0.05)]
+    scene.options = StepOptions(**QUASI_STATIC, load_ramp=1.0)
+    s = scene.solver()
+    for _ in range(5):
+        s.step(0.2)
+        e = s.implicit.last.residuals / s.implicit.last.residuals[0]
+        assert e[-1] < 1e-9 and e[-2] < 1e-2 and e[-1] < 10 * e[-2] ** 2  # the last iterations quadratic
+    eps_p = s.particles.comm.allreduce(float(s.particles.fields["eps_p"].max(initial=0.0)), op=MPI.MAX)
+    assert eps_p > 1e-4 and s.record.cut_steps == 0
 
 
 @pytest.mark.parametrize("steps", [1, 4])
