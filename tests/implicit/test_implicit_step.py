@@ -62,6 +62,18 @@ def test_newton_converges_quadratically_on_cooks_membrane(law, load):
     assert orders and min(orders) >= 1.8, orders
 
 
+def test_a_near_incompressible_membrane_converges_and_locks():
+    """nu = 0.4999: Newton stops at the round-off floor (2e-8 of the first residual) on its step
+    norm; P1 locks as the explicit run does (-22 % at h = 4, docs/implicit.md)."""
+    scene = cook_membrane(h=4.0, nu=0.4999, load=1e-3)
+    scene.options = StepOptions(**QUASI_STATIC)
+    s = scene.solver()
+    s.step(1.0)
+    assert s.implicit.last.converged and s.implicit.last.iterations <= 4
+    uy = corner_displacement(s.particles)[1] / 1e-3 / 19.411
+    assert 0.75 < uy < 0.82, uy
+
+
 def test_a_plastic_membrane_converges_in_load_steps():
     """Cook's membrane with J2 plasticity yielding from the third of five load steps: each step
     converges (the algorithmic tangent: quadratic once the plastic zone settles), no cut."""
