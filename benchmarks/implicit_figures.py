@@ -1,7 +1,7 @@
 """The figures of docs/implicit.md: implicit against explicit runs of Cook's membrane and of the
 vibrating bar, and F-bar on Cook's membrane near incompressibility.
 
-    python benchmarks/implicit_figures.py [--cook 2 1] [--bar] [--fbar 2]
+    python benchmarks/implicit_figures.py [--cook 2 1] [--bar] [--fbar 2] [--compaction]
 
 * ``--cook H ...``: Cook's membrane (nu = 1/3, E = 1, load 1e-3), at each triangle size H: the
   scene's explicit damped run and quasi-static implicit runs in 1 and 10 load steps; the
@@ -13,7 +13,10 @@ vibrating bar, and F-bar on Cook's membrane near incompressibility.
   :math:`2\\pi/\\omega`, the largest error of that velocity over the amplitude, the energy at the
   end over the initial one;
 * ``--fbar H ...``: Cook's membrane at nu = 0.4999 (P1 triangles of size H), the explicit damped
-  run with and without F-bar, against the Taylor-Hood reference 19.411.
+  run with and without F-bar, against the Taylor-Hood reference 19.411;
+* ``--compaction``: the scene ``compaction`` (5 quasi-static steps) at 4, 8, 16 and 32 cells over
+  the height with point particles, uGIMP, cpGIMP, CPDI1 and CPDI2: ``stress_error`` and the rate
+  fitted to it.
 """
 
 from __future__ import annotations
@@ -88,11 +91,28 @@ def bar_row(label: str, options: StepOptions, courant: float) -> str:
             f"{100 * (measured / period - 1):+.2f} % | {worst:.3f} | {energy:.4f} | {wall:.3f} |")
 
 
+def compaction_rows() -> None:
+    from fempm.scenes.compaction import compaction
+
+    sizes = (4, 8, 16, 32)
+    print("| domain | " + " | ".join(f"{n} cells" for n in sizes) + " | fitted rate | wall (s) |")
+    print("|---|" + "---|" * (len(sizes) + 2))
+    for domain in ("point", "ugimp", "cpgimp", "cpdi1", "cpdi2"):
+        errors, t0 = [], time.perf_counter()
+        for n in sizes:
+            errors.append(fempm.scene.run(compaction(cells=n, domain=domain, frames=0), None,
+                                          progress=False)["stress_error"])
+        rate = -np.polyfit(np.log(sizes), np.log(errors), 1)[0]
+        print(f"| {domain} | " + " | ".join(f"{e:.3e}" for e in errors)
+              + f" | {rate:.2f} | {time.perf_counter() - t0:.2f} |")
+
+
 def main() -> None:
     a = argparse.ArgumentParser()
     a.add_argument("--cook", type=float, nargs="*", default=[])
     a.add_argument("--bar", action="store_true")
     a.add_argument("--fbar", type=float, nargs="*", default=[])
+    a.add_argument("--compaction", action="store_true")
     args = a.parse_args()
     if args.cook:
         print(COOK_HEADER)
@@ -111,6 +131,10 @@ def main() -> None:
         for h in args.fbar:
             print(cook_row(h, 0.4999, "explicit, damped, F-bar", fbar("fbar")))
             print(cook_row(h, 0.4999, "explicit, damped, standard", fbar("standard")))
+
+
+    if args.compaction:
+        compaction_rows()
 
 
 if __name__ == "__main__":
