@@ -94,12 +94,14 @@ def health_options(rest: list[str]) -> tuple[dict, list[str]]:
 
 
 #: the stepping options every scene takes on the command line, with the values they accept
-STEPPING_FLAGS = {"integrator": ("explicit", "implicit"), "dynamics": ("newmark", "quasi-static"), "steps": None}
+STEPPING_FLAGS = {"integrator": ("explicit", "implicit"), "dynamics": ("newmark", "quasi-static"), "steps": None,
+                  "volumetric": ("standard", "fbar")}
 
 
 def stepping_options(rest: list[str]) -> tuple[dict, list[str]]:
     """Split the stepping options every scene takes (``--integrator explicit|implicit``,
-    ``--dynamics newmark|quasi-static``, ``--steps N``) from the scene options."""
+    ``--dynamics newmark|quasi-static``, ``--steps N``, ``--volumetric standard|fbar``) from the
+    scene options."""
     stepping, others = {}, []
     it = iter(rest)
     for flag in it:
@@ -129,7 +131,7 @@ def with_stepping(scene, stepping: dict):
     (quasi-static: the loads ramped to ``t_end``), ``--steps`` fixed steps to ``t_end``."""
     if not stepping:
         return scene
-    changes = {k: stepping[k] for k in ("integrator", "dynamics") if k in stepping}
+    changes = {k: stepping[k] for k in ("integrator", "dynamics", "volumetric") if k in stepping}
     if stepping.get("integrator") == "implicit" and stepping.get("dynamics") == "quasi-static":
         changes["load_ramp"] = scene.t_end
     if changes:

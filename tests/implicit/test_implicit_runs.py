@@ -38,6 +38,14 @@ def test_bad_stepping_options_exit_2_with_one_line(argv, message, capsys, tmp_pa
     assert code == 2 and message in err and len(err.strip().splitlines()) == 1, err
 
 
+def test_fbar_from_the_command_line(tmp_path):
+    argv = ["run", "cook", "--out", str(tmp_path), "--h", "6", "--nu", "0.4999", "--frames", "0", "--t-end", "20",
+            "--volumetric", "fbar"]
+    assert main(argv) == 0
+    assert json.loads((tmp_path / "summary.json").read_text())["status"] == "completed"
+    assert main(["run", "cook", "--out", str(tmp_path), "--overwrite", "--volumetric", "bbar"]) == 2
+
+
 def last_row(folder):
     return list(csv.DictReader(open(folder / "energies.csv")))[-1]
 
