@@ -35,11 +35,12 @@ __all__ = ["compaction", "stress_error"]
 
 def compaction(
     cells: int = 8, ppc: int = 4, domain: str = "point", mass: str = "lumped", steps: int = 5, height: float = 50.0,
-    E: float = 1.0e6, nu: float = 0.0, rho: float = 80.0, g: float = 10.0, frames: int = 5,
+    E: float = 1.0e6, nu: float = 0.0, rho: float = 80.0, g: float = 10.0, t_end: float = 1.0, frames: int = 5,
     comm: MPI.Comm = MPI.COMM_WORLD,
 ) -> Scene:
     """The column with ``cells`` quadrilaterals over its height (one across), ``ppc`` particles a
-    cell, loaded in ``steps`` quasi-static steps to t = 1 (see the module)."""
+    cell, loaded in ``steps`` quasi-static steps to ``t_end`` (a pseudo-time: gravity reaches its
+    value there; see the module)."""
     check_counts(cells=cells, ppc=ppc, steps=steps)
     per_direction(ppc, 2)
     h = height / cells
@@ -47,13 +48,13 @@ def compaction(
     p = create_particles(mesh, ppc, density=rho, cells=lambda x: x[1] < height,
                          corners=step_domain(domain).tracks_corners)
     params = {"cells": cells, "ppc": ppc, "domain": domain, "mass": mass, "steps": steps, "height": height, "E": E,
-              "nu": nu, "rho": rho, "g": g}
+              "nu": nu, "rho": rho, "g": g, "t_end": t_end}
     return Scene(
-        name="compaction", mesh=mesh, particles=p, materials=[LinearElastic(E, nu)], t_end=1.0, dt=1.0 / steps,
+        name="compaction", mesh=mesh, particles=p, materials=[LinearElastic(E, nu)], t_end=t_end, dt=t_end / steps,
         bcs=lambda V: [fixed(V, lambda x: np.isclose(x[1], 0.0)),
                        slip(V, lambda x: np.isclose(x[0], 0.0) | np.isclose(x[0], h), (1.0, 0.0))],
         loads=Loads(body_force=(0.0, -g)), frames=frames, params=params,
-        options=StepOptions(integrator="implicit", dynamics="quasi-static", load_ramp=1.0, mass=mass, domain=domain),
+        options=StepOptions(integrator="implicit", dynamics="quasi-static", load_ramp=t_end, mass=mass, domain=domain),
         results=lambda scene, solver: {"stress_error": stress_error(solver.particles, height, rho, g)},
     )
 
