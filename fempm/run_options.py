@@ -8,8 +8,8 @@ import math
 
 from fempm.stepping.health import Health
 
-__all__ = ["STEPPING_FLAGS", "UsageError", "boolean", "health_options", "scene_options", "stepping_options",
-           "with_stepping"]
+__all__ = ["STEPPING_FLAGS", "UsageError", "boolean", "health_options", "scene_options", "split_flags",
+           "stepping_options", "with_stepping"]
 
 
 class UsageError(SystemExit):
@@ -68,21 +68,29 @@ def boolean(flag: str, value: str) -> bool:
     return table[value.lower()]
 
 
-def health_options(rest: list[str]) -> tuple[dict, list[str]]:
-    """Split the run-health limits (``--energy-tolerance X|none``, ``--j-min``, ``--j-max``,
-    ``--dt-floor``) from the scene options."""
-
-    defaults = Health().asdict()
-    health, others = {}, []
+def split_flags(rest: list[str], names) -> tuple[dict[str, tuple[str, str]], list[str]]:
+    """The ``--name value`` pairs of ``rest`` whose name (dashes as underscores) is in ``names``,
+    as name -> (flag, value), and the other arguments in their order."""
+    chosen, others = {}, []
     it = iter(rest)
     for flag in it:
         name = flag[2:].replace("-", "_") if flag.startswith("--") else ""
-        if name not in defaults:
+        if name not in names:
             others.append(flag)
             continue
         value = next(it, None)
         if value is None:
             raise UsageError(f"fempm run: option {flag} needs a value")
+        chosen[name] = (flag, value)
+    return chosen, others
+
+
+def health_options(rest: list[str]) -> tuple[dict, list[str]]:
+    """Split the run-health limits (``--energy-tolerance X|none``, ``--j-min``, ``--j-max``,
+    ``--dt-floor``) from the scene options."""
+    chosen, others = split_flags(rest, Health().asdict())
+    health = {}
+    for name, (flag, value) in chosen.items():
         if name == "energy_tolerance" and value.lower() in ("none", "off"):
             health[name] = None
             continue
@@ -102,16 +110,9 @@ def stepping_options(rest: list[str]) -> tuple[dict, list[str]]:
     """Split the stepping options every scene takes (``--integrator explicit|implicit``,
     ``--dynamics newmark|quasi-static``, ``--steps N``, ``--volumetric standard|fbar``) from the
     scene options."""
-    stepping, others = {}, []
-    it = iter(rest)
-    for flag in it:
-        name = flag[2:].replace("-", "_") if flag.startswith("--") else ""
-        if name not in STEPPING_FLAGS:
-            others.append(flag)
-            continue
-        value = next(it, None)
-        if value is None:
-            raise UsageError(f"fempm run: option {flag} needs a value")
+    chosen, others = split_flags(rest, STEPPING_FLAGS)
+    stepping = {}
+    for name, (flag, value) in chosen.items():
         choices = STEPPING_FLAGS[name]
         if choices is None:  # --steps
             if not (value.isdigit() and int(value) >= 1):
