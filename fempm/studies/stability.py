@@ -3,7 +3,7 @@ r"""The stability catalogue: ``python -m fempm study stability [--quick] [--out 
 Each case of :data:`fempm.studies.stability_cases.CASES` (a small scene that stresses one
 thing) runs with every option of :func:`options_for` (scheme, mass matrix, particle domain,
 mass cut-off, CFL number; one factor at a time from USL lumped point, plus MUSL crossed with
-consistent mass, FMPM(5) and CPDI1), with the default run-health limits (:class:`fempm.stepping.health.Health`:
+consistent mass, FMPM(5) and CPDI1, F-bar, and Newmark's implicit step), with the default run-health limits (:class:`fempm.stepping.health.Health`:
 20 % energy growth beyond the work of the loads, :math:`10^{-2} \le J \le 10^2`, time-step
 floor). The outcome of a run is
 
@@ -53,14 +53,24 @@ CFLS = (0.1, 0.25, 0.5, 0.75, 0.9, 1.0)
 
 
 def label(opts: dict) -> str:
-    """An option's name: scheme, mass, domain, cut-off and CFL, e.g. ``USL lumped point cut=1e-09 cfl=0.4``."""
+    """An option's name: scheme, mass, domain, cut-off and CFL, e.g. ``USL lumped point cut=1e-09 cfl=0.4``;
+    ``fbar`` appended with F-bar, and an implicit run named by its dynamics and Courant number
+    (``implicit newmark lumped point courant=4``)."""
     o = {**BASE, **opts}
-    return f"{o['scheme']} {o['mass']} {o['domain']} cut={o['mass_cutoff']:g} cfl={o['cfl']:g}"
+    if o.get("integrator") == "implicit":
+        name = f"implicit {o.get('dynamics', 'newmark')} {o['mass']} {o['domain']} courant={o['courant']:g}"
+    else:
+        name = f"{o['scheme']} {o['mass']} {o['domain']} cut={o['mass_cutoff']:g} cfl={o['cfl']:g}"
+    return name + (" fbar" if o.get("volumetric") == "fbar" else "")
 
 
-#: the full catalogue also crosses MUSL with the other mass matrices and with CPDI1
+#: the full catalogue also crosses MUSL with the other mass matrices and with CPDI1, and runs
+#: F-bar (USL and MUSL) and Newmark's implicit step at a Courant number of 4 (lumped and
+#: consistent mass)
 MUSL_VARIATIONS = ({"scheme": "MUSL", "mass": "consistent"}, {"scheme": "MUSL", "mass": "fmpm5"},
-                   {"scheme": "MUSL", "domain": "cpdi1"})
+                   {"scheme": "MUSL", "domain": "cpdi1"}, {"volumetric": "fbar"},
+                   {"scheme": "MUSL", "volumetric": "fbar"}, {"integrator": "implicit", "courant": 4.0},
+                   {"integrator": "implicit", "courant": 4.0, "mass": "consistent"})
 
 
 def options_for(case: str, quick: bool = False) -> list[dict]:
@@ -81,11 +91,16 @@ def run_one(case: str, opts: dict, *, quick: bool, comm: MPI.Comm = MPI.COMM_WOR
     t0 = time.perf_counter()
     try:
         scene = CASES[case](quick, comm)
-        scene.options = dataclasses.replace(scene.options, **{**BASE, **opts})
+        options = {**BASE, **opts}
+        courant = options.pop("courant", None)
+        scene.options = dataclasses.replace(scene.options, **options)
+        if courant is not None:  # an implicit run: steps of this many explicit (CFL 1) steps of the start
+            scene.dt = courant * scene.solver().stable_dt() / scene.options.cfl
         summary = run(scene, None, progress=False)
         _health(row, summary["health"])
         row["steps"] = summary["steps"]
-    except (SimulationError, SingularMassError, OutsideMeshError, ValueError) as e:
+    except (SimulationError, SingularMassError, OutsideMeshError, ValueError, TypeError) as e:  # TypeError: a law
+        # without the implicit step's tangent
         msg = " ".join(str(e).split())
         row["outcome"] = "unstable" if "energy growth" in msg else "aborted"
         row["reason"] = f"{type(e).__name__}: {msg}"[:400]
@@ -161,7 +176,8 @@ def write_markdown(rows: list[dict], path: Path, *, quick: bool = False, wall: f
     lines = [f"# Stability catalogue{' (quick)' if quick else ''}", "",
              (provenance or Provenance.now(comm=MPI.COMM_SELF)).line(), "",
              "Outcome of each case with each transfer option (one factor at a time from USL, lumped, point, "
-             "cut-off 1e-9, CFL 0.4; the full catalogue also crosses MUSL with consistent mass, FMPM(5) and CPDI1), "
+             "cut-off 1e-9, CFL 0.4; the full catalogue also crosses MUSL with consistent mass, FMPM(5) and CPDI1, and "
+             "runs F-bar and Newmark's implicit step at a Courant number of 4), "
              "under the default run-health limits (20 % energy growth beyond the work of the "
              "loads, 1e-2 <= J <= 1e2). E/E0: energy over initial energy plus work at the end (or the stop); "
              "drift: momentum change not explained by the loads, relative to the largest sum of |p|.", ""]
