@@ -1,7 +1,7 @@
 """The figures of docs/implicit.md: implicit against explicit runs of Cook's membrane and of the
 vibrating bar, and F-bar on Cook's membrane near incompressibility.
 
-    python benchmarks/implicit_figures.py [--cook 2 1] [--bar] [--fbar 2] [--compaction]
+    python benchmarks/implicit_figures.py [--cook 2 1] [--bar] [--fbar 2] [--disks] [--compaction]
 
 * ``--cook H ...``: Cook's membrane (nu = 1/3, E = 1, load 1e-3), at each triangle size H: the
   scene's explicit damped run and quasi-static implicit runs in 1 and 10 load steps; the
@@ -14,6 +14,8 @@ vibrating bar, and F-bar on Cook's membrane near incompressibility.
   end over the initial one;
 * ``--fbar H ...``: Cook's membrane at nu = 0.4999 (P1 triangles of size H), the explicit damped
   run with and without F-bar, against the Taylor-Hood reference 19.411;
+* ``--disks``: the scene ``disks`` at nu = 0.4999 (20 cells, t_end = 3, its ``LinearElastic``,
+  MUSL, lumped mass, point particles, FLIP) with and without F-bar: outcome, E/E0, steps;
 * ``--compaction``: the scene ``compaction`` (5 quasi-static steps) at 4, 8, 16 and 32 cells over
   the height with point particles, uGIMP, cpGIMP, CPDI1 and CPDI2: ``stress_error`` and the rate
   fitted to it.
@@ -91,6 +93,22 @@ def bar_row(label: str, options: StepOptions, courant: float) -> str:
             f"{100 * (measured / period - 1):+.2f} % | {worst:.3f} | {energy:.4f} | {wall:.3f} |")
 
 
+def disks_rows() -> None:
+    from fempm.scenes import two_disks
+
+    print("| volumetric | outcome | E/E0 | steps | wall (s) |\n|---|---|---|---|---|")
+    for volumetric in ("standard", "fbar"):
+        scene = two_disks(cells=20, t_end=3.0, nu=0.4999, frames=0)
+        fbar(volumetric)(scene)
+        t0 = time.perf_counter()
+        try:
+            out = fempm.scene.run(scene, None, progress=False)
+            outcome, ratio, steps = "reached t_end", out["health"]["energy_ratio"], out["steps"]
+        except fempm.SimulationError as e:
+            outcome, ratio, steps = f"stopped: {str(e)[:60]}", e.health["energy_ratio"], e.health["steps"]
+        print(f"| {volumetric} | {outcome} | {ratio:.3f} | {steps} | {time.perf_counter() - t0:.1f} |")
+
+
 def compaction_rows() -> None:
     from fempm.scenes.compaction import compaction
 
@@ -112,6 +130,7 @@ def main() -> None:
     a.add_argument("--cook", type=float, nargs="*", default=[])
     a.add_argument("--bar", action="store_true")
     a.add_argument("--fbar", type=float, nargs="*", default=[])
+    a.add_argument("--disks", action="store_true")
     a.add_argument("--compaction", action="store_true")
     args = a.parse_args()
     if args.cook:
@@ -133,6 +152,8 @@ def main() -> None:
             print(cook_row(h, 0.4999, "explicit, damped, standard", fbar("standard")))
 
 
+    if args.disks:
+        disks_rows()
     if args.compaction:
         compaction_rows()
 

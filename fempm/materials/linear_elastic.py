@@ -8,6 +8,7 @@ equation is exactly linear (the vibrating-bar reference).
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import ClassVar
 
 import numpy as np
 import numpy.typing as npt
@@ -20,12 +21,17 @@ __all__ = ["LinearElastic"]
 
 @dataclass(frozen=True)
 class LinearElastic(IsotropicElastic):
-    """Linear elasticity, small strain (see the module).
+    r"""Linear elasticity, small strain (see the module). Its volumetric strain is
+    :math:`\mathrm{tr}\,F - d`, which F-bar averages for it (``volumetric_measure``,
+    :mod:`fempm.stepping.fbar`).
 
     Args:
         E: Young's modulus.
         nu: Poisson's ratio, in (-1, 0.5).
     """
+
+    #: what F-bar averages for this law (fempm.stepping.fbar): tr F - d, its volumetric strain
+    volumetric_measure: ClassVar[str] = "trace"
 
     def strain(self, F: npt.NDArray) -> npt.NDArray:
         return sym(F) - identity(len(F), F.shape[1])

@@ -27,6 +27,14 @@ makes the averaged volume change when a particle moves from patch to patch, whic
 not see: a near-incompressible body gains energy.) The patches do not cross bodies (one average
 per value of ``fields["body"]``). A law says that it takes the averaged deformation with the
 class attribute ``volumetric_average = True`` (every law of :mod:`fempm.materials`).
+
+What is averaged is the law's volumetric strain: :math:`\det F` by default; for a small-strain
+law whose volumetric strain is :math:`\mathrm{tr}\,F - d` (``volumetric_measure = "trace"``,
+:class:`fempm.materials.LinearElastic`) its increment :math:`\Delta\theta = \Delta t\,
+\mathrm{tr}(L F^n)`, and :math:`\bar F^{n+1} = \Delta F F^n + \frac1d (\overline{\Delta\theta} -
+\Delta\theta) I`: a rotation changes :math:`\mathrm{tr}\,F` and not :math:`\det F`, so averaging
+:math:`\det F` for such a law leaves its pressure without the average it is conjugate to, and a
+rotating body gains energy (the colliding disks at nu = 0.4999 blow up at the impact).
 """
 
 from __future__ import annotations
@@ -52,20 +60,33 @@ class FBar:
 
     name = "fbar"
 
-    def rate(self, basis: ParticleBasis, volume: npt.NDArray, body: npt.NDArray, bodies: int, L: npt.NDArray,
-             dt: float) -> npt.NDArray:
+    def rate(self, basis: ParticleBasis, volume: npt.NDArray, body: npt.NDArray, materials: Sequence,
+             F: npt.NDArray, L: npt.NDArray, dt: float) -> npt.NDArray:
         r""":math:`\bar L` (n, d, d) of a step with velocity gradients ``L`` of particles of volumes
-        ``volume`` (:math:`V^n`) and bodies ``body`` (of ``bodies``):
-        :math:`I + \Delta t \bar L = \overline{\Delta F}` (see the module).
+        ``volume`` (:math:`V^n`), deformation gradients ``F`` (:math:`F^n`) and bodies ``body``
+        (indices into ``materials``): :math:`I + \Delta t \bar L = \overline{\Delta F}` (see the
+        module); for the bodies of a law whose volumetric strain is :math:`\mathrm{tr}\,F - d`
+        (``volumetric_measure = "trace"``, :class:`fempm.materials.LinearElastic`) the average is
+        of :math:`\Delta\theta = \Delta t\, \mathrm{tr}(L F^n)` instead, and
+        :math:`\bar F^{n+1} = \Delta F F^n + \frac{1}{d}(\overline{\Delta\theta} - \Delta\theta) I`.
 
         Note:
             Collective (the nodal sums over ranks).
         """
         d = L.shape[1]
-        dF = np.eye(d) + dt * L
+        eye = np.eye(d)
+        dF = eye + dt * L
         dJ = np.linalg.det(dF)
-        scale = (patch_average(basis, volume, body, bodies, dJ) / dJ) ** (1.0 / d)
-        return (scale[:, None, None] * dF - np.eye(d)) / dt
+        trace = np.array([getattr(mat, "volumetric_measure", "J") == "trace" for mat in materials], dtype=bool)
+        by_trace = trace[body] if len(body) else np.zeros(0, dtype=bool)
+        dtheta = dt * np.einsum("pij,pji->p", L, F)
+        averaged = patch_average(basis, volume, body, len(materials), np.where(by_trace, dtheta, dJ))
+        scale = (np.where(by_trace, 1.0, averaged) / dJ) ** (1.0 / d)
+        L_bar = (np.where(by_trace[:, None, None], dF, scale[:, None, None] * dF) - eye) / dt
+        if by_trace.any():
+            shift = np.where(by_trace, (averaged - dtheta) / d, 0.0)
+            L_bar += (shift / dt)[:, None, None] * np.linalg.inv(F)
+        return L_bar
 
     def force_stress(self, basis: ParticleBasis, volume: npt.NDArray, body: npt.NDArray, bodies: int,
                      sigma: npt.NDArray) -> npt.NDArray:

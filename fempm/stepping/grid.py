@@ -205,7 +205,7 @@ class BasisGrid(Grid):
         f = p.fields
         average = self.options.volumetric_average
         if average is not None:  # F-bar: the increments' volume change averaged over the patches
-            L = average.rate(self.basis, p.volume, f["body"], len(s.materials), L, dt)
+            L = average.rate(self.basis, p.volume, f["body"], s.materials, f["F"], L, dt)
         F, J = kernels.deform(f["F"], L, dt)
         nonfinite = ~np.isfinite(J)
         bad = J <= 0

@@ -26,8 +26,9 @@ def particles(request):
 
 
 def averaged(basis, volume, body, bodies, dF):
-    """The averaged increment of increments ``dF`` (FBar.rate with dt = 1)."""
-    return np.eye(2) + FBar().rate(basis, volume, body, bodies, dF - np.eye(2), 1.0)
+    """The averaged increment of increments ``dF`` (FBar.rate with dt = 1, laws averaging det F)."""
+    laws = [NeoHookean(10.0, 0.3)] * bodies
+    return np.eye(2) + FBar().rate(basis, volume, body, laws, np.tile(np.eye(2), (len(dF), 1, 1)), dF - np.eye(2), 1.0)
 
 
 def increments(p, scale=0.05, seed=3):
@@ -100,34 +101,41 @@ def test_fbar_errors(particles):
 
 
 @pytest.mark.parametrize("scheme", ["USL", "MUSL", "USF"])
-def test_a_step_with_fbar_keeps_the_volume_and_averages_it(particles, scheme):
-    """One step from the same state: the same velocity gradients, so the same total volume (the
-    average conserves it), with the volume redistributed over the particles."""
+@pytest.mark.parametrize("law", [NeoHookean(10.0, 0.3), LinearElastic(10.0, 0.3)], ids=["det-F", "trace-F"])
+def test_a_step_with_fbar_keeps_the_averaged_measure(particles, scheme, law):
+    """One step from the same state: the same velocity gradients, so the same total of what the
+    law's F-bar averages (the volume for NeoHookean, sum_p V_p tr F_p for LinearElastic, whose
+    volumetric strain is tr F - d), redistributed over the particles."""
     V, p = particles
     rng = np.random.default_rng(5 + p.comm.rank)
     v = 0.1 * (p.x - 0.5) + 0.02 * rng.standard_normal(p.x.shape)
     runs = []
     for volumetric in ("standard", "fbar"):
         q = fempm.Particles(p.mesh, p.x.copy(), p.mass.copy(), p.volume.copy(), fields={"v": v.copy()})
-        s = ExplicitSolver(V, q, [LinearElastic(10.0, 0.3)], options=StepOptions(scheme=scheme, volumetric=volumetric))
+        s = ExplicitSolver(V, q, [law], options=StepOptions(scheme=scheme, volumetric=volumetric))
         s.step(1e-2)
-        runs.append((p.comm.allreduce(float(q.volume.sum())), q.volume.copy(), np.linalg.det(q.fields["F"])))
-    (total, _, J), (total_bar, vol_bar, J_bar) = runs
+        F = q.fields["F"]
+        measure = np.linalg.det(F) if isinstance(law, NeoHookean) else np.trace(F, axis1=1, axis2=2)
+        runs.append((p.comm.allreduce(float(p.volume @ measure)), measure, q.volume.copy()))
+    (total, own, _), (total_bar, averaged, vol_bar) = runs
     assert abs(total_bar - total) < 1e-14 * total
-    np.testing.assert_allclose(vol_bar, J_bar * p.volume, rtol=1e-14)  # V = det(F-bar) V0
-    assert p.comm.allreduce(float(np.abs(J_bar - J).max(initial=0.0)), op=MPI.MAX) > 1e-5
+    np.testing.assert_allclose(vol_bar, np.linalg.det(q.fields["F"]) * p.volume, rtol=1e-14)  # V = det(F-bar) V0
+    assert p.comm.allreduce(float(np.abs(averaged - own).max(initial=0.0)), op=MPI.MAX) > 1e-5
 
 
-def test_colliding_near_incompressible_disks_keep_their_energy():
-    """The two disks at nu = 0.4999 through their impact (MUSL, lumped, FLIP) with F-bar and a
-    hyperelastic law: the averaged pressure's force conserves the stored energy of the averaged
-    increments."""
+@pytest.mark.parametrize("law", [NeoHookean(1000.0, 0.4999), LinearElastic(1000.0, 0.4999)],
+                         ids=["neo-hookean", "linear-elastic"])
+def test_colliding_near_incompressible_disks_do_not_gain_energy(law):
+    """The two disks at nu = 0.4999 through their impact (MUSL, lumped, FLIP) with F-bar: the
+    averaged pressure's force is the derivative of the stored energy of the averaged measure
+    (det F for NeoHookean, tr F for LinearElastic); the standard step gains 20 % here with
+    LinearElastic (docs/implicit.md)."""
     import dataclasses
 
     from fempm.scenes import two_disks
 
     scene = two_disks(cells=10, t_end=1.6, nu=0.4999, frames=0)
-    scene = dataclasses.replace(scene, materials=[NeoHookean(1000.0, 0.4999)],
-                                options=dataclasses.replace(scene.options, volumetric="fbar"))
+    scene = dataclasses.replace(scene, materials=[law], options=dataclasses.replace(scene.options, volumetric="fbar"))
     out = fempm.scene.run(scene, None, progress=False)
-    assert out["status"] == "completed" and abs(out["health"]["energy_ratio"] - 1.0) < 0.01
+    ratio = out["health"]["energy_ratio"]
+    assert out["status"] == "completed" and 0.9 < ratio < 1.01, ratio
