@@ -55,6 +55,7 @@ class IncrementOperator:
         self.F, self.sigma = f["F"], f["sigma"]
         self.groups = [(mat, idx, law_state(mat, f, idx)) for mat, idx in material_groups(f, materials)]
         self.finite_difference = finite_difference
+        self._last: tuple[npt.NDArray, npt.NDArray] | None = None  # (G, sigma) of the last call
 
     def gradients(self, du: npt.NDArray) -> npt.NDArray:
         r""":math:`G_p = \sum_a \Delta u_a \otimes \nabla N_a(x_p)` (n, d, d) of an increment ``du``
@@ -64,15 +65,20 @@ class IncrementOperator:
 
     def stresses(self, G: npt.NDArray, tangent: bool) -> tuple[npt.NDArray, npt.NDArray | None]:
         r"""The nominal stresses :math:`P_p` (n, d, d) after the increments of gradients ``G``,
-        and with ``tangent`` their tangents :math:`\mathbb{A}_p` (n, d, d, d, d) (else None)."""
+        and with ``tangent`` their tangents :math:`\mathbb{A}_p` (n, d, d, d, d) (else None). The
+        Cauchy stresses of the last call are kept: Newton asks for the tangent where it has just
+        evaluated the residual, and the laws' stress update is not repeated there."""
         n, d = len(G), self.d
-        sigma = np.empty((n, d, d))
+        known = self._last is not None and np.array_equal(self._last[0], G)
+        sigma = self._last[1] if known else np.empty((n, d, d))
         D = np.empty((n, d, d, d, d)) if tangent else None
         for mat, idx, state in self.groups:
-            sigma[idx] = stress_after(mat, self.F[idx], G[idx], self.sigma[idx], self.rho[idx], state)[0]
+            if not known:
+                sigma[idx] = stress_after(mat, self.F[idx], G[idx], self.sigma[idx], self.rho[idx], state)[0]
             if D is not None:
                 D[idx] = tangent_of(mat, self.F[idx], G[idx], self.sigma[idx], self.rho[idx], state,
                                     finite_difference=self.finite_difference)
+        self._last = (G, sigma)
         return nominal_stress(sigma, D, G)
 
     def internal_force(self, P: npt.NDArray) -> npt.NDArray:

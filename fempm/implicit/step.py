@@ -163,21 +163,21 @@ class ImplicitStep(BasisGrid):
         x.array[:] = (dt * v[:owned] if integ.inertia else np.zeros((owned, d))).ravel()  # constant velocity
         forces = np.concatenate([fext[:owned].ravel(), op.internal_force(op.sigma)[:owned].ravel()])
         scale = float(np.sqrt(p.comm.allreduce(float(forces @ forces))))  # what the residual balances
-        result = self.newton.solve(residual, jacobian, J, x, force_scale=scale)
-        if not result.converged:
-            self.last_failure = f"SNES {result.reason} after {result.iterations} iteration(s)"
-            deficiency = None if integ.inertia else null_pivots(J)  # (with inertia the tangent is regular)
-            if deficiency:  # a smaller step cannot help
-                s.fail(f"singular tangent in the quasi-static step ({deficiency} null pivot(s)): a body whose rigid "
-                       "motions no condition holds (give it supports, or take dynamics='newmark')")
+        try:
+            result = self.newton.solve(residual, jacobian, J, x, force_scale=scale)
+            if not result.converged:
+                self.last_failure = f"SNES {result.reason} after {result.iterations} iteration(s)"
+                deficiency = None if integ.inertia else null_pivots(J)  # (with inertia the tangent is regular)
+                if deficiency:  # a smaller step cannot help
+                    s.fail(f"singular tangent in the quasi-static step ({deficiency} null pivot(s)): a body whose "
+                           "rigid motions no condition holds (give it supports, or take dynamics='newmark')")
+                return False
+            du = increment(x)
+        finally:
             J.destroy()
             x.destroy()
-            return False
         self.last = result
         s.record.newton_iterations += result.iterations
-        du = increment(x)
-        J.destroy()
-        x.destroy()
         self._update(basis, op, du, v, a, dt)
         return True
 

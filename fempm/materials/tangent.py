@@ -64,7 +64,7 @@ def stress_after(law, F: npt.NDArray, G: npt.NDArray, sigma: npt.NDArray, rho: n
 
 
 def finite_difference_tangent(law, F: npt.NDArray, G: npt.NDArray, sigma: npt.NDArray, rho: npt.NDArray,
-                      state: dict | None = None, step: float = FD_STEP) -> npt.NDArray:
+                              state: dict | None = None, step: float = FD_STEP) -> npt.NDArray:
     r"""The tangent :math:`\partial \sigma_{ij} / \partial G_{kl}` (n, d, d, d, d) by central
     differences of :func:`stress_after` (:math:`2 d^2` stress updates; the error is
     :math:`O(h^2)` where the law is smooth, and the rounding error about :math:`10^{-16}/h`

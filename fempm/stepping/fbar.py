@@ -78,7 +78,7 @@ class FBar:
         dF = eye + dt * L
         dJ = np.linalg.det(dF)
         trace = np.array([getattr(mat, "volumetric_measure", "J") == "trace" for mat in materials], dtype=bool)
-        by_trace = trace[body] if len(body) else np.zeros(0, dtype=bool)
+        by_trace = trace[body]
         dtheta = dt * np.einsum("pij,pji->p", L, F)
         averaged = patch_average(basis, volume, body, len(materials), np.where(by_trace, dtheta, dJ))
         scale = (np.where(by_trace, 1.0, averaged) / dJ) ** (1.0 / d)
