@@ -1,7 +1,7 @@
 """The figures of docs/implicit.md: implicit against explicit runs of Cook's membrane and of the
 vibrating bar, and F-bar on Cook's membrane near incompressibility.
 
-    python benchmarks/implicit_figures.py [--cook 2 1] [--bar] [--fbar 2] [--disks] [--compaction]
+    python benchmarks/implicit_figures.py [--cook 2 1] [--bar] [--fbar 2] [--fbar-implicit 4 2 1] [--disks] [--compaction]
 
 * ``--cook H ...``: Cook's membrane (nu = 1/3, E = 1, load 1e-3), at each triangle size H: the
   scene's explicit damped run and quasi-static implicit runs in 1 and 10 load steps; the
@@ -14,6 +14,8 @@ vibrating bar, and F-bar on Cook's membrane near incompressibility.
   end over the initial one;
 * ``--fbar H ...``: Cook's membrane at nu = 0.4999 (P1 triangles of size H), the explicit damped
   run with and without F-bar, against the Taylor-Hood reference 19.411;
+* ``--fbar-implicit H ...``: the same, quasi-static implicit in 1 and 10 load steps with F-bar
+  and in 1 without;
 * ``--disks``: the scene ``disks`` at nu = 0.4999 (20 cells, t_end = 3, its ``LinearElastic``,
   MUSL, lumped mass, point particles, FLIP) with and without F-bar: outcome, E/E0, steps;
 * ``--compaction``: the scene ``compaction`` (5 quasi-static steps) at 4, 8, 16 and 32 cells over
@@ -54,9 +56,10 @@ def cook_row(h: float, nu: float, label: str, change) -> str:
     return f"| {h:g} | {nu:g} | {label} | {out['steps']} | {uy:.3f} | {error:+.2f} % | {wall:.3f} |"
 
 
-def implicit(steps: int):
+def implicit(steps: int, volumetric: str = "standard"):
     def change(scene):
-        scene.options = StepOptions(integrator="implicit", dynamics="quasi-static", load_ramp=scene.t_end)
+        scene.options = StepOptions(integrator="implicit", dynamics="quasi-static", load_ramp=scene.t_end,
+                                    volumetric=volumetric)
         scene.dt = scene.t_end / steps
     return change
 
@@ -130,6 +133,7 @@ def main() -> None:
     a.add_argument("--cook", type=float, nargs="*", default=[])
     a.add_argument("--bar", action="store_true")
     a.add_argument("--fbar", type=float, nargs="*", default=[])
+    a.add_argument("--fbar-implicit", type=float, nargs="*", default=[])
     a.add_argument("--disks", action="store_true")
     a.add_argument("--compaction", action="store_true")
     args = a.parse_args()
@@ -150,6 +154,12 @@ def main() -> None:
         for h in args.fbar:
             print(cook_row(h, 0.4999, "explicit, damped, F-bar", fbar("fbar")))
             print(cook_row(h, 0.4999, "explicit, damped, standard", fbar("standard")))
+    if args.fbar_implicit:
+        print(COOK_HEADER)
+        for h in args.fbar_implicit:
+            for steps in (1, 10):
+                print(cook_row(h, 0.4999, f"implicit, quasi-static, {steps} step(s), F-bar", implicit(steps, "fbar")))
+            print(cook_row(h, 0.4999, "implicit, quasi-static, 1 step(s), standard", implicit(1)))
 
 
     if args.disks:

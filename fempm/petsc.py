@@ -30,16 +30,21 @@ def coo_pattern(
     cols: npt.NDArray,
     lgmap: PETSc.LGMap | None = None,
     bs: int = 1,
+    col_bs: int | None = None,
 ) -> PETSc.Mat:
-    """Square AIJ matrix on ``index_map`` (blocks of ``bs`` rows: local row ``i bs + c`` is
-    component ``c`` of dof ``i``) with the sparsity of COO entries in *local* indices
-    (owned + ghost); its values come with ``setValuesCOO`` (one per entry, in this order;
-    repeated entries are summed, entries in rows owned by another rank are sent there)."""
+    """AIJ matrix on ``index_map`` (blocks of ``bs`` rows: local row ``i bs + c`` is
+    component ``c`` of dof ``i``; columns likewise in blocks of ``col_bs``, by default ``bs``:
+    square) with the sparsity of COO entries in *local* indices (owned + ghost); its values
+    come with ``setValuesCOO`` (one per entry, in this order; repeated entries are summed,
+    entries in rows owned by another rank are sent there)."""
+    cbs = bs if col_bs is None else col_bs
     n, N = index_map.size_local * bs, index_map.size_global * bs
+    nc, Nc = index_map.size_local * cbs, index_map.size_global * cbs
     A = PETSc.Mat().create(comm=index_map.comm)
-    A.setSizes(((n, N), (n, N)), bsize=bs)
+    A.setSizes(((n, N), (nc, Nc)), bsize=bs if cbs == bs else None)
     A.setType(PETSc.Mat.Type.AIJ)
-    A.setLGMap(lgmap or local_to_global_map(index_map, bs))
+    rmap = lgmap or local_to_global_map(index_map, bs)
+    A.setLGMap(rmap, rmap if cbs == bs else local_to_global_map(index_map, cbs))
     A.setPreallocationCOOLocal(
         np.asarray(rows, dtype=PETSc.IntType).ravel().copy(),
         np.asarray(cols, dtype=PETSc.IntType).ravel().copy(),

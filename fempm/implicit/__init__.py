@@ -3,6 +3,10 @@ increment with Newton's method (PETSc SNES), the tangent assembled from the part
 
 * :mod:`fempm.implicit.nominal`: the particles' nominal stress with respect to the step's start
   and its tangent, from the laws' stresses and tangents (:mod:`fempm.materials.tangent`).
+* :mod:`fempm.implicit.operator`: an increment's action on the particles, the tangent's blocks.
+* :mod:`fempm.implicit.fbar`: the same with F-bar's patch-averaged volume change, and the
+  tangent's coupling over the patches.
+* :mod:`fempm.implicit.newton`, :mod:`fempm.implicit.step`: Newton on SNES, the step.
 """
 
 from fempm.implicit.nominal import nominal_stress

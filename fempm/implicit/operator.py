@@ -81,6 +81,20 @@ class IncrementOperator:
         self._last = (G, sigma)
         return nominal_stress(sigma, D, G)
 
+    def law_gradients(self, G: npt.NDArray) -> npt.NDArray:
+        """The increments the laws see for the increments ``G``: ``G`` itself (F-bar averages
+        them, :class:`fempm.implicit.fbar.FBarIncrementOperator`)."""
+        return G
+
+    def forces(self, G: npt.NDArray) -> npt.NDArray:
+        r"""The stresses :math:`P_p` (n, d, d) whose scatter is the internal force of the increments ``G``."""
+        return self.stresses(G, tangent=False)[0]
+
+    def tangents(self, G: npt.NDArray) -> tuple[npt.NDArray, tuple | None]:
+        r"""The particles' tangent blocks :math:`\mathbb{A}_p` (n, d, d, d, d) at the increments
+        ``G``, and what couples particles beyond them (None here)."""
+        return self.stresses(G, tangent=True)[1], None
+
     def internal_force(self, P: npt.NDArray) -> npt.NDArray:
         r""":math:`f^{int}_a = \sum_p V_p^n P_p \nabla N_a` (owned + ghost dofs, d), summed over ranks."""
         return p2g_gradients(self.basis, self.volume[:, None, None] * P)

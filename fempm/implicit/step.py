@@ -13,7 +13,8 @@ A step of :math:`\Delta t` from the particles' state at :math:`t_n`:
    .. math::
        R(\Delta u) = M a^{+}(\Delta u) + f^{int}(\Delta u) - f^{ext}(t_n + \Delta t) = 0
 
-   (:mod:`fempm.implicit.operator`; :mod:`fempm.implicit.dynamics` for :math:`a^{+}`, no
+   (:mod:`fempm.implicit.operator`, with F-bar :mod:`fempm.implicit.fbar`;
+   :mod:`fempm.implicit.dynamics` for :math:`a^{+}`, no
    inertia when quasi-static, the loads then scaled by ``StepOptions.load_ramp``), the held
    components' rows :math:`\Delta u_{ai} = 0`;
 3. the particles: :math:`F_p \leftarrow (I + G_p) F_p`, the laws' stress and internal
@@ -39,6 +40,7 @@ from mpi4py import MPI
 from petsc4py import PETSc
 
 from fempm import petsc as fpetsc
+from fempm.implicit.fbar import FBarIncrementOperator, PatchCoupling
 from fempm.implicit.newton import Newton, null_pivots
 from fempm.implicit.operator import IncrementOperator
 from fempm.stepping.grid import BasisGrid
@@ -107,7 +109,9 @@ class ImplicitStep(BasisGrid):
         s, p, integ = self.solver, self.solver.particles, self.integration
         d = p.gdim
         basis = self.open_basis()
-        op = IncrementOperator(basis, p, s.materials, finite_difference=self.options.tangent == "finite-difference")
+        fbar = self.options.volumetric_average is not None
+        op = (FBarIncrementOperator if fbar else IncrementOperator)(
+            basis, p, s.materials, finite_difference=self.options.tangent == "finite-difference")
         m = op.nodal(p.mass[:, None])[:, 0]
         free = self._free(m, basis.num_dofs_local)
         v, a = np.zeros_like(free, dtype=float), np.zeros_like(free, dtype=float)
@@ -138,25 +142,21 @@ class ImplicitStep(BasisGrid):
         def residual(x, r) -> None:
             du = increment(x)
             G = op.gradients(du)
-            if inverts(G):  # outside the residual's domain: an infinite norm, which the line search steps back from
-                r.set(np.inf)
+            if inverts(G) or inverts(op.law_gradients(G)):  # outside the residual's domain: an infinite norm,
+                r.set(np.inf)  # which the line search steps back from
                 return
-            P, _ = op.stresses(G, tangent=False)
-            R = op.internal_force(P) - fext
+            R = op.internal_force(op.forces(G)) - fext
             if integ.inertia:
                 R += op.mass_times(integ.acceleration(du, v, a, dt), self.consistent, m)
             R[~free] = du[~free]
             r.array[:] = R[:owned].ravel()
 
-        rows, cols = op.pattern()
-        J = fpetsc.coo_pattern(imap, rows, cols, bs=d)
+        local = fpetsc.coo_pattern(imap, *op.pattern(), bs=d)
+        patches = PatchCoupling(op) if fbar else None
+        J = local if patches is None else self._coupled_pattern(local, patches)
 
         def jacobian(x, JJ) -> None:
-            du = increment(x)
-            G = op.gradients(du)
-            _, A = op.stresses(G, tangent=True)
-            JJ.setValuesCOO(op.tangent_values(A, c, self.consistent), addv=PETSc.InsertMode.INSERT_VALUES)
-            JJ.assemble()
+            self._fill_tangent(JJ, local, patches, op, op.gradients(increment(x)), c)
             JJ.zeroRowsColumnsLocal(held, diag=1.0)
 
         x = J.createVecRight()
@@ -174,12 +174,41 @@ class ImplicitStep(BasisGrid):
                 return False
             du = increment(x)
         finally:
-            J.destroy()
-            x.destroy()
+            for obj in [x, local] + ([J, patches] if patches is not None else []):
+                obj.destroy()
         self.last = result
         s.record.newton_iterations += result.iterations
         self._update(basis, op, du, v, a, dt)
         return True
+
+    def _fill_tangent(self, JJ: PETSc.Mat, local: PETSc.Mat, patches: PatchCoupling | None, op: IncrementOperator,
+                      G: npt.NDArray, c: float) -> None:
+        """The tangent at the increments ``G`` into ``JJ``: the particles' blocks (into ``local``,
+        which is ``JJ`` without F-bar) and with F-bar the patch coupling (:class:`PatchCoupling`)."""
+        A, coupling = op.tangents(G)
+        local.setValuesCOO(op.tangent_values(A, c, self.consistent), addv=PETSc.InsertMode.INSERT_VALUES)
+        local.assemble()
+        if patches is not None:
+            JJ.zeroEntries()
+            JJ.axpy(1.0, local, structure=PETSc.Mat.Structure.SUBSET_NONZERO_PATTERN)
+            K = patches.matrix(coupling)
+            JJ.axpy(1.0, K, structure=PETSc.Mat.Structure.SUBSET_NONZERO_PATTERN)
+            K.destroy()
+
+    @staticmethod
+    def _coupled_pattern(local: PETSc.Mat, patches: PatchCoupling) -> PETSc.Mat:
+        """The tangent's matrix with F-bar: the particles' blocks' pattern and the patch
+        coupling's (the products' structure, from zero factors)."""
+        n, d = len(patches.op.volume), patches.d
+        zeros = (np.zeros((n, d, d)), np.zeros((n, d, d)), np.zeros((n, d, d)), np.zeros(n))
+        local.setValuesCOO(np.zeros(len(patches.op.pattern()[0])), addv=PETSc.InsertMode.INSERT_VALUES)
+        local.assemble()
+        J = local.copy()
+        K = patches.matrix(zeros)
+        J.axpy(1.0, K, structure=PETSc.Mat.Structure.DIFFERENT_NONZERO_PATTERN)
+        K.destroy()
+        J.setLGMap(*local.getLGMap())
+        return J
 
     def _free(self, m: npt.NDArray, num_local: int) -> npt.NDArray[np.bool_]:
         """(owned + ghost dofs, d): the components solved for: not held by a condition, on dofs
@@ -207,7 +236,8 @@ class ImplicitStep(BasisGrid):
         else:
             f["v"] = np.zeros_like(f["v"])
             s.grid_velocity = np.zeros((basis.num_dofs_space, p.gdim))
-        self.update_kinematics(op.gradients(du), 1.0)
+        G = op.gradients(du)
+        self.update_kinematics(op.law_gradients(G), 1.0, averaged=False)
         self.move(basis.gather(du), lambda: basis.gather_samples(du), 1.0)
         self.close()
         self.relocate()

@@ -196,15 +196,16 @@ class BasisGrid(Grid):
             f += p2g(basis, fext)
         return f
 
-    def update_kinematics(self, L: npt.NDArray, dt: float) -> None:
+    def update_kinematics(self, L: npt.NDArray, dt: float, averaged: bool = True) -> None:
         r""":math:`F_p^+ = (I + \Delta t L_p) F_p`, :math:`V_p = J_p V_p^0` and the laws' stress,
         with the checks of J (one collective); with F-bar :math:`L_p` is first replaced by
-        :math:`\bar L_p` (:meth:`fempm.stepping.fbar.FBar.rate`)."""
+        :math:`\bar L_p` (:meth:`fempm.stepping.fbar.FBar.rate`) unless ``averaged`` is False
+        (the implicit step's :math:`L_p` are averaged already)."""
         s = self.solver
         p = s.particles
         f = p.fields
         average = self.options.volumetric_average
-        if average is not None:  # F-bar: the increments' volume change averaged over the patches
+        if average is not None and averaged:  # F-bar: the increments' volume change averaged over the patches
             L = average.rate(self.basis, p.volume, f["body"], s.materials, f["F"], L, dt)
         F, J = kernels.deform(f["F"], L, dt)
         nonfinite = ~np.isfinite(J)

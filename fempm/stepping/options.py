@@ -61,7 +61,8 @@ class StepOptions:
     converge is halved before the run stops. load_ramp (implicit, quasi-static): the loads are
     scaled by :math:`\min(1, t / t_{ramp})` at a step's end time t (None: the loads as given).
     volumetric: standard, or fbar (:mod:`fempm.stepping.fbar`: each particle's volume change
-    averaged over its nodal patch, against volumetric locking; the explicit numpy step).
+    averaged over its nodal patch, against volumetric locking; the explicit numpy step, and the
+    implicit step with :mod:`fempm.implicit.fbar`).
     """
 
     scheme: Scheme = "MUSL"
@@ -110,9 +111,6 @@ class StepOptions:
                              "does not apply")
         #: the volumetric average of the deformation increments (None: standard)
         self.volumetric_average = volumetric(self.volumetric)
-        if self.integration is not None and self.volumetric_average is not None:
-            raise ValueError("volumetric='fbar' runs with the explicit integrator only, so far (the implicit step's "
-                             "tangent of the patch average is not there yet)")
         if self.tangent not in ("analytic", "finite-difference"):
             raise ValueError(f"unknown option tangent={self.tangent!r}; expected analytic or finite-difference")
         if self.load_ramp is not None and not 0.0 < self.load_ramp < float("inf"):

@@ -66,11 +66,12 @@ def label(opts: dict) -> str:
 
 #: the full catalogue also crosses MUSL with the other mass matrices and with CPDI1, and runs
 #: F-bar (USL and MUSL) and Newmark's implicit step at a Courant number of 4 (lumped and
-#: consistent mass)
+#: consistent mass, and lumped with F-bar)
 MUSL_VARIATIONS = ({"scheme": "MUSL", "mass": "consistent"}, {"scheme": "MUSL", "mass": "fmpm5"},
                    {"scheme": "MUSL", "domain": "cpdi1"}, {"volumetric": "fbar"},
                    {"scheme": "MUSL", "volumetric": "fbar"}, {"integrator": "implicit", "courant": 4.0},
-                   {"integrator": "implicit", "courant": 4.0, "mass": "consistent"})
+                   {"integrator": "implicit", "courant": 4.0, "mass": "consistent"},
+                   {"integrator": "implicit", "courant": 4.0, "volumetric": "fbar"})
 
 
 def options_for(case: str, quick: bool = False) -> list[dict]:

@@ -160,7 +160,6 @@ def test_a_free_body_in_a_quasi_static_step_has_a_singular_tangent():
     ({"integrator": "implicit", "newmark_gamma": 0.4}, r"newmark_gamma=0.4 must lie in \[1/2, 1\]"),
     ({"integrator": "implicit", "tangent": "numeric"}, r"unknown option tangent='numeric'"),
     ({"integrator": "implicit", "load_ramp": 0.0}, r"load_ramp=0.0 must be a positive time"),
-    ({"integrator": "implicit", "volumetric": "fbar"}, r"volumetric='fbar' runs with the explicit integrator only"),
 ])
 def test_bad_implicit_options(options, message):
     with pytest.raises(ValueError, match=message):
