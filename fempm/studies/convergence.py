@@ -27,6 +27,7 @@ A run that fails or stops converging stays a row of the table.
 from __future__ import annotations
 
 import csv
+import dataclasses
 import time
 from dataclasses import dataclass
 from pathlib import Path
@@ -68,11 +69,26 @@ class Config:
     scheme: str = "USL"
     ppc: int | None = None
     max_cells: int | None = None  # the finest size run (the costly P2 spaces in 2D stop earlier)
+    #: "explicit", or the implicit step's dynamics: "newmark" (time steps of ``courant`` times the
+    #: cell's crossing time by the wave) or "quasi-static" (``steps`` load steps)
+    integrator: str = "explicit"
+    courant: float = 4.0
+    steps: int = 1
 
     @property
     def label(self) -> str:
         space = f"P{self.degree}" + ("B" if self.variant == "bernstein" else "")
-        return f"{self.mesh} {space} {self.mass} {self.domain} {self.scheme}"
+        return f"{self.mesh} {space} {self.mass} {self.domain} {self.scheme}" + (
+            "" if self.integrator == "explicit" else f" {self.integration}")
+
+    @property
+    def integration(self) -> str:
+        """How the run integrates in time: ``explicit``, ``newmark courant=C``, ``quasi-static N steps``."""
+        if self.integrator == "newmark":
+            return f"newmark courant={self.courant:g}"
+        if self.integrator == "quasi-static":
+            return f"quasi-static {self.steps} step(s)"
+        return "explicit"
 
 
 @dataclass(frozen=True)
@@ -174,6 +190,9 @@ def run_case(name: str, config: Config, cells: int, comm: MPI.Comm = MPI.COMM_WO
                                    domain=config.domain, scheme=config.scheme, comm=comm)
         h = scene.params["h"]
         cfl = spec.consistent_cfl if mass_model(config.mass).matrix and spec.consistent_cfl else spec.cfl
+        if config.integrator == "newmark":  # Newmark's implicit step at a Courant number
+            scene.options = dataclasses.replace(scene.options, integrator="implicit", dynamics="newmark")
+            cfl = config.courant
         dt = cfl * h / (config.degree * max_speed(problem))
         scene.dt = dt
         row.update(h=h, dt=dt)

@@ -13,7 +13,11 @@ the vibrating bar, the 1D and 2D axis-aligned manufactured solutions and the sma
 generalized vortex; error the :math:`V^0`-weighted :math:`L^2` particle displacement error,
 maximum over time) and ``mapping``, the particle-to-grid projection alone
 (:func:`fempm.studies.mapping.run_case` with the smooth field; error :math:`\|F - f\|_{L^2}`,
-time the projection's).
+time the projection's), and the static problems of :mod:`fempm.studies.scene_problems`
+(``cook``: Cook's membrane, its corner's error, explicit damped and quasi-static implicit;
+``compaction``: the column's ``stress_error``, quasi-static). The vibrating bar also runs with
+Newmark's implicit step (:data:`NEWMARK_BAR`); the column ``integration`` says how a row
+integrates in time (``explicit``, ``newmark courant=C``, ``quasi-static N step(s)``).
 
 Outputs: ``DIR/error_vs_time.csv`` with the columns :data:`COLUMNS` (``pareto`` true on the
 rows no other row of the problem beats in both error and time), ``DIR/error_vs_time.md`` (the
@@ -34,18 +38,18 @@ from mpi4py import MPI
 
 from fempm.io.plot import plot_pareto
 from fempm.particles.seeding import create_particles
-from fempm.studies import convergence, mapping
+from fempm.studies import convergence, mapping, scene_problems
 from fempm.studies.convergence import Config
 from fempm.studies.harness import Provenance, chosen, prepare, read_rows, sweep
 from fempm.transfer.domains import half_widths
 
 __all__ = [
-    "COLUMNS", "REPEAT_BELOW_S", "SWEEPS", "Sweep", "pareto", "read_csv", "run_case", "run_study", "threads",
+    "COLUMNS", "COMPACTION", "COOK", "NEWMARK_BAR", "REPEAT_BELOW_S", "SWEEPS", "Sweep", "pareto", "read_csv", "run_case", "run_study", "threads",
     "write_csv", "write_report",
 ]
 
 COLUMNS = ["problem", "mesh", "degree", "mass", "domain", "scheme", "cells", "ppc", "error", "wall_s", "repeats",
-           "threads", "pareto"]
+           "threads", "pareto", "integration"]
 #: runs faster than this are repeated (3 times) and their median time kept
 REPEAT_BELOW_S = 2.0
 
@@ -83,8 +87,19 @@ def _quick(*masses: str, scheme: str = "USL", ppc: int = 2) -> tuple[Config, ...
     return tuple(Config(mass=m, scheme=scheme, ppc=ppc) for m in masses)
 
 
+#: Newmark's implicit step on the bar at Courant numbers 1 and 4, lumped and consistent mass
+NEWMARK_BAR = tuple(Config(mass=m, scheme="MUSL", ppc=2, integrator="newmark", courant=c)
+                    for m in ("lumped", "consistent") for c in (1.0, 4.0))
+#: Cook's membrane: the scene's explicit damped run, quasi-static implicit in 1 and 10 load steps
+COOK = tuple(Config("unstructured", scheme="MUSL", ppc=4, integrator=i, steps=n)
+             for i, n in (("explicit", 1), ("quasi-static", 1), ("quasi-static", 10)))
+#: the compaction column: point particles, cpGIMP and CPDI1, 5 quasi-static load steps
+COMPACTION = tuple(Config(domain=d, ppc=4, integrator="quasi-static", steps=5) for d in ("point", "cpgimp", "cpdi1"))
+
+
 SWEEPS: dict[str, Sweep] = {
-    "vibrating_bar": Sweep(_sweep_1d("MUSL"), (8, 16, 32, 64), _quick("lumped", "fmpm3", "consistent", scheme="MUSL"), (8, 16)),
+    "vibrating_bar": Sweep(_sweep_1d("MUSL") + NEWMARK_BAR, (8, 16, 32, 64),
+                           _quick("lumped", "fmpm3", "consistent", scheme="MUSL") + NEWMARK_BAR[1:2], (8, 16)),
     "axis_aligned_1d_G0.05": Sweep(_sweep_1d("USL"), (16, 32, 64, 128), _quick("lumped", "consistent"), (16, 32)),
     "axis_aligned_2d": Sweep(_sweep_2d("USL"), (8, 16, 32), _quick("lumped", "consistent", ppc=4), (8,)),
     "vortex_A0.01": Sweep(_sweep_2d("MUSL"), (24, 48), _quick("lumped", scheme="MUSL", ppc=4), (24,)),
@@ -94,6 +109,8 @@ SWEEPS: dict[str, Sweep] = {
               for m in masses for d in ("point", "gimp", "cpdi1") for ppc in (4, 9) if not (k == 2 and ppc == 4)),
         (8, 16, 32, 64),
         tuple(Config("structured", mass=m, ppc=4) for m in ("lumped", "fmpm3", "consistent")), (8, 16)),
+    "cook": Sweep(COOK, (6, 12, 24, 48), COOK, (6,)),
+    "compaction": Sweep(COMPACTION, (4, 8, 16, 32), COMPACTION[1:2], (4, 8)),
 }
 
 
@@ -119,10 +136,11 @@ def _loop_case(problem: str, config: Config, cells: int, comm) -> dict:
 
 def run_case(problem: str, config: Config, cells: int, comm: MPI.Comm = MPI.COMM_WORLD) -> dict:
     """One (problem, configuration, size), repeated when fast; returns its row."""
-    case = _mapping_case if problem == "mapping" else (lambda c, n, cm: _loop_case(problem, c, n, cm))
+    case = (_mapping_case if problem == "mapping" else scene_problems.PROBLEMS.get(problem)
+            or (lambda c, n, cm: _loop_case(problem, c, n, cm)))
     row = {"problem": problem, "degree": f"{config.degree}{'B' if config.variant == 'bernstein' else ''}", "mass": config.mass,
            "domain": config.domain, "scheme": "-" if problem == "mapping" else config.scheme, "cells": cells,
-           "ppc": config.ppc, "threads": threads()}
+           "ppc": config.ppc, "threads": threads(), "integration": config.integration}
     try:
         first = case(config, cells, comm)
     except Exception as e:  # noqa: BLE001 - a failed configuration is a row (SingularMassError, unsupported options)
@@ -224,7 +242,9 @@ def read_csv(path: Path) -> list[dict]:
 
 
 def _name(r: dict) -> str:
-    return f"{r['mesh']} P{r['degree']} {r['mass']} {r['domain']} {r['scheme']} ppc={r['ppc']} n={r['cells']}"
+    integration = r.get("integration", "explicit") or "explicit"
+    return (f"{r['mesh']} P{r['degree']} {r['mass']} {r['domain']} {r['scheme']} ppc={r['ppc']} n={r['cells']}"
+            + ("" if integration == "explicit" else f" {integration}"))
 
 
 def write_report(rows: list[dict], out: Path, *, quick: bool = False, wall: float | None = None,

@@ -28,7 +28,7 @@ def test_csv_has_the_fixed_columns_and_every_run(study):
         with open(Path(out) / "error_vs_time.csv", newline="") as f:
             reader = csv.DictReader(f)
             assert reader.fieldnames == ["problem", "mesh", "degree", "mass", "domain", "scheme", "cells", "ppc", "error",
-                                         "wall_s", "repeats", "threads", "pareto"]
+                                         "wall_s", "repeats", "threads", "pareto", "integration"]
             assert len(list(reader)) == expected
         assert (Path(out) / "error_vs_time.md").read_text().count("## ") == len(evt.SWEEPS)
         assert (Path(out) / "error_vs_time.md").read_text().splitlines()[2].startswith("Made by `")
@@ -62,3 +62,19 @@ def test_consistent_and_fmpm_beat_lumped_mapping_error(study):
     for cells in (8, 16):
         e = {r["mass"]: r["error"] for r in rows if r["problem"] == "mapping" and r["cells"] == cells}
         assert e["consistent"] < e["fmpm3"] < e["lumped"]
+
+
+def test_implicit_rows(study):
+    """Cook's membrane at 6 cells across: the quasi-static implicit runs (1 and 10 load steps)
+    find the explicit damped run's rest state (errors 0.096-0.097 against the reference, the
+    same discretization); the compaction column's stress error falls under refinement
+    (0.101 -> 0.046, cpGIMP); Newmark's bar at Courant 4 is a row of the bar."""
+    _, rows = study
+    cook = {r["integration"]: r["error"] for r in rows if r["problem"] == "cook"}
+    assert set(cook) == {"explicit", "quasi-static 1 step(s)", "quasi-static 10 step(s)"}
+    for name in ("quasi-static 1 step(s)", "quasi-static 10 step(s)"):
+        assert abs(cook[name] - cook["explicit"]) < 5e-3, cook
+    compaction = {r["cells"]: r["error"] for r in rows if r["problem"] == "compaction"}
+    assert compaction[8] < 0.6 * compaction[4], compaction
+    assert [r["integration"] for r in rows if r["problem"] == "vibrating_bar" and r["integration"] != "explicit"] == [
+        "newmark courant=4"] * 2
