@@ -78,14 +78,28 @@ class Newton:
             self.snes.getLineSearch().setFromOptions()
 
     def solve(self, residual: Callable[[PETSc.Vec, PETSc.Vec], None], jacobian: Callable[[PETSc.Vec, PETSc.Mat], None],
-              J: PETSc.Mat, x: PETSc.Vec, force_scale: float = 0.0) -> NewtonResult:
+              J: PETSc.Mat, x: PETSc.Vec, force_scale: float = 0.0, line_search: str | None = None) -> NewtonResult:
         """Solve ``residual(x, r) = 0`` from the guess in ``x`` (the solution left there), with
         ``jacobian(x, J)`` filling the tangent ``J``; ``residual`` may fill ``r`` with infinities
         where ``x`` is outside its domain (the line search then steps back, or the solve fails).
         ``force_scale``: the norm of the forces the residual balances; a residual below
         :data:`FORCE_ATOL` of it has converged (the round-off floor of a small load increment on
         a loaded body lies above the relative tolerance), unless the options database sets
-        ``snes_atol``."""
+        ``snes_atol``. ``line_search``: a PETSc line search type for this solve instead of the
+        configured one (e.g. ``"basic"``: full Newton steps)."""
+        snes = self.snes
+        ls = snes.getLineSearch()
+        configured = ls.getType()
+        if line_search is not None:
+            ls.setType(line_search)
+        try:
+            return self._solve(residual, jacobian, J, x, force_scale)
+        finally:
+            if line_search is not None:
+                ls.setType(configured)
+                ls.setFromOptions()  # the options database's settings of the configured search
+
+    def _solve(self, residual, jacobian, J: PETSc.Mat, x: PETSc.Vec, force_scale: float) -> NewtonResult:
         snes = self.snes
         if not PETSc.Options().hasName(self.prefix + "snes_atol"):
             rtol, _, stol, max_it = snes.getTolerances()

@@ -24,7 +24,9 @@ A step of :math:`\Delta t` from the particles' state at :math:`t_n`:
    (FLIP :math:`v_p + \sum_a N_a (v^{+}_a - v_a)`, PIC :math:`\sum_a N_a v^{+}_a`); quasi-static,
    :math:`v_p = a_p = 0`.
 
-A step whose Newton iterations do not converge is not accepted: it is taken again as two halves
+A Newton solve that fails with the configured line search is taken once more with full Newton
+steps (PETSc's ``basic`` line search). A step whose Newton iterations still do not converge is
+not accepted: it is taken again as two halves
 (each of which may be halved again, up to ``StepOptions.max_cuts`` times), and every cut is
 counted in :attr:`fempm.stepping.solver.StepRecord.cut_steps`.
 """
@@ -160,26 +162,43 @@ class ImplicitStep(BasisGrid):
             JJ.zeroRowsColumnsLocal(held, diag=1.0)
 
         x = J.createVecRight()
-        x.array[:] = (dt * v[:owned] if integ.inertia else np.zeros((owned, d))).ravel()  # constant velocity
+        guess = (dt * v[:owned] if integ.inertia else np.zeros((owned, d))).ravel()  # constant velocity
         forces = np.concatenate([fext[:owned].ravel(), op.internal_force(op.sigma)[:owned].ravel()])
         scale = float(np.sqrt(p.comm.allreduce(float(forces @ forces))))  # what the residual balances
         try:
-            result = self.newton.solve(residual, jacobian, J, x, force_scale=scale)
-            if not result.converged:
-                self.last_failure = f"SNES {result.reason} after {result.iterations} iteration(s)"
-                deficiency = None if integ.inertia else null_pivots(J)  # (with inertia the tangent is regular)
-                if deficiency:  # a smaller step cannot help
-                    s.fail(f"singular tangent in the quasi-static step ({deficiency} null pivot(s)): a body whose "
-                           "rigid motions no condition holds (give it supports, or take dynamics='newmark')")
+            result = self._solve(residual, jacobian, J, x, guess, scale)
+            if result is None:
                 return False
             du = increment(x)
         finally:
             for obj in [x, local] + ([J, patches] if patches is not None else []):
                 obj.destroy()
         self.last = result
-        s.record.newton_iterations += result.iterations
         self._update(basis, op, du, v, a, dt)
         return True
+
+    def _solve(self, residual, jacobian, J: PETSc.Mat, x: PETSc.Vec, guess: npt.NDArray, scale: float):
+        """Newton from ``guess`` with the line search of the options; where it fails, once more
+        with full Newton steps (``basic``: near incompressibility the first full step can raise
+        the residual many times over on its way to the quadratic range, and the backtracking
+        search then creeps); the :class:`~fempm.implicit.newton.NewtonResult` that converged,
+        else None (:attr:`last_failure` says why). A singular quasi-static tangent stops the run."""
+        s = self.solver
+        failures = []
+        for line_search in (None, "basic"):
+            x.array[:] = guess
+            result = self.newton.solve(residual, jacobian, J, x, force_scale=scale, line_search=line_search)
+            s.record.newton_iterations += result.iterations
+            if result.converged:
+                return result
+            failures.append(f"SNES {result.reason} after {result.iterations} iteration(s)"
+                            + (" with full Newton steps" if line_search else ""))
+            deficiency = None if self.integration.inertia else null_pivots(J)  # (with inertia the tangent is regular)
+            if deficiency:  # a smaller step cannot help
+                s.fail(f"singular tangent in the quasi-static step ({deficiency} null pivot(s)): a body whose "
+                       "rigid motions no condition holds (give it supports, or take dynamics='newmark')")
+        self.last_failure = ", then ".join(failures)
+        return None
 
     def _fill_tangent(self, JJ: PETSc.Mat, local: PETSc.Mat, patches: PatchCoupling | None, op: IncrementOperator,
                       G: npt.NDArray, c: float) -> None:

@@ -5,7 +5,6 @@ and 2 ranks (the 2-rank run against the same problem on one rank)."""
 import numpy as np
 import pytest
 from mpi4py import MPI
-from petsc4py import PETSc
 
 import fempm  # before dolfinx
 from fempm.materials import NeoHookean, VonMises
@@ -25,22 +24,6 @@ def cook_solver(h, comm=MPI.COMM_WORLD, **options):
     scene = cook_membrane(h=h, nu=1 / 3, load=1e-3, comm=comm)
     scene.options = StepOptions(**{**QUASI_STATIC, **options})
     return scene.solver()
-
-
-@pytest.fixture
-def petsc_options():
-    """Options set in the PETSc database for one test, removed after it."""
-    opts = PETSc.Options()
-    added = []
-
-    def put(**values):
-        for k, v in values.items():
-            opts[k] = v
-            added.append(k)
-
-    yield put
-    for k in added:
-        opts.delValue(k)
 
 
 @pytest.mark.parametrize("law, load", [(None, 1e-3), (NeoHookean(1.0, 1 / 3), 0.02)],
