@@ -3,7 +3,8 @@ r"""# A block and a disk on a frictional incline, against the rigid-body acceler
 The incline scene (`python -m fempm run incline --body block|disk --angle DEG --friction MU`,
 `fempm.scenes.incline`) at 30 degrees: the plane is the grid boundary $y = 0$ with Coulomb
 friction, or a rigid body in frictional contact (`--plane rigid`), gravity rotated by the
-slope. The analytic along-slope accelerations of the centre of mass:
+slope; or (`--plane tagged`, the block) the tagged floor of a gmsh triangle mesh turned by the
+slope, gravity vertical (`fempm.boundary.tagged`: the wall's normals from its facets). The analytic along-slope accelerations of the centre of mass:
 
 * block: $g(\sin\theta - \mu\cos\theta)$ while $\mu < \tan\theta = 0.577$, 0 (it sticks) above;
 * disk: $\tfrac23 g \sin\theta = 3.27$ m/s$^2$ (rolling without slip) for
@@ -46,9 +47,12 @@ G_SIN = 9.81 * np.sin(np.radians(30.0))
 #: blend (0.7 for the block, pure FLIP for the disk)
 #: the coefficients run for each plane and body
 FRICTIONS = {("grid", "block"): (0.0, 0.2, 0.5, 0.6, 1.0), ("grid", "disk"): (0.0, 0.1, 0.2, 0.22, 0.25, 0.3, 1.0),
-             ("rigid", "block"): (0.0, 0.2, 0.5, 0.6, 1.0), ("rigid", "disk"): (0.1, 0.2, 0.3)}
-CASES = {f"{'rigid plane, ' if plane == 'rigid' else ''}{body} mu={mu:g}":
-         dict(body=body, friction=mu, **({"plane": "rigid"} if plane == "rigid" else {}))
+             ("rigid", "block"): (0.0, 0.2, 0.5, 0.6, 1.0), ("rigid", "disk"): (0.1, 0.2, 0.3),
+             ("tagged", "block"): (0.0, 0.2, 0.5, 0.6, 0.7, 1.0)}
+#: how a case's name says its plane
+PLANE_NAMES = {"grid": "", "rigid": "rigid plane, ", "tagged": "tagged wall, "}
+CASES = {f"{PLANE_NAMES[plane]}{body} mu={mu:g}":
+         dict(body=body, friction=mu, **({} if plane == "grid" else {"plane": plane}))
          for (plane, body), mus in FRICTIONS.items() for mu in mus}
 COLUMNS = ["case", "cells", "ppc", "acceleration", "analytic", "error_percent", "energy_ratio", "steps", "wall_s"]
 

@@ -1,7 +1,9 @@
-"""Grid conditions: fixed, slip, prescribed and frictional walls, and the contact patches of a
-wall that shares its normal impulse by depth."""
+"""Grid conditions: fixed, slip, prescribed and frictional walls (chosen by position, or on
+tagged facets with their normals: :func:`tagged`), and the contact patches of a wall that
+shares its normal impulse by depth."""
 
 from fempm.boundary.conditions import GridConditions
+from fempm.boundary.tagged import tagged
 from fempm.boundary.walls import (
     Fixed,
     Friction,
@@ -27,4 +29,5 @@ __all__ = [
     "locate_dofs",
     "prescribed",
     "slip",
+    "tagged",
 ]

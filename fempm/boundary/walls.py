@@ -28,8 +28,8 @@ from fempm.boundary.patches import Patches, depth_shares
 from fempm.transfer.centres import NodalCentres
 
 __all__ = [
-    "Fixed", "Friction", "Prescribed", "Slip", "fixed", "fixed_on_facets", "friction", "locate_dofs",
-    "prescribed", "slip",
+    "Fixed", "Friction", "Prescribed", "Slip", "fixed", "fixed_on_facets", "friction", "friction_wall",
+    "locate_dofs", "prescribed", "slip",
 ]
 
 
@@ -96,7 +96,7 @@ class Prescribed:
 @dataclass(frozen=True)
 class Friction:
     r"""A rigid wall with Coulomb friction (coefficient ``mu``) at ``dofs``, outward ``normal``
-    (unit, (d,)). Where the grid velocity moves into the wall (:math:`v_n = v \cdot n > 0`),
+    (unit, (d,), or one per dof (len(dofs), d)). Where the grid velocity moves into the wall (:math:`v_n = v \cdot n > 0`),
     its normal part is removed and the tangential part reduced by the friction that normal
     impulse can carry,
 
@@ -156,16 +156,16 @@ class Friction:
     def apply(self, v: npt.NDArray, centroids: NodalCentres | None = None) -> None:
         """Friction on the velocities ``v`` (dofs, d); ``centroids``: the nodal centres of mass
         and masses, needed with a ``gap``."""
-        n = self.normal
         vd = v[self.dofs]
-        vn = vd @ n
+        n = np.broadcast_to(self.normal, vd.shape)  # one normal, or one per dof (a tagged wall)
+        vn = np.einsum("kd,kd->k", vd, n)
         vt = vd - vn[:, None] * n
         if self.gap is None:  # each node moving into the wall gives up its normal velocity
             held, dvn = vn > 0, vn
         else:  # the touching nodes share the normal momentum of their patch by depth
             if centroids is None:
                 raise ValueError("a friction wall with a gap needs the nodal centres of mass and masses")
-            depth = self.gap - (self.points - centroids.centre[self.dofs]) @ n  # NaN where no mass
+            depth = self.gap - np.einsum("kd,kd->k", self.points - centroids.centre[self.dofs], n)  # NaN: no mass
             held = depth > 0
             depth = np.where(held, depth, 0.0)
             t = np.flatnonzero(held)  # every touching node takes a share, those moving in give
@@ -278,19 +278,30 @@ def friction(V: dolfinx.fem.FunctionSpace, where: Callable[[npt.NDArray], npt.ND
     Raises:
         ValueError: ``mu`` negative or not finite, ``gap`` not positive.
     """
-    if not 0.0 <= mu < np.inf:
-        raise ValueError(f"friction needs a finite coefficient mu >= 0 (got {mu!r})")
+    _check_mu(mu)
     if gap is not None and not 0.0 < gap < np.inf:
         raise ValueError(f"friction needs a finite gap > 0 or None (got {gap!r})")
     d = V.mesh.geometry.dim
     dofs = locate_dofs(V, where)
     if gap is None:
-        return Friction(dofs, _unit_normal(normal, d, "friction"), float(mu))
+        return friction_wall(dofs, _unit_normal(normal, d, "friction"), mu)
     if not V.element.interpolation_ident:
         raise ValueError("a friction wall with a gap needs a Lagrange space whose dofs are point values")
     points = V.tabulate_dof_coordinates()[dofs, :d]
     return Friction(dofs, _unit_normal(normal, d, "friction"), float(mu), float(gap), points,
                     Patches.of_space(V, dofs))
+
+
+def _check_mu(mu: float) -> None:
+    if not 0.0 <= mu < np.inf:
+        raise ValueError(f"friction needs a finite coefficient mu >= 0 (got {mu!r})")
+
+
+def friction_wall(dofs: npt.NDArray[np.int32], normal: npt.NDArray, mu: float) -> Friction:
+    """A :class:`Friction` wall without a gap at ``dofs`` with unit ``normal`` ((d,) or one per
+    dof), ``mu`` checked (finite, >= 0)."""
+    _check_mu(mu)
+    return Friction(dofs, normal, float(mu))
 
 
 def fixed_on_facets(V: dolfinx.fem.FunctionSpace, facet_tags: dolfinx.mesh.MeshTags, tag: int) -> Fixed:

@@ -12,7 +12,8 @@ from pathlib import Path
 import dolfinx
 from mpi4py import MPI
 
-__all__ = ["MESHES", "MeshFileError", "read_msh", "unstructured_box", "unstructured_polygon", "unstructured_rectangle"]
+__all__ = ["MESHES", "MeshFileError", "read_msh", "tagged_polygon", "unstructured_box", "unstructured_polygon",
+           "unstructured_rectangle"]
 
 #: the gmsh meshes that ship with fempm (demos, tests, scenes)
 MESHES = Path(__file__).resolve().parents[2] / "meshes"
@@ -77,9 +78,13 @@ def _start(gmsh) -> None:
 
 
 def _model_to_mesh(gmsh, comm: MPI.Comm, gdim: int) -> dolfinx.mesh.Mesh:
+    return _model_to_data(gmsh, comm, gdim)[0]
+
+
+def _model_to_data(gmsh, comm: MPI.Comm, gdim: int):
     data = _gmshio().model_to_mesh(gmsh.model, comm, 0, gdim=gdim)
     gmsh.finalize() if comm.rank == 0 else None
-    return data[0]
+    return data
 
 
 def unstructured_rectangle(
@@ -113,6 +118,20 @@ def unstructured_rectangle(
 
 def unstructured_polygon(comm: MPI.Comm, vertices, h: float, *, seed: int = 0) -> dolfinx.mesh.Mesh:
     """Frontal-Delaunay triangles of size ``h`` on the polygon with ``vertices`` (k, 2), in order."""
+    return tagged_polygon(comm, vertices, h, seed=seed).mesh
+
+
+def tagged_polygon(comm: MPI.Comm, vertices, h: float, edge_tags=None, *, quadrilateral: bool = False,
+                   seed: int = 0):
+    """Triangles (or recombined quadrilaterals) of size ``h`` on the polygon with ``vertices``
+    (k, 2), in order, its edges tagged: ``edge_tags[i]`` (an int > 0, or 0 for none) the
+    physical group of the edge from vertex i to vertex i + 1 (gmsh lines; the facets of the
+    mesh that lie on it carry the tag, :func:`fempm.boundary.tagged`). Returns DOLFINx
+    ``MeshData`` (``mesh``, ``facet_tags``, ...). Collective."""
+    k = len(vertices)
+    tags = [0] * k if edge_tags is None else [int(t) for t in edge_tags]
+    if len(tags) != k or any(t < 0 for t in tags):
+        raise ValueError(f"edge_tags needs one tag >= 0 per edge ({k}), got {edge_tags!r}")
     gmsh = _gmsh()
     if comm.rank == 0:
         _start(gmsh)
@@ -123,10 +142,15 @@ def unstructured_polygon(comm: MPI.Comm, vertices, h: float, *, seed: int = 0) -
         surface = gmsh.model.occ.addPlaneSurface([gmsh.model.occ.addCurveLoop(lines)])
         gmsh.model.occ.synchronize()
         gmsh.model.addPhysicalGroup(2, [surface], 1)
+        for t in sorted(set(tags) - {0}):
+            gmsh.model.addPhysicalGroup(1, [line for line, tag in zip(lines, tags) if tag == t], t)
         gmsh.option.setNumber("Mesh.CharacteristicLengthMax", h)
-        gmsh.option.setNumber("Mesh.Algorithm", 6)
+        gmsh.option.setNumber("Mesh.Algorithm", 8 if quadrilateral else 6)
+        if quadrilateral:
+            gmsh.option.setNumber("Mesh.RecombineAll", 1)
+            gmsh.option.setNumber("Mesh.RecombinationAlgorithm", 2)
         gmsh.model.mesh.generate(2)
-    return _model_to_mesh(gmsh, comm, 2)
+    return _model_to_data(gmsh, comm, 2)
 
 
 def unstructured_box(comm: MPI.Comm, h: float, *, size=(1.0, 1.0, 1.0)) -> dolfinx.mesh.Mesh:

@@ -4,7 +4,10 @@ The incline is the grid boundary :math:`y = 0` with Coulomb friction ``friction`
 (:func:`fempm.boundary.friction`), or a rigid body in frictional contact (``plane="rigid"``),
 in the frame of the slope: :math:`x` runs down it and gravity is
 :math:`g (\sin\theta, -\cos\theta)` for the slope angle :math:`\theta` (``angle``, degrees),
-which is the inclined plane itself, rotated. The body is elastic and objective under the
+which is the inclined plane itself, rotated. With ``plane="tagged"`` the slope is not a grid
+axis: the mesh is a gmsh triangulation of the same region turned by :math:`\theta` (gravity
+:math:`(0, -g)`), whose floor is the tagged boundary :data:`FLOOR_TAG` held by
+:func:`fempm.boundary.tagged` (Coulomb friction against its facet normals). The body is elastic and objective under the
 disk's large rotation: hypoelastic with the Jaumann rate (:class:`fempm.materials.VonMises`
 without a yield stress), whose strain energy comes from the stress, so that a body starting
 under stress has it. It starts at rest on the plane:
@@ -42,8 +45,10 @@ import dolfinx.mesh as dm
 import numpy as np
 from mpi4py import MPI
 
+from fempm.boundary.tagged import tagged
 from fempm.boundary.walls import friction as friction_wall
 from fempm.materials.von_mises import VonMises
+from fempm.meshes.generators import tagged_polygon
 from fempm.particles.seeding import create_particles, per_direction
 from fempm.scene.definition import Scene, check_counts
 from fempm.stepping.contact import Contact
@@ -51,7 +56,7 @@ from fempm.stepping.loads import Loads
 from fempm.stepping.options import StepOptions
 
 __all__ = [
-    "BLOCK_FLIP", "BODIES", "PLANES", "RIGID_MASS_CUTOFF", "analytic_acceleration", "incline",
+    "BLOCK_FLIP", "BODIES", "FLOOR_TAG", "PLANES", "RIGID_MASS_CUTOFF", "analytic_acceleration", "incline",
     "slope_acceleration",
 ]
 
@@ -59,7 +64,9 @@ BODIES = ("block", "disk")
 #: the PIC/FLIP blend of the block by default: pure FLIP lets the frictional sliding of the
 #: elastic block go unstable (see the module)
 BLOCK_FLIP = 0.7
-PLANES = ("grid", "rigid")
+PLANES = ("grid", "rigid", "tagged")
+#: the facet tag of the slope with ``plane="tagged"``
+FLOOR_TAG = 1
 #: the contact's force cut-off with a rigid plane: with the default 1 % the rolling disk's
 #: sparsely filled nodes keep their mapped velocity, and its energy grows by 20 % in 0.34 s
 RIGID_MASS_CUTOFF = 1e-4
@@ -83,16 +90,18 @@ def analytic_acceleration(body: str, angle: float, mu: float, g: float = 9.81) -
 
 
 class _Track:
-    """The body's centre of mass along the slope after every step (a scene ``watch``)."""
+    """The body's centre of mass along the slope (the unit vector ``down``) after every step (a
+    scene ``watch``)."""
 
-    def __init__(self):
+    def __init__(self, down=(1.0, 0.0)):
+        self.down = np.asarray(down, dtype=float)
         self.t: list[float] = []
         self.x: list[float] = []
 
     def __call__(self, solver) -> None:
         p = solver.particles
         mass = np.where(p.fields["plane"] == 0, p.mass, 0.0)  # the body, not a rigid plane
-        sums = np.array([mass @ p.x[:, 0], mass.sum()])
+        sums = np.array([mass @ (p.x[:, :2] @ self.down), mass.sum()])
         p.comm.Allreduce(MPI.IN_PLACE, sums, op=MPI.SUM)
         self.t.append(solver.t)
         self.x.append(sums[0] / sums[1])
@@ -125,7 +134,9 @@ def incline(
     or ``rigid``, a rigid layer of particles two cells thick under :math:`y = 0` in frictional
     contact with the body
     (:class:`fempm.stepping.contact.Contact` with ``rigid=(1,)``, the gap measured from the layer's own
-    nodal centre of mass, which lies :func:`_depth` cells under its surface)."""
+    nodal centre of mass, which lies :func:`_depth` cells under its surface), or ``tagged``, the
+    tagged floor of a turned gmsh triangle mesh of size ``size / cells`` (the block; every node
+    moving into the floor held, no gap)."""
     ppc = (16 if body == "disk" else 4) if ppc is None else ppc
     flip = (1.0 if body == "disk" else BLOCK_FLIP) if flip is None else flip
     gap = (0.5 if body == "disk" else 0.0) if gap is None else gap
@@ -140,9 +151,17 @@ def incline(
     nx = int(np.ceil((x0 + length + 1.1 * travel + 2 * h) / h))
     ny = int(np.ceil(1.5 * (2.0 * size if body == "disk" else size) / h)) + 2
     below = 3 if plane == "rigid" else 0  # cells under the plane: the rigid layer and one empty row
-    mesh = dm.create_rectangle(comm, [[0.0, -below * h], [nx * h, ny * h]], [nx, ny + below], dm.CellType.quadrilateral)
-    p = _particles(mesh, body, plane, ppc, (x0, length, size, h), rho, g * np.cos(th), g * np.sin(th), nu)
-    track = _Track()
+    frame = np.array([[np.cos(th), np.sin(th)], [-np.sin(th), np.cos(th)]])  # columns: down the slope, normal
+    if plane == "tagged":  # the slope's region turned by theta, its floor tagged
+        corners = np.array([[0.0, 0.0], [nx * h, 0.0], [nx * h, ny * h], [0.0, ny * h]]) @ frame.T
+        data = tagged_polygon(comm, corners, h, [FLOOR_TAG, 0, 0, 0])
+        mesh = data.mesh
+    else:
+        frame = np.eye(2)
+        mesh = dm.create_rectangle(comm, [[0.0, -below * h], [nx * h, ny * h]], [nx, ny + below],
+                                   dm.CellType.quadrilateral)
+    p = _particles(mesh, body, plane, ppc, (x0, length, size, h), rho, g * np.cos(th), g * np.sin(th), nu, frame)
+    track = _Track(frame[:, 0])
 
     def results(scene, solver) -> dict:
         return {"acceleration": slope_acceleration(track, scene.t_end),
@@ -154,12 +173,14 @@ def incline(
     def walls(V):
         if plane == "rigid":
             return []
+        if plane == "tagged":
+            return [tagged(V, data.facet_tags, FLOOR_TAG, "friction", friction)]
         return [friction_wall(V, lambda x: np.isclose(x[1], 0.0), (0.0, -1.0), friction,
                               gap=gap * h if gap > 0 else None)]
 
     return Scene(
         name="incline", mesh=mesh, particles=p, materials=[VonMises(E, nu)], t_end=t_end, bcs=walls,
-        loads=Loads(body_force=(g * np.sin(th), -g * np.cos(th))),
+        loads=Loads(body_force=(0.0, -g) if plane == "tagged" else (g * np.sin(th), -g * np.cos(th))),
         options=StepOptions(scheme=scheme, flip=flip, cfl=cfl), frames=frames, params=params, results=results,
         watch=track, contact=Contact(friction=friction, field="plane", rigid=(1,), mass_cutoff=RIGID_MASS_CUTOFF,
                                      gap=(gap + _depth(ppc)) * h if gap > 0 else None) if plane == "rigid" else None,
@@ -180,29 +201,34 @@ def _check(body: str, angle: float, friction: float, plane: str, gap: float, cel
         raise ValueError(f"unknown option plane={plane!r}; expected one of {', '.join(PLANES)}")
     if not 0.0 <= gap < np.inf:
         raise ValueError(f"gap={gap} must be >= 0 (cells)")
+    if plane == "tagged" and (body != "block" or gap != 0.0):
+        raise ValueError("plane='tagged' takes the block with gap=0 (a tagged wall holds every node moving into it)")
 
 
 def _particles(mesh, body: str, plane: str, ppc: int, place: tuple[float, float, float, float], rho: float,
-               g_normal: float, g_slope: float, nu: float):
+               g_normal: float, g_slope: float, nu: float, frame: np.ndarray):
     """The body's particles (group 0 of the field ``plane``; ``place``: its left end, length, size
     and the cell size) and, with ``plane="rigid"``, the rigid layer's (group 1). A block starts
-    with the stress of a layer carrying its weight on the slope (plane strain)."""
+    with the stress of a layer carrying its weight on the slope (plane strain). ``frame``: the
+    slope's axes (columns) in the mesh's coordinates."""
     x0, length, size, h = place
     if body == "block":
         def inside(x):
-            return (x[0] > x0) & (x[0] < x0 + length) & (x[1] < size)
+            s, n = frame.T @ x[:2]
+            return (s > x0) & (s < x0 + length) & (n > 0.0) & (n < size)
     else:
         def inside(x):
             return np.hypot(x[0] - x0 - size, x[1] - size) < size
-    p = create_particles(mesh, ppc, density=rho, where=inside if plane == "grid" else
+    p = create_particles(mesh, ppc, density=rho, where=inside if plane != "rigid" else
                          lambda x: inside(x) | ((x[1] < 0.0) & (x[1] > -2.0 * h)))
-    group = (p.x[:, 1] < 0.0).astype(np.int32)  # 0 the body, 1 the rigid plane (at rest)
+    normal = p.x[:, :2] @ frame[:, 1]
+    group = (normal < 0.0).astype(np.int32)  # 0 the body, 1 the rigid plane (at rest)
     p.fields["plane"] = group
     if body == "block":  # at rest on the slope: the stress of a layer carrying its weight
-        depth = np.where(group == 0, size - p.x[:, 1], 0.0)
+        depth = np.where(group == 0, size - normal, 0.0)
         sigma = np.zeros((len(p), 2, 2))
         sigma[:, 1, 1] = -rho * g_normal * depth
         sigma[:, 0, 1] = sigma[:, 1, 0] = rho * g_slope * depth
-        p.fields["sigma"] = sigma
+        p.fields["sigma"] = frame @ sigma @ frame.T  # in the mesh's axes
         p.fields["sigma_zz"] = nu * sigma[:, 1, 1]  # plane strain
     return p

@@ -1,0 +1,156 @@
+r"""Grid conditions on tagged facets (gmsh physical groups): :func:`tagged`.
+
+The nodes of the facets that carry a tag are held as a fixed, slip or frictional wall. A slip
+or frictional wall takes each node's normal from the facets around it: the outward normals of
+the tagged facets that hold the node, weighted by their size (length, area), summed and made
+unit,
+
+.. math::
+    n_i = \frac{\sum_{f \ni i} |f|\, n_f}{\big|\sum_{f \ni i} |f|\, n_f\big|},
+
+so that an inclined or curved boundary slips along itself (at a corner the node slips along the
+bisector). Under MPI the sums run over the facets each rank owns and are added across ranks
+(a DOLFINx vector's reverse scatter), so every rank holds the same normals at shared nodes.
+"""
+
+from __future__ import annotations
+
+import dolfinx.fem
+import dolfinx.la
+import dolfinx.mesh
+import numpy as np
+import numpy.typing as npt
+
+from fempm.boundary.walls import Fixed, Friction, Slip, friction_wall
+
+__all__ = ["KINDS", "facet_normals", "tagged"]
+
+#: the kinds of condition :func:`tagged` makes
+KINDS = ("fixed", "slip", "friction")
+
+
+def _facets(mesh: dolfinx.mesh.Mesh, facet_tags: dolfinx.mesh.MeshTags, value: int) -> npt.NDArray[np.int32]:
+    """The local facets with tag ``value`` (collective: the tag checked on every rank)."""
+    fdim = mesh.topology.dim - 1
+    if facet_tags.dim != fdim:
+        raise ValueError(f"tagged conditions need facet tags (dimension {fdim}); these tags are of dimension "
+                         f"{facet_tags.dim}")
+    comm = mesh.comm
+    facets = facet_tags.find(int(value))
+    if not comm.allreduce(len(facets)):  # an unknown tag, or one no rank's facets carry
+        known = sorted(set().union(*comm.allgather(set(np.unique(facet_tags.values).tolist()))))
+        raise ValueError(f"unknown facet tag {value}: it marks no facets on any rank (the facet tags hold "
+                         f"{', '.join(map(str, known)) or 'none'})")
+    return facets
+
+
+def _oriented_normals(mesh: dolfinx.mesh.Mesh, facets: npt.NDArray[np.int32]) -> npt.NDArray:
+    """(len(facets), gdim): each facet's normal times its size, pointing out of its (first) cell."""
+    tdim, gdim = mesh.topology.dim, mesh.geometry.dim
+    fdim = tdim - 1
+    x = mesh.geometry.x[:, :gdim]
+    nodes = dolfinx.mesh.entities_to_geometry(mesh, fdim, facets)
+    p = x[nodes]  # (nf, nodes, gdim); the first are the vertices
+    if gdim == 2:
+        t = p[:, 1] - p[:, 0]
+        n = np.stack([t[:, 1], -t[:, 0]], axis=1)
+    elif fdim == 2 and nodes.shape[1] in (4, 9):  # a quadrilateral facet: half the cross product of its diagonals
+        n = 0.5 * np.cross(p[:, 3] - p[:, 0], p[:, 2] - p[:, 1])
+    else:
+        n = 0.5 * np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0])
+    f2c = mesh.topology.connectivity(fdim, tdim)
+    cells = np.array([f2c.links(f)[0] for f in facets], dtype=np.int32)
+    centres = x[dolfinx.mesh.entities_to_geometry(mesh, tdim, cells)].mean(axis=1)
+    inward = np.einsum("fd,fd->f", p.mean(axis=1) - centres, n) < 0
+    n[inward] *= -1.0
+    return n
+
+
+def facet_normals(V: dolfinx.fem.FunctionSpace, facets: npt.NDArray[np.int32]) -> tuple[npt.NDArray, npt.NDArray]:
+    """The (block) dofs of the local ``facets`` (owned + ghost, sorted) and their unit normals
+    (k, gdim) averaged over the facets as in the module; a dof whose normals cancel has a zero
+    row. Collective."""
+    mesh = V.mesh
+    tdim, gdim = mesh.topology.dim, mesh.geometry.dim
+    fdim = tdim - 1
+    for a, b in ((fdim, tdim), (tdim, fdim), (fdim, 0)):
+        mesh.topology.create_connectivity(a, b)
+    owned = facets[facets < mesh.topology.index_map(fdim).size_local]  # each facet counted on one rank
+    n = _oriented_normals(mesh, owned) if len(owned) else np.zeros((0, gdim))
+    f2c, c2f = mesh.topology.connectivity(fdim, tdim), mesh.topology.connectivity(tdim, fdim)
+    layout = V.dofmap.dof_layout
+    sums = dolfinx.la.vector(V.dofmap.index_map, bs=gdim + 1)  # normal sums and a count per dof
+    acc = sums.array.reshape(-1, gdim + 1)
+    for f, nf in zip(owned, n):
+        cell = f2c.links(f)[0]
+        local = int(np.flatnonzero(c2f.links(cell) == f)[0])
+        dofs = V.dofmap.cell_dofs(cell)[layout.entity_closure_dofs(fdim, local)]
+        acc[dofs, :gdim] += nf
+        acc[dofs, gdim] += 1.0
+    sums.scatter_reverse(dolfinx.la.InsertMode.add)
+    sums.scatter_forward()
+    acc = sums.array.reshape(-1, gdim + 1)
+    dofs = np.flatnonzero(acc[:, gdim] > 0).astype(np.int32)
+    length = np.linalg.norm(acc[dofs, :gdim], axis=1)
+    scale = np.where(length > 1e-12 * length.max(initial=0.0), 1.0 / np.where(length > 0, length, 1.0), 0.0)
+    return dofs, acc[dofs, :gdim] * scale[:, None]
+
+
+def tagged(V: dolfinx.fem.FunctionSpace, facet_tags: dolfinx.mesh.MeshTags, value: int, kind: str,
+           friction: float = 0.0) -> Fixed | Slip | Friction:
+    """A wall on the facets tagged ``value``: the nodes of those facets held as ``kind``.
+
+    Args:
+        V: The velocity space.
+        facet_tags: Facet tags of ``V``'s mesh (gmsh physical groups, e.g. from
+            :func:`fempm.meshes.read_msh` or :func:`fempm.meshes.tagged_polygon`).
+        value: The tag.
+        kind: ``"fixed"`` (every component 0), ``"slip"`` (no flow through the boundary, along
+            the facet normals averaged at each node) or ``"friction"`` (Coulomb friction with
+            coefficient ``friction`` against the same normals, the kernel the other walls and
+            contact use: :func:`fempm.boundary.coulomb.coulomb`).
+        friction: The friction coefficient of ``kind="friction"``.
+
+    Returns:
+        The condition, for ``ExplicitSolver(bcs=[...])``.
+
+    Raises:
+        ValueError: An unknown kind, tags that are not facet tags, a tag that marks no facets
+            on any rank (its message lists the tags there are), a friction coefficient that is negative or not finite, nodes where the facet normals
+            cancel (a slip or friction wall on a boundary that folds back on itself).
+
+    Note:
+        Collective.
+    """
+    if kind not in KINDS:
+        raise ValueError(f"unknown kind={kind!r} of tagged condition; expected one of {', '.join(KINDS)}")
+    facets = _facets(V.mesh, facet_tags, value)
+    dofs, normals = facet_normals(V, facets)
+    if kind == "fixed":
+        return Fixed(dofs)
+    cancel = V.mesh.comm.allreduce(int(np.count_nonzero(~np.any(normals != 0.0, axis=1))))
+    if cancel:
+        raise ValueError(f"facet tag {value}: the facet normals cancel at {cancel} node(s) (a boundary that folds back "
+                         f"on itself); a {kind} wall needs one side")
+    normals = _common_normal(normals, V.mesh.comm)
+    if kind == "slip":
+        return Slip(dofs, normals)
+    return friction_wall(dofs, normals, friction)
+
+
+def _common_normal(normals: npt.NDArray, comm) -> npt.NDArray:
+    """One normal (d,) where every rank's nodes share it (a straight wall: an axis-aligned one
+    then holds a component, :class:`Slip`), else the per-node normals."""
+    d = normals.shape[1]
+    first = normals[0] if len(normals) else np.full(d, np.nan)
+    candidates = [c for c in comm.allgather(first) if np.all(np.isfinite(c))]
+    common = candidates[0]
+    same = all(np.allclose(c, common, atol=1e-12) for c in candidates) and np.allclose(normals, common, atol=1e-12)
+    if comm.allreduce(int(not same)):
+        return normals
+    axis = np.flatnonzero(np.abs(np.abs(common) - 1.0) < 1e-12)
+    if len(axis) == 1:  # exactly along an axis
+        n = np.zeros(d)
+        n[axis[0]] = np.sign(common[axis[0]])
+        return n
+    return common
