@@ -86,3 +86,21 @@ def quick_study(tmp_path_factory, name: str, run) -> tuple[str, list[dict]]:
     """(the folder, the rows) of ``run(folder, quick=True)``, a study at its quick size, silent."""
     out = shared_tmp(tmp_path_factory, name)
     return out, run(out, quick=True, log=lambda *a: None)
+
+
+@pytest.fixture
+def petsc_options():
+    """Options set in the PETSc database for one test, removed after it."""
+    from petsc4py import PETSc
+
+    opts = PETSc.Options()
+    added = []
+
+    def put(**values):
+        for k, v in values.items():
+            opts[k] = v
+            added.append(k)
+
+    yield put
+    for k in added:
+        opts.delValue(k)
