@@ -198,7 +198,8 @@ def _run(args, rest: list[str]) -> int:
             if k != "comm":
                 print(f"  --{k.replace('_', '-')} {v.default}")
         print("stepping (every scene): --integrator explicit|implicit, --dynamics newmark|quasi-static (implicit), "
-              "--steps N (fixed steps to t_end; implicit runs need it), --volumetric standard|fbar")
+              "--steps N (fixed steps to t_end; implicit runs need it), --volumetric standard|fbar, "
+              "--outside raise|remove (particles that leave the mesh)")
         print("run health (fempm.stepping.health.Health; a crossed limit stops the run with exit code 3):")
         for k, v in Health().asdict().items():
             print(f"  --{k.replace('_', '-')} {v}")

@@ -103,13 +103,13 @@ def health_options(rest: list[str]) -> tuple[dict, list[str]]:
 
 #: the stepping options every scene takes on the command line, with the values they accept
 STEPPING_FLAGS = {"integrator": ("explicit", "implicit"), "dynamics": ("newmark", "quasi-static"), "steps": None,
-                  "volumetric": ("standard", "fbar")}
+                  "volumetric": ("standard", "fbar"), "outside": ("raise", "remove")}
 
 
 def stepping_options(rest: list[str]) -> tuple[dict, list[str]]:
     """Split the stepping options every scene takes (``--integrator explicit|implicit``,
-    ``--dynamics newmark|quasi-static``, ``--steps N``, ``--volumetric standard|fbar``) from the
-    scene options."""
+    ``--dynamics newmark|quasi-static``, ``--steps N``, ``--volumetric standard|fbar``,
+    ``--outside raise|remove``) from the scene options."""
     chosen, others = split_flags(rest, STEPPING_FLAGS)
     stepping = {}
     for name, (flag, value) in chosen.items():
@@ -132,6 +132,8 @@ def with_stepping(scene, stepping: dict):
     (quasi-static: the loads ramped to ``t_end``), ``--steps`` fixed steps to ``t_end``."""
     if not stepping:
         return scene
+    if "outside" in stepping:
+        scene.outside = stepping["outside"]
     changes = {k: stepping[k] for k in ("integrator", "dynamics", "volumetric") if k in stepping}
     if stepping.get("integrator") == "implicit" and stepping.get("dynamics") == "quasi-static":
         changes["load_ramp"] = scene.t_end

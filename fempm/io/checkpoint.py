@@ -49,6 +49,7 @@ from mpi4py import MPI
 
 from fempm.meshes.geometry import coordinate_map
 from fempm.particles.particle_set import Particles
+from fempm.stepping.outside import Removed
 
 __all__ = ["FOLDER", "FORMAT", "CheckpointError", "RunInterrupted", "check_fields", "choose", "manifest",
            "mesh_digest", "requested", "restore_particles", "restore_solver", "stop_requests", "write"]
@@ -90,7 +91,7 @@ def _scalar_state(obj, names) -> dict:
 
 #: the HealthMonitor attributes that accumulate over a run
 MONITOR_STATE = ("e0", "e_max", "momentum0", "work", "impulse", "_power", "_force", "first_dt", "_t_prev", "j_min",
-                 "j_max", "p_scale", "drift", "ratio")
+                 "j_max", "p_scale", "drift", "ratio", "total_mass")
 
 
 def mesh_digest(mesh) -> str:
@@ -163,7 +164,7 @@ def write(out: Path, scene, solver, monitor, writer_state: dict, rebuild: dict |
         "solver": {"extended_steps": solver.extended_steps, "mass_ratio": solver.mass_ratio,
                    "j_range": list(solver.j_range) if solver.j_range is not None else None,
                    "terms": dict(solver.terms), "since_sort": counters.get("since_sort"),
-                   "ratio_age": counters.get("ratio_age")},
+                   "ratio_age": counters.get("ratio_age"), "removed": solver.removed.asdict()},
         "monitor": _scalar_state(monitor, MONITOR_STATE),
         "writer": writer_state,
     }
@@ -180,6 +181,8 @@ def write(out: Path, scene, solver, monitor, writer_state: dict, rebuild: dict |
 def _options(scene) -> dict:
     """The scene's step options as given (numbers, names; others by their repr)."""
     values = {f.name: getattr(scene.options, f.name) for f in dataclasses.fields(scene.options)}
+    if scene.outside != "raise":  # (checkpoints from before the option compare equal)
+        values["outside"] = scene.outside
     return {k: v if isinstance(v, (bool, int, float, str, type(None))) else repr(v) for k, v in values.items()}
 
 
@@ -339,6 +342,8 @@ def restore_solver(solver, monitor, data: dict, solver_arrays: dict) -> None:
     solver.extended_steps, solver.mass_ratio = int(s["extended_steps"]), float(s["mass_ratio"])
     solver.j_range = tuple(s["j_range"]) if s["j_range"] is not None else None
     solver.terms = Counter(s["terms"])
+    if "removed" in s:  # what particles that left the mesh took (outside="remove")
+        solver.removal.removed = Removed(**s["removed"])
     solver.grid_velocity = solver_arrays.get("grid_velocity")
     # collective: on another number of ranks every rank passes {} (no solver arrays)
     solver.restore_state({"since_sort": s["since_sort"], "ratio_age": s["ratio_age"]}, solver_arrays)

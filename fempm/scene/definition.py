@@ -18,6 +18,7 @@ from fempm.stepping.contact import Contact
 from fempm.stepping.health import Health
 from fempm.stepping.loads import Loads
 from fempm.stepping.options import StepOptions
+from fempm.stepping.outside import outside_policy
 from fempm.stepping.solver import ExplicitSolver
 
 __all__ = [
@@ -95,6 +96,8 @@ class Scene:
             dict`` (collective), added to the summary.
         contact: One velocity field per particle group with frictional contact
             (:class:`fempm.stepping.contact.Contact`); None: one field.
+        outside: ``"raise"`` (a particle leaving the mesh ends the run) or ``"remove"`` (it is
+            dropped, what it takes accounted: :mod:`fempm.stepping.outside`).
         watch: Called with the solver after every step (collective), for the scene's own
             histories (a continued run calls it from the checkpoint on).
     """
@@ -117,8 +120,10 @@ class Scene:
     results: Callable[[Scene, ExplicitSolver], dict] | None = None
     contact: Contact | None = None
     watch: Callable[[ExplicitSolver], None] | None = None
+    outside: str = "raise"
 
     def __post_init__(self):
+        outside_policy(self.outside)
         unknown = set(self.outputs) - set(OUTPUTS)
         if unknown:
             raise ValueError(f"unknown output(s) {sorted(unknown)}; expected some of {OUTPUTS}")
@@ -149,4 +154,4 @@ class Scene:
         V = self.space()
         bcs = list(self.bcs(V)) if self.bcs is not None else []
         return ExplicitSolver(V, self.particles, self.materials, bcs=bcs, loads=self.loads, options=self.options,
-                              contact=self.contact)
+                              contact=self.contact, outside=self.outside)

@@ -239,7 +239,7 @@ class BasisGrid(Grid):
         self.solver.check_finite()
 
     def relocate(self) -> None:
-        self.solver.particles.relocate()
+        self.solver.relocate_particles()
 
 
 class SingleFieldGrid(BasisGrid):

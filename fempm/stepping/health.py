@@ -113,18 +113,19 @@ class HealthMonitor:
         lo = p.comm.allreduce(float(J.min(initial=np.inf)), op=MPI.MIN)
         return lo, p.comm.allreduce(float(J.max(initial=-np.inf)), op=MPI.MAX)
 
-    def _external(self, t: float, momentum: npt.NDArray | None = None) -> tuple[float, npt.NDArray]:
+    def _external(self, t: float, momentum: npt.NDArray | None = None, removed: float = 0.0) -> tuple[float, npt.NDArray]:
         r"""Power :math:`\sum_p f_p \cdot v_p` and resultant :math:`\sum_p f_p` of the external
         loads at time ``t`` (body forces and tractions), summed over ranks; a constant body
         force :math:`g` with the particles' ``momentum`` given: :math:`g \cdot \sum_p M_p v_p`
-        and :math:`g \sum_p M_p`, without a pass over the particles."""
+        and :math:`g \sum_p M_p`, without a pass over the particles (``removed``: the mass that
+        left the mesh in the last step, still counted)."""
         p = self.solver.particles
         loads = self.solver.loads
         if momentum is not None and loads.traction is None and not callable(loads.body_force):
             if loads.body_force is None:
                 return 0.0, np.zeros(p.gdim)
             g = np.asarray(loads.body_force, dtype=np.float64)
-            return float(g @ momentum), g * self.total_mass
+            return float(g @ momentum), g * (self.total_mass - self.solver.removed.mass + removed)  # the mass here
         f = external_forces(loads, p, t)
         local = np.concatenate([[np.einsum("nd,nd->", f, p.fields["v"])], f.sum(axis=0)])
         total = p.comm.allreduce(local)
@@ -141,10 +142,16 @@ class HealthMonitor:
         s, h = self.solver, self.health
         mom = np.array([energies[k] for k in energies if k.startswith("momentum_")])
         power, force = self._external(s.t, mom)
-        self.work += 0.5 * dt * (self._power + power)
-        self.impulse = self.impulse + 0.5 * dt * (self._force + force)
+        end = (power, force)  # the loads at the step's end on the particles still in the mesh
+        if s.removal.last_momentum is not None:  # those removed in this step were in it until its end
+            end = self._external(s.t, mom + s.removal.last_momentum, s.removal.last_mass)
+        gone = s.removed  # what the particles that left the mesh took: it has left, not vanished
+        if gone.count:
+            mom = mom + np.asarray(gone.momentum)
+        self.work += 0.5 * dt * (self._power + end[0])
+        self.impulse = self.impulse + 0.5 * dt * (self._force + end[1])
         self._power, self._force = power, force
-        e = energies["total"]
+        e = energies["total"] + gone.kinetic + gone.strain
         self.e_max = max(self.e_max, e)
         budget = self.e0 + self.work
         self.ratio = e / budget if budget > 0 else (1.0 if e <= 0 else np.inf)

@@ -331,7 +331,7 @@ class PointGrid(Grid):
             self.solver.check_finite()  # names the particles
 
     def relocate(self) -> None:
-        self.solver.particles.relocate(left=self.left)
+        self.solver.relocate_particles(left=self.left)
         self._checked = self._state()
 
     def nodal(self, v: npt.NDArray) -> npt.NDArray:

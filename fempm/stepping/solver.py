@@ -37,6 +37,7 @@ from fempm.stepping.loads import Loads
 from fempm.stepping.lumped import PointGrid
 from fempm.stepping.lumped import supported as point_grid_supported
 from fempm.stepping.options import SimulationError, StepOptions
+from fempm.stepping.outside import Outside, Removed
 
 __all__ = ["ExplicitSolver", "StepRecord"]
 
@@ -88,6 +89,9 @@ class ExplicitSolver:
             reference).
         contact: One velocity field per particle group with frictional contact between them
             (:class:`fempm.stepping.contact.Contact`); None: one field for all.
+        outside: What a particle that leaves the mesh does (:mod:`fempm.stepping.outside`):
+            ``"raise"`` an error naming it, ``"remove"`` it is dropped and what it takes
+            accounted (:attr:`removed`).
 
     Raises:
         ValueError: Options, fields or conditions that do not fit the space or the particles.
@@ -106,6 +110,7 @@ class ExplicitSolver:
     step_count: int = 0
     compiled: bool | None = None
     contact: Contact | None = None
+    outside: str = "raise"
 
     def __post_init__(self):
         p = self.particles
@@ -134,6 +139,7 @@ class ExplicitSolver:
         self.h_cell = cell_sizes(p.mesh)
         self.conditions = GridConditions(self.V, self.bcs)
         self.record = StepRecord()
+        self.removal = Outside(self.outside)
         self.grid_velocity: npt.NDArray | None = None  # last step's, also the CG warm start
         self._stress_space: dolfinx.fem.FunctionSpace | None = None  # tensor space of grid_stress, on first use
         self._grid: Grid | None = None
@@ -245,6 +251,8 @@ class ExplicitSolver:
         Note:
             Collective.
         """
+        if self.removed.count and self.particles.num_global == 0:
+            self.fail(f"every particle has left the mesh ({self.removed.count} removed, mass {self.removed.mass:.6g})")
         checks.check_step_arguments(self.particles, dt, dt_max)
         if self.options.integration is not None:  # implicit
             dt = self.implicit.step(dt)
@@ -305,13 +313,25 @@ class ExplicitSolver:
             self._stress_space = diagnostics.stress_space(self.V)
         return diagnostics.grid_stress(self._stress_space, self.particles, self.options, mass)
 
+    @property
+    def removed(self) -> Removed:
+        """What the particles removed from the mesh took (``outside="remove"``), over the run."""
+        return self.removal.removed
+
+    def relocate_particles(self, left: npt.NDArray[np.bool_] | None = None) -> None:
+        """Locate the moved particles (``left``: the only ones that may have left their cells),
+        under the ``outside`` policy (:class:`fempm.stepping.outside.Outside`). Collective."""
+        self.removal.relocate(self.particles, self.materials, left)
+
     def energies(self) -> dict[str, float]:
-        """Kinetic, strain and total energy and linear momentum (:func:`fempm.stepping.diagnostics.energies`).
+        """Kinetic, strain and total energy and linear momentum (:func:`fempm.stepping.diagnostics.energies`),
+        with ``outside="remove"`` also what the removed particles took (:meth:`Removed.columns`).
 
         Note:
             Collective.
         """
-        return diagnostics.energies(self.particles, self.materials, self.t)
+        row = diagnostics.energies(self.particles, self.materials, self.t)
+        return {**row, **self.removed.columns()} if self.removal.removes else row
 
     def step_energies(self) -> tuple[dict[str, float], float]:
         r"""(:meth:`energies`, the momentum scale :math:`\sum_p M_p |v_p|`) of the state the last
@@ -324,8 +344,9 @@ class ExplicitSolver:
             Collective.
         """
         p = self.particles
-        sums = self._grid.state_sums() if self._grid is not None else None
-        if sums is None:  # the same grid on every rank
+        sums = self._grid.state_sums() if self._grid is not None and not self.removal.removed_now else None
+        if sums is None:  # the same grid on every rank (and the step's sums hold particles removed since)
             return self.energies(), diagnostics.momentum_scale(p)
         p.comm.Allreduce(MPI.IN_PLACE, sums, op=MPI.SUM)
-        return diagnostics.energy_row(self.t, sums[0], sums[1], sums[3:]), float(sums[2])
+        row = diagnostics.energy_row(self.t, sums[0], sums[1], sums[3:])
+        return ({**row, **self.removed.columns()} if self.removal.removes else row), float(sums[2])

@@ -1,0 +1,107 @@
+r"""Particles that leave the mesh (``ExplicitSolver(outside=...)``, ``Scene(outside=...)``,
+``--outside``): :class:`Outside`.
+
+* ``"raise"`` (the default): a particle found in no cell of any rank ends the run with an
+  :class:`fempm.particles.location.OutsideMeshError` naming where it went (exit code 3 and a
+  summary from the command line).
+* ``"remove"``: such particles are dropped on every rank, and what they take with them is
+  accounted: their count, mass, momentum, kinetic and strain energy (:class:`Removed`), as the
+  difference of the global totals before and after the relocation that dropped them (the
+  totals are invariant under migration between ranks, so what remains is what left, to
+  round-off). A run's ``energies.csv`` then has the columns ``removed_mass``,
+  ``removed_kinetic`` and ``removed_strain`` (running totals), ``summary.json`` the entry
+  ``removed``, and the energy check counts the removed energy as having left
+  (:class:`fempm.stepping.health.HealthMonitor`).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+
+import numpy as np
+import numpy.typing as npt
+
+from fempm.particles.particle_set import Particles
+from fempm.stepping.diagnostics import strain_energy
+
+__all__ = ["OUTSIDE", "Outside", "Removed", "outside_policy"]
+
+#: the policies ``outside=`` takes
+OUTSIDE = ("raise", "remove")
+
+
+@dataclass
+class Removed:
+    """What the removed particles took with them, summed over ranks and over the run."""
+
+    count: int = 0
+    mass: float = 0.0
+    kinetic: float = 0.0
+    strain: float = 0.0
+    momentum: list[float] = field(default_factory=list)
+
+    def asdict(self) -> dict:
+        return {"count": self.count, "mass": self.mass, "kinetic": self.kinetic, "strain": self.strain,
+                "momentum": list(self.momentum)}
+
+    def columns(self) -> dict[str, float]:
+        """The ``energies.csv`` columns (running totals)."""
+        return {"removed_mass": self.mass, "removed_kinetic": self.kinetic, "removed_strain": self.strain}
+
+
+def outside_policy(name: str) -> str:
+    """``name`` checked against :data:`OUTSIDE`.
+
+    Raises:
+        ValueError: Another name.
+    """
+    if name not in OUTSIDE:
+        raise ValueError(f"unknown option outside={name!r}; expected one of {', '.join(OUTSIDE)}")
+    return name
+
+
+def _totals(p: Particles, materials: Sequence) -> npt.NDArray:
+    """[count, mass, kinetic, strain, momentum...] summed over ranks (one reduction)."""
+    v = p.fields["v"]
+    local = np.concatenate([[len(p), p.mass.sum(), 0.5 * np.sum(p.mass * np.einsum("nd,nd->n", v, v)),
+                             strain_energy(p, materials)], p.mass @ v])
+    return p.comm.allreduce(local)
+
+
+class Outside:
+    """The policy ``name`` (:data:`OUTSIDE`) for the particles that leave the mesh, and what the
+    removed ones took (:attr:`removed`; see the module)."""
+
+    def __init__(self, name: str = "raise"):
+        self.name = outside_policy(name)
+        self.removed = Removed()
+        #: whether the last relocation removed particles
+        self.removed_now = False
+        #: the mass and momentum the last relocation removed (the energy check's work over the
+        #: step in which they left counts them at its end)
+        self.last_mass, self.last_momentum = 0.0, None
+
+    @property
+    def removes(self) -> bool:
+        return self.name == "remove"
+
+    def relocate(self, particles: Particles, materials: Sequence, left: npt.NDArray[np.bool_] | None = None) -> None:
+        """Relocate ``particles`` (:meth:`fempm.particles.particle_set.Particles.relocate`, ``left``
+        as there) under the policy, accounting the removed ones. Collective."""
+        if not self.removes:
+            particles.relocate(left=left)
+            return
+        before = _totals(particles, materials)
+        particles.relocate("remove", left=left)
+        self.removed_now = bool(particles.removed)
+        self.last_mass, self.last_momentum = 0.0, None
+        if self.removed_now:
+            gone = before - _totals(particles, materials)
+            self.last_mass, self.last_momentum = float(gone[1]), gone[4:].copy()
+            r = self.removed
+            r.count += int(particles.removed)
+            r.mass += float(gone[1])
+            r.kinetic += float(gone[2])
+            r.strain += float(gone[3])
+            r.momentum = [float(m) for m in np.asarray(r.momentum or np.zeros(len(gone) - 4)) + gone[4:]]
