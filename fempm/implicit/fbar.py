@@ -46,7 +46,7 @@ from petsc4py import PETSc
 from fempm import petsc as fpetsc
 from fempm.implicit.operator import IncrementOperator
 from fempm.particles.particle_set import Particles
-from fempm.stepping.fbar import patch_average
+from fempm.stepping.fbar import patch_average, patch_weights, trace_measure
 from fempm.transfer.basis import ParticleBasis
 
 __all__ = ["FBarIncrementOperator", "PatchCoupling", "averaged_stress", "increment_measure", "modified"]
@@ -146,8 +146,7 @@ class FBarIncrementOperator(IncrementOperator):
         super().__init__(basis, particles, materials, finite_difference)
         self.body = particles.fields["body"]
         self.bodies = len(materials)
-        by_law = np.array([getattr(mat, "volumetric_measure", "J") == "trace" for mat in materials], dtype=bool)
-        self.trace = by_law[self.body]
+        self.trace = trace_measure(materials)[self.body]
         self._kin: tuple | None = None  # (G, theta, theta', theta'', theta_bar, Gbar) of the last call
 
     def average(self, values: npt.NDArray) -> npt.NDArray:
@@ -205,21 +204,22 @@ class PatchCoupling:
                        np.broadcast_to(nodes[:, None, :], (n, k, k)).ravel())
         self.T, self.S, self.U = (fpetsc.coo_pattern(imap, *self.rect, bs=self.B, col_bs=self.d) for _ in range(3))
         self.Mc = fpetsc.coo_pattern(imap, *self.square, bs=self.B)
-        mass = op.nodal(np.stack([np.where(op.body == c, op.volume, 0.0) for c in range(self.B)], axis=1))
+        mass = op.nodal(patch_weights(op.volume, op.body, self.B))
         scale = np.where(mass > 0.0, 1.0 / np.where(mass > 0.0, mass, 1.0), 0.0).ravel()
         self.D = self.T.createVecLeft()
         self.D.array[:] = scale[: imap.size_local * self.B]
         self.scaled: list[PETSc.Mat] | None = None  # D T and D U
-        self.products: list[PETSc.Mat] | None = None
+        self._products: list[PETSc.Mat] | None = None
 
     def _scatter(self, X: npt.NDArray) -> npt.NDArray:
         b, op = self.op.basis, self.op
         XN = np.einsum("pkm,pam->pak", X, b.gradients)  # (n, k, d)
         return ((op.volume[:, None] * b.values)[:, :, None, None] * XN[:, None, :, :]).ravel()
 
-    def matrix(self, factors: tuple) -> PETSc.Mat:
-        """The coupling (dofs x dofs, owned rows) of the factors of
-        :meth:`FBarIncrementOperator.tangents`; the same Mat, refilled, on later calls."""
+    def products(self, factors: tuple) -> list[PETSc.Mat]:
+        """The coupling's three terms :math:`S^T D T`, :math:`T^T D U`, :math:`T^T D M_c D T`
+        (dofs x dofs, owned rows) of the factors of :meth:`FBarIncrementOperator.tangents`; the
+        same Mats, refilled, on later calls (owned here: add them, do not destroy them)."""
         d1, dAt, dpG, dpt = factors
         b, op = self.op.basis, self.op
         for M, X in ((self.T, d1), (self.S, dAt), (self.U, dpG)):
@@ -236,17 +236,14 @@ class PatchCoupling:
         DT, DU = self.scaled
         DT.diagonalScale(L=self.D)
         DU.diagonalScale(L=self.D)
-        if self.products is None:
-            self.products = [self.S.transposeMatMult(DT), self.T.transposeMatMult(DU), self.Mc.PtAP(DT)]
+        if self._products is None:
+            self._products = [self.S.transposeMatMult(DT), self.T.transposeMatMult(DU), self.Mc.PtAP(DT)]
         else:
-            self.S.transposeMatMult(DT, result=self.products[0])
-            self.T.transposeMatMult(DU, result=self.products[1])
-            self.Mc.PtAP(DT, result=self.products[2])
-        K = self.products[0].copy()
-        K.axpy(1.0, self.products[1], structure=PETSc.Mat.Structure.DIFFERENT_NONZERO_PATTERN)
-        K.axpy(1.0, self.products[2], structure=PETSc.Mat.Structure.DIFFERENT_NONZERO_PATTERN)
-        return K
+            self.S.transposeMatMult(DT, result=self._products[0])
+            self.T.transposeMatMult(DU, result=self._products[1])
+            self.Mc.PtAP(DT, result=self._products[2])
+        return self._products
 
     def destroy(self) -> None:
-        for M in (self.T, self.S, self.U, self.Mc, self.D, *(self.scaled or []), *(self.products or [])):
+        for M in (self.T, self.S, self.U, self.Mc, self.D, *(self.scaled or []), *(self._products or [])):
             M.destroy()

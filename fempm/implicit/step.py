@@ -153,9 +153,10 @@ class ImplicitStep(BasisGrid):
             R[~free] = du[~free]
             r.array[:] = R[:owned].ravel()
 
-        local = fpetsc.coo_pattern(imap, *op.pattern(), bs=d)
+        rows, cols = op.pattern()
+        local = fpetsc.coo_pattern(imap, rows, cols, bs=d)
         patches = PatchCoupling(op) if fbar else None
-        J = local if patches is None else self._coupled_pattern(local, patches)
+        J = local if patches is None else self._coupled_pattern(local, patches, len(rows))
 
         def jacobian(x, JJ) -> None:
             self._fill_tangent(JJ, local, patches, op, op.gradients(increment(x)), c)
@@ -209,23 +210,21 @@ class ImplicitStep(BasisGrid):
         local.assemble()
         if patches is not None:
             JJ.zeroEntries()
-            JJ.axpy(1.0, local, structure=PETSc.Mat.Structure.SUBSET_NONZERO_PATTERN)
-            K = patches.matrix(coupling)
-            JJ.axpy(1.0, K, structure=PETSc.Mat.Structure.SUBSET_NONZERO_PATTERN)
-            K.destroy()
+            for K in (local, *patches.products(coupling)):
+                JJ.axpy(1.0, K, structure=PETSc.Mat.Structure.SUBSET_NONZERO_PATTERN)
 
     @staticmethod
-    def _coupled_pattern(local: PETSc.Mat, patches: PatchCoupling) -> PETSc.Mat:
-        """The tangent's matrix with F-bar: the particles' blocks' pattern and the patch
-        coupling's (the products' structure, from zero factors)."""
+    def _coupled_pattern(local: PETSc.Mat, patches: PatchCoupling, entries: int) -> PETSc.Mat:
+        """The tangent's matrix with F-bar: the pattern of the particles' blocks (``local``, of
+        ``entries`` COO entries) and of the patch coupling (the products' structure, from zero
+        factors)."""
         n, d = len(patches.op.volume), patches.d
         zeros = (np.zeros((n, d, d)), np.zeros((n, d, d)), np.zeros((n, d, d)), np.zeros(n))
-        local.setValuesCOO(np.zeros(len(patches.op.pattern()[0])), addv=PETSc.InsertMode.INSERT_VALUES)
+        local.setValuesCOO(np.zeros(entries), addv=PETSc.InsertMode.INSERT_VALUES)
         local.assemble()
         J = local.copy()
-        K = patches.matrix(zeros)
-        J.axpy(1.0, K, structure=PETSc.Mat.Structure.DIFFERENT_NONZERO_PATTERN)
-        K.destroy()
+        for K in patches.products(zeros):
+            J.axpy(1.0, K, structure=PETSc.Mat.Structure.DIFFERENT_NONZERO_PATTERN)
         J.setLGMap(*local.getLGMap())
         return J
 

@@ -301,5 +301,5 @@ class Run:
             "initial": self.history[0],
             "status": self.monitor.outcome,
             "health": self.monitor.summary(),
-            **({"removed": solver.removed.asdict()} if solver.removal.removes else {}),
+            **solver.removal.summary(),
         }

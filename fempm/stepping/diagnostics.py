@@ -9,6 +9,7 @@ from typing import Literal
 import basix.ufl
 import dolfinx.fem
 import numpy as np
+import numpy.typing as npt
 
 from fempm.particles.particle_set import Particles
 from fempm.stepping.laws import law_state, material_groups
@@ -77,6 +78,21 @@ def energy_row(t: float, kinetic: float, strain: float, momentum) -> dict[str, f
     return out
 
 
+def totals(particles: Particles, materials: Sequence) -> npt.NDArray:
+    r"""[mass, kinetic energy, strain energy, momentum...]: :math:`\sum_p M_p`,
+    :math:`\sum_p M_p |v_p|^2 / 2`, :math:`\sum_p V_p^0 W_p`, :math:`\sum_p M_p v_p`, summed
+    over ranks (one reduction).
+
+    Note:
+        Collective.
+    """
+    p = particles
+    v = p.fields["v"]
+    local = np.concatenate([[p.mass.sum(), 0.5 * np.sum(p.mass * np.einsum("nd,nd->n", v, v)),
+                             strain_energy(p, materials)], p.mass @ v])
+    return p.comm.allreduce(local)
+
+
 def energies(particles: Particles, materials: Sequence, t: float) -> dict[str, float]:
     r"""Kinetic energy :math:`\sum_p M_p |v_p|^2 / 2`, strain energy :math:`\sum_p V_p^0 W_p`,
     their total and the linear momentum :math:`\sum_p M_p v_p`, summed over ranks, at time ``t``.
@@ -84,14 +100,8 @@ def energies(particles: Particles, materials: Sequence, t: float) -> dict[str, f
     Note:
         Collective.
     """
-    p = particles
-    f = p.fields
-    kin = 0.5 * np.sum(p.mass * np.einsum("nd,nd->n", f["v"], f["v"]))
-    strain = strain_energy(p, materials)
-    mom = p.mass @ f["v"]
-    kin, strain = p.comm.allreduce(kin), p.comm.allreduce(strain)
-    mom = p.comm.allreduce(mom)
-    return energy_row(t, kin, strain, mom)
+    s = totals(particles, materials)
+    return energy_row(t, s[1], s[2], s[3:])
 
 
 def momentum_scale(particles: Particles) -> float:

@@ -48,7 +48,7 @@ import numpy.typing as npt
 from fempm.transfer.basis import ParticleBasis
 from fempm.transfer.mapping import p2g
 
-__all__ = ["VOLUMETRIC", "FBar", "check_laws", "patch_average", "volumetric"]
+__all__ = ["VOLUMETRIC", "FBar", "check_laws", "patch_average", "patch_weights", "trace_measure", "volumetric"]
 
 #: the names ``StepOptions(volumetric=...)`` takes
 VOLUMETRIC = ("standard", "fbar")
@@ -77,8 +77,7 @@ class FBar:
         eye = np.eye(d)
         dF = eye + dt * L
         dJ = np.linalg.det(dF)
-        trace = np.array([getattr(mat, "volumetric_measure", "J") == "trace" for mat in materials], dtype=bool)
-        by_trace = trace[body]
+        by_trace = trace_measure(materials)[body]
         dtheta = dt * np.einsum("pij,pji->p", L, F)
         averaged = patch_average(basis, volume, body, len(materials), np.where(by_trace, dtheta, dJ))
         scale = (np.where(by_trace, 1.0, averaged) / dJ) ** (1.0 / d)
@@ -108,11 +107,23 @@ def patch_average(basis: ParticleBasis, volume: npt.NDArray, body: npt.NDArray, 
     bodies (``body`` (n,) the particles' indices, the same count on every rank):
     :math:`\bar f_p = \sum_i N_{ip} \sum_q V_q N_{iq} f_q / \sum_q V_q N_{iq}` over the
     particles q of p's body. Collective."""
-    weights = np.stack([np.where(body == b, volume, 0.0) for b in range(bodies)], axis=1)  # one column per body
+    weights = patch_weights(volume, body, bodies)
     nodal = p2g(basis, np.hstack([weights, weights * values[:, None]]))
     mass = nodal[:, :bodies]
     averaged = np.where(mass > 0.0, nodal[:, bodies:] / np.where(mass > 0.0, mass, 1.0), 0.0)
     return basis.gather(averaged)[np.arange(len(body)), body]  # (n, bodies): each particle's own body
+
+
+def patch_weights(volume: npt.NDArray, body: npt.NDArray, bodies: int) -> npt.NDArray:
+    """(n, bodies): each particle's volume in its body's column, zero in the others (the
+    weights of :func:`patch_average`)."""
+    return np.stack([np.where(body == b, volume, 0.0) for b in range(bodies)], axis=1)
+
+
+def trace_measure(materials: Sequence) -> npt.NDArray[np.bool_]:
+    """(bodies,): whether each law's volumetric strain is ``tr F - d`` (``volumetric_measure =
+    "trace"``) rather than ``det F``."""
+    return np.array([getattr(mat, "volumetric_measure", "J") == "trace" for mat in materials], dtype=bool)
 
 
 def volumetric(name: str) -> FBar | None:

@@ -143,7 +143,7 @@ class HealthMonitor:
         mom = np.array([energies[k] for k in energies if k.startswith("momentum_")])
         power, force = self._external(s.t, mom)
         end = (power, force)  # the loads at the step's end on the particles still in the mesh
-        if s.removal.last_momentum is not None:  # those removed in this step were in it until its end
+        if s.removal.removed_now:  # those removed in this step were in it until its end
             end = self._external(s.t, mom + s.removal.last_momentum, s.removal.last_mass)
         gone = s.removed  # what the particles that left the mesh took: it has left, not vanished
         if gone.count:

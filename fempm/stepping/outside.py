@@ -23,7 +23,7 @@ import numpy as np
 import numpy.typing as npt
 
 from fempm.particles.particle_set import Particles
-from fempm.stepping.diagnostics import strain_energy
+from fempm.stepping.diagnostics import totals
 
 __all__ = ["OUTSIDE", "Outside", "Removed", "outside_policy"]
 
@@ -61,30 +61,30 @@ def outside_policy(name: str) -> str:
     return name
 
 
-def _totals(p: Particles, materials: Sequence) -> npt.NDArray:
-    """[count, mass, kinetic, strain, momentum...] summed over ranks (one reduction)."""
-    v = p.fields["v"]
-    local = np.concatenate([[len(p), p.mass.sum(), 0.5 * np.sum(p.mass * np.einsum("nd,nd->n", v, v)),
-                             strain_energy(p, materials)], p.mass @ v])
-    return p.comm.allreduce(local)
-
-
 class Outside:
     """The policy ``name`` (:data:`OUTSIDE`) for the particles that leave the mesh, and what the
     removed ones took (:attr:`removed`; see the module)."""
 
     def __init__(self, name: str = "raise"):
-        self.name = outside_policy(name)
+        #: whether particles found in no cell are removed (else they raise)
+        self.removes = outside_policy(name) == "remove"
         self.removed = Removed()
-        #: whether the last relocation removed particles
-        self.removed_now = False
-        #: the mass and momentum the last relocation removed (the energy check's work over the
-        #: step in which they left counts them at its end)
+        #: the mass and momentum the last relocation removed, None when it removed none (the
+        #: energy check's work over the step in which they left counts them at its end)
         self.last_mass, self.last_momentum = 0.0, None
 
     @property
-    def removes(self) -> bool:
-        return self.name == "remove"
+    def removed_now(self) -> bool:
+        """Whether the last relocation removed particles."""
+        return self.last_momentum is not None
+
+    def columns(self) -> dict[str, float]:
+        """The ``energies.csv`` columns of the removed particles (none unless removing)."""
+        return self.removed.columns() if self.removes else {}
+
+    def summary(self) -> dict:
+        """The ``summary.json`` entry ``removed`` (none unless removing)."""
+        return {"removed": self.removed.asdict()} if self.removes else {}
 
     def relocate(self, particles: Particles, materials: Sequence, left: npt.NDArray[np.bool_] | None = None) -> None:
         """Relocate ``particles`` (:meth:`fempm.particles.particle_set.Particles.relocate`, ``left``
@@ -92,16 +92,15 @@ class Outside:
         if not self.removes:
             particles.relocate(left=left)
             return
-        before = _totals(particles, materials)
+        before = totals(particles, materials)
         particles.relocate("remove", left=left)
-        self.removed_now = bool(particles.removed)
         self.last_mass, self.last_momentum = 0.0, None
-        if self.removed_now:
-            gone = before - _totals(particles, materials)
-            self.last_mass, self.last_momentum = float(gone[1]), gone[4:].copy()
+        if particles.removed:
+            gone = before - totals(particles, materials)  # [mass, kinetic, strain, momentum...]
+            self.last_mass, self.last_momentum = float(gone[0]), gone[3:].copy()
             r = self.removed
             r.count += int(particles.removed)
-            r.mass += float(gone[1])
-            r.kinetic += float(gone[2])
-            r.strain += float(gone[3])
-            r.momentum = [float(m) for m in np.asarray(r.momentum or np.zeros(len(gone) - 4)) + gone[4:]]
+            r.mass += float(gone[0])
+            r.kinetic += float(gone[1])
+            r.strain += float(gone[2])
+            r.momentum = [float(m) for m in np.asarray(r.momentum or np.zeros(len(gone) - 3)) + gone[3:]]

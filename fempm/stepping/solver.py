@@ -330,8 +330,7 @@ class ExplicitSolver:
         Note:
             Collective.
         """
-        row = diagnostics.energies(self.particles, self.materials, self.t)
-        return {**row, **self.removed.columns()} if self.removal.removes else row
+        return {**diagnostics.energies(self.particles, self.materials, self.t), **self.removal.columns()}
 
     def step_energies(self) -> tuple[dict[str, float], float]:
         r"""(:meth:`energies`, the momentum scale :math:`\sum_p M_p |v_p|`) of the state the last
@@ -348,5 +347,4 @@ class ExplicitSolver:
         if sums is None:  # the same grid on every rank (and the step's sums hold particles removed since)
             return self.energies(), diagnostics.momentum_scale(p)
         p.comm.Allreduce(MPI.IN_PLACE, sums, op=MPI.SUM)
-        row = diagnostics.energy_row(self.t, sums[0], sums[1], sums[3:])
-        return ({**row, **self.removed.columns()} if self.removal.removes else row), float(sums[2])
+        return {**diagnostics.energy_row(self.t, sums[0], sums[1], sums[3:]), **self.removal.columns()}, float(sums[2])
