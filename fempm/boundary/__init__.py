@@ -1,8 +1,11 @@
 """Grid conditions: fixed, slip, prescribed and frictional walls (chosen by position, or on
-tagged facets with their normals: :func:`tagged`), and the contact patches of a wall that
-shares its normal impulse by depth."""
+tagged facets with their normals: :func:`tagged`), the contact patches of a wall that shares
+its normal impulse by depth, absorbing dashpots (:func:`absorbing`); pressures and tractions
+on tagged parts of the body's surface (:func:`surface_load`)."""
 
+from fempm.boundary.absorbing import Dashpot, absorbing
 from fempm.boundary.conditions import GridConditions
+from fempm.boundary.surface import SurfaceLoad, surface_load
 from fempm.boundary.tagged import tagged
 from fempm.boundary.walls import (
     Fixed,
@@ -18,16 +21,20 @@ from fempm.boundary.walls import (
 )
 
 __all__ = [
+    "Dashpot",
     "GridConditions",
     "Fixed",
     "Friction",
     "Prescribed",
     "Slip",
+    "SurfaceLoad",
+    "absorbing",
     "fixed",
     "fixed_on_facets",
     "friction",
     "locate_dofs",
     "prescribed",
     "slip",
+    "surface_load",
     "tagged",
 ]

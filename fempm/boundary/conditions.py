@@ -10,6 +10,7 @@ import dolfinx.fem
 import numpy as np
 import numpy.typing as npt
 
+from fempm.boundary.absorbing import Dashpot
 from fempm.boundary.walls import Fixed, Friction, Slip
 from fempm.transfer.centres import NodalCentres
 
@@ -32,8 +33,10 @@ class GridConditions:
             consistently solved velocities oscillate from node to node along a wall, so that
             some fall below mu times their normal velocity change and the friction there is
             cut short (docs/contact.md, "The sliding block").
-        needs_positions: whether a condition checks contact by position (the step then maps
-            the nodal centres of mass, :class:`~fempm.transfer.centres.NodalCentres`).
+        dashpots: the absorbing conditions (:class:`~fempm.boundary.absorbing.Dashpot`).
+        needs_positions: whether a condition checks contact by position or damps by the nodal
+            mass (the step then maps the nodal centres of mass and masses,
+            :class:`~fempm.transfer.centres.NodalCentres`).
         zero_components: whether every condition only holds velocity components at 0.
     """
 
@@ -50,12 +53,18 @@ class GridConditions:
             if isinstance(bc, Friction) and bc.mu > 0.0:
                 mask[bc.dofs] = True
         self.friction_dofs = mask if mask.any() else None
+        self.dashpots = tuple(bc for bc in self.bcs if isinstance(bc, Dashpot))
         self.needs_positions = any(bc.needs_positions for bc in self.bcs)
         self.zero_components = all(bc.zero_components for bc in self.bcs)
 
-    def apply(self, v: npt.NDArray, centroids: NodalCentres | None = None) -> None:
+    def apply(self, v: npt.NDArray, centroids: NodalCentres | None = None, dt: float | None = None) -> None:
         """Every condition on the grid velocity ``v`` (dofs, d), in place; ``centroids``: the
-        step's nodal centres of mass, for the conditions that check contact by position."""
+        step's nodal centres of mass (and masses), for the conditions that check contact by
+        position and for dashpots; ``dt``: given when ``v`` is the update of a step of that
+        size, on which the dashpots act first (:mod:`fempm.boundary.absorbing`)."""
+        if dt is not None:
+            for bc in self.dashpots:
+                bc.damp(v, centroids, dt)
         for bc in self.bcs:
             bc.apply(v, centroids)
 

@@ -22,18 +22,20 @@ import numpy as np
 import numpy.typing as npt
 
 from fempm.boundary.walls import Fixed, Friction, Slip, friction_wall
+from fempm.meshes.facets import facet_area_vectors
 
-__all__ = ["KINDS", "facet_normals", "tagged"]
+__all__ = ["KINDS", "facet_normals", "tagged", "tagged_facets"]
 
 #: the kinds of condition :func:`tagged` makes
 KINDS = ("fixed", "slip", "friction")
 
 
-def _facets(mesh: dolfinx.mesh.Mesh, facet_tags: dolfinx.mesh.MeshTags, value: int) -> npt.NDArray[np.int32]:
-    """The local facets with tag ``value`` (collective: the tag checked on every rank)."""
+def tagged_facets(mesh: dolfinx.mesh.Mesh, facet_tags: dolfinx.mesh.MeshTags, value: int) -> npt.NDArray[np.int32]:
+    """The local facets with tag ``value``; a ValueError when the tags are not facet tags or
+    no rank's facets carry ``value`` (its message lists the tags there are). Collective."""
     fdim = mesh.topology.dim - 1
     if facet_tags.dim != fdim:
-        raise ValueError(f"tagged conditions need facet tags (dimension {fdim}); these tags are of dimension "
+        raise ValueError(f"tagged conditions and loads need facet tags (dimension {fdim}); these tags are of dimension "
                          f"{facet_tags.dim}")
     comm = mesh.comm
     facets = facet_tags.find(int(value))
@@ -42,28 +44,6 @@ def _facets(mesh: dolfinx.mesh.Mesh, facet_tags: dolfinx.mesh.MeshTags, value: i
         raise ValueError(f"unknown facet tag {value}: it marks no facets on any rank (the facet tags hold "
                          f"{', '.join(map(str, known)) or 'none'})")
     return facets
-
-
-def _oriented_normals(mesh: dolfinx.mesh.Mesh, facets: npt.NDArray[np.int32]) -> npt.NDArray:
-    """(len(facets), gdim): each facet's normal times its size, pointing out of its (first) cell."""
-    tdim, gdim = mesh.topology.dim, mesh.geometry.dim
-    fdim = tdim - 1
-    x = mesh.geometry.x[:, :gdim]
-    nodes = dolfinx.mesh.entities_to_geometry(mesh, fdim, facets)
-    p = x[nodes]  # (nf, nodes, gdim); the first are the vertices
-    if gdim == 2:
-        t = p[:, 1] - p[:, 0]
-        n = np.stack([t[:, 1], -t[:, 0]], axis=1)
-    elif fdim == 2 and nodes.shape[1] in (4, 9):  # a quadrilateral facet: half the cross product of its diagonals
-        n = 0.5 * np.cross(p[:, 3] - p[:, 0], p[:, 2] - p[:, 1])
-    else:
-        n = 0.5 * np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0])
-    f2c = mesh.topology.connectivity(fdim, tdim)
-    cells = np.array([f2c.links(f)[0] for f in facets], dtype=np.int32)
-    centres = x[dolfinx.mesh.entities_to_geometry(mesh, tdim, cells)].mean(axis=1)
-    inward = np.einsum("fd,fd->f", p.mean(axis=1) - centres, n) < 0
-    n[inward] *= -1.0
-    return n
 
 
 def facet_normals(V: dolfinx.fem.FunctionSpace, facets: npt.NDArray[np.int32]) -> tuple[npt.NDArray, npt.NDArray]:
@@ -76,7 +56,7 @@ def facet_normals(V: dolfinx.fem.FunctionSpace, facets: npt.NDArray[np.int32]) -
     for a, b in ((fdim, tdim), (tdim, fdim), (fdim, 0)):
         mesh.topology.create_connectivity(a, b)
     owned = facets[facets < mesh.topology.index_map(fdim).size_local]  # each facet counted on one rank
-    n = _oriented_normals(mesh, owned) if len(owned) else np.zeros((0, gdim))
+    n = facet_area_vectors(mesh, owned)
     f2c, c2f = mesh.topology.connectivity(fdim, tdim), mesh.topology.connectivity(tdim, fdim)
     layout = V.dofmap.dof_layout
     sums = dolfinx.la.vector(V.dofmap.index_map, bs=gdim + 1)  # normal sums and a count per dof
@@ -124,7 +104,7 @@ def tagged(V: dolfinx.fem.FunctionSpace, facet_tags: dolfinx.mesh.MeshTags, valu
     """
     if kind not in KINDS:
         raise ValueError(f"unknown kind={kind!r} of tagged condition; expected one of {', '.join(KINDS)}")
-    facets = _facets(V.mesh, facet_tags, value)
+    facets = tagged_facets(V.mesh, facet_tags, value)
     dofs, normals = facet_normals(V, facets)
     if kind == "fixed":
         return Fixed(dofs)

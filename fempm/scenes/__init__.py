@@ -12,15 +12,16 @@ from fempm.scenes.disks import two_disks
 from fempm.scenes.impact import disk_impact
 from fempm.scenes.incline import incline
 from fempm.scenes.manufactured import manufactured_scene
+from fempm.scenes.wave import wave
 
 SCENES = {"bar": vibrating_bar, "disks": two_disks, "cantilever": cantilever, "dam": dam_break, "block": hanging_block,
           "cook": cook_membrane, "column": column_collapse, "incline": incline, "impact": disk_impact,
-          "compaction": compaction}
+          "compaction": compaction, "wave": wave}
 
 __all__ = [
     "MARTIN_MOYCE", "SCENES", "cantilever", "cantilever_reference", "cantilever_tip", "column_collapse", "compaction",
     "cook_membrane",
     "dam_break", "deposit", "disk_impact",
     "hanging_block", "incline",
-    "largest_neighbour_gap", "manufactured_scene", "stress_error", "surge_front", "two_disks", "vibrating_bar",
+    "largest_neighbour_gap", "manufactured_scene", "stress_error", "surge_front", "two_disks", "vibrating_bar", "wave",
 ]

@@ -141,5 +141,5 @@ class ConsistentNodalMass(NodalMass):
             self._accel, self._spare = a, self._accel  # the next warm start; the next output
         v_new = np.empty_like(a)
         kc.advance(a, v_old, mass[:, 0], weak_max, float(dt), float(opts.damping), v_new)
-        g.conditions.apply(v_new, centroids)
+        g.conditions.apply(v_new, centroids, dt)
         return self._ghosts(v_new)

@@ -257,11 +257,12 @@ class ContactGrid(BasisGrid):
                 self.centroids = [NodalCentres(c, mg) for c, mg in zip(mass_centres(m, self.moments), m)]
         return stable
 
-    def constrain(self, v: npt.NDArray) -> npt.NDArray:
-        """Each deformable group's grid conditions, and the ghost values, in place."""
+    def constrain(self, v: npt.NDArray, dt: float | None = None) -> npt.NDArray:
+        """Each deformable group's grid conditions, and the ghost values, in place (``dt``: of
+        the update ``v`` is, for the dashpots)."""
         for g in range(self.num_groups):
             if not self.rigid[g]:
-                self.solver.conditions.apply(v[g], self.centroids[g])
+                self.solver.conditions.apply(v[g], self.centroids[g], dt)
             v[g] = self.basis.update_ghosts(v[g])
         return v
 
@@ -287,7 +288,7 @@ class ContactGrid(BasisGrid):
         v_new = v_old + dt * a
         patches = Patches.of_space(self.basis.V, index_map=self.basis.index_map).sums if self.rigid.any() else None
         correct(self.m_has, v_new, self.grad, contact.friction, self.rigid, self.moments, contact.gap, dt, patches)
-        return self.constrain(v_new)
+        return self.constrain(v_new, dt)
 
     def to_particles(self, v_new: npt.NDArray, v_old: npt.NDArray, dt: float, *, blend: bool = False,
                      kinematics: bool = False, move: bool = False, remap: bool = False) -> None:

@@ -129,13 +129,13 @@ class ContactPointGrid(PointGrid):
             centroids = [NodalCentres(c, mg) for c, mg in zip(mass_centres(m, moments), m)]
         return moments, centroids
 
-    def _constrain(self, v: npt.NDArray) -> npt.NDArray:
+    def _constrain(self, v: npt.NDArray, dt: float | None = None) -> npt.NDArray:
         """Each deformable group's grid conditions on ``v`` (dofs, G d), in place (a fused
-        grid's velocities hold them already)."""
+        grid's velocities hold them already; ``dt``: of the update ``v`` is, for the dashpots)."""
         if not self.fused:
             by_group = self._by_group(v, 0, self.d)
             for g in np.flatnonzero(~self.rigid):
-                self.conditions.apply(by_group[g], self.centroids[g])
+                self.conditions.apply(by_group[g], self.centroids[g], dt)
         return v
 
     def velocity(self, remapped: bool = False) -> npt.NDArray:
@@ -163,7 +163,7 @@ class ContactPointGrid(PointGrid):
         at = correct(self.m_has, a, self.grad, contact.friction, self.rigid, self.moments, contact.gap, dt,
                      self.patches)
         self.contacts = int(np.count_nonzero(at))
-        return self._constrain(v)
+        return self._constrain(v, dt)
 
     def update(self, dt: float) -> tuple[npt.NDArray, npt.NDArray]:
         if not self.fused:  # velocity() then advance()

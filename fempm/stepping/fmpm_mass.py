@@ -134,5 +134,5 @@ class FMPMNodalMass(NodalMass):
         v_new = np.empty_like(a)
         kc.advance(np.ascontiguousarray(a), v_old, np.ascontiguousarray(mass[:, 0]), weak_max, float(dt),
                    float(g.options.damping), v_new)
-        g.conditions.apply(v_new, centroids)
+        g.conditions.apply(v_new, centroids, dt)
         return v_new

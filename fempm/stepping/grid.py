@@ -192,7 +192,7 @@ class BasisGrid(Grid):
                                          basis.num_dofs_local)
             return sum_over_ranks(basis.index_map, local)
         f = p2g_gradients(basis, -volume[:, None, None] * sigma)
-        if s.loads.body_force is not None or s.loads.traction is not None:
+        if s.loads.any:
             f += p2g(basis, fext)
         return f
 
@@ -293,7 +293,7 @@ class SingleFieldGrid(BasisGrid):
             a -= opts.damping * v_old[: len(a)]
         a[self.weak] = 0.0  # nodes with a tiny share of mass keep their mapped velocity, no force update
         v_new = v_old + dt * a
-        self.solver.conditions.apply(v_new, self.centroids)
+        self.solver.conditions.apply(v_new, self.centroids, dt)
         return self.basis.update_ghosts(v_new)
 
     def to_particles(self, v_new: npt.NDArray, v_old: npt.NDArray, dt: float, *, blend: bool = False,

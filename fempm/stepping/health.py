@@ -121,7 +121,7 @@ class HealthMonitor:
         left the mesh in the last step, still counted)."""
         p = self.solver.particles
         loads = self.solver.loads
-        if momentum is not None and loads.traction is None and not callable(loads.body_force):
+        if momentum is not None and not loads.per_particle:
             if loads.body_force is None:
                 return 0.0, np.zeros(p.gdim)
             g = np.asarray(loads.body_force, dtype=np.float64)

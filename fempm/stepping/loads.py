@@ -8,7 +8,7 @@ with :math:`A_p` the particle's share of that surface.
 from __future__ import annotations
 
 import inspect
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 
 import dolfinx.la
@@ -16,6 +16,9 @@ import dolfinx.mesh
 import numpy as np
 import numpy.typing as npt
 from mpi4py import MPI
+
+from fempm.boundary.surface import SurfaceLoad
+from fempm.meshes.facets import cells_beside, facet_area_vectors
 
 __all__ = [
     "Loads", "body_force_at", "boundary_shares", "external_forces", "surface_areas", "surface_shares",
@@ -39,10 +42,24 @@ class Loads:
             when the particles carry it (:func:`surface_areas`), else the body's boundary
             facets next to the loaded particles (:func:`boundary_shares`, exact on every cell
             type).
+        surface: Pressures and tractions on tagged parts of the body's surface, following it
+            as it deforms (:func:`fempm.boundary.surface.surface_load`).
     """
 
     body_force: npt.ArrayLike | Callable | None = None
     traction: Callable[[float], npt.NDArray] | None = None
+    surface: Sequence[SurfaceLoad] = ()
+
+    @property
+    def any(self) -> bool:
+        """Whether there is a load at all."""
+        return self.body_force is not None or self.per_particle
+
+    @property
+    def per_particle(self) -> bool:
+        """Whether the loads need a pass over the particles: anything but a constant body
+        force (or none)."""
+        return self.traction is not None or bool(self.surface) or callable(self.body_force)
 
 
 def takes_reference_positions(fn: Callable) -> bool:
@@ -89,36 +106,12 @@ def body_force_at(b, particles, t: float) -> npt.NDArray:
 
 
 def _facet_geometry(mesh, facets: npt.NDArray[np.int32]) -> tuple[npt.NDArray, npt.NDArray, npt.NDArray]:
-    """(a point, the unit normal, the measure) of each facet (straight edges in 2D, planar
-    triangles or quadrilaterals in 3D; the vertices of the facet)."""
-    d = mesh.geometry.dim
+    """(a point, the unit normal, the measure) of each facet
+    (:func:`fempm.meshes.facets.facet_area_vectors`)."""
     nodes = dolfinx.mesh.entities_to_geometry(mesh, mesh.topology.dim - 1, facets)
-    xv = mesh.geometry.x[nodes][:, :, :d]  # (facets, vertices, d)
-    origin = xv[:, 0]
-    if d == 2:
-        t = xv[:, 1] - xv[:, 0]
-        measure = np.linalg.norm(t, axis=1)
-        normal = np.stack([-t[:, 1], t[:, 0]], axis=1)
-    else:  # triangles; quadrilaterals (vertices 0 1 3 2 in DOLFINx order) as two triangles
-        a = np.cross(xv[:, 1] - xv[:, 0], xv[:, 2] - xv[:, 0])
-        normal = a
-        measure = 0.5 * np.linalg.norm(a, axis=1)
-        if xv.shape[1] == 4:
-            b = np.cross(xv[:, 2] - xv[:, 3], xv[:, 1] - xv[:, 3])
-            measure = measure + 0.5 * np.linalg.norm(b, axis=1)
-    normal = normal / np.linalg.norm(normal, axis=1)[:, None]
-    return origin, normal, measure
-
-
-def _facet_counts(mesh, links: npt.NDArray, flags: npt.NDArray[np.bool_]) -> npt.NDArray:
-    """For each local facet, the number of cells on either side (over all ranks) whose owned
-    ``flags`` hold. Collective."""
-    fdim = mesh.topology.dim - 1
-    counts = dolfinx.la.vector(mesh.topology.index_map(fdim), 1, dtype=np.float64)
-    np.add.at(counts.array, links[: len(flags)][flags].ravel(), 1.0)
-    counts.scatter_reverse(dolfinx.la.InsertMode.add)
-    counts.scatter_forward()
-    return counts.array.copy()
+    a = facet_area_vectors(mesh, facets)
+    measure = np.linalg.norm(a, axis=1)
+    return mesh.geometry.x[nodes[:, 0], : mesh.geometry.dim], a / measure[:, None], measure
 
 
 def boundary_shares(particles, loaded: npt.NDArray[np.bool_]) -> npt.NDArray:
@@ -160,8 +153,8 @@ def boundary_shares(particles, loaded: npt.NDArray[np.bool_]) -> npt.NDArray:
     occupied, holds_loaded = np.zeros(num_cells, dtype=np.bool_), np.zeros(num_cells, dtype=np.bool_)
     occupied[cells[cells < num_cells]] = True
     holds_loaded[cells[loaded & (cells < num_cells)]] = True
-    surface = _facet_counts(mesh, links, occupied) == 1.0
-    across = _facet_counts(mesh, links, holds_loaded)  # cells with loaded particles at each facet
+    surface = cells_beside(mesh, occupied) == 1.0
+    across = cells_beside(mesh, holds_loaded)  # cells with loaded particles at each facet
     loaded_rows = np.flatnonzero(loaded)
     loaded_rows = loaded_rows[np.argsort(cells[loaded_rows], kind="stable")]
     by_cell = np.split(loaded_rows, np.flatnonzero(np.diff(cells[loaded_rows])) + 1) if len(loaded_rows) else []
@@ -253,7 +246,7 @@ def surface_shares(particles, loaded: npt.NDArray[np.bool_]) -> npt.NDArray:
 
 def external_forces(loads, particles, t: float) -> npt.NDArray:
     r"""The external force on each particle (n, d) at time ``t``:
-    :math:`f^{ext}_p = M_p b_p + \bar t_p A_p` (the terms ``loads`` declares; zeros without any)."""
+    :math:`f^{ext}_p = M_p b_p + \bar t_p A_p` plus the surface loads (the terms ``loads`` declares; zeros without any)."""
     p = particles
     f = np.zeros((len(p), p.gdim))
     if loads.body_force is not None:
@@ -264,4 +257,6 @@ def external_forces(loads, particles, t: float) -> npt.NDArray:
             raise ValueError(f"the traction returned shape {traction.shape} for {len(p)} particles in {p.gdim}D "
                              f"(expected {f.shape})")
         f += traction * surface_shares(p, np.any(traction != 0.0, axis=1))[:, None]
+    for load in loads.surface:
+        f += load.forces(p, t)
     return f

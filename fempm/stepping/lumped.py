@@ -148,7 +148,7 @@ class PointGrid(Grid):
         s = self.solver
         loads = s.loads
         s.count_terms()
-        if loads.traction is None and (loads.body_force is None or not callable(loads.body_force)):
+        if not loads.per_particle:
             g = np.zeros(self.d) if loads.body_force is None else np.asarray(loads.body_force, dtype=np.float64)
             if g.shape != (self.d,):
                 raise ValueError(f"the body force has shape {g.shape}, expected ({self.d},)")
@@ -384,7 +384,7 @@ class LumpedNodalMass(NodalMass):
         v_new = np.empty((g.num_dofs, g.d))
         kl.grid_advance(mass, force[:, cf:cf + g.d], g.free, active_min, weak_max, float(dt),
                         float(g.options.damping), v_old, v_new)
-        g.conditions.apply(v_new, centroids)
+        g.conditions.apply(v_new, centroids, dt)
         return v_new
 
 

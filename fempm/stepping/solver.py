@@ -180,6 +180,8 @@ class ExplicitSolver:
         """Count the force terms assembled this step (:attr:`terms`)."""
         self.record.terms["internal"] += 1
         self.record.terms.update(k for k in ("body_force", "traction") if getattr(self.loads, k) is not None)
+        if self.loads.surface:
+            self.record.terms["surface"] += 1
 
     # -- the step -----------------------------------------------------------------------------
     def stable_dt(self) -> float:

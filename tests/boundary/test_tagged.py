@@ -103,7 +103,7 @@ def test_bad_input_is_named():
         tagged(V, data.facet_tags, 1, "friction", friction=-0.1)
     cells = dm.meshtags(data.mesh, 2, np.arange(data.mesh.topology.index_map(2).size_local, dtype=np.int32),
                         np.ones(data.mesh.topology.index_map(2).size_local, dtype=np.int32))
-    with pytest.raises(ValueError, match=r"tagged conditions need facet tags \(dimension 1\)"):
+    with pytest.raises(ValueError, match=r"tagged conditions and loads need facet tags \(dimension 1\)"):
         tagged(V, cells, 1, "slip")
     with pytest.raises(ValueError, match=r"edge_tags needs one tag >= 0 per edge \(4\)"):
         tagged_polygon(comm, SLOPE, 0.3, [1, 2])

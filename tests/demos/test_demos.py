@@ -86,3 +86,13 @@ def test_incline_demo_writes_its_table(tmp_path):
     assert table.startswith("Made by `python demos/incline.py --cells 4") and (tmp_path / "provenance.json").exists()
     with pytest.raises(ValueError, match="unknown case"):
         demo.main(["--cases", "sphere", "--out", str(tmp_path)])
+
+
+def test_wave_demo_absorbs_and_reflects(tmp_path):
+    demo = load("wave")
+    rows = demo.main(["--cells", "64", "--out", str(tmp_path), "--figure"])
+    ratio = {r["boundary"]: r["reflected_energy_ratio"] for r in rows}
+    assert ratio["absorbing"] < 0.05 and ratio["fixed"] > 0.9
+    if MPI.COMM_WORLD.rank == 0:
+        assert f"| absorbing | 64 | {ratio['absorbing']:.4f} |" in (tmp_path / "wave.md").read_text()
+        assert (tmp_path / "wave.png").stat().st_size > 10_000
