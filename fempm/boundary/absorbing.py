@@ -39,7 +39,7 @@ import ufl
 from fempm.boundary.tagged import facet_normals, tagged_facets
 from fempm.transfer.centres import NodalCentres
 
-__all__ = ["Dashpot", "absorbing", "boundary_shares"]
+__all__ = ["Dashpot", "absorbing", "nodal_boundary_shares"]
 
 
 @dataclass(frozen=True)
@@ -72,7 +72,8 @@ class Dashpot:
             + vt / (1.0 + dt * self.tangential_coefficient[with_mass] / m)[:, None]
 
 
-def boundary_shares(V: dolfinx.fem.FunctionSpace, facet_tags: dolfinx.mesh.MeshTags, value: int) -> npt.NDArray:
+def nodal_boundary_shares(V: dolfinx.fem.FunctionSpace, facet_tags: dolfinx.mesh.MeshTags,
+                          value: int) -> npt.NDArray:
     r""":math:`A_i = \int_{\Gamma} N_i\, ds` over the facets tagged ``value``, for every block dof
     of ``V`` (owned and ghost; summed over ranks). Collective."""
     Q, to_V = V.sub(0).collapse()
@@ -115,8 +116,8 @@ def absorbing(V: dolfinx.fem.FunctionSpace, facet_tags: dolfinx.mesh.MeshTags | 
     for name, speed in (("cp", cp), ("cs", cs)):
         z = rho * speed
         if not (np.isfinite(z) and z >= 0.0):
-            raise ValueError(f"absorbing boundary: the dashpot impedance rho*{name} = {rho:g}*{speed:g} = {z:g} must be "
-                             "a finite number >= 0")
+            raise ValueError(f"absorbing boundary: the dashpot impedance rho*{name} = {rho:g}*{speed:g} = {z:g} "
+                             "must be a finite number >= 0")
     mesh = V.mesh
     fdim = mesh.topology.dim - 1
     if (where is None) == (facet_tags is None):
@@ -129,5 +130,5 @@ def absorbing(V: dolfinx.fem.FunctionSpace, facet_tags: dolfinx.mesh.MeshTags | 
         facet_tags, value = dolfinx.mesh.meshtags(mesh, fdim, found, np.ones(len(found), dtype=np.int32)), 1
     facets = tagged_facets(mesh, facet_tags, value)
     dofs, normals = facet_normals(V, facets)
-    area = boundary_shares(V, facet_tags, value)[dofs]
+    area = nodal_boundary_shares(V, facet_tags, value)[dofs]
     return Dashpot(dofs, normals, rho * cp * area, rho * cs * area)

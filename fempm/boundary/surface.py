@@ -28,19 +28,14 @@ from __future__ import annotations
 from collections.abc import Callable
 from dataclasses import dataclass
 
-import dolfinx.la
 import dolfinx.mesh
 import numpy as np
 import numpy.typing as npt
 
 from fempm.boundary.tagged import tagged_facets
-from fempm.meshes.facets import cells_beside, facet_area_vectors
+from fempm.meshes.facets import cells_beside, facet_planes, facet_sums, nearest_row
 
 __all__ = ["SurfaceLoad", "cofactor_apply", "surface_area_vectors", "surface_load"]
-
-#: a particle in the row nearest a facet lies within this factor of the smallest distance to it
-ROW = 1.5
-
 
 @dataclass(frozen=True)
 class SurfaceLoad:
@@ -122,7 +117,7 @@ def surface_area_vectors(particles, facet_tags: dolfinx.mesh.MeshTags, value: in
     tag = np.zeros(fmap.size_local + fmap.num_ghosts, dtype=np.bool_)
     tag[facets] = True  # this rank's tagged facets; every rank that has a facet learns if any rank tags it
     beside = cells_beside(mesh, occupied)
-    tagged_anywhere = _tagged_anywhere(mesh, tag)
+    tagged_anywhere = facet_sums(mesh, tag) > 0
     owned = slice(0, fmap.size_local)
     inner = comm.allreduce(int(np.count_nonzero(tagged_anywhere[owned] & (beside[owned] > 1))))
     if inner:
@@ -144,27 +139,14 @@ def surface_area_vectors(particles, facet_tags: dolfinx.mesh.MeshTags, value: in
     return A
 
 
-def _tagged_anywhere(mesh: dolfinx.mesh.Mesh, tag: npt.NDArray[np.bool_]) -> npt.NDArray[np.bool_]:
-    """The local facets (owned and ghost) that some rank's ``tag`` (one flag per local facet)
-    marks. Collective."""
-    fdim = mesh.topology.dim - 1
-    v = dolfinx.la.vector(mesh.topology.index_map(fdim), 1, dtype=np.float64)
-    v.array[:] = tag
-    v.scatter_reverse(dolfinx.la.InsertMode.add)
-    v.scatter_forward()
-    return v.array > 0
-
-
 def _share(mesh, particles, cell: int, facets: npt.NDArray[np.int32], rows: npt.NDArray, A: npt.NDArray) -> None:
     """Add each facet's area vector (out of ``cell``) to the particles ``rows`` of ``cell`` in
     the row nearest to it, in proportion to their volumes."""
-    a = facet_area_vectors(mesh, facets, np.full(len(facets), cell, dtype=np.int32))
-    nodes = dolfinx.mesh.entities_to_geometry(mesh, mesh.topology.dim - 1, facets)
-    origin = mesh.geometry.x[nodes[:, 0], : mesh.geometry.dim]
+    origin, a = facet_planes(mesh, facets, np.full(len(facets), cell, dtype=np.int32))
     x, v = particles.x[rows], particles.volume[rows]
     for o, af in zip(origin, a):
         depth = np.abs((x - o) @ af) / np.linalg.norm(af)
-        near = depth <= ROW * depth.min() + 1e-12 * depth.max()
+        near = nearest_row(depth, 1e-12 * depth.max())
         A[rows[near]] += af * (v[near] / v[near].sum())[:, None]
 
 
@@ -201,7 +183,8 @@ def surface_load(particles, facet_tags: dolfinx.mesh.MeshTags, value: int, *,
     if (pressure is None) == (traction is None):
         raise ValueError("a surface load takes a pressure or a traction (one of them)")
     gdim = particles.mesh.geometry.dim
-    if pressure is not None and not callable(pressure) and not np.isfinite(np.asarray(pressure, dtype=np.float64)).all():
+    if pressure is not None and not callable(pressure) \
+            and not np.isfinite(np.asarray(pressure, dtype=np.float64)).all():
         raise ValueError(f"pressure={pressure!r} must be a finite number (or a function of the time)")
     if traction is not None and not callable(traction):
         tr = np.asarray(traction, dtype=np.float64)

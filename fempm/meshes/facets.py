@@ -12,7 +12,7 @@ import dolfinx.mesh
 import numpy as np
 import numpy.typing as npt
 
-__all__ = ["cells_beside", "facet_area_vectors"]
+__all__ = ["cells_beside", "facet_area_vectors", "facet_planes", "facet_sums", "nearest_row"]
 
 
 def facet_area_vectors(mesh: dolfinx.mesh.Mesh, facets: npt.NDArray[np.int32],
@@ -44,15 +44,37 @@ def facet_area_vectors(mesh: dolfinx.mesh.Mesh, facets: npt.NDArray[np.int32],
     return a
 
 
+def facet_planes(mesh: dolfinx.mesh.Mesh, facets: npt.NDArray[np.int32],
+                 cells: npt.NDArray[np.int32] | None = None) -> tuple[npt.NDArray, npt.NDArray]:
+    """(a point (the first vertex), the area vector) of each local facet, the area vectors as
+    :func:`facet_area_vectors`."""
+    nodes = dolfinx.mesh.entities_to_geometry(mesh, mesh.topology.dim - 1, np.asarray(facets, dtype=np.int32))
+    return mesh.geometry.x[nodes[:, 0], : mesh.geometry.dim], facet_area_vectors(mesh, facets, cells)
+
+
+def nearest_row(depth: npt.NDArray, slack: float) -> npt.NDArray[np.bool_]:
+    """Which of some particles at distances ``depth`` from a facet's plane lie in the row
+    nearest to it: within 1.5 times the smallest distance, plus ``slack`` (round-off)."""
+    return depth <= 1.5 * depth.min() + slack
+
+
+def facet_sums(mesh: dolfinx.mesh.Mesh, local: npt.NDArray) -> npt.NDArray:
+    """Per local facet (owned and ghost), the sum over all ranks of each rank's ``local`` values
+    of that facet. Collective."""
+    sums = dolfinx.la.vector(mesh.topology.index_map(mesh.topology.dim - 1), 1, dtype=np.float64)
+    sums.array[:] = local
+    sums.scatter_reverse(dolfinx.la.InsertMode.add)
+    sums.scatter_forward()
+    return sums.array.copy()
+
+
 def cells_beside(mesh: dolfinx.mesh.Mesh, flags: npt.NDArray[np.bool_]) -> npt.NDArray:
     """For each local facet (owned and ghost), the number of cells beside it, over all ranks,
     whose ``flags`` (one per owned cell) hold. Needs the cell-to-facet connectivity. Collective."""
     tdim = mesh.topology.dim
     fdim = tdim - 1
-    cmap = mesh.topology.index_map(tdim)
+    cmap, fmap = mesh.topology.index_map(tdim), mesh.topology.index_map(fdim)
     links = np.asarray(mesh.topology.connectivity(tdim, fdim).array).reshape(cmap.size_local + cmap.num_ghosts, -1)
-    counts = dolfinx.la.vector(mesh.topology.index_map(fdim), 1, dtype=np.float64)
-    np.add.at(counts.array, links[: len(flags)][flags].ravel(), 1.0)
-    counts.scatter_reverse(dolfinx.la.InsertMode.add)
-    counts.scatter_forward()
-    return counts.array.copy()
+    counts = np.zeros(fmap.size_local + fmap.num_ghosts)
+    np.add.at(counts, links[: len(flags)][flags].ravel(), 1.0)
+    return facet_sums(mesh, counts)

@@ -18,7 +18,7 @@ import numpy.typing as npt
 from mpi4py import MPI
 
 from fempm.boundary.surface import SurfaceLoad
-from fempm.meshes.facets import cells_beside, facet_area_vectors
+from fempm.meshes.facets import cells_beside, facet_planes, nearest_row
 
 __all__ = [
     "Loads", "body_force_at", "boundary_shares", "external_forces", "surface_areas", "surface_shares",
@@ -107,11 +107,10 @@ def body_force_at(b, particles, t: float) -> npt.NDArray:
 
 def _facet_geometry(mesh, facets: npt.NDArray[np.int32]) -> tuple[npt.NDArray, npt.NDArray, npt.NDArray]:
     """(a point, the unit normal, the measure) of each facet
-    (:func:`fempm.meshes.facets.facet_area_vectors`)."""
-    nodes = dolfinx.mesh.entities_to_geometry(mesh, mesh.topology.dim - 1, facets)
-    a = facet_area_vectors(mesh, facets)
+    (:func:`fempm.meshes.facets.facet_planes`)."""
+    origin, a = facet_planes(mesh, facets)
     measure = np.linalg.norm(a, axis=1)
-    return mesh.geometry.x[nodes[:, 0], : mesh.geometry.dim], a / measure[:, None], measure
+    return origin, a / measure[:, None], measure
 
 
 def boundary_shares(particles, loaded: npt.NDArray[np.bool_]) -> npt.NDArray:
@@ -189,7 +188,7 @@ def _loaded_facets(particles, loaded: npt.NDArray[np.bool_], links: npt.NDArray,
         lit_p = loaded[inside]
         next_to, thin = [], []
         for k in np.flatnonzero(surface[facets]):
-            row = depth[k] <= 1.5 * depth[k].min() + 1e-12 * measure[k]
+            row = nearest_row(depth[k], 1e-12 * measure[k])
             if not 2 * np.count_nonzero(row & lit_p) > np.count_nonzero(row):
                 continue
             next_to.append(k)
@@ -246,7 +245,8 @@ def surface_shares(particles, loaded: npt.NDArray[np.bool_]) -> npt.NDArray:
 
 def external_forces(loads, particles, t: float) -> npt.NDArray:
     r"""The external force on each particle (n, d) at time ``t``:
-    :math:`f^{ext}_p = M_p b_p + \bar t_p A_p` plus the surface loads (the terms ``loads`` declares; zeros without any)."""
+    :math:`f^{ext}_p = M_p b_p + \bar t_p A_p` plus the surface loads (the terms ``loads`` declares;
+    zeros without any)."""
     p = particles
     f = np.zeros((len(p), p.gdim))
     if loads.body_force is not None:

@@ -13,7 +13,7 @@ from mpi4py import MPI
 
 import fempm  # noqa: F401  (before dolfinx)
 from fempm.boundary import Dashpot, absorbing
-from fempm.boundary.absorbing import boundary_shares
+from fempm.boundary.absorbing import nodal_boundary_shares
 from fempm.meshes import tagged_polygon
 from fempm.scene import run
 from fempm.scenes.wave import wave
@@ -41,7 +41,7 @@ def test_the_nodal_shares_sum_to_the_boundary(family, degree, quadrilateral):
         V = dolfinx.fem.functionspace(data.mesh, el)
     else:
         V = dolfinx.fem.functionspace(data.mesh, (family, degree, (2,)))
-    share = boundary_shares(V, data.facet_tags, 1)
+    share = nodal_boundary_shares(V, data.facet_tags, 1)
     assert owned_sum(V, share) == pytest.approx(np.hypot(2.0, 1.0), rel=1e-12)
     wall = absorbing(V, data.facet_tags, 1, rho=2.0, cp=3.0, cs=1.5)
     np.testing.assert_allclose(wall.normal, np.tile([-1.0, -2.0], (len(wall.dofs), 1)) / np.sqrt(5.0), atol=1e-12)
