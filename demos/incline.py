@@ -29,17 +29,16 @@ Run: `python demos/incline.py [--cells 8 16] [--cases NAME ...] [--out docs/incl
 from __future__ import annotations
 
 import argparse
-import csv
 import time
 from pathlib import Path
 
-import fempm  # noqa: F401
 import numpy as np
 from mpi4py import MPI
 
+import fempm  # noqa: F401
 from fempm.scene import run
 from fempm.scenes import incline
-from fempm.studies.harness import Provenance
+from fempm.studies.harness import Provenance, write_table
 
 G_SIN = 9.81 * np.sin(np.radians(30.0))
 
@@ -48,13 +47,19 @@ G_SIN = 9.81 * np.sin(np.radians(30.0))
 #: the coefficients run for each plane and body
 FRICTIONS = {("grid", "block"): (0.0, 0.2, 0.5, 0.6, 1.0), ("grid", "disk"): (0.0, 0.1, 0.2, 0.22, 0.25, 0.3, 1.0),
              ("rigid", "block"): (0.0, 0.2, 0.5, 0.6, 1.0), ("rigid", "disk"): (0.1, 0.2, 0.3),
-             ("tagged", "block"): (0.0, 0.2, 0.5, 0.6, 0.7, 1.0)}
-#: how a case's name says its plane
-PLANE_NAMES = {"grid": "", "rigid": "rigid plane, ", "tagged": "tagged wall, "}
-CASES = {f"{PLANE_NAMES[plane]}{body} mu={mu:g}":
-         dict(body=body, friction=mu, **({} if plane == "grid" else {"plane": plane}))
+             ("tagged", "block"): (0.0, 0.2, 0.5, 0.6, 0.7, 1.0), ("collider", "disk"): (0.1, 0.2, 0.22, 0.3, 1.0),
+             ("collider on axes", "disk"): (0.1, 0.2, 0.22, 0.3, 1.0)}
+#: how a case's name says its plane, and the scene's options for it
+PLANES = {"grid": ("", {}), "rigid": ("rigid plane, ", {"plane": "rigid"}),
+          "tagged": ("tagged wall, ", {"plane": "tagged"}), "collider": ("plane collider, ", {"plane": "collider"}),
+          "collider on axes": ("plane collider on axis-aligned grid, ", {"plane": "collider", "turned": False})}
+CASES = {f"{PLANES[plane][0]}{body} mu={mu:g}": dict(body=body, friction=mu, **PLANES[plane][1])
          for (plane, body), mus in FRICTIONS.items() for mu in mus}
-COLUMNS = ["case", "cells", "ppc", "acceleration", "analytic", "error_percent", "energy_ratio", "steps", "wall_s"]
+#: the table's columns: (row key, heading, format)
+TABLE = [("case", "case", ""), ("cells", "cells", ""), ("ppc", "ppc", ""),
+         ("acceleration", "acceleration (m/s^2)", ".4f"),
+         ("analytic", "analytic", ".4f"), ("error_percent", "error (%)", "+.2f"),
+         ("energy_ratio", "energy / work", ".3f"), ("steps", "steps", ""), ("wall_s", "wall (s)", ".0f")]
 
 
 def error_percent(acceleration: float, analytic: float) -> float:
@@ -69,21 +74,6 @@ def run_case(name: str, cells: int, t_end: float | None = None) -> dict:
     return {"case": name, "cells": cells, "ppc": scene.params["ppc"], "acceleration": s["acceleration"],
             "analytic": s["analytic"], "error_percent": error_percent(s["acceleration"], s["analytic"]),
             "energy_ratio": s["health"]["energy_ratio"], "steps": s["steps"], "wall_s": time.perf_counter() - t0}
-
-
-def write(rows: list[dict], out: Path, provenance: Provenance) -> None:
-    out.mkdir(parents=True, exist_ok=True)
-    with open(out / "incline.csv", "w", newline="") as f:
-        w = csv.DictWriter(f, COLUMNS)
-        w.writeheader()
-        w.writerows(rows)
-    provenance.write(out)
-    lines = [provenance.line(), "",
-             "| case | cells | ppc | acceleration (m/s^2) | analytic | error (%) | energy / work | steps | wall (s) |",
-             "|---|---|---|---|---|---|---|---|---|"]
-    lines += [f"| {r['case']} | {r['cells']} | {r['ppc']} | {r['acceleration']:.4f} | {r['analytic']:.4f} | "
-              f"{r['error_percent']:+.2f} | {r['energy_ratio']:.3f} | {r['steps']} | {r['wall_s']:.0f} |" for r in rows]
-    (out / "incline.md").write_text("\n".join(lines) + "\n")
 
 
 def main(argv: list[str] | None = None) -> list[dict]:
@@ -105,7 +95,7 @@ def main(argv: list[str] | None = None) -> list[dict]:
                 r = rows[-1]
                 print(f"{name:28s} {cells:3d} cells: {r['acceleration']:.4f} against {r['analytic']:.4f} "
                       f"({r['error_percent']:+.2f} %), {r['wall_s']:.0f} s", flush=True)
-                write(rows, a.out, provenance)
+                write_table(a.out, "incline", rows, provenance, TABLE)
     return rows
 
 

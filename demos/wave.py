@@ -18,7 +18,6 @@ Run: `python demos/wave.py [--cells 32 64 128 256] [--out docs/wave] [--figure]`
 from __future__ import annotations
 
 import argparse
-import csv
 import time
 from pathlib import Path
 
@@ -28,9 +27,7 @@ from mpi4py import MPI
 import fempm  # noqa: F401
 from fempm.scene import run
 from fempm.scenes.wave import BOUNDARIES, wave
-from fempm.studies.harness import Provenance
-
-COLUMNS = ["boundary", "cells", "reflected_energy_ratio", "energy_ratio", "steps", "wall_s"]
+from fempm.studies.harness import Provenance, write_table
 
 
 def run_case(boundary: str, cells: int) -> tuple[dict, np.ndarray]:
@@ -45,19 +42,10 @@ def run_case(boundary: str, cells: int) -> tuple[dict, np.ndarray]:
             profile)
 
 
-def write(rows: list[dict], out: Path, provenance: Provenance) -> None:
-    out.mkdir(parents=True, exist_ok=True)
-    with open(out / "wave.csv", "w", newline="") as f:
-        w = csv.DictWriter(f, COLUMNS)
-        w.writeheader()
-        w.writerows(rows)
-    provenance.write(out)
-    lines = [provenance.line(), "",
-             "| end | cells | reflected energy / pulse energy | energy / (initial + work) | steps | wall (s) |",
-             "|---|---|---|---|---|---|"]
-    lines += [f"| {r['boundary']} | {r['cells']} | {r['reflected_energy_ratio']:.4f} | {r['energy_ratio']:.4f} | "
-              f"{r['steps']} | {r['wall_s']:.2f} |" for r in rows]
-    (out / "wave.md").write_text("\n".join(lines) + "\n")
+#: the table's columns: (row key, heading, format)
+TABLE = [("boundary", "end", ""), ("cells", "cells", ""),
+         ("reflected_energy_ratio", "reflected energy / pulse energy", ".4f"),
+         ("energy_ratio", "energy / (initial + work)", ".4f"), ("steps", "steps", ""), ("wall_s", "wall (s)", ".2f")]
 
 
 def figure(profiles: dict, out: Path) -> None:
@@ -92,7 +80,7 @@ def main(argv: list[str] | None = None) -> list[dict]:
             rows.append(row)
             if MPI.COMM_WORLD.rank == 0:
                 print(f"{boundary:9s} {cells:4d} cells: reflected {row['reflected_energy_ratio']:.4f}", flush=True)
-                write(rows, a.out, provenance)
+                write_table(a.out, "wave", rows, provenance, TABLE)
     if a.figure and MPI.COMM_WORLD.rank == 0:
         figure(profiles, a.out)
     return rows

@@ -55,11 +55,13 @@ class Dashpot:
     #: the nodal masses come with the step's nodal centres of mass
     needs_positions: ClassVar[bool] = True
     zero_components: ClassVar[bool] = False
+    #: it acts on the velocity update (:meth:`on_update`)
+    acts_on_update: ClassVar[bool] = True
 
     def apply(self, v: npt.NDArray, centroids: NodalCentres | None = None) -> None:
-        """The mapped velocity is free: the dashpots act on the update (:meth:`damp`)."""
+        """The mapped velocity is free: the dashpots act on the update (:meth:`on_update`)."""
 
-    def damp(self, v: npt.NDArray, centroids: NodalCentres, dt: float) -> None:
+    def on_update(self, v: npt.NDArray, centroids: NodalCentres, dt: float) -> None:
         """The dashpots on the updated velocity ``v`` (dofs, d) of a step ``dt``, in place."""
         m = centroids.mass[self.dofs]
         with_mass = m > 0.0

@@ -10,7 +10,6 @@ import dolfinx.fem
 import numpy as np
 import numpy.typing as npt
 
-from fempm.boundary.absorbing import Dashpot
 from fempm.boundary.walls import Fixed, Friction, Slip
 from fempm.transfer.centres import NodalCentres
 
@@ -33,8 +32,11 @@ class GridConditions:
             consistently solved velocities oscillate from node to node along a wall, so that
             some fall below mu times their normal velocity change and the friction there is
             cut short (docs/contact.md, "The sliding block").
-        dashpots: the absorbing conditions (:class:`~fempm.boundary.absorbing.Dashpot`).
-        needs_positions: whether a condition checks contact by position or damps by the nodal
+        on_update: the conditions that act on the velocity update of a step only (their
+            ``acts_on_update``; e.g. the absorbing dashpots, :class:`~fempm.boundary.absorbing.Dashpot`,
+            and the colliders, :class:`~fempm.colliders.grid.ColliderContact`), with their
+            ``on_update(v, centroids, dt)``.
+        needs_positions: whether a condition checks contact by position or acts by the nodal
             mass (the step then maps the nodal centres of mass and masses,
             :class:`~fempm.transfer.centres.NodalCentres`).
         zero_components: whether every condition only holds velocity components at 0.
@@ -53,18 +55,18 @@ class GridConditions:
             if isinstance(bc, Friction) and bc.mu > 0.0:
                 mask[bc.dofs] = True
         self.friction_dofs = mask if mask.any() else None
-        self.dashpots = tuple(bc for bc in self.bcs if isinstance(bc, Dashpot))
+        self.on_update = tuple(bc for bc in self.bcs if getattr(bc, "acts_on_update", False))
         self.needs_positions = any(bc.needs_positions for bc in self.bcs)
         self.zero_components = all(bc.zero_components for bc in self.bcs)
 
     def apply(self, v: npt.NDArray, centroids: NodalCentres | None = None, dt: float | None = None) -> None:
         """Every condition on the grid velocity ``v`` (dofs, d), in place; ``centroids``: the
         step's nodal centres of mass (and masses), for the conditions that check contact by
-        position and for dashpots; ``dt``: given when ``v`` is the update of a step of that
-        size, on which the dashpots act first (:mod:`fempm.boundary.absorbing`)."""
+        position and for those that act by the nodal mass; ``dt``: given when ``v`` is the update
+        of a step of that size, on which the conditions of :attr:`on_update` act first (in order)."""
         if dt is not None:
-            for bc in self.dashpots:
-                bc.damp(v, centroids, dt)
+            for bc in self.on_update:
+                bc.on_update(v, centroids, dt)
         for bc in self.bcs:
             bc.apply(v, centroids)
 

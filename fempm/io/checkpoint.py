@@ -164,7 +164,8 @@ def write(out: Path, scene, solver, monitor, writer_state: dict, rebuild: dict |
         "solver": {"extended_steps": solver.extended_steps, "mass_ratio": solver.mass_ratio,
                    "j_range": list(solver.j_range) if solver.j_range is not None else None,
                    "terms": dict(solver.terms), "since_sort": counters.get("since_sort"),
-                   "ratio_age": counters.get("ratio_age"), "removed": solver.removed.asdict()},
+                   "ratio_age": counters.get("ratio_age"), "removed": solver.removed.asdict(),
+                   "colliders": solver.collisions.state()},
         "monitor": _scalar_state(monitor, MONITOR_STATE),
         "writer": writer_state,
     }
@@ -344,6 +345,8 @@ def restore_solver(solver, monitor, data: dict, solver_arrays: dict) -> None:
     solver.terms = Counter(s["terms"])
     if "removed" in s:  # what particles that left the mesh took (outside="remove")
         solver.removal.removed = Removed(**s["removed"])
+    if "colliders" in s:  # the colliders' positions and reactions
+        solver.collisions.restore(s["colliders"])
     solver.grid_velocity = solver_arrays.get("grid_velocity")
     # collective: on another number of ranks every rank passes {} (no solver arrays)
     solver.restore_state({"since_sort": s["since_sort"], "ratio_age": s["ratio_age"]}, solver_arrays)

@@ -100,6 +100,9 @@ class Scene:
             dropped, what it takes accounted: :mod:`fempm.stepping.outside`).
         watch: Called with the solver after every step (collective), for the scene's own
             histories (a continued run calls it from the checkpoint on).
+        colliders: Rigid obstacles given as shapes (:class:`fempm.colliders.Collider`); their
+            forces go to ``energies.csv`` (``collider_force_<k>_x``, ...) and ``summary.json``
+            (``colliders``).
     """
 
     name: str
@@ -121,6 +124,7 @@ class Scene:
     contact: Contact | None = None
     watch: Callable[[ExplicitSolver], None] | None = None
     outside: str = "raise"
+    colliders: Sequence = ()
 
     def __post_init__(self):
         outside_policy(self.outside)
@@ -154,4 +158,4 @@ class Scene:
         V = self.space()
         bcs = list(self.bcs(V)) if self.bcs is not None else []
         return ExplicitSolver(V, self.particles, self.materials, bcs=bcs, loads=self.loads, options=self.options,
-                              contact=self.contact, outside=self.outside)
+                              contact=self.contact, outside=self.outside, colliders=self.colliders)

@@ -302,4 +302,5 @@ class Run:
             "status": self.monitor.outcome,
             "health": self.monitor.summary(),
             **solver.removal.summary(),
+            **solver.collisions.summary(),
         }

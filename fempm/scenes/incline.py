@@ -47,6 +47,8 @@ from mpi4py import MPI
 
 from fempm.boundary.tagged import tagged
 from fempm.boundary.walls import friction as friction_wall
+from fempm.colliders.collider import Collider
+from fempm.colliders.shapes import plane as collider_plane
 from fempm.materials.von_mises import VonMises
 from fempm.meshes.generators import tagged_polygon
 from fempm.particles.seeding import create_particles, per_direction
@@ -64,7 +66,7 @@ BODIES = ("block", "disk")
 #: the PIC/FLIP blend of the block by default: pure FLIP lets the frictional sliding of the
 #: elastic block go unstable (see the module)
 BLOCK_FLIP = 0.7
-PLANES = ("grid", "rigid", "tagged")
+PLANES = ("grid", "rigid", "tagged", "collider")
 #: the facet tag of the slope with ``plane="tagged"``
 FLOOR_TAG = 1
 #: the contact's force cut-off with a rigid plane: with the default 1 % the rolling disk's
@@ -121,7 +123,7 @@ def incline(
     body: str = "block", angle: float = 30.0, friction: float = 0.2, cells: int = 8, ppc: int | None = None,
     size: float = 0.1, E: float = 1.0e6, nu: float = 0.3, rho: float = 1000.0, g: float = 9.81,
     t_end: float | None = None, scheme: str = "MUSL", flip: float | None = None, cfl: float = 0.4, frames: int = 10,
-    plane: str = "grid", gap: float | None = None, comm: MPI.Comm = MPI.COMM_WORLD,
+    plane: str = "grid", gap: float | None = None, turned: bool = True, comm: MPI.Comm = MPI.COMM_WORLD,
 ) -> Scene:
     """The incline of the module: ``cells`` cells across ``size``, ``ppc`` particles per
     cell, a square lattice (default 4 = 2 x 2 for the block, 16 = 4 x 4 for the disk, whose
@@ -152,10 +154,17 @@ def incline(
     ny = int(np.ceil(1.5 * (2.0 * size if body == "disk" else size) / h)) + 2
     below = 3 if plane == "rigid" else 0  # cells under the plane: the rigid layer and one empty row
     frame = np.array([[np.cos(th), np.sin(th)], [-np.sin(th), np.cos(th)]])  # columns: down the slope, normal
+    corners = np.array([[0.0, 0.0], [nx * h, 0.0], [nx * h, ny * h], [0.0, ny * h]]) @ frame.T
     if plane == "tagged":  # the slope's region turned by theta, its floor tagged
-        corners = np.array([[0.0, 0.0], [nx * h, 0.0], [nx * h, ny * h], [0.0, ny * h]]) @ frame.T
         data = tagged_polygon(comm, corners, h, [FLOOR_TAG, 0, 0, 0])
         mesh = data.mesh
+    elif plane == "collider" and not turned:  # an axis-aligned grid over the turned region and a cell under it
+        lo, hi = corners.min(axis=0) - h, corners.max(axis=0)
+        n = np.ceil((hi - lo) / h).astype(int)
+        mesh = dm.create_rectangle(comm, [lo, lo + n * h], n, dm.CellType.quadrilateral)
+    elif plane == "collider":  # the slope's grid, turned by theta
+        mesh = dm.create_rectangle(comm, [[0.0, 0.0], [nx * h, ny * h]], [nx, ny], dm.CellType.quadrilateral)
+        mesh.geometry.x[:, :2] = mesh.geometry.x[:, :2] @ frame.T
     else:
         frame = np.eye(2)
         mesh = dm.create_rectangle(comm, [[0.0, -below * h], [nx * h, ny * h]], [nx, ny + below],
@@ -168,19 +177,23 @@ def incline(
                 "analytic": analytic_acceleration(body, angle, friction, g)}
 
     params = {"body": body, "angle": angle, "friction": friction, "cells": cells, "ppc": ppc, "size": size, "E": E,
-              "nu": nu, "rho": rho, "g": g, "scheme": scheme, "flip": flip, "cfl": cfl, "plane": plane, "gap": gap}
+              "nu": nu, "rho": rho, "g": g, "scheme": scheme, "flip": flip, "cfl": cfl, "plane": plane, "gap": gap,
+              **({"turned": turned} if plane == "collider" else {})}
 
     def walls(V):
-        if plane == "rigid":
+        if plane in ("rigid", "collider"):
             return []
         if plane == "tagged":
             return [tagged(V, data.facet_tags, FLOOR_TAG, "friction", friction)]
         return [friction_wall(V, lambda x: np.isclose(x[1], 0.0), (0.0, -1.0), friction,
                               gap=gap * h if gap > 0 else None)]
 
+    colliders = [Collider(collider_plane((0.0, 0.0), frame[:, 1]), friction=friction,
+                          gap=gap * h if gap > 0 else None)] if plane == "collider" else []
     return Scene(
         name="incline", mesh=mesh, particles=p, materials=[VonMises(E, nu)], t_end=t_end, bcs=walls,
-        loads=Loads(body_force=(0.0, -g) if plane == "tagged" else (g * np.sin(th), -g * np.cos(th))),
+        loads=Loads(body_force=(0.0, -g) if plane in ("tagged", "collider") else (g * np.sin(th), -g * np.cos(th))),
+        colliders=colliders,
         options=StepOptions(scheme=scheme, flip=flip, cfl=cfl), frames=frames, params=params, results=results,
         watch=track, contact=Contact(friction=friction, field="plane", rigid=(1,), mass_cutoff=RIGID_MASS_CUTOFF,
                                      gap=(gap + _depth(ppc)) * h if gap > 0 else None) if plane == "rigid" else None,
@@ -218,7 +231,8 @@ def _particles(mesh, body: str, plane: str, ppc: int, place: tuple[float, float,
             return (s > x0) & (s < x0 + length) & (n > 0.0) & (n < size)
     else:
         def inside(x):
-            return np.hypot(x[0] - x0 - size, x[1] - size) < size
+            s, n = frame.T @ x[:2]
+            return np.hypot(s - x0 - size, n - size) < size
     p = create_particles(mesh, ppc, density=rho, where=inside if plane != "rigid" else
                          lambda x: inside(x) | ((x[1] < 0.0) & (x[1] > -2.0 * h)))
     normal = p.x[:, :2] @ frame[:, 1]

@@ -11,7 +11,8 @@ the cause when
       E(t) > E(0) + W(t) + \epsilon \big(E(0) + |W|(t)\big), \qquad
       W(t) = \int_0^t \sum_p \big(M_p b_p + \bar t_p A_p\big) \cdot v_p \, dt
 
-  (the work integrated with the trapezoidal rule over the steps); the grid, its boundary
+  (the work integrated with the trapezoidal rule over the steps; the work of moving colliders,
+  :class:`fempm.colliders.grid.ColliderContact`, added to it); the grid, its boundary
   conditions and the transfers of a stable explicit scheme do no net work, so growth is the
   signature of an instability (energy blow-up with a near-incompressible law, a step above the
   critical one, ringing instabilities); quasi-static implicit steps are not checked (their
@@ -24,7 +25,7 @@ the cause when
 The :meth:`HealthMonitor.summary` records the outcome and the energy ratio
 :math:`E(t)/(E(0) + W(t))`, the momentum drift
 :math:`|P(t) - P(0) - I(t)| / \max_s \sum_p M_p |v_p|(s)` (with :math:`I` the impulse of the
-external loads; supports and walls change momentum legitimately, so this is a figure, not a
+external loads less that the colliders took; supports and walls change momentum legitimately, so this is a figure, not a
 check) and the range of :math:`J`.
 """
 
@@ -148,12 +149,13 @@ class HealthMonitor:
         gone = s.removed  # what the particles that left the mesh took: it has left, not vanished
         if gone.count:
             mom = mom + np.asarray(gone.momentum)
+        mom = mom + s.collisions.total_impulse  # what the colliders took
         self.work += 0.5 * dt * (self._power + end[0])
         self.impulse = self.impulse + 0.5 * dt * (self._force + end[1])
         self._power, self._force = power, force
         e = energies["total"] + gone.kinetic + gone.strain
         self.e_max = max(self.e_max, e)
-        budget = self.e0 + self.work
+        budget = self.e0 + self.work + s.collisions.total_work
         self.ratio = e / budget if budget > 0 else (1.0 if e <= 0 else np.inf)
         if momentum_scale is None:
             momentum_scale = diagnostics.momentum_scale(s.particles)

@@ -20,6 +20,7 @@ import numpy.typing as npt
 from mpi4py import MPI
 
 from fempm.boundary.conditions import GridConditions
+from fempm.colliders.grid import ColliderContact
 from fempm.implicit.step import ImplicitStep
 from fempm.materials.base import check_materials, identity
 from fempm.meshes.cell_sizes import cell_sizes
@@ -92,6 +93,9 @@ class ExplicitSolver:
         outside: What a particle that leaves the mesh does (:mod:`fempm.stepping.outside`):
             ``"raise"`` an error naming it, ``"remove"`` it is dropped and what it takes
             accounted (:attr:`removed`).
+        colliders: Rigid obstacles given as shapes in prescribed motion
+            (:class:`fempm.colliders.Collider`), acting on the velocity update; their positions
+            and reactions are :attr:`collisions` (:class:`fempm.colliders.grid.ColliderContact`).
 
     Raises:
         ValueError: Options, fields or conditions that do not fit the space or the particles.
@@ -111,6 +115,7 @@ class ExplicitSolver:
     compiled: bool | None = None
     contact: Contact | None = None
     outside: str = "raise"
+    colliders: Sequence = ()
 
     def __post_init__(self):
         p = self.particles
@@ -137,7 +142,8 @@ class ExplicitSolver:
                                      f"{np.shape(f[h.name])}; expected {expected}")
         checks.check_fields(p, self.materials)
         self.h_cell = cell_sizes(p.mesh)
-        self.conditions = GridConditions(self.V, self.bcs)
+        self.collisions = ColliderContact(self.V, self.colliders, self.h_cell, self.t)
+        self.conditions = GridConditions(self.V, [*self.bcs, *([self.collisions] if self.colliders else [])])
         self.record = StepRecord()
         self.removal = Outside(self.outside)
         self.grid_velocity: npt.NDArray | None = None  # last step's, also the CG warm start
@@ -265,8 +271,10 @@ class ExplicitSolver:
         grid.totals = totals
         stable = grid.open(dt)
         dt = self._time_step(stable, dt, dt_max)
+        self.collisions.begin(self.t)
         v_new = self.options.stages.update(grid, dt)
         grid.close()
+        self.collisions.end(dt)
         self.t += dt
         self.step_count += 1
         grid.relocate()
@@ -327,12 +335,14 @@ class ExplicitSolver:
 
     def energies(self) -> dict[str, float]:
         """Kinetic, strain and total energy and linear momentum (:func:`fempm.stepping.diagnostics.energies`),
-        with ``outside="remove"`` also what the removed particles took (:meth:`Removed.columns`).
+        with ``outside="remove"`` also what the removed particles took (:meth:`Removed.columns`),
+        with colliders their forces, impulses and displacements (:meth:`ColliderContact.columns`).
 
         Note:
             Collective.
         """
-        return {**diagnostics.energies(self.particles, self.materials, self.t), **self.removal.columns()}
+        return {**diagnostics.energies(self.particles, self.materials, self.t), **self.removal.columns(),
+                **self.collisions.columns()}
 
     def step_energies(self) -> tuple[dict[str, float], float]:
         r"""(:meth:`energies`, the momentum scale :math:`\sum_p M_p |v_p|`) of the state the last
@@ -349,4 +359,5 @@ class ExplicitSolver:
         if sums is None:  # the same grid on every rank (and the step's sums hold particles removed since)
             return self.energies(), diagnostics.momentum_scale(p)
         p.comm.Allreduce(MPI.IN_PLACE, sums, op=MPI.SUM)
-        return {**diagnostics.energy_row(self.t, sums[0], sums[1], sums[3:]), **self.removal.columns()}, float(sums[2])
+        row = diagnostics.energy_row(self.t, sums[0], sums[1], sums[3:])
+        return {**row, **self.removal.columns(), **self.collisions.columns()}, float(sums[2])

@@ -21,7 +21,7 @@ from pathlib import Path
 
 from mpi4py import MPI
 
-__all__ = ["Provenance", "chosen", "prepare", "read_rows", "sweep"]
+__all__ = ["Provenance", "chosen", "prepare", "read_rows", "sweep", "write_table"]
 
 REPOSITORY = Path(__file__).resolve().parents[2]
 
@@ -88,6 +88,24 @@ class Provenance:
         path = Path(out) / "provenance.json"
         path.write_text(json.dumps(asdict(self), indent=1) + "\n")
         return path
+
+
+def write_table(out: Path, name: str, rows: Sequence[dict], provenance: Provenance,
+                columns: Sequence[tuple[str, str, str]]) -> None:
+    """``name.csv`` (every key of the rows), ``provenance.json`` and ``name.md`` (the provenance
+    line and a Markdown table) in the folder ``out``. ``columns``: the table's columns, each
+    (row key, heading, format spec), e.g. ``("error_percent", "error (%)", "+.2f")``."""
+    out = Path(out)
+    out.mkdir(parents=True, exist_ok=True)
+    with open(out / f"{name}.csv", "w", newline="") as f:
+        w = csv.DictWriter(f, list(rows[0]) if rows else [c for c, _, _ in columns])
+        w.writeheader()
+        w.writerows(rows)
+    provenance.write(out)
+    lines = [provenance.line(), "", "| " + " | ".join(h for _, h, _ in columns) + " |",
+             "|" + "---|" * len(columns)]
+    lines += ["| " + " | ".join(format(r[k], spec) for k, _, spec in columns) + " |" for r in rows]
+    (out / f"{name}.md").write_text("\n".join(lines) + "\n")
 
 
 def chosen(names: Iterable[str] | None, known: Sequence[str], kind: str) -> list[str]:

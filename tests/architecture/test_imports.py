@@ -19,7 +19,7 @@ LAYERS = (
     ("fempm.materials",),
     ("fempm.particles",),
     ("fempm.transfer",),
-    ("fempm.boundary",),
+    ("fempm.boundary", "fempm.colliders"),
     ("fempm.stepping", "fempm.implicit"),  # the implicit step is a stepping of its own
     ("fempm.verification",),
     ("fempm.io",),

@@ -69,7 +69,7 @@ def test_the_dashpot_is_backward_euler():
     pot.apply(v)  # the mapped velocity is left free
     np.testing.assert_array_equal(v, before)
     dt = 0.1
-    pot.damp(v, NodalCentres(np.zeros((3, 2)), mass), dt)
+    pot.on_update(v, NodalCentres(np.zeros((3, 2)), mass), dt)
     for k, (i, m) in enumerate(((0, 0.5), (2, 2.0))):
         vn = before[i] @ n[k]
         vt = before[i] - vn * n[k]

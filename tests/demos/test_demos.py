@@ -96,3 +96,22 @@ def test_wave_demo_absorbs_and_reflects(tmp_path):
     if MPI.COMM_WORLD.rank == 0:
         assert f"| absorbing | 64 | {ratio['absorbing']:.4f} |" in (tmp_path / "wave.md").read_text()
         assert (tmp_path / "wave.png").stat().st_size > 10_000
+
+
+def test_footing_demo_writes_its_table_and_curve(tmp_path):
+    demo = load("footing")
+    rows = demo.main(["--cells", "4", "--depth", "0.05", "--out", str(tmp_path), "--figure"])
+    assert [r["cells"] for r in rows] == [4]
+    assert 0.8 < rows[0]["bearing_ratio"] < 2.0  # 4 cells across the footing: coarse, locking
+    if MPI.COMM_WORLD.rank == 0:
+        assert f"| 4 | standard | {rows[0]['bearing_pressure']:.0f} |" in (tmp_path / "footing.md").read_text()
+        assert (tmp_path / "footing.png").stat().st_size > 10_000
+
+
+def test_silo_demo_writes_its_table_and_figure(tmp_path):
+    demo = load("silo")
+    rows = demo.main(["--cells", "3", "--t-end", "0.5", "--out", str(tmp_path), "--figure"])
+    assert abs(rows[0]["balance"]) < 1e-13
+    if MPI.COMM_WORLD.rank == 0:
+        assert "| 3 |" in (tmp_path / "silo.md").read_text()
+        assert (tmp_path / "silo.png").stat().st_size > 10_000

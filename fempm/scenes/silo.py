@@ -1,0 +1,113 @@
+r"""Granular flow out of a hopper onto a floor (plane strain, Drucker-Prager).
+
+A wedge hopper with walls at ``half_angle`` :math:`\alpha` from the vertical, an outlet of width
+``outlet`` :math:`W_o` at the height :math:`y_o` = :data:`OUTLET_HEIGHT`, is filled to ``fill``
+above the outlet with a cohesionless Drucker-Prager material at rest; the outlet is open at
+:math:`t = 0`. The material falls onto a floor of width :data:`FLOOR` under the outlet, heaps on
+it and spills over its edges out of the mesh, where it is removed (``outside="remove"``,
+:mod:`fempm.stepping.outside`). The mesh is a gmsh triangulation of the hopper and the chamber
+below it (:func:`fempm.meshes.generators.tagged_polygon`): the hopper's walls are the tagged
+boundary :data:`WALL_TAG` held by Coulomb friction ``wall_friction`` against their facet normals
+(:func:`fempm.boundary.tagged`), the floor :data:`FLOOR_TAG` with ``floor_friction``; the
+chamber's sides and the bottom beside the floor are open.
+
+Results: ``discharge_rate``, the mass per second (per unit thickness) leaving the hopper over the
+steady part of the flow (the slope of a least-squares line through the hopper's mass while it
+holds between 85 % and 35 % of its fill; NaN if the run ends before), ``hopper_mass`` (the mass
+still above the outlet at the end) and the run's ``removed`` entry (the mass that left the mesh).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from mpi4py import MPI
+
+from fempm.boundary.tagged import tagged
+from fempm.materials.drucker_prager import DruckerPrager
+from fempm.meshes.generators import tagged_polygon
+from fempm.particles.seeding import create_particles
+from fempm.scene.definition import Scene, check_counts, check_finite
+from fempm.stepping.loads import Loads
+from fempm.stepping.options import StepOptions
+
+__all__ = ["FLOOR", "FLOOR_TAG", "OUTLET_HEIGHT", "WALL_TAG", "discharge_rate", "silo"]
+
+#: the facet tags of the hopper's walls and of the floor
+WALL_TAG, FLOOR_TAG = 2, 1
+#: the outlet's height above the floor, the floor's and the chamber's widths, the hopper's top width (m)
+OUTLET_HEIGHT, FLOOR, CHAMBER, TOP = 0.2, 0.4, 1.0, 0.5
+#: the window of the hopper's mass (fractions of its fill) over which the discharge is steady
+WINDOW = (0.85, 0.35)
+
+
+def discharge_rate(t: np.ndarray, mass: np.ndarray) -> float:
+    """The steady discharge: minus the slope of the hopper's ``mass`` over time ``t`` while it
+    lies within :data:`WINDOW` of the first value (NaN with fewer than 3 such samples)."""
+    steady = (mass <= WINDOW[0] * mass[0]) & (mass >= WINDOW[1] * mass[0])
+    if np.count_nonzero(steady) < 3:
+        return float("nan")
+    return float(-np.polyfit(t[steady], mass[steady], 1)[0])
+
+
+def _outline(outlet: float, half_angle: float) -> tuple[np.ndarray, list[int], float]:
+    """The polygon of the hopper and the chamber, its edge tags, and the hopper's top height."""
+    top = OUTLET_HEIGHT + 0.5 * (TOP - outlet) / np.tan(np.radians(half_angle))
+    yo, wo, wc, wf, wt = OUTLET_HEIGHT, 0.5 * outlet, 0.5 * CHAMBER, 0.5 * FLOOR, 0.5 * TOP
+    vertices = np.array([[-wc, 0.0], [-wf, 0.0], [wf, 0.0], [wc, 0.0], [wc, yo], [wo, yo], [wt, top], [-wt, top],
+                         [-wo, yo], [-wc, yo]])
+    tags = [0, FLOOR_TAG, 0, 0, 0, WALL_TAG, 0, WALL_TAG, 0, 0]
+    return vertices, tags, top
+
+
+def silo(cells: int = 5, outlet: float = 0.1, half_angle: float = 30.0, fill: float = 0.3, ppc: int = 4,
+         rho: float = 2000.0, E: float = 2.0e6, nu: float = 0.3, friction_angle: float = 30.0,
+         wall_friction: float = 0.3, floor_friction: float = 0.5, g: float = 9.81, t_end: float = 1.0,
+         scheme: str = "MUSL", flip: float = 0.99, cfl: float = 0.4, frames: int = 20,
+         comm: MPI.Comm = MPI.COMM_WORLD) -> Scene:
+    """The silo of the module, ``cells`` cells across the outlet (the gmsh size ``outlet / cells``).
+
+    Raises:
+        ValueError: Counts that are not positive, a half-angle outside (0, 60) degrees, a fill
+            above the hopper's top or not positive, non-finite numbers.
+    """
+    check_counts(cells=cells, ppc=ppc)
+    check_finite(outlet=outlet, fill=fill, rho=rho, E=E, nu=nu, g=g, t_end=t_end)
+    if not 0.0 < half_angle < 60.0:
+        raise ValueError(f"half_angle={half_angle:g} must lie in (0, 60) degrees")
+    if not 0.0 < outlet < TOP:
+        raise ValueError(f"outlet={outlet:g} must lie in (0, {TOP:g}) (the hopper's top width)")
+    vertices, tags, top = _outline(outlet, half_angle)
+    if not 0.0 < fill < top - OUTLET_HEIGHT:
+        raise ValueError(f"fill={fill:g} must lie in (0, {top - OUTLET_HEIGHT:.4g}) (the hopper's height)")
+    data = tagged_polygon(comm, vertices, outlet / cells, tags)
+    tan = np.tan(np.radians(half_angle))
+
+    def inside(x):
+        y = x[1] - OUTLET_HEIGHT
+        return (y > 0.0) & (y < fill) & (np.abs(x[0]) < 0.5 * outlet + y * tan)
+
+    p = create_particles(data.mesh, ppc, density=rho, where=inside)
+    history: list[tuple[float, float]] = []
+
+    def watch(solver) -> None:
+        q = solver.particles
+        history.append((solver.t, q.comm.allreduce(float(q.mass[q.x[:, 1] > OUTLET_HEIGHT].sum()))))
+
+    def results(scene, solver) -> dict:
+        t, m = np.array(history).T if history else (np.zeros(1), np.zeros(1))
+        q = solver.particles
+        m0 = q.comm.allreduce(float(q.mass.sum())) + solver.removed.mass  # the fill: all above the outlet
+        return {"discharge_rate": discharge_rate(np.concatenate([[0.0], t]), np.concatenate([[m0], m])),
+                "hopper_mass": float(m[-1])}
+
+    def bcs(V):
+        return [tagged(V, data.facet_tags, WALL_TAG, "friction", wall_friction),
+                tagged(V, data.facet_tags, FLOOR_TAG, "friction", floor_friction)]
+
+    params = {"cells": cells, "outlet": outlet, "half_angle": half_angle, "fill": fill, "ppc": ppc, "rho": rho,
+              "E": E, "nu": nu, "friction_angle": friction_angle, "wall_friction": wall_friction,
+              "floor_friction": floor_friction, "g": g, "scheme": scheme, "flip": flip, "cfl": cfl}
+    return Scene(name="silo", mesh=data.mesh, particles=p, materials=[DruckerPrager(E, nu, friction_angle)],
+                 t_end=t_end, bcs=bcs, loads=Loads(body_force=(0.0, -g)),
+                 options=StepOptions(scheme=scheme, flip=flip, cfl=cfl), frames=frames, params=params,
+                 results=results, watch=watch, outside="remove")

@@ -1,0 +1,31 @@
+"""The footing scene (fempm.scenes.footing): a rigid strip footing (a box collider) pushed into a
+weightless von Mises layer reaches Prandtl's bearing pressure (2 + pi) c within 15 % at 16 cells
+across it (docs/colliders.md has 8 to 32 cells: 1.02 at 32); the reaction rises from 0 with the
+penetration; bad options named."""
+
+import numpy as np
+import pytest
+
+from fempm.scene import run
+from fempm.scenes.footing import footing, prandtl
+
+
+def test_the_footing_reaches_prandtls_pressure():
+    scene = footing(cells=16)
+    pressure = []
+    summary = run(scene, None, progress=False, callback=lambda s: pressure.append(s.collisions.force[0][1]))
+    c = scene.params["yield_stress"] / np.sqrt(3.0)
+    assert summary["prandtl"] == pytest.approx((2.0 + np.pi) * c, rel=1e-12)
+    assert summary["bearing_pressure"] == pytest.approx(summary["prandtl"], rel=0.15)
+    assert summary["penetration"] == pytest.approx(0.1, rel=1e-6)
+    assert summary["colliders"][0]["displacement"] == pytest.approx([0.0, -0.1], abs=1e-9)
+    early = np.mean(pressure[: len(pressure) // 50])  # the elastic start, far below the limit
+    assert 0.0 <= early < 0.2 * summary["prandtl"]
+
+
+def test_bad_footing_options_are_named():
+    with pytest.raises(ValueError, match=r"depth=0 must lie in \(0, 1\]"):
+        footing(depth=0)
+    with pytest.raises(ValueError, match=r"speed=-1 must be > 0"):
+        footing(speed=-1.0)
+    assert prandtl(np.sqrt(3.0)) == pytest.approx(2.0 + np.pi)
