@@ -63,8 +63,9 @@ def figure(curves: dict, out: Path) -> None:
     fig, ax = plt.subplots(figsize=(6.5, 4))
     for (cells, volumetric), curve in curves.items():
         window = max(len(curve) // 100, 1)  # a moving mean over 1 % of the run: the step's reaction rings
-        smooth = np.convolve(curve[:, 1], np.ones(window) / window, mode="same")
-        ax.plot(curve[:, 0], smooth, lw=1, label=f"{cells} cells across B, {volumetric}")
+        smooth = np.convolve(curve[:, 1], np.ones(window) / window, mode="valid")
+        centre = np.convolve(curve[:, 0], np.ones(window) / window, mode="valid")
+        ax.plot(centre, smooth, lw=1, label=f"{cells} cells across B, {volumetric}")
     ax.axhline(2.0 + np.pi, color="k", ls="--", lw=0.8, label="Prandtl, 2 + pi")
     ax.set_xlabel("penetration / B")
     ax.set_ylabel("mean contact pressure / c")

@@ -103,7 +103,8 @@ def main(argv: list[str] | None = None) -> list[dict]:
         row, cases[cells] = run_case(cells, a.t_end)
         rows.append(row)
         if MPI.COMM_WORLD.rank == 0:
-            print(f"{cells:3d} cells: discharge {row['discharge_rate']:.2f} kg/s, removed {row['removed_mass']:.3f} kg, "
+            print(f"{cells:3d} cells: discharge {row['discharge_rate']:.2f} kg/s, "
+                  f"removed {row['removed_mass']:.3f} kg, "
                   f"balance {row['balance']:.1e}, {row['wall_s']:.0f} s", flush=True)
             write_table(a.out, "silo", rows, provenance, TABLE)
     if a.figure and MPI.COMM_WORLD.rank == 0:

@@ -150,7 +150,8 @@ class Particles:
             examples = np.concatenate(comm.allgather(outside_x[:5]))
             raise OutsideMeshError(outside_message(nout, examples))
         if nout:
-            log.warning("fempm: removed %d particle(s) outside the mesh", nout)
+            # info, not a warning: removal is asked for, and fempm.stepping.outside accounts it
+            log.info("fempm: removed %d particle(s) outside the mesh", nout)
         self.removed = nout
 
     def _assign(self, d, outside: OutsidePolicy) -> None:

@@ -25,5 +25,6 @@ __all__ = [
     "cook_membrane",
     "dam_break", "deposit", "disk_impact", "footing",
     "hanging_block", "incline",
-    "largest_neighbour_gap", "manufactured_scene", "silo", "stress_error", "surge_front", "two_disks", "vibrating_bar", "wave",
+    "largest_neighbour_gap", "manufactured_scene",
+    "silo", "stress_error", "surge_front", "two_disks", "vibrating_bar", "wave",
 ]

@@ -7,7 +7,11 @@ in the frame of the slope: :math:`x` runs down it and gravity is
 which is the inclined plane itself, rotated. With ``plane="tagged"`` the slope is not a grid
 axis: the mesh is a gmsh triangulation of the same region turned by :math:`\theta` (gravity
 :math:`(0, -g)`), whose floor is the tagged boundary :data:`FLOOR_TAG` held by
-:func:`fempm.boundary.tagged` (Coulomb friction against its facet normals). The body is elastic and objective under the
+:func:`fempm.boundary.tagged` (Coulomb friction against its facet normals). With
+``plane="collider"`` the slope is a plane collider through the origin turned by :math:`\theta`
+(:class:`fempm.colliders.Collider`, gravity :math:`(0, -g)`), on the slope's structured grid
+turned with it (``turned=True``) or on an axis-aligned grid that it cuts at :math:`\theta`
+(docs/colliders.md). The body is elastic and objective under the
 disk's large rotation: hypoelastic with the Jaumann rate (:class:`fempm.materials.VonMises`
 without a yield stress), whose strain energy comes from the stress, so that a body starting
 under stress has it. It starts at rest on the plane:
@@ -138,7 +142,9 @@ def incline(
     (:class:`fempm.stepping.contact.Contact` with ``rigid=(1,)``, the gap measured from the layer's own
     nodal centre of mass, which lies :func:`_depth` cells under its surface), or ``tagged``, the
     tagged floor of a turned gmsh triangle mesh of size ``size / cells`` (the block; every node
-    moving into the floor held, no gap)."""
+    moving into the floor held, no gap), or ``collider``, a plane collider (the gap ``gap``
+    cells, default half a cell) on the slope's grid turned with it (``turned``) or on an
+    axis-aligned grid."""
     ppc = (16 if body == "disk" else 4) if ppc is None else ppc
     flip = (1.0 if body == "disk" else BLOCK_FLIP) if flip is None else flip
     gap = (0.5 if body == "disk" else 0.0) if gap is None else gap

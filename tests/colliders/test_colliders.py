@@ -197,7 +197,7 @@ def test_a_resumed_run_continues_the_colliders(tmp_path):
 
 
 # -- the rolling disk -------------------------------------------------------------------------
-@pytest.mark.parametrize("mu", [0.2, 0.3, 1.0])
+@pytest.mark.parametrize("mu", [0.2, 1.0])
 def test_a_disk_rolls_down_a_tilted_plane_collider(mu):
     """A disk (8 cells per radius) on a plane collider at 30 degrees, gravity vertical: it rolls
     at (2/3) g sin(theta) within 2 % from mu = 0.2 (just above tan(theta)/3 = 0.19) on."""
