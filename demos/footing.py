@@ -38,20 +38,14 @@ def run_case(cells: int, volumetric: str, depth: float) -> tuple[dict, np.ndarra
     """One run: its row and its curve (penetration / B, pressure / c) per step."""
     scene = footing(cells=cells, depth=depth)
     scene.options = dataclasses.replace(scene.options, volumetric=volumetric)
-    curve = []
-
-    def record(solver):
-        c = solver.collisions
-        curve.append((-c.displacement[0][1], c.force[0][1]))
-
     t0 = time.perf_counter()
-    s = run(scene, None, progress=False, callback=record)
-    width, c = scene.params["width"], scene.params["yield_stress"] / np.sqrt(3.0)
+    s = run(scene, None, progress=False)
+    c = scene.params["yield_stress"] / np.sqrt(3.0)
     return ({"cells": cells, "volumetric": volumetric, "bearing_pressure": s["bearing_pressure"],
              "prandtl": s["prandtl"], "bearing_ratio": s["bearing_ratio"],
              "error_percent": 100.0 * (s["bearing_ratio"] - 1.0), "steps": s["steps"],
              "wall_s": time.perf_counter() - t0},
-            np.array(curve) / [width, width * c])
+            np.array(scene.watch.points) / [1.0, c])  # the scene's PressureCurve
 
 
 def figure(curves: dict, out: Path) -> None:

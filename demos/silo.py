@@ -22,7 +22,7 @@ from mpi4py import MPI
 
 import fempm  # noqa: F401
 from fempm.scene import run
-from fempm.scenes.silo import OUTLET_HEIGHT, WINDOW, silo
+from fempm.scenes.silo import WINDOW, silo
 from fempm.studies.harness import Provenance, write_table
 
 #: the table's columns: (row key, heading, format)
@@ -35,15 +35,15 @@ SNAPSHOTS = (0.15, 0.5, 1.0)
 
 
 def run_case(cells: int, t_end: float) -> tuple[dict, dict]:
-    """One run: its row, and for the figure the snapshots (t -> (x, speed)) and the hopper's mass."""
+    """One run: its row, and for the figure the snapshots (t -> (x, speed)) and the hopper's mass
+    (the scene's :class:`~fempm.scenes.silo.HopperMass`)."""
     scene = silo(cells=cells, t_end=t_end, frames=0)
     p = scene.particles
     fill = p.comm.allreduce(float(p.mass.sum()))
-    shots, history = {}, [(0.0, fill)]
+    shots = {}
     wanted = list(SNAPSHOTS)
 
     def record(solver):
-        history.append((solver.t, p.comm.allreduce(float(p.mass[p.x[:, 1] > OUTLET_HEIGHT].sum()))))
         if wanted and solver.t >= wanted[0] * t_end * (1 - 1e-9):
             wanted.pop(0)
             x = np.concatenate(p.comm.allgather(p.x[:, :2]))
@@ -56,7 +56,7 @@ def run_case(cells: int, t_end: float) -> tuple[dict, dict]:
     row = {"cells": cells, "discharge_rate": s["discharge_rate"], "removed_mass": s["removed"]["mass"],
            "hopper_mass": s["hopper_mass"], "fill": fill, "balance": (left + s["removed"]["mass"] - fill) / fill,
            "steps": s["steps"], "wall_s": time.perf_counter() - t0}
-    return row, {"shots": shots, "history": np.array(history), "outline": scene.mesh.geometry.x[:, :2]}
+    return row, {"shots": shots, "history": np.array(scene.watch.points), "outline": scene.mesh.geometry.x[:, :2]}
 
 
 def figure(cases: dict, out: Path) -> None:

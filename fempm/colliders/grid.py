@@ -105,8 +105,8 @@ class ColliderContact:
         self.num_owned = V.dofmap.index_map.size_local
         self.patches = Patches.of_space(V) if self.colliders else None
         self.points = V.tabulate_dof_coordinates()[:, :d] if self.colliders else None
-        nodal_h = _nodal_gaps(V, h_cell) if any(c.gap is None for c in self.colliders) else None
-        self.gaps = [nodal_h if c.gap is None else c.gap for c in self.colliders]
+        nodal = _nodal_gaps(V, h_cell) if any(c.gap is None for c in self.colliders) else None
+        self.gaps = [nodal if c.gap is None else np.full(len(self.points), c.gap) for c in self.colliders]
         n = len(self.colliders)
         self.t = t
         self.displacement = np.zeros((n, d))
@@ -138,16 +138,15 @@ class ColliderContact:
         s = self.displacement[k]
         cand = np.flatnonzero(centroids.mass > 0.0)
         x = centroids.centre[cand] - s
-        gap = self.gaps[k][cand] if isinstance(self.gaps[k], np.ndarray) else self.gaps[k]
-        depth = gap - c.shape.distance(x)
+        depth = self.gaps[k][cand] - c.shape.distance(x)
         touch = depth > 0.0
-        dofs, depth, gap = cand[touch], depth[touch], gap[touch] if np.ndim(gap) else gap
+        dofs, depth = cand[touch], depth[touch]
         n = -c.shape.normal_at(x[touch])
         m = centroids.mass[dofs]
         w = v[dofs] - u
         wn = np.einsum("kd,kd->k", w, n)
         held = wn > 0.0
-        inside = c.shape.distance(self.points[dofs] - s) < -INSIDE * gap  # node by node
+        inside = c.shape.distance(self.points[dofs] - s) < -INSIDE * self.gaps[k][dofs]  # node by node
         shares = held & ~inside
         dwn = depth_shares(self.patches.sums, dofs, m, np.where(shares, wn, 0.0), np.where(shares, depth, 0.0))
         dwn = np.where(inside, wn, dwn)
@@ -220,10 +219,9 @@ def _nodal_gaps(V: dolfinx.fem.FunctionSpace, h_cell: npt.NDArray) -> npt.NDArra
     """Half the smallest size of the cells around each dof over the degree (owned + ghost dofs;
     the owner's value, the same on every rank)."""
     index_map = V.dofmap.index_map
-    cells = np.asarray(V.dofmap.list)
-    k = min(len(cells), len(h_cell))
+    cells = np.asarray(V.dofmap.list)  # every local cell, as h_cell
     h = np.full(index_map.size_local + index_map.num_ghosts, np.inf)
-    np.minimum.at(h, cells[:k].ravel(), np.repeat(h_cell[:k], cells.shape[1]))
+    np.minimum.at(h, cells.ravel(), np.repeat(h_cell, cells.shape[1]))
     vec = dolfinx.la.vector(index_map)
     vec.array[:] = h
     vec.scatter_forward()  # the owner's value on its ghosts

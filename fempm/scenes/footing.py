@@ -15,7 +15,8 @@ The footing moves at the speed ``speed`` (m/s), reached over the first quarter o
 smooth ramp (a sudden start sends a stress wave of :math:`\rho c_p v` into the layer), until it
 has penetrated ``depth`` :math:`\times B`. Results: ``bearing_pressure``, the mean of the
 footing's reaction over :math:`B` over the last tenth of the penetration (from the collider's
-force, :attr:`fempm.colliders.grid.ColliderContact.force`), ``prandtl``, :math:`(2 + \pi) c`,
+force, :attr:`fempm.colliders.grid.ColliderContact.force`, kept by the scene's ``watch``, a
+:class:`PressureCurve`), ``prandtl``, :math:`(2 + \pi) c`,
 and their ratio ``bearing_ratio``; ``energies.csv`` holds the force and the displacement of
 every step (``collider_force_0_y``, ``collider_displacement_0_y``: the force-penetration curve).
 """
@@ -34,12 +35,25 @@ from fempm.particles.seeding import create_particles
 from fempm.scene.definition import Scene, check_counts, check_finite
 from fempm.stepping.options import StepOptions
 
-__all__ = ["LAYER", "footing", "prandtl"]
+__all__ = ["LAYER", "PressureCurve", "footing", "prandtl"]
 
 #: the layer's width and depth over the footing's width
 LAYER = (5.0, 2.0)
 #: the room above the layer, over the footing's width (heave)
 ROOM = 0.5
+
+
+class PressureCurve:
+    """The footing's (penetration / width, mean contact pressure) after every step, ``points``
+    (a scene ``watch``: the collider's displacement and force)."""
+
+    def __init__(self, width: float):
+        self.width = width
+        self.points: list[tuple[float, float]] = []
+
+    def __call__(self, solver) -> None:
+        c = solver.collisions
+        self.points.append((-c.displacement[0][1] / self.width, c.force[0][1] / self.width))
 
 
 def prandtl(yield_stress: float) -> float:
@@ -80,14 +94,10 @@ def footing(cells: int = 8, depth: float = 0.1, width: float = 1.0, E: float = 1
     t_end = depth * width / speed / (1.0 - 0.125)
     shape = box((-0.5 * width, layer), (0.5 * width, top + width))
     law = VonMises(E, nu, yield_stress)
-    curve: list[tuple[float, float]] = []
-
-    def watch(solver) -> None:
-        c = solver.collisions
-        curve.append((-c.displacement[0][1] / width, c.force[0][1] / width))
+    curve = PressureCurve(width)
 
     def results(scene, solver) -> dict:
-        pen, q = np.array(curve).T if curve else (np.zeros(1), np.zeros(1))
+        pen, q = np.array(curve.points).T if curve.points else (np.zeros(1), np.zeros(1))
         late = pen >= 0.9 * pen[-1]
         q_end = float(np.mean(q[late]))
         qu = prandtl(yield_stress)
@@ -102,5 +112,5 @@ def footing(cells: int = 8, depth: float = 0.1, width: float = 1.0, E: float = 1
               "rho": rho, "speed": speed, "ppc": ppc, "scheme": scheme, "flip": flip, "cfl": cfl}
     return Scene(name="footing", mesh=mesh, particles=p, materials=[law], t_end=t_end, bcs=bcs,
                  options=StepOptions(scheme=scheme, flip=flip, cfl=cfl), frames=frames, params=params,
-                 results=results, watch=watch,
+                 results=results, watch=curve,
                  colliders=[Collider(shape, velocity=_ramp(speed, 0.25 * t_end))])

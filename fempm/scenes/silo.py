@@ -12,7 +12,8 @@ boundary :data:`WALL_TAG` held by Coulomb friction ``wall_friction`` against the
 chamber's sides and the bottom beside the floor are open.
 
 Results: ``discharge_rate``, the mass per second (per unit thickness) leaving the hopper over the
-steady part of the flow (the slope of a least-squares line through the hopper's mass while it
+steady part of the flow (the slope of a least-squares line through the hopper's mass, kept by
+the scene's ``watch``, a :class:`HopperMass`, while it
 holds between 85 % and 35 % of its fill; NaN if the run ends before), ``hopper_mass`` (the mass
 still above the outlet at the end) and the run's ``removed`` entry (the mass that left the mesh).
 """
@@ -30,7 +31,7 @@ from fempm.scene.definition import Scene, check_counts, check_finite
 from fempm.stepping.loads import Loads
 from fempm.stepping.options import StepOptions
 
-__all__ = ["FLOOR", "FLOOR_TAG", "OUTLET_HEIGHT", "WALL_TAG", "discharge_rate", "silo"]
+__all__ = ["FLOOR", "FLOOR_TAG", "OUTLET_HEIGHT", "WALL_TAG", "HopperMass", "discharge_rate", "silo"]
 
 #: the facet tags of the hopper's walls and of the floor
 WALL_TAG, FLOOR_TAG = 2, 1
@@ -38,6 +39,21 @@ WALL_TAG, FLOOR_TAG = 2, 1
 OUTLET_HEIGHT, FLOOR, CHAMBER, TOP = 0.2, 0.4, 1.0, 0.5
 #: the window of the hopper's mass (fractions of its fill) over which the discharge is steady
 WINDOW = (0.85, 0.35)
+
+
+class HopperMass:
+    """The mass above the outlet, (t, mass) from the fill at t = 0 and after every step,
+    ``points`` (a scene ``watch``). Collective."""
+
+    def __init__(self, particles):
+        self.points = [(0.0, self.mass(particles))]  # the fill: all above the outlet
+
+    @staticmethod
+    def mass(particles) -> float:
+        return particles.comm.allreduce(float(particles.mass[particles.x[:, 1] > OUTLET_HEIGHT].sum()))
+
+    def __call__(self, solver) -> None:
+        self.points.append((solver.t, self.mass(solver.particles)))
 
 
 def discharge_rate(t: np.ndarray, mass: np.ndarray) -> float:
@@ -87,18 +103,11 @@ def silo(cells: int = 5, outlet: float = 0.1, half_angle: float = 30.0, fill: fl
         return (y > 0.0) & (y < fill) & (np.abs(x[0]) < 0.5 * outlet + y * tan)
 
     p = create_particles(data.mesh, ppc, density=rho, where=inside)
-    history: list[tuple[float, float]] = []
-
-    def watch(solver) -> None:
-        q = solver.particles
-        history.append((solver.t, q.comm.allreduce(float(q.mass[q.x[:, 1] > OUTLET_HEIGHT].sum()))))
+    hopper = HopperMass(p)
 
     def results(scene, solver) -> dict:
-        t, m = np.array(history).T if history else (np.zeros(1), np.zeros(1))
-        q = solver.particles
-        m0 = q.comm.allreduce(float(q.mass.sum())) + solver.removed.mass  # the fill: all above the outlet
-        return {"discharge_rate": discharge_rate(np.concatenate([[0.0], t]), np.concatenate([[m0], m])),
-                "hopper_mass": float(m[-1])}
+        t, m = np.array(hopper.points).T
+        return {"discharge_rate": discharge_rate(t, m), "hopper_mass": float(m[-1])}
 
     def bcs(V):
         return [tagged(V, data.facet_tags, WALL_TAG, "friction", wall_friction),
@@ -110,4 +119,4 @@ def silo(cells: int = 5, outlet: float = 0.1, half_angle: float = 30.0, fill: fl
     return Scene(name="silo", mesh=data.mesh, particles=p, materials=[DruckerPrager(E, nu, friction_angle)],
                  t_end=t_end, bcs=bcs, loads=Loads(body_force=(0.0, -g)),
                  options=StepOptions(scheme=scheme, flip=flip, cfl=cfl), frames=frames, params=params,
-                 results=results, watch=watch, outside="remove")
+                 results=results, watch=hopper, outside="remove")
