@@ -1,11 +1,12 @@
-# fempm: `make demo` runs the main demo, `make test` runs the tests (serial, then MPI on 2 ranks).
+# fempm: `make demo` runs the main demo, `make test` runs the tests (serial, then MPI on 2 ranks),
+# `make test-all` also the slow ones (the long studies and demos, the full test matrices).
 # Both create the virtual environment .venv when it is missing.
 VENV    ?= .venv
 PY      := $(VENV)/bin/python
 MPIEXEC := $(VENV)/bin/mpiexec
 NPROCS  ?= 2
 
-.PHONY: venv demo test study quick bench clean
+.PHONY: venv demo test test-all study quick bench clean
 
 venv:
 	@bash scripts/bootstrap
@@ -15,6 +16,9 @@ demo: venv
 
 test: venv
 	bash scripts/run-tests
+
+test-all: venv
+	FEMPM_TEST_ALL=1 bash scripts/run-tests
 
 study: venv
 	$(PY) -m fempm study mapping

@@ -2,6 +2,7 @@
 vibrating bar, and F-bar on Cook's membrane near incompressibility.
 
     python benchmarks/implicit_figures.py [--cook 2 1] [--bar] [--fbar 2] [--fbar-implicit 4 2 1] [--disks] [--compaction]
+                                          [--p2 4 2 1]
 
 * ``--cook H ...``: Cook's membrane (nu = 1/3, E = 1, load 1e-3), at each triangle size H: the
   scene's explicit damped run and quasi-static implicit runs in 1 and 10 load steps; the
@@ -20,7 +21,14 @@ vibrating bar, and F-bar on Cook's membrane near incompressibility.
   MUSL, lumped mass, point particles, FLIP) with and without F-bar: outcome, E/E0, steps;
 * ``--compaction``: the scene ``compaction`` (5 quasi-static steps) at 4, 8, 16 and 32 cells over
   the height with point particles, uGIMP, cpGIMP, CPDI1 and CPDI2: ``stress_error`` and the rate
-  fitted to it.
+  fitted to it;
+* ``--p2 H ...``: degree 2 in the implicit step: the column of ``tests/implicit/test_implicit_p2.py``
+  (unit square or cube, slip sides, fixed base, gravity; 2, 4, 8 cells; 3 and 4 in 3D) on every
+  cell type, P1 lumped, P2 Lagrange consistent and Bernstein P2 lumped (simplices), the relative
+  L2 error of u_y against the exact uniaxial strain and its fitted rate; Cook's membrane at
+  each H in one quasi-static step, P1, P2 Lagrange consistent, Bernstein P2 lumped, against the
+  reference; and Cook's explicit damped run (the scene's defaults, CFL 0.4) with P2 Lagrange
+  consistent and Bernstein P2 lumped mass.
 """
 
 from __future__ import annotations
@@ -128,6 +136,49 @@ def compaction_rows() -> None:
               + f" | {rate:.2f} | {time.perf_counter() - t0:.2f} |")
 
 
+def p2_rows(sizes: list[float]) -> None:
+    import sys
+    from pathlib import Path
+
+    sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests" / "implicit"))
+    from test_implicit_p2 import column, column_error
+
+    spaces = [("P1 lumped", 1, "equispaced", "lumped"), ("P2 Lagrange consistent", 2, "equispaced", "consistent"),
+              ("Bernstein P2 lumped", 2, "bernstein", "lumped")]
+    print("| cell | space | errors (cells: error) | fitted rate |\n|---|---|---|---|")
+    for cell, ns in (("triangle", (2, 4, 8)), ("quadrilateral", (2, 4, 8)), ("tetrahedron", (2, 3, 4)),
+                     ("hexahedron", (2, 3, 4))):
+        for label, degree, variant, mass in spaces:
+            if variant == "bernstein" and cell in ("quadrilateral", "hexahedron"):
+                continue  # (basix: Bernstein on simplices)
+            errors = []
+            for n in ns:
+                s = column(cell, n, degree, variant, mass)
+                s.step(1.0)
+                errors.append(column_error(s))
+            rate = -np.polyfit(np.log(ns), np.log(errors), 1)[0]
+            print(f"| {cell} | {label} | " + ", ".join(f"{n}: {e:.2e}" for n, e in zip(ns, errors))
+                  + f" | {rate:.2f} |")
+    print(COOK_HEADER)
+    for h in sizes:
+        for label, degree, variant, mass in spaces:
+            def change(scene, degree=degree, variant=variant, mass=mass):
+                built = cook_membrane(h=scene.params["h"], nu=1 / 3, load=1e-3, frames=0, degree=degree,
+                                      variant=None if variant == "equispaced" else variant, mass=mass)
+                scene.__dict__.update(built.__dict__)
+                implicit(1)(scene)
+                scene.options = dataclasses.replace(scene.options, mass=mass)
+            print(cook_row(h, 1 / 3, f"implicit, quasi-static, 1 step, {label}", change))
+    for h in sizes:
+        for label, variant, mass in (("P2 Lagrange consistent", None, "consistent"),
+                                     ("Bernstein P2 lumped", "bernstein", "lumped")):
+            def change(scene, variant=variant, mass=mass):
+                built = cook_membrane(h=scene.params["h"], nu=1 / 3, load=1e-3, frames=0, degree=2, variant=variant,
+                                      mass=mass)
+                scene.__dict__.update(built.__dict__)
+            print(cook_row(h, 1 / 3, f"explicit, damped, {label}", change))
+
+
 def main() -> None:
     a = argparse.ArgumentParser()
     a.add_argument("--cook", type=float, nargs="*", default=[])
@@ -136,6 +187,7 @@ def main() -> None:
     a.add_argument("--fbar-implicit", type=float, nargs="*", default=[])
     a.add_argument("--disks", action="store_true")
     a.add_argument("--compaction", action="store_true")
+    a.add_argument("--p2", type=float, nargs="*", default=[])
     args = a.parse_args()
     if args.cook:
         print(COOK_HEADER)
@@ -166,6 +218,8 @@ def main() -> None:
         disks_rows()
     if args.compaction:
         compaction_rows()
+    if args.p2:
+        p2_rows(args.p2)
 
 
 if __name__ == "__main__":

@@ -31,7 +31,7 @@ from typing import TYPE_CHECKING, NoReturn
 if TYPE_CHECKING:  # mpi4py is imported where it is used: the command line imports this module first
     from mpi4py import MPI
 
-__all__ = ["AGREE_TIMEOUT", "GRACE", "FailureAgreement", "abort", "abort_on_error"]
+__all__ = ["AGREE_TIMEOUT", "GRACE", "FailureAgreement", "RankError", "abort", "abort_on_error", "raise_together"]
 
 #: seconds between the failing rank's message and MPI_Abort
 GRACE = 1.0
@@ -49,6 +49,32 @@ def abort(comm: MPI.Comm, message: str) -> NoReturn:
     time.sleep(GRACE)  # mpiexec forwards the message before MPI_Abort ends the job (else it may be lost)
     comm.Abort(1)
     raise SystemExit(1)  # not reached: Abort does not return
+
+
+class RankError(RuntimeError):
+    """What the other ranks raise when one rank's part of a collective step failed
+    (:func:`raise_together`): the failing rank and its error."""
+
+
+def raise_together(comm: MPI.Comm, error: BaseException | None) -> None:
+    """Raise on every rank of ``comm`` when ``error`` is set on any: the rank that caught it
+    raises it, the others a :class:`RankError` naming that rank and the error. Collective:
+    one reduction, and on a failure one gather of the messages. Call it after code that may
+    raise on some ranks only (a user's law, a check of a rank's own arguments), where every
+    rank reaches it."""
+    if comm.size == 1:
+        if error is not None:
+            raise error
+        return
+    from mpi4py import MPI
+
+    if not comm.allreduce(error is not None, op=MPI.LOR):
+        return
+    messages = comm.allgather(None if error is None else f"{type(error).__name__}: {error}")
+    if error is not None:
+        raise error
+    rank, message = next((r, m) for r, m in enumerate(messages) if m is not None)
+    raise RankError(f"rank {rank} of {comm.size} failed: {message}")
 
 
 @contextlib.contextmanager

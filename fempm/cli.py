@@ -30,7 +30,8 @@ from mpi4py import MPI
 
 from fempm import __version__
 from fempm.abort import abort_on_error
-from fempm.io.checkpoint import CheckpointError, RunInterrupted, choose
+from fempm.io.checkpoint import CheckpointError, choose
+from fempm.io.stops import RunInterrupted
 from fempm.io.writers import (
     OUTPUT_LIMIT,
     OutputFolderError,
@@ -198,7 +199,8 @@ def _run(args, rest: list[str]) -> int:
             if k != "comm":
                 print(f"  --{k.replace('_', '-')} {v.default}")
         print("stepping (every scene): --integrator explicit|implicit, --dynamics newmark|quasi-static (implicit), "
-              "--steps N (fixed steps to t_end; implicit runs need it), --volumetric standard|fbar, "
+              "--steps N (fixed steps to t_end; implicit runs need it), --tangent analytic|finite-difference "
+              "(implicit: the laws' own tangents or central differences), --volumetric standard|fbar, "
               "--outside raise|remove (particles that leave the mesh)")
         print("run health (fempm.stepping.health.Health; a crossed limit stops the run with exit code 3):")
         for k, v in Health().asdict().items():
@@ -221,13 +223,17 @@ def _check_every(every: int | None, command: str) -> None:
 
 
 def _build(rebuild: dict):
-    """The scene of a command line (name, options, health limits)."""
+    """The scene of a command line (name, options, health limits), and a solver made of it: what
+    the options cannot take together (the implicit step with the scene's colliders, absorbing
+    ends, contact or frictional walls; F-bar with a law it cannot average) is a usage error
+    before anything is written. Collective."""
 
     try:
         scene = SCENES[rebuild["scene"]](**rebuild["options"])
         scene.health = dataclasses.replace(scene.health, **rebuild["health"])
         scene = with_stepping(scene, rebuild.get("stepping", {}))
-    except (ValueError, TypeError) as e:  # the builders and Health check their arguments
+        scene.solver()
+    except (ValueError, TypeError) as e:  # the builders, Health and the solver check their arguments
         raise UsageError(f"fempm run {rebuild['scene']}: {e}") from None
     return scene
 

@@ -12,8 +12,9 @@ import numpy.typing as npt
 from petsc4py import PETSc
 
 __all__ = [
-    "DEFAULT_KSP_OPTIONS", "converged_reason_name", "coo_matrix", "coo_pattern", "create_ksp",
-    "local_to_global_map", "owned_index_set", "set_up_now", "solve_from", "sub_ksps", "temporary_options",
+    "DEFAULT_KSP_OPTIONS", "NULL_PIVOT", "converged_reason_name", "coo_matrix", "coo_pattern", "create_ksp",
+    "local_to_global_map", "null_pivots", "owned_index_set", "set_up_now", "solve_from", "sub_ksps",
+    "temporary_options",
 ]
 
 
@@ -170,3 +171,30 @@ def set_up_now(ksp: PETSc.KSP) -> None:
 def converged_reason_name(reason: int) -> str:
     names = {v: k for k, v in vars(PETSc.KSP.ConvergedReason).items() if isinstance(v, int)}
     return names.get(reason, str(reason))
+
+
+#: a pivot below this fraction of the matrix norm counts as null in :func:`null_pivots`
+NULL_PIVOT = 1e-10
+
+
+def null_pivots(J: PETSc.Mat) -> int | None:
+    r"""The rank deficiency of the assembled matrix ``J`` (an implicit step's tangent, a mass
+    matrix): the null pivots of its MUMPS LU factorization with null-pivot detection
+    (``ICNTL(24) = 1``, a pivot below :data:`NULL_PIVOT` :math:`\|J\|` null), made apart from
+    any solve with ``J`` (whose factorizations stay exact); None without MUMPS. Collective."""
+    if not PETSc.Sys.hasExternalPackage("mumps"):
+        return None
+    ksp = PETSc.KSP().create(J.getComm())
+    ksp.setType(PETSc.KSP.Type.PREONLY)
+    pc = ksp.getPC()
+    pc.setType(PETSc.PC.Type.LU)
+    pc.setFactorSolverType("mumps")
+    ksp.setOperators(J, J)
+    pc.setFactorSetUpSolverType()
+    F = pc.getFactorMatrix()
+    F.setMumpsIcntl(24, 1)
+    F.setMumpsCntl(3, NULL_PIVOT)
+    ksp.setUp()
+    count = int(F.getMumpsInfog(28))
+    ksp.destroy()
+    return count

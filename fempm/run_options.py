@@ -103,13 +103,14 @@ def health_options(rest: list[str]) -> tuple[dict, list[str]]:
 
 #: the stepping options every scene takes on the command line, with the values they accept
 STEPPING_FLAGS = {"integrator": ("explicit", "implicit"), "dynamics": ("newmark", "quasi-static"), "steps": None,
-                  "volumetric": ("standard", "fbar"), "outside": ("raise", "remove")}
+                  "volumetric": ("standard", "fbar"), "outside": ("raise", "remove"),
+                  "tangent": ("analytic", "finite-difference")}
 
 
 def stepping_options(rest: list[str]) -> tuple[dict, list[str]]:
     """Split the stepping options every scene takes (``--integrator explicit|implicit``,
     ``--dynamics newmark|quasi-static``, ``--steps N``, ``--volumetric standard|fbar``,
-    ``--outside raise|remove``) from the scene options."""
+    ``--outside raise|remove``, ``--tangent analytic|finite-difference``) from the scene options."""
     chosen, others = split_flags(rest, STEPPING_FLAGS)
     stepping = {}
     for name, (flag, value) in chosen.items():
@@ -122,8 +123,9 @@ def stepping_options(rest: list[str]) -> tuple[dict, list[str]]:
             raise UsageError(f"fempm run: option {flag} expects one of {', '.join(choices)}, got {value!r}")
         else:
             stepping[name] = value
-    if stepping.get("integrator") != "implicit" and "dynamics" in stepping:
-        raise UsageError("fempm run: option --dynamics applies to --integrator implicit")
+    for name in ("dynamics", "tangent"):
+        if stepping.get("integrator") != "implicit" and name in stepping:
+            raise UsageError(f"fempm run: option --{name} applies to --integrator implicit")
     return stepping, others
 
 
@@ -134,7 +136,7 @@ def with_stepping(scene, stepping: dict):
         return scene
     if "outside" in stepping:
         scene.outside = stepping["outside"]
-    changes = {k: stepping[k] for k in ("integrator", "dynamics", "volumetric") if k in stepping}
+    changes = {k: stepping[k] for k in ("integrator", "dynamics", "volumetric", "tangent") if k in stepping}
     if stepping.get("integrator") == "implicit" and stepping.get("dynamics") == "quasi-static":
         changes["load_ramp"] = scene.t_end
     if changes:

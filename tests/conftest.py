@@ -62,6 +62,23 @@ def ppc_for(mesh: dm.Mesh, degree: int) -> int:
     return n**tdim
 
 
+def pytest_collection_modifyitems(config, items):
+    """Under MPI, a test marked ``parallel(only=(id, ...))`` runs only the parametrizations of
+    those ids: the 2-rank pass takes one or two of a matrix whose other entries test the same
+    parallel code (every entry still runs serially)."""
+    if MPI.COMM_WORLD.size == 1:
+        return
+    kept, dropped = [], []
+    for item in items:
+        mark = item.get_closest_marker("parallel")
+        only = mark.kwargs.get("only") if mark is not None else None
+        callspec = getattr(item, "callspec", None)
+        (dropped if only is not None and callspec is not None and callspec.id not in only else kept).append(item)
+    if dropped:
+        config.hook.pytest_deselected(items=dropped)
+        items[:] = kept
+
+
 @pytest.hookimpl(hookwrapper=True)
 def pytest_runtest_makereport(item, call):
     """Under MPI a test failing on one rank leaves the others waiting in a collective:

@@ -36,7 +36,7 @@ import numpy as np
 import numpy.typing as npt
 import ufl
 
-from fempm.boundary.tagged import facet_normals, tagged_facets
+from fempm.boundary.tagged import boundary_only, facet_normals, tagged_facets
 from fempm.transfer.centres import NodalCentres
 
 __all__ = ["Dashpot", "absorbing", "nodal_boundary_shares"]
@@ -55,6 +55,7 @@ class Dashpot:
     #: the nodal masses come with the step's nodal centres of mass
     needs_positions: ClassVar[bool] = True
     zero_components: ClassVar[bool] = False
+    kind: ClassVar[str] = "absorbing dashpots"
     #: it acts on the velocity update (:meth:`on_update`)
     acts_on_update: ClassVar[bool] = True
 
@@ -78,13 +79,20 @@ def nodal_boundary_shares(V: dolfinx.fem.FunctionSpace, facet_tags: dolfinx.mesh
                           value: int) -> npt.NDArray:
     r""":math:`A_i = \int_{\Gamma} N_i\, ds` over the facets tagged ``value``, for every block dof
     of ``V`` (owned and ghost; summed over ranks). Collective."""
-    Q, to_V = V.sub(0).collapse()
     ds = ufl.Measure("ds", domain=V.mesh, subdomain_data=facet_tags)
-    share = dolfinx.fem.assemble_vector(dolfinx.fem.form(ufl.TestFunction(Q) * ds(int(value))))
+    n = V.dofmap.index_map.size_local + V.dofmap.index_map.num_ghosts
+    if V.num_sub_spaces:
+        Q, to_V = V.sub(0).collapse()
+        to_V = np.asarray(to_V).ravel()  # (dolfinx may give it as a nested list)
+        test = ufl.TestFunction(Q)
+    else:  # one component (an interval mesh's velocity): the space is its own component
+        Q, to_V = V, np.arange(n) * V.dofmap.index_map_bs
+        test = ufl.TestFunction(Q)[0] if len(V.value_shape) else ufl.TestFunction(Q)
+    share = dolfinx.fem.assemble_vector(dolfinx.fem.form(test * ds(int(value))))
     share.scatter_reverse(dolfinx.la.InsertMode.add)
     share.scatter_forward()
-    out = np.zeros(V.dofmap.index_map.size_local + V.dofmap.index_map.num_ghosts)
-    out[np.asarray(to_V) // V.dofmap.index_map_bs] = share.array
+    out = np.zeros(n)
+    out[to_V // V.dofmap.index_map_bs] = share.array[: len(to_V)]
     return out
 
 
@@ -131,6 +139,7 @@ def absorbing(V: dolfinx.fem.FunctionSpace, facet_tags: dolfinx.mesh.MeshTags | 
             raise ValueError("absorbing boundary: where(x) holds on no boundary facet of the mesh")
         facet_tags, value = dolfinx.mesh.meshtags(mesh, fdim, found, np.ones(len(found), dtype=np.int32)), 1
     facets = tagged_facets(mesh, facet_tags, value)
+    boundary_only(mesh, facets, value, "an absorbing boundary")
     dofs, normals = facet_normals(V, facets)
     area = nodal_boundary_shares(V, facet_tags, value)[dofs]
     return Dashpot(dofs, normals, rho * cp * area, rho * cs * area)

@@ -40,6 +40,8 @@ class GridConditions:
             mass (the step then maps the nodal centres of mass and masses,
             :class:`~fempm.transfer.centres.NodalCentres`).
         zero_components: whether every condition only holds velocity components at 0.
+        other_kinds: what the conditions that do more than that are (their ``kind``: "a
+            frictional wall", "colliders", ...), in order, each once.
     """
 
     def __init__(self, V: dolfinx.fem.FunctionSpace, bcs: Sequence = ()):
@@ -58,6 +60,8 @@ class GridConditions:
         self.on_update = tuple(bc for bc in self.bcs if getattr(bc, "acts_on_update", False))
         self.needs_positions = any(bc.needs_positions for bc in self.bcs)
         self.zero_components = all(bc.zero_components for bc in self.bcs)
+        self.other_kinds = tuple(dict.fromkeys(getattr(bc, "kind", type(bc).__name__) for bc in self.bcs
+                                               if not bc.zero_components))
 
     def apply(self, v: npt.NDArray, centroids: NodalCentres | None = None, dt: float | None = None) -> None:
         """Every condition on the grid velocity ``v`` (dofs, d), in place; ``centroids``: the

@@ -24,16 +24,20 @@ import numpy.typing as npt
 from fempm.boundary.walls import Fixed, Friction, Slip, friction_wall
 from fempm.meshes.facets import facet_area_vectors
 
-__all__ = ["KINDS", "facet_normals", "tagged", "tagged_facets"]
+__all__ = ["KINDS", "boundary_only", "facet_normals", "tagged", "tagged_facets"]
 
 #: the kinds of condition :func:`tagged` makes
 KINDS = ("fixed", "slip", "friction")
 
 
 def tagged_facets(mesh: dolfinx.mesh.Mesh, facet_tags: dolfinx.mesh.MeshTags, value: int) -> npt.NDArray[np.int32]:
-    """The local facets with tag ``value``; a ValueError when the tags are not facet tags or
-    no rank's facets carry ``value`` (its message lists the tags there are). Collective."""
+    """The local facets with tag ``value``; a ValueError when the tags were made on another mesh,
+    are not facet tags or no rank's facets carry ``value`` (its message lists the tags there
+    are). Collective."""
     fdim = mesh.topology.dim - 1
+    if facet_tags.topology is not mesh.topology._cpp_object:
+        raise ValueError(f"facet tag {value}: the facet tags were made on another mesh than the space's (make them on "
+                         "V.mesh: fempm.meshes.read_msh returns a mesh with its own facet tags)")
     if facet_tags.dim != fdim:
         raise ValueError(f"tagged conditions and loads need facet tags (dimension {fdim}); these tags are of dimension "
                          f"{facet_tags.dim}")
@@ -44,6 +48,19 @@ def tagged_facets(mesh: dolfinx.mesh.Mesh, facet_tags: dolfinx.mesh.MeshTags, va
         raise ValueError(f"unknown facet tag {value}: it marks no facets on any rank (the facet tags hold "
                          f"{', '.join(map(str, known)) or 'none'})")
     return facets
+
+
+def boundary_only(mesh: dolfinx.mesh.Mesh, facets: npt.NDArray[np.int32], value: int, what: str) -> None:
+    """A ValueError naming tag ``value`` when some of its local ``facets`` lie inside the mesh
+    (two cells share them, on any rank), where ``what`` has nothing to act on. Collective."""
+    fdim = mesh.topology.dim - 1
+    mesh.topology.create_connectivity(fdim, mesh.topology.dim)
+    exterior = dolfinx.mesh.exterior_facet_indices(mesh.topology)
+    owned = facets[facets < mesh.topology.index_map(fdim).size_local]
+    inner = mesh.comm.allreduce(int(np.count_nonzero(~np.isin(owned, exterior))))
+    if inner:
+        raise ValueError(f"facet tag {value} marks {inner} facet(s) inside the mesh: {what} acts on the mesh's "
+                         "boundary only")
 
 
 def facet_normals(V: dolfinx.fem.FunctionSpace, facets: npt.NDArray[np.int32]) -> tuple[npt.NDArray, npt.NDArray]:

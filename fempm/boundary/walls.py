@@ -40,6 +40,8 @@ class Fixed:
     dofs: npt.NDArray[np.int32]
     #: whether the condition needs the step's nodal centres of mass (:class:`NodalCentres`)
     needs_positions: ClassVar[bool] = False
+    #: what the condition is, in messages
+    kind: ClassVar[str] = "fixed dofs"
 
     @property
     def zero_components(self) -> bool:
@@ -58,6 +60,10 @@ class Slip:
     dofs: npt.NDArray[np.int32]
     normal: npt.NDArray  # (d,) or (len(dofs), d), unit
     needs_positions: ClassVar[bool] = False
+
+    @property
+    def kind(self) -> str:
+        return "a slip wall" + ("" if self.axis is not None else " whose normal is not a coordinate axis")
 
     @property
     def axis(self) -> int | None:
@@ -87,6 +93,7 @@ class Prescribed:
     velocity: npt.NDArray
     needs_positions: ClassVar[bool] = False
     zero_components: ClassVar[bool] = False
+    kind: ClassVar[str] = "prescribed velocities"
 
     def apply(self, v: npt.NDArray, centroids: NodalCentres | None = None) -> None:
         held = np.flatnonzero(np.isfinite(self.velocity))
@@ -148,6 +155,7 @@ class Friction:
     patches: Patches | None = None
 
     zero_components: ClassVar[bool] = False
+    kind: ClassVar[str] = "a frictional wall"
 
     @property
     def needs_positions(self) -> bool:

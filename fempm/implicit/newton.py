@@ -11,7 +11,7 @@ import numpy as np
 import numpy.typing as npt
 from petsc4py import PETSc
 
-from fempm.petsc import temporary_options
+from fempm.petsc import NULL_PIVOT, null_pivots, temporary_options  # (the rank test, shared with the masses)
 
 __all__ = ["FORCE_ATOL", "NEWTON_OPTIONS", "NULL_PIVOT", "Newton", "NewtonResult", "null_pivots"]
 
@@ -38,8 +38,6 @@ NEWTON_OPTIONS: dict[str, Any] = {
 #: a residual below this fraction of the forces it balances has converged (:meth:`Newton.solve`)
 FORCE_ATOL = 1e-9
 
-#: a pivot below this fraction of the tangent's norm counts as null in :func:`null_pivots`
-NULL_PIVOT = 1e-10
 
 
 @dataclass
@@ -120,26 +118,3 @@ class Newton:
         names = {v: k for k, v in vars(PETSc.SNES.ConvergedReason).items() if isinstance(v, int)}
         r.destroy()
         return NewtonResult(reason > 0, names.get(reason, str(reason)), snes.getIterationNumber(), norms)
-
-
-def null_pivots(J: PETSc.Mat) -> int | None:
-    r"""The rank deficiency of the assembled tangent ``J``: the null pivots of its MUMPS LU
-    factorization with null-pivot detection (``ICNTL(24) = 1``, a pivot below
-    :data:`NULL_PIVOT` :math:`\|J\|` null), made apart from the Newton solves (whose
-    factorizations stay exact); None without MUMPS. Collective."""
-    if not PETSc.Sys.hasExternalPackage("mumps"):
-        return None
-    ksp = PETSc.KSP().create(J.getComm())
-    ksp.setType(PETSc.KSP.Type.PREONLY)
-    pc = ksp.getPC()
-    pc.setType(PETSc.PC.Type.LU)
-    pc.setFactorSolverType("mumps")
-    ksp.setOperators(J, J)
-    pc.setFactorSetUpSolverType()
-    F = pc.getFactorMatrix()
-    F.setMumpsIcntl(24, 1)
-    F.setMumpsCntl(3, NULL_PIVOT)
-    ksp.setUp()
-    count = int(F.getMumpsInfog(28))
-    ksp.destroy()
-    return count

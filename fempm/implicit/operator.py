@@ -103,6 +103,12 @@ class IncrementOperator:
         r""":math:`\sum_p N_a(x_p)\, w_p` of per-particle ``values`` (n, k), summed over ranks."""
         return p2g(self.basis, values)
 
+    def support(self) -> npt.NDArray:
+        r"""How strongly the particles reach each dof, :math:`\sum_p M_p N_a(x_p)^2` (owned +
+        ghost dofs), summed over ranks: the consistent mass's diagonal, positive wherever a
+        particle sees the dof, whatever the sign of the basis (P2 Lagrange)."""
+        return p2g(self.basis, self.mass[:, None], values=self.basis.values**2)[:, 0]
+
     def mass_times(self, a: npt.NDArray, consistent: bool, lumped: npt.NDArray) -> npt.NDArray:
         r""":math:`M a` of nodal vectors ``a`` (owned + ghost dofs, d): the consistent mass
         :math:`\sum_p M_p N_a(x_p) \sum_b N_b(x_p) a_b`, else the ``lumped`` masses times ``a``."""

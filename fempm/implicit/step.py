@@ -5,8 +5,10 @@ A step of :math:`\Delta t` from the particles' state at :math:`t_n`:
 
 1. the basis at the particles, the lumped masses :math:`m_a = \sum_p M_p N_a(x_p)`, the dofs
    that hold: components held by the conditions (fixed, axis-aligned slip) and dofs that no
-   particle reaches; with Newmark's method the grid velocity and acceleration of the particles',
-   :math:`v_a = \sum_p M_p N_a v_p / m_a` (likewise :math:`a_a`);
+   particle reaches (:math:`\sum_p M_p N_a(x_p)^2 = 0`: the consistent mass's diagonal, which
+   unlike :math:`m_a` sees the vertices of P2 Lagrange simplices); with Newmark's method the
+   grid velocity and acceleration of the particles', :math:`v_a = \sum_p M_p N_a v_p / m_a`
+   (likewise :math:`a_a`), or with the consistent mass :math:`v = M^{-1} \sum_p M_p N v_p`;
 2. Newton's method (:class:`fempm.implicit.newton.Newton`, PETSc SNES, prefix
    ``fempm_implicit_``) on
 
@@ -47,6 +49,8 @@ from fempm.implicit.newton import Newton, null_pivots
 from fempm.implicit.operator import IncrementOperator
 from fempm.stepping.grid import BasisGrid
 from fempm.stepping.loads import external_forces
+from fempm.transfer.basis import is_nonnegative
+from fempm.transfer.grid_solves import negative_basis_message
 from fempm.transfer.mapping import SUPPORT_TOL
 
 if TYPE_CHECKING:
@@ -70,15 +74,19 @@ class ImplicitStep(BasisGrid):
         if solver.contact is not None:
             raise ValueError("the implicit step does not take contact between bodies (contact=...) yet")
         if not solver.conditions.zero_components:
-            raise ValueError("the implicit step takes fixed dofs and slip walls normal to a coordinate axis; other "
-                             "conditions (friction, prescribed velocities, inclined walls) need the explicit step")
+            raise ValueError(f"the implicit step takes fixed dofs and slip walls normal to a coordinate axis, not "
+                             f"{' or '.join(solver.conditions.other_kinds)}: take the explicit step")
         if opts.tangent == "analytic":
             for mat in solver.materials:
                 if not hasattr(mat, "tangent"):
                     raise TypeError(f"{type(mat).__name__} has no tangent(F, G, sigma, state), which the implicit step "
-                                    "needs: give the law one, or take StepOptions(tangent='finite-difference')")
+                                    "needs: give the law one, or take StepOptions(tangent='finite-difference') "
+                                    "(on the command line --tangent finite-difference)")
         self.integration = opts.integration
         self.consistent = opts.mass_model.matrix
+        if self.integration.inertia and not self.consistent and not is_nonnegative(solver.V.element.basix_element):
+            raise ValueError("Newmark's inertia: " + negative_basis_message(opts.mass_model.label,
+                                                                             solver.V.element.basix_element.degree))
         self.newton = Newton(solver.particles.comm)
         self.last = None  # the NewtonResult of the last accepted (sub)step
         self.last_failure = ""  # what the last failed Newton solve reported
@@ -92,6 +100,8 @@ class ImplicitStep(BasisGrid):
         if dt is None or not dt > 0.0:
             raise ValueError(f"the implicit step needs a time step dt > 0 (got {dt}): it is not bound by the CFL "
                              "condition, so there is no stable step to default to")
+        record = self.solver.record
+        record.load_work, record.load_impulse = 0.0, np.zeros(self.solver.particles.gdim)
         self._advance(self.solver.t, dt, 0)
         return dt
 
@@ -115,17 +125,14 @@ class ImplicitStep(BasisGrid):
         op = (FBarIncrementOperator if fbar else IncrementOperator)(
             basis, p, s.materials, finite_difference=self.options.tangent == "finite-difference")
         m = op.nodal(p.mass[:, None])[:, 0]
-        free = self._free(m, basis.num_dofs_local)
+        free = self._free(op.support(), basis.num_dofs_local)
         v, a = np.zeros_like(free, dtype=float), np.zeros_like(free, dtype=float)
         if integ.inertia:
             f = p.fields
             f.setdefault("a", np.zeros((len(p), d)))
-            mv = op.nodal(p.mass[:, None] * np.hstack([f["v"], f["a"]]))
-            safe = np.where(m > 0, m, 1.0)[:, None]
-            v, a = np.where(free, mv[:, :d] / safe, 0.0), np.where(free, mv[:, d:] / safe, 0.0)
-        fext = op.nodal(external_forces(s.loads, p, t + dt))
-        if not integ.inertia and self.options.load_ramp is not None:
-            fext *= min(1.0, (t + dt) / self.options.load_ramp)
+            va = self._grid_motion(basis, op, free, m)
+            v, a = np.where(free, va[:, :d], 0.0), np.where(free, va[:, d:], 0.0)
+        fext = self._loads(op, t + dt)
         c = integ.mass_factor(dt)
         imap = basis.index_map
         owned = imap.size_local
@@ -175,8 +182,30 @@ class ImplicitStep(BasisGrid):
             for obj in [x, local] + ([J, patches] if patches is not None else []):
                 obj.destroy()
         self.last = result
+        self._count_loads(op, t, dt, fext, du, owned)
         self._update(basis, op, du, v, a, dt)
         return True
+
+    def _loads(self, op: IncrementOperator, t: float) -> npt.NDArray:
+        """The nodal external forces at time ``t`` (owned + ghost dofs, d), quasi-static ones
+        scaled by the load ramp."""
+        s = self.solver
+        f = op.nodal(external_forces(s.loads, s.particles, t))
+        if not self.integration.inertia and self.options.load_ramp is not None:
+            f *= min(1.0, t / self.options.load_ramp)
+        return f
+
+    def _count_loads(self, op: IncrementOperator, t: float, dt: float, fext: npt.NDArray, du: npt.NDArray,
+                     owned: int) -> None:
+        r"""Add the loads' work :math:`\tfrac12 (f^n + f^{n+1}) \cdot \Delta u` and impulse
+        :math:`\tfrac12 \Delta t (F^n + F^{n+1})` over the accepted (sub)step ``[t, t + dt]`` to
+        the record (``fext``: the nodal loads at its end, ``du``: its increment; owned dofs,
+        summed over ranks)."""
+        record, comm = self.solver.record, self.solver.particles.comm
+        mean = 0.5 * (self._loads(op, t) + fext)[:owned]
+        sums = comm.allreduce(np.concatenate([[float(np.einsum("nd,nd->", mean, du[:owned]))], mean.sum(axis=0)]))
+        record.load_work += float(sums[0])
+        record.load_impulse = record.load_impulse + dt * sums[1:]
 
     def _solve(self, residual, jacobian, J: PETSc.Mat, x: PETSc.Vec, guess: npt.NDArray, scale: float):
         """Newton from ``guess`` with the line search of the options; where it fails, once more
@@ -228,16 +257,33 @@ class ImplicitStep(BasisGrid):
         J.setLGMap(*local.getLGMap())
         return J
 
-    def _free(self, m: npt.NDArray, num_local: int) -> npt.NDArray[np.bool_]:
+    def _grid_motion(self, basis, op: IncrementOperator, free: npt.NDArray[np.bool_], m: npt.NDArray) -> npt.NDArray:
+        r"""The grid velocity and acceleration of the particles' (owned + ghost dofs, 2d): the
+        projection of the momenta :math:`\sum_p M_p N_a [v_p, a_p]` with the step's mass, the
+        lumped :math:`m_a` or the consistent matrix (a basis with negative values, P2
+        Lagrange, needs the matrix: its lumped masses vanish at the vertices). Collective."""
+        p = self.solver.particles
+        f = p.fields
+        mv = op.nodal(p.mass[:, None] * np.hstack([f["v"], f["a"]]))
+        if not self.consistent:
+            return mv / np.where(m > 0, m, 1.0)[:, None]
+        solve = self.options.mass_model.grid_solve(basis, p.mass, p, "mass", False)
+        solve.set_up(free.any(axis=1), None, [], lambda: m, "fempm_implicit_mass_", None)
+        return basis.update_ghosts(solve.solve(mv, None, basis.update_ghosts))
+
+    def _free(self, support: npt.NDArray, num_local: int) -> npt.NDArray[np.bool_]:
         """(owned + ghost dofs, d): the components solved for: not held by a condition, on dofs
-        that particles reach (lumped mass above :data:`SUPPORT_TOL` of the largest)."""
+        that particles reach (``support``, :meth:`IncrementOperator.support`, above
+        :data:`SUPPORT_TOL` of the largest). Not the lumped mass: the vertex functions of P2
+        Lagrange on simplices integrate to zero, and their lumped masses vanish or turn negative
+        where particles plainly reach them."""
         s = self.solver
         d = s.particles.gdim
         free = np.ones((num_local, d), dtype=np.bool_)
         space = s.conditions.free(d)
         free[: len(space)] = space
-        largest = s.particles.comm.allreduce(float(m.max(initial=0.0)), op=MPI.MAX)
-        free &= (m > SUPPORT_TOL * largest)[:, None]
+        largest = s.particles.comm.allreduce(float(support.max(initial=0.0)), op=MPI.MAX)
+        free &= (support > SUPPORT_TOL * largest)[:, None]
         return free
 
     def _update(self, basis, op: IncrementOperator, du: npt.NDArray, v: npt.NDArray, a: npt.NDArray, dt: float) -> None:

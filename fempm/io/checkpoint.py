@@ -10,7 +10,9 @@ A checkpoint is the folder ``OUT/checkpoint/``:
   parameters, options and health limits, a digest of the mesh (:func:`mesh_digest`), the
   particle fields and their shapes, each rank file's size and SHA-256, how to rebuild the
   scene (the command line's scene and options), the solver's and the run-health monitor's
-  accumulated state, and the writer's frame count.
+  accumulated state, the scene watch's history (:class:`fempm.scene.Recorder`: a footing's
+  pressure curve, a silo's hopper mass), the writer's frame count, and the SHA-256 of all of
+  that (``digest``: a manifest edited by hand is damaged, like a rank file whose digest differs).
 
 It is written atomically and the one before is kept: every rank writes into
 ``checkpoint.tmp/``, rank 0 writes the manifest last, then swaps the folders
@@ -38,10 +40,8 @@ import dataclasses
 import hashlib
 import json
 import shutil
-import signal
 import sys
 import zipfile
-from contextlib import contextmanager
 from pathlib import Path
 
 import numpy as np
@@ -49,18 +49,20 @@ from mpi4py import MPI
 
 from fempm.meshes.geometry import coordinate_map
 from fempm.particles.particle_set import Particles
+from fempm.io.stops import RunInterrupted, requested, stop_requests  # noqa: F401 (fempm.io.checkpoint names them)
 from fempm.stepping.outside import Removed
 
 __all__ = ["FOLDER", "FORMAT", "CheckpointError", "RunInterrupted", "check_fields", "choose", "manifest",
-           "mesh_digest", "requested", "restore_particles", "restore_solver", "stop_requests", "write"]
+           "manifest_digest", "mesh_digest", "requested", "restore_particles", "restore_solver", "restore_watch",
+           "stop_requests", "write"]
 
-FORMAT = 2
+FORMAT = 3
 FOLDER = "checkpoint"
 #: the checkpoint before the newest, kept as a fallback
 PREVIOUS = FOLDER + ".prev"
 #: the manifest keys a checkpoint needs
 MANIFEST_KEYS = ("format", "ranks", "t", "step_count", "scene", "params", "options", "health", "mesh", "fields",
-                 "files", "particles", "solver", "monitor", "writer", "rebuild")
+                 "files", "particles", "solver", "monitor", "writer", "rebuild", "watch", "digest")
 
 
 class CheckpointError(RuntimeError):
@@ -90,8 +92,8 @@ def _scalar_state(obj, names) -> dict:
 
 
 #: the HealthMonitor attributes that accumulate over a run
-MONITOR_STATE = ("e0", "e_max", "momentum0", "work", "impulse", "_power", "_force", "first_dt", "_t_prev", "j_min",
-                 "j_max", "p_scale", "drift", "ratio", "total_mass")
+MONITOR_STATE = ("e0", "e_max", "momentum0", "work", "work_path", "impulse", "_power", "_force", "first_dt", "_t_prev",
+                 "j_min", "j_max", "p_scale", "drift", "ratio", "total_mass")
 
 
 def mesh_digest(mesh) -> str:
@@ -168,7 +170,10 @@ def write(out: Path, scene, solver, monitor, writer_state: dict, rebuild: dict |
                    "colliders": solver.collisions.state()},
         "monitor": _scalar_state(monitor, MONITOR_STATE),
         "writer": writer_state,
+        "watch": scene.watch.state_dict() if callable(getattr(scene.watch, "state_dict", None)) else None,
     }
+    manifest = _plain(manifest)
+    manifest["digest"] = manifest_digest(manifest)
     if comm.rank == 0:
         (tmp / "manifest.json").write_text(json.dumps(manifest, indent=1, default=_jsonable))
         if final.exists():
@@ -177,6 +182,12 @@ def write(out: Path, scene, solver, monitor, writer_state: dict, rebuild: dict |
         tmp.rename(final)
     comm.Barrier()
     return final
+
+
+def manifest_digest(data: dict) -> str:
+    """The SHA-256 of a manifest's entries but its ``digest`` (keys sorted, as JSON)."""
+    body = {k: v for k, v in data.items() if k != "digest"}
+    return hashlib.sha256(json.dumps(body, sort_keys=True).encode()).hexdigest()
 
 
 def _options(scene) -> dict:
@@ -204,6 +215,8 @@ def _problem(path: Path) -> tuple[dict | None, str | None]:
     missing = [k for k in MANIFEST_KEYS if k not in data]
     if missing:
         return None, f"{where} lacks the key(s) {', '.join(missing)}"
+    if data["digest"] != manifest_digest(data):
+        return None, f"{where} was changed after it was written (its SHA-256 differs from its digest)"
     for name, record in sorted(data["files"].items()):
         f = path / name
         if not f.is_file():
@@ -333,6 +346,26 @@ def check_fields(data: dict, particles, comm: MPI.Comm) -> None:
         raise CheckpointError(f"the checkpoint lacks the particle field(s) {', '.join(missing)} that this run needs")
 
 
+def restore_watch(watch, data: dict) -> None:
+    """Put the checkpoint's history of the scene's ``watch`` back (a watch without
+    ``load_state_dict`` keeps none).
+
+    Raises:
+        CheckpointError: A checkpoint without the state of a watch that keeps one, or with the
+            state of one where this scene's watch keeps none.
+    """
+    state = data["watch"]
+    loads = callable(getattr(watch, "load_state_dict", None))
+    if loads != (state is not None):
+        raise CheckpointError("the checkpoint holds " + ("no" if state is None else "a") + " scene watch state; this "
+                              "scene's watch " + ("keeps one" if loads else "keeps none"))
+    if loads:
+        try:
+            watch.load_state_dict(state)
+        except ValueError as e:
+            raise CheckpointError(str(e)) from None
+
+
 def restore_solver(solver, monitor, data: dict, solver_arrays: dict) -> None:
     """Put the checkpoint's solver and run-health state into a solver built on the restored
     particles (and its monitor)."""
@@ -352,40 +385,3 @@ def restore_solver(solver, monitor, data: dict, solver_arrays: dict) -> None:
     solver.restore_state({"since_sort": s["since_sort"], "ratio_age": s["ratio_age"]}, solver_arrays)
     for k, v in data["monitor"].items():
         setattr(monitor, k, np.asarray(v) if isinstance(v, list) else v)
-
-
-class RunInterrupted(Exception):
-    """A run stopped by SIGTERM or SIGINT at a step boundary, after writing its checkpoint."""
-
-    def __init__(self, signum: int, t: float, path: Path | None):
-        self.signum = signum
-        where = f"; checkpoint in {path}" if path is not None else ""
-        super().__init__(f"interrupted by {signal.Signals(signum).name} at t = {t:.6g}{where}")
-
-
-@contextmanager
-def stop_requests(comm: MPI.Comm):
-    """While active, SIGTERM and SIGINT only set a flag (returned as a one-item list, with the
-    signal number); :func:`requested` tells every rank at the step boundary. Outside the main
-    thread nothing is installed."""
-    flag = [0]
-
-    def handler(signum, frame):
-        flag[0] = signum
-
-    installed = {}
-    try:
-        for sig in (signal.SIGTERM, signal.SIGINT):
-            installed[sig] = signal.signal(sig, handler)
-    except ValueError:  # not the main thread
-        pass
-    try:
-        yield flag
-    finally:
-        for sig, previous in installed.items():
-            signal.signal(sig, previous)
-
-
-def requested(flag: list, comm: MPI.Comm) -> int:
-    """The signal any rank received (0: none); collective."""
-    return flag[0] if comm.size == 1 else comm.allreduce(flag[0], op=MPI.MAX)

@@ -290,7 +290,11 @@ class RunWriter:
 
     def _truncate(self) -> None:
         """Drop what the continued run wrote after its checkpoint: energies.csv rows, frames of
-        every series and PNG frames (rank 0)."""
+        every series and PNG frames, and the temporary files of writes a killed run left
+        unfinished (:func:`fempm.io.vtu.write_atomic`'s ``.NAME.PID.tmp``) (rank 0)."""
+        for tmp in self.folder.rglob(".*.tmp"):
+            if tmp.is_file():
+                tmp.unlink()
         energies = self.folder / "energies.csv"
         if energies.exists():
             lines = energies.read_bytes().split(b"\n")

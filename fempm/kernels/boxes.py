@@ -51,6 +51,23 @@ if AVAILABLE:
 
     from fempm.kernels.box_pieces import tetrahedron_piece, triangle_piece
 
+    @njit(inline="always")
+    def box_piece(c, d, blo, bhi, x0, K, lo, hi, acc, cen):  # pragma: no cover - compiled
+        """The volume of the part of box [lo, hi] in the axis-aligned box cell ``c``, its
+        centroid's reference coordinates into ``cen`` (``acc``: a work array)."""
+        vol = 1.0  # a box cell: the piece is a box
+        for e in range(d):
+            a = max(lo[e], blo[c, e])
+            b = min(hi[e], bhi[c, e])
+            vol *= max(b - a, 0.0)
+            acc[e] = 0.5 * (a + b)
+        for i in range(d):  # the centroid's reference coordinates
+            t = 0.0
+            for e in range(d):
+                t += K[c, i, e] * (acc[e] - x0[c, e])
+            cen[i] = t
+        return vol
+
 
 if AVAILABLE:
     @njit(inline="always")
@@ -140,27 +157,6 @@ def _kernel(d: int, simplex: bool):
     TRIANGLE = simplex and d == 2
     TETRAHEDRON = simplex and d == 3
 
-    @njit(inline="always")
-    def piece(x, p, ell, c, verts, blo, bhi, x0, K, lo, hi, P, acc, cen):  # pragma: no cover
-        """The volume of the part of box ``p`` in cell ``c``, its centroid's reference
-        coordinates into ``cen`` (``P``, ``acc``: work arrays)."""
-        if TRIANGLE:
-            return triangle_piece(x, p, ell, x0, K, c, P, cen)
-        if TETRAHEDRON:
-            return tetrahedron_piece(verts[c], x0, K, c, lo, hi, P, acc, cen)
-        vol = 1.0  # a box cell: the piece is a box
-        for e in range(d):
-            a = max(lo[e], blo[c, e])
-            b = min(hi[e], bhi[c, e])
-            vol *= max(b - a, 0.0)
-            acc[e] = 0.5 * (a + b)
-        for i in range(d):  # the centroid's reference coordinates
-            t = 0.0
-            for e in range(d):
-                t += K[c, i, e] * (acc[e] - x0[c, e])
-            cen[i] = t
-        return vol
-
     @njit(cache=True, error_model="numpy")
     def kernel(x, ell, cells, verts, blo, bhi, c2v, v_offsets, v_cells, num_cells, frontier, x0, K, guessed, sc, Y,
                w):  # pragma: no cover - compiled
@@ -184,7 +180,9 @@ def _kernel(d: int, simplex: bool):
             ng = _guesses(p, sc, w, num_cells, guess) if guessed else 0
             npiece, covered, ghost = 0, 0.0, False
             for r in range(ng):
-                vol = piece(x, p, ell, guess[r], verts, blo, bhi, x0, K, lo, hi, P, acc, cen)
+                vol = (triangle_piece(x, p, ell, x0, K, guess[r], P, cen) if TRIANGLE else
+                       tetrahedron_piece(verts[guess[r]], x0, K, guess[r], lo, hi, P, acc, cen) if TETRAHEDRON else
+                       box_piece(guess[r], d, blo, bhi, x0, K, lo, hi, acc, cen))
                 if vol > 0.0:
                     npiece = _record(npiece, guess[r], vol, cen, piece_cell, piece_vol, piece_cen)
                     covered += vol
@@ -195,7 +193,9 @@ def _kernel(d: int, simplex: bool):
                 while head < nvis:
                     c = visited[head]
                     head += 1
-                    vol = piece(x, p, ell, c, verts, blo, bhi, x0, K, lo, hi, P, acc, cen)
+                    vol = (triangle_piece(x, p, ell, x0, K, c, P, cen) if TRIANGLE else
+                       tetrahedron_piece(verts[c], x0, K, c, lo, hi, P, acc, cen) if TETRAHEDRON else
+                       box_piece(c, d, blo, bhi, x0, K, lo, hi, acc, cen))
                     if not vol > 0.0:
                         continue
                     npiece = _record(npiece, c, vol, cen, piece_cell, piece_vol, piece_cen)

@@ -34,6 +34,17 @@ if AVAILABLE:
     from fempm.kernels.shape import inside_after_pull_back, star_search
 
     @njit(inline="always")
+    def pull(y0, y1, x0, K, e, tol, simplex):  # pragma: no cover - compiled
+        """(inside, X0, X1): :func:`fempm.kernels.shape.inside_after_pull_back` in the affine
+        triangle (``simplex``) or parallelogram ``e``."""
+        d0, d1 = y0 - x0[e, 0], y1 - x0[e, 1]
+        X0 = K[e, 0, 0] * d0 + K[e, 0, 1] * d1
+        X1 = K[e, 1, 0] * d0 + K[e, 1, 1] * d1
+        if simplex:
+            return X0 >= -tol and X1 >= -tol and X0 + X1 <= 1.0 + tol, X0, X1
+        return X0 >= -tol and X1 >= -tol and X0 <= 1.0 + tol and X1 <= 1.0 + tol, X0, X1
+
+    @njit(inline="always")
     def corner_frame(F, lp, p, d, R, Ri):  # pragma: no cover - compiled
         r"""``R`` <- :math:`F_p \operatorname{diag}(\ell_p)`, ``Ri`` <- :math:`R^{-1}` (the
         gradient weight of corner :math:`s` is :math:`Q^{-1} \sum_j R^{-1}_{ji} s_j`)."""
@@ -127,16 +138,6 @@ def _planar_locate_kernel(simplex: bool):
     scalars (the same arithmetic): a corner and its pull-back never go through scratch arrays
     the compiler must take as aliasing the outputs."""
 
-    @njit(inline="always")
-    def pull(y0, y1, x0, K, e, tol):  # pragma: no cover - compiled
-        """(inside, X0, X1): :func:`fempm.kernels.shape.inside_after_pull_back` in cell ``e``."""
-        d0, d1 = y0 - x0[e, 0], y1 - x0[e, 1]
-        X0 = K[e, 0, 0] * d0 + K[e, 0, 1] * d1
-        X1 = K[e, 1, 0] * d0 + K[e, 1, 1] * d1
-        if simplex:
-            return X0 >= -tol and X1 >= -tol and X0 + X1 <= 1.0 + tol, X0, X1
-        return X0 >= -tol and X1 >= -tol and X0 <= 1.0 + tol and X1 <= 1.0 + tol, X0, X1
-
     @njit(cache=True, error_model="numpy")
     def locate(x, F, lp, signs, cells, x0, K, c2v, v_offsets, v_cells, num_cells, tol, guess, sc,
                Y):  # pragma: no cover - compiled
@@ -155,10 +156,10 @@ def _planar_locate_kernel(simplex: bool):
                 e = guess[p, q] if guessed else -1
                 found, X0, X1 = False, 0.0, 0.0
                 if e >= 0 and e != c:
-                    found, X0, X1 = pull(y0, y1, x0, K, e, tol)
+                    found, X0, X1 = pull(y0, y1, x0, K, e, tol, simplex)
                 if not found:
                     e = c
-                    found, X0, X1 = pull(y0, y1, x0, K, c, tol)
+                    found, X0, X1 = pull(y0, y1, x0, K, c, tol, simplex)
                 if not found:
                     y[0, 0], y[0, 1] = y0, y1
                     e = star_search(y, 0, x0, K, c, c2v, v_offsets, v_cells, num_cells, simplex, 2, tol, X, True)

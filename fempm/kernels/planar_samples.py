@@ -50,6 +50,103 @@ if AVAILABLE:
         s0, s1 = signs[q, 0], signs[q, 1]
         return share * (r00 * s0 + r10 * s1), share * (r01 * s0 + r11 * s1)
 
+    @njit(inline="always")
+    def add_momentum(p, sc, Y, w, cell_dofs, m0, m1, mom, simplex, grad_from_values,
+                     corners):  # pragma: no cover - compiled
+        r"""MUSL's re-map of particle ``p``'s blended momentum ``(m0, m1)`` over its samples,
+        :math:`m_i \mathrel{+}= \sum_q w_{pq} N_i(y_{pq}) M_p v_p` (inlined into the G2P pass)."""
+        QUAD = not simplex
+        Q = sc.shape[1]
+        for q in range(Q):
+            wq = 1.0 / Q if corners else w[p, q]
+            if grad_from_values and wq == 0.0:
+                continue
+            r = p * Q + q
+            cq = sc[p, q]
+            N0, N1, N2, N3 = basis(Y[r, 0], Y[r, 1], 0.0, 0.0, 0.0, 0.0, simplex)[:4]
+            i0, i1, i2 = cell_dofs[cq, 0], cell_dofs[cq, 1], cell_dofs[cq, 2]
+            i3 = cell_dofs[cq, 3] if QUAD else i0
+            add_pair(mom, 0, i0, i1, i2, i3, N0, N1, N2, N3, wq * m0, wq * m1, QUAD)
+
+    @njit(inline="always")
+    def sample(p, q, Q, sc, Y, w, cell_dofs, simplex, corners):  # pragma: no cover - compiled
+        """Sample ``q`` of particle ``p``: its weight (0: none), basis values and cell's dofs."""
+        wq = 1.0 / Q if corners else w[p, q]
+        r, cq = p * Q + q, sc[p, q]
+        N0, N1, N2, N3 = basis(Y[r, 0], Y[r, 1], 0.0, 0.0, 0.0, 0.0, simplex)[:4]
+        i0, i1, i2 = cell_dofs[cq, 0], cell_dofs[cq, 1], cell_dofs[cq, 2]
+        return wq, N0, N1, N2, N3, i0, i1, i2, cell_dofs[cq, 3] if not simplex else i0
+
+    @njit(inline="always")
+    def gather(p, sc, Y, w, gw, Fw, lp, signs, K, cell_dofs, v_new, v_old, at, simplex, affine, grad_from_values,
+               corners, blend, kinematics, track):  # pragma: no cover - compiled
+        """Particle ``p``'s grid velocity, FLIP increment and velocity gradient summed over its
+        samples, (vg0, vg1, dv0, dv1, L00, L01, L10, L11) (inlined into the G2P pass, where the
+        flags are the pass's constants); with ``track`` the grid velocity at each sample into
+        ``at[p, q]``."""
+        QUAD = not simplex
+        Q = sc.shape[1]
+        share = 1.0 / Q
+        vg0, vg1, dv0, dv1 = 0.0, 0.0, 0.0, 0.0
+        L00, L01, L10, L11 = 0.0, 0.0, 0.0, 0.0
+        if corners:  # of F before this pass updates it
+            r00, r01, r10, r11 = corner_inverse(Fw, lp, p)
+        for q in range(Q):
+            wq = share if corners else w[p, q]
+            if grad_from_values and wq == 0.0:
+                continue
+            r = p * Q + q
+            cq = sc[p, q]
+            X0, X1 = Y[r, 0], Y[r, 1]
+            k00, k01, k10, k11 = inverse_jacobian(X0, X1, K, cq, affine)
+            N0, N1, N2, N3, g0x, g0y, g1x, g1y, g2x, g2y, g3x, g3y = basis(X0, X1, k00, k01, k10, k11, simplex)
+            i0, i1, i2 = cell_dofs[cq, 0], cell_dofs[cq, 1], cell_dofs[cq, 2]
+            i3 = cell_dofs[cq, 3] if QUAD else i0
+            a0, b0, a1, b1 = v_new[i0, 0], v_new[i0, 1], v_new[i1, 0], v_new[i1, 1]
+            a2, b2 = v_new[i2, 0], v_new[i2, 1]
+            u0 = N0 * a0 + N1 * a1 + N2 * a2
+            u1 = N0 * b0 + N1 * b1 + N2 * b2
+            if QUAD:
+                a3, b3 = v_new[i3, 0], v_new[i3, 1]
+                u0 += N3 * a3
+                u1 += N3 * b3
+            vg0 += wq * u0
+            vg1 += wq * u1
+            if track:
+                at[p, q, 0], at[p, q, 1] = u0, u1
+            if blend:
+                e0 = N0 * (a0 - v_old[i0, 0]) + N1 * (a1 - v_old[i1, 0]) + N2 * (a2 - v_old[i2, 0])
+                e1 = N0 * (b0 - v_old[i0, 1]) + N1 * (b1 - v_old[i1, 1]) + N2 * (b2 - v_old[i2, 1])
+                if QUAD:
+                    e0 += N3 * (a3 - v_old[i3, 0])
+                    e1 += N3 * (b3 - v_old[i3, 1])
+                dv0 += wq * e0
+                dv1 += wq * e1
+            if kinematics and grad_from_values:
+                l00 = a0 * g0x + a1 * g1x + a2 * g2x
+                l01 = a0 * g0y + a1 * g1y + a2 * g2y
+                l10 = b0 * g0x + b1 * g1x + b2 * g2x
+                l11 = b0 * g0y + b1 * g1y + b2 * g2y
+                if QUAD:
+                    l00 += a3 * g3x
+                    l01 += a3 * g3y
+                    l10 += b3 * g3x
+                    l11 += b3 * g3y
+                L00 += wq * l00
+                L01 += wq * l01
+                L10 += wq * l10
+                L11 += wq * l11
+            elif kinematics:  # v(y_q) (x) g_q
+                if corners:
+                    t0, t1 = corner_weight(r00, r01, r10, r11, signs, q, share)
+                else:
+                    t0, t1 = gw[p, q, 0], gw[p, q, 1]
+                L00 += u0 * t0
+                L01 += u0 * t1
+                L10 += u1 * t0
+                L11 += u1 * t1
+        return vg0, vg1, dv0, dv1, L00, L01, L10, L11
+
 
 @functools.cache
 def scatter_kernel(simplex: bool, affine: bool, grad_from_values: bool, corners: bool, with_mass: bool,
@@ -135,9 +232,6 @@ def g2p_kernel(simplex: bool, affine: bool, grad_from_values: bool, corners: boo
     :func:`fempm.kernels.samples.locate_samples`, over the first ``sample_cells`` cells; -1
     where the search fails), and counts the twisted domains in ``bad[0]`` and the corners not
     found in ``bad[1]``."""
-    add_momentum = _momentum_kernel(simplex, grad_from_values, corners)
-    gather = _gather_kernel(simplex, affine, grad_from_values, corners, blend, kinematics, track)
-
     @njit(cache=True, error_model="numpy")
     def g2p_update(cells, sc, Y, w, gw, Fw, lp, signs, K, cell_dofs, v_new, v_old, flip, dt, by_particle, X, x, v,
                    F, volume0, volume, sigma, body, law, lam, mu, L, x0, tol, left, c2v, v_offsets, v_cells, num_cells,
@@ -149,12 +243,14 @@ def g2p_kernel(simplex: bool, affine: bool, grad_from_values: bool, corners: boo
         acc = np.zeros(5)  # the state's sums (totals)
         for p in range(n):
             vg0, vg1, dv0, dv1, L00, L01, L10, L11 = gather(p, sc, Y, w, gw, Fw, lp, signs, K, cell_dofs, v_new, v_old,
-                                                            moved)
+                                                            moved, simplex, affine, grad_from_values, corners, blend,
+                                                            kinematics, track)
             if blend:
                 v[p, 0] = flip * (v[p, 0] + dv0) + (1.0 - flip) * vg0
                 v[p, 1] = flip * (v[p, 1] + dv1) + (1.0 - flip) * vg1
             if remap:  # MUSL: the blended momenta back to the grid
-                add_momentum(p, sc, Y, w, cell_dofs, mass[p] * v[p, 0], mass[p] * v[p, 1], mom)
+                add_momentum(p, sc, Y, w, cell_dofs, mass[p] * v[p, 0], mass[p] * v[p, 1], mom, simplex,
+                             grad_from_values, corners)
             if kinematics:
                 n00, n01, n10, n11, J = deform(F, p, dt, L00, L01, L10, L11)
                 if keep_L:
@@ -208,102 +304,8 @@ def g2p_kernel(simplex: bool, affine: bool, grad_from_values: bool, corners: boo
     return g2p_update
 
 
-@functools.cache
-def _momentum_kernel(simplex: bool, grad_from_values: bool, corners: bool):
-    r"""MUSL's re-map of particle ``p``'s blended momentum ``(m0, m1)`` over its samples,
-    :math:`m_i \mathrel{+}= \sum_q w_{pq} N_i(y_{pq}) M_p v_p` (inlined into the G2P pass)."""
-    QUAD = not simplex
-
-    @njit(inline="always")
-    def add_momentum(p, sc, Y, w, cell_dofs, m0, m1, mom):  # pragma: no cover - compiled
-        Q = sc.shape[1]
-        for q in range(Q):
-            wq = 1.0 / Q if corners else w[p, q]
-            if grad_from_values and wq == 0.0:
-                continue
-            r = p * Q + q
-            cq = sc[p, q]
-            N0, N1, N2, N3 = basis(Y[r, 0], Y[r, 1], 0.0, 0.0, 0.0, 0.0, simplex)[:4]
-            i0, i1, i2 = cell_dofs[cq, 0], cell_dofs[cq, 1], cell_dofs[cq, 2]
-            i3 = cell_dofs[cq, 3] if QUAD else i0
-            add_pair(mom, 0, i0, i1, i2, i3, N0, N1, N2, N3, wq * m0, wq * m1, QUAD)
-
-    return add_momentum
 
 
-@functools.cache
-def _gather_kernel(simplex: bool, affine: bool, grad_from_values: bool, corners: bool, blend: bool, kinematics: bool,
-                   track: bool):
-    """Particle ``p``'s grid velocity, FLIP increment and velocity gradient summed over its
-    samples, (vg0, vg1, dv0, dv1, L00, L01, L10, L11) (inlined into the G2P pass); with
-    ``track`` the grid velocity at each sample into ``at[p, q]``."""
-    QUAD = not simplex
-
-    @njit(inline="always")
-    def gather(p, sc, Y, w, gw, Fw, lp, signs, K, cell_dofs, v_new, v_old, at):  # pragma: no cover - compiled
-        Q = sc.shape[1]
-        share = 1.0 / Q
-        vg0, vg1, dv0, dv1 = 0.0, 0.0, 0.0, 0.0
-        L00, L01, L10, L11 = 0.0, 0.0, 0.0, 0.0
-        if corners:  # of F before this pass updates it
-            r00, r01, r10, r11 = corner_inverse(Fw, lp, p)
-        for q in range(Q):
-            wq = share if corners else w[p, q]
-            if grad_from_values and wq == 0.0:
-                continue
-            r = p * Q + q
-            cq = sc[p, q]
-            X0, X1 = Y[r, 0], Y[r, 1]
-            k00, k01, k10, k11 = inverse_jacobian(X0, X1, K, cq, affine)
-            N0, N1, N2, N3, g0x, g0y, g1x, g1y, g2x, g2y, g3x, g3y = basis(X0, X1, k00, k01, k10, k11, simplex)
-            i0, i1, i2 = cell_dofs[cq, 0], cell_dofs[cq, 1], cell_dofs[cq, 2]
-            i3 = cell_dofs[cq, 3] if QUAD else i0
-            a0, b0, a1, b1 = v_new[i0, 0], v_new[i0, 1], v_new[i1, 0], v_new[i1, 1]
-            a2, b2 = v_new[i2, 0], v_new[i2, 1]
-            u0 = N0 * a0 + N1 * a1 + N2 * a2
-            u1 = N0 * b0 + N1 * b1 + N2 * b2
-            if QUAD:
-                a3, b3 = v_new[i3, 0], v_new[i3, 1]
-                u0 += N3 * a3
-                u1 += N3 * b3
-            vg0 += wq * u0
-            vg1 += wq * u1
-            if track:
-                at[p, q, 0], at[p, q, 1] = u0, u1
-            if blend:
-                e0 = N0 * (a0 - v_old[i0, 0]) + N1 * (a1 - v_old[i1, 0]) + N2 * (a2 - v_old[i2, 0])
-                e1 = N0 * (b0 - v_old[i0, 1]) + N1 * (b1 - v_old[i1, 1]) + N2 * (b2 - v_old[i2, 1])
-                if QUAD:
-                    e0 += N3 * (a3 - v_old[i3, 0])
-                    e1 += N3 * (b3 - v_old[i3, 1])
-                dv0 += wq * e0
-                dv1 += wq * e1
-            if kinematics and grad_from_values:
-                l00 = a0 * g0x + a1 * g1x + a2 * g2x
-                l01 = a0 * g0y + a1 * g1y + a2 * g2y
-                l10 = b0 * g0x + b1 * g1x + b2 * g2x
-                l11 = b0 * g0y + b1 * g1y + b2 * g2y
-                if QUAD:
-                    l00 += a3 * g3x
-                    l01 += a3 * g3y
-                    l10 += b3 * g3x
-                    l11 += b3 * g3y
-                L00 += wq * l00
-                L01 += wq * l01
-                L10 += wq * l10
-                L11 += wq * l11
-            elif kinematics:  # v(y_q) (x) g_q
-                if corners:
-                    t0, t1 = corner_weight(r00, r01, r10, r11, signs, q, share)
-                else:
-                    t0, t1 = gw[p, q, 0], gw[p, q, 1]
-                L00 += u0 * t0
-                L01 += u0 * t1
-                L10 += u1 * t0
-                L11 += u1 * t1
-        return vg0, vg1, dv0, dv1, L00, L01, L10, L11
-
-    return gather
 
 
 @functools.cache
@@ -314,15 +316,6 @@ def mass_apply_kernel(simplex: bool, grad_from_values: bool, corners: bool):
     of ``y`` at a time (an even number), the values alone."""
     QUAD = not simplex
 
-    @njit(inline="always")
-    def sample(p, q, Q, sc, Y, w, cell_dofs):  # pragma: no cover - compiled
-        """Sample ``q`` of particle ``p``: its weight (0: none), basis values and cell's dofs."""
-        wq = 1.0 / Q if corners else w[p, q]
-        r, cq = p * Q + q, sc[p, q]
-        N0, N1, N2, N3 = basis(Y[r, 0], Y[r, 1], 0.0, 0.0, 0.0, 0.0, simplex)[:4]
-        i0, i1, i2 = cell_dofs[cq, 0], cell_dofs[cq, 1], cell_dofs[cq, 2]
-        return wq, N0, N1, N2, N3, i0, i1, i2, cell_dofs[cq, 3] if QUAD else i0
-
     @njit(cache=True, error_model="numpy")
     def mass_apply(cells, sc, Y, w, gw, Fw, lp, signs, K, cell_dofs, mass, y, lump, out):  # pragma: no cover
         Q = sc.shape[1]
@@ -332,7 +325,7 @@ def mass_apply_kernel(simplex: bool, grad_from_values: bool, corners: bool):
         for p in range(len(cells)):
             u[:] = 0.0
             for q in range(Q):
-                wq, N0, N1, N2, N3, i0, i1, i2, i3 = sample(p, q, Q, sc, Y, w, cell_dofs)
+                wq, N0, N1, N2, N3, i0, i1, i2, i3 = sample(p, q, Q, sc, Y, w, cell_dofs, simplex, corners)
                 if grad_from_values and wq == 0.0:
                     continue
                 e0, e1, e2, e3 = wq * N0, wq * N1, wq * N2, wq * N3
@@ -344,7 +337,7 @@ def mass_apply_kernel(simplex: bool, grad_from_values: bool, corners: bool):
                     u[j] += t + e3 * y[i3, j] if QUAD else t
             m = mass[p]
             for q in range(Q):
-                wq, N0, N1, N2, N3, i0, i1, i2, i3 = sample(p, q, Q, sc, Y, w, cell_dofs)
+                wq, N0, N1, N2, N3, i0, i1, i2, i3 = sample(p, q, Q, sc, Y, w, cell_dofs, simplex, corners)
                 if grad_from_values and wq == 0.0:
                     continue
                 s = wq * m

@@ -1,8 +1,9 @@
 r"""Facets of a mesh: their area vectors and what lies on either side of them.
 
 A facet's area vector is its measure times its unit normal, :math:`\mathbf a_f = |f|\,\mathbf
-n_f` (a straight edge in 2D; a triangle, or a quadrilateral as half the cross product of its
-diagonals, in 3D: exact for planar facets), pointing out of a chosen cell beside it.
+n_f` (a point of measure 1 in 1D; a straight edge in 2D; a triangle, or a quadrilateral as half
+the cross product of its diagonals, in 3D: exact for planar facets), pointing out of a chosen
+cell beside it.
 """
 
 from __future__ import annotations
@@ -28,7 +29,9 @@ def facet_area_vectors(mesh: dolfinx.mesh.Mesh, facets: npt.NDArray[np.int32],
     x = mesh.geometry.x[:, :gdim]
     nodes = dolfinx.mesh.entities_to_geometry(mesh, fdim, facets)
     p = x[nodes]  # (nf, nodes, gdim); the vertices first
-    if gdim == 2:
+    if gdim == 1:  # a point facet of an interval mesh: measure 1, the sign set below
+        a = np.ones((len(facets), 1))
+    elif gdim == 2:
         t = p[:, 1] - p[:, 0]
         a = np.stack([t[:, 1], -t[:, 0]], axis=1)
     elif nodes.shape[1] in (4, 9):  # a quadrilateral facet (vertices 0 1 3 2 round it)

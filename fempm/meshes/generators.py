@@ -43,8 +43,9 @@ def read_msh(path: str | Path, comm: MPI.Comm = MPI.COMM_WORLD, gdim: int | None
     """Read a gmsh ``.msh`` file; returns DOLFINx ``MeshData`` (mesh, cell_tags, facet_tags, ...).
 
     ``gdim`` defaults to the dimension of the highest-dimensional cells. Rank 0 reads the file;
-    a missing, empty, corrupt or non-mesh file is a :class:`MeshFileError` on every rank that
-    names the file (and what gmsh said), not gmsh's words alone. Collective.
+    a missing, empty, corrupt or non-mesh file, or one without a physical group of its cells,
+    is a :class:`MeshFileError` on every rank that names the file (and what gmsh said), not
+    gmsh's or DOLFINx's words alone. Collective.
     """
     path = Path(path)
     gmsh = _gmsh()
@@ -59,6 +60,9 @@ def read_msh(path: str | Path, comm: MPI.Comm = MPI.COMM_WORLD, gdim: int | None
                 dim = gmsh.model.getDimension()
                 if dim < 1 or not len(gmsh.model.mesh.getElements(dim)[0]):
                     error = f"{str(path)!r} is not a readable gmsh mesh: it holds no cells"
+                elif not gmsh.model.getPhysicalGroups(dim):
+                    error = (f"{str(path)!r} has no physical group of its {dim}-dimensional cells: DOLFINx reads the "
+                             "cells of physical groups only (mark them in gmsh: Physical Surface or Physical Volume)")
             except Exception as e:  # noqa: BLE001 - gmsh raises plain Exceptions with its own words
                 error = f"{str(path)!r} is not a readable gmsh mesh (gmsh: {str(e).strip() or type(e).__name__})"
             if error is not None:

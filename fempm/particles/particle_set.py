@@ -16,6 +16,7 @@ import numpy as np
 import numpy.typing as npt
 from mpi4py import MPI
 
+from fempm.abort import raise_together
 from fempm.particles.location import CellLocator, OutsideMeshError, outside_message
 from fempm.particles.migration import distribute, migrate, with_room
 
@@ -35,6 +36,28 @@ def _check_positive(name: str, a: npt.NDArray, comm: MPI.Comm) -> None:
             f"{nbad} particle(s) have non-positive or non-finite {name} "
             f"(e.g. {name}[{bad[0] if len(bad) else '...'}] = {a[bad[0]] if len(bad) else '...'})"
         )
+
+
+def _arrays(x, mass, volume, ids, fields, gdim: int):
+    """(x, mass, volume) of one rank's arguments as arrays, their shapes checked (this rank's)."""
+    x = np.asarray(x, dtype=np.float64).reshape(-1, np.shape(x)[-1] if np.ndim(x) > 1 else 1)
+    if x.shape[1] < gdim or np.any(x[:, gdim:] != 0):
+        raise ValueError(f"positions must have {gdim} coordinates (extra columns must be 0)")
+    x = np.ascontiguousarray(x[:, :gdim])
+    n = len(x)
+    for name, a in (("mass", mass), ("volume", volume)):
+        if np.ndim(a) > 1 or (np.ndim(a) == 1 and np.size(a) != n):
+            raise ValueError(f"{name} has shape {np.shape(a)} for {n} particles: give one value or one per particle")
+    if ids is not None:
+        ids = np.asarray(ids).reshape(-1)
+        if len(ids) != n or not np.issubdtype(ids.dtype, np.integer):
+            raise ValueError(f"ids must be {n} integers, one per particle (got {len(ids)} of type {ids.dtype})")
+    for k, v in (fields or {}).items():
+        if len(np.asarray(v)) != n:
+            raise ValueError(f"field {k!r} has {len(np.asarray(v))} rows for {n} particles")
+    mass = np.broadcast_to(np.asarray(mass, dtype=np.float64), (n,)).copy()
+    volume = np.broadcast_to(np.asarray(volume, dtype=np.float64), (n,)).copy()
+    return x, mass, volume
 
 
 class Particles:
@@ -78,17 +101,14 @@ class Particles:
         self.mesh = mesh
         self.locator = locator if locator is not None else CellLocator(mesh)
         gdim = mesh.geometry.dim
-        x = np.asarray(x, dtype=np.float64).reshape(-1, np.shape(x)[-1] if np.ndim(x) > 1 else 1)
-        if x.shape[1] < gdim or np.any(x[:, gdim:] != 0):
-            raise ValueError(f"positions must have {gdim} coordinates (extra columns must be 0)")
-        x = np.ascontiguousarray(x[:, :gdim])
-        n = len(x)
-        for name, a in (("mass", mass), ("volume", volume)):
-            if np.ndim(a) > 1 or (np.ndim(a) == 1 and np.size(a) != n):
-                raise ValueError(f"{name} has shape {np.shape(a)} for {n} particles: give one value or one per particle")
-        mass = np.broadcast_to(np.asarray(mass, dtype=np.float64), (n,)).copy()
-        volume = np.broadcast_to(np.asarray(volume, dtype=np.float64), (n,)).copy()
         comm = mesh.comm
+        error = None
+        try:  # the shapes each rank was given: an error on one rank is raised on every rank
+            x, mass, volume = _arrays(x, mass, volume, ids, fields, gdim)
+        except (ValueError, TypeError) as e:
+            error = e
+        raise_together(comm, error)
+        n = len(x)
         nonfinite = comm.allreduce(int(np.count_nonzero(~np.isfinite(x).all(axis=1))))
         if nonfinite:
             raise ValueError(f"{nonfinite} particle position(s) are not finite")
@@ -99,18 +119,13 @@ class Particles:
             ids = np.arange(ids, ids + n, dtype=np.int64)
         else:
             ids = np.asarray(ids).reshape(-1)
-            if len(ids) != n or not np.issubdtype(ids.dtype, np.integer):
-                raise ValueError(f"ids must be {n} integers, one per particle (got {len(ids)} of type {ids.dtype})")
             every = np.concatenate(comm.allgather(ids))  # once, at construction
             values, counts = np.unique(every, return_counts=True)
             if np.any(counts > 1):
                 raise ValueError(f"particle ids must be unique over all ranks; repeated: {values[counts > 1][:5].tolist()}")
         data = {"mass": mass, "volume": volume, "ids": np.asarray(ids, dtype=np.int64)}
         for k, v in (fields or {}).items():
-            v = np.asarray(v)
-            if len(v) != n:
-                raise ValueError(f"field {k!r} has {len(v)} rows for {n} particles")
-            data["field:" + k] = v
+            data["field:" + k] = np.asarray(v)
         self._assign(distribute(self.locator, x, data), outside)
         if locator is None:  # runs relocate to neighbouring cells: the tree comes back if a search needs it
             self.locator.release_tree()

@@ -12,11 +12,13 @@ from fempm.scene.definition import (
     emptiest_cell,
 )
 from fempm.scene.loop import RUN_STATS, outcome_of, run, run_stats, write_frame
+from fempm.scene.recorder import Recorder
 
 __all__ = [
     "MAX_STEPS",
     "OUTPUTS",
     "RUN_STATS",
+    "Recorder",
     "Scene",
     "VARIANTS",
     "check_counts",

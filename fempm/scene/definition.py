@@ -3,6 +3,8 @@ transfer options, outputs), checked as it is made."""
 
 from __future__ import annotations
 
+import functools
+import inspect
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 
@@ -22,7 +24,7 @@ from fempm.stepping.outside import outside_policy
 from fempm.stepping.solver import ExplicitSolver
 
 __all__ = [
-    "MAX_STEPS", "OUTPUTS", "VARIANTS", "Scene", "check_counts", "check_finite", "dofs_per_cell",
+    "MAX_STEPS", "OUTPUTS", "VARIANTS", "Scene", "check_counts", "check_finite", "checked", "dofs_per_cell",
     "emptiest_cell",
 ]
 
@@ -42,6 +44,34 @@ def check_finite(**values: float) -> None:
         if isinstance(value, bool) or not isinstance(value, (int, float, np.integer, np.floating)) \
                 or not np.isfinite(value):
             raise ValueError(f"{name}={value!r} must be a finite number")
+
+
+def checked(positive: tuple[str, ...] = (), non_negative: tuple[str, ...] = ()):
+    """A scene builder whose numeric parameters ``positive`` must be finite and > 0 (lengths,
+    moduli, densities, times: a zero width divides by zero, a negative height is a mesh dolfinx
+    refuses in its own words) and ``non_negative`` finite and >= 0 (friction coefficients,
+    viscosities): a ValueError naming the first that is not, before anything is built. None
+    (a parameter's "default from the others") passes."""
+    def wrap(builder):
+        signature = inspect.signature(builder)
+
+        @functools.wraps(builder)
+        def build(*args, **kwargs):
+            bound = signature.bind(*args, **kwargs)
+            bound.apply_defaults()
+            for names, ok, what in ((positive, lambda v: v > 0, "> 0"), (non_negative, lambda v: v >= 0, ">= 0")):
+                for name in names:
+                    value = bound.arguments[name]
+                    if value is None:
+                        continue
+                    check_finite(**{name: value})
+                    if not ok(value):
+                        raise ValueError(f"{name}={value!r} must be {what}")
+            return builder(*args, **kwargs)
+
+        return build
+
+    return wrap
 
 
 def dofs_per_cell(cell_name: str, degree: int) -> int:

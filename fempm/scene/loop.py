@@ -13,7 +13,7 @@ from mpi4py import MPI
 from tqdm import tqdm
 
 from fempm.abort import FailureAgreement, abort
-from fempm.io import checkpoint
+from fempm.io import checkpoint, stops
 from fempm.io.writers import OUTPUT_LIMIT, RunWriter, check_output_size, write_json
 from fempm.particles.location import OutsideMeshError
 from fempm.scene.definition import MAX_STEPS, Scene
@@ -58,7 +58,7 @@ def outcome_of(error: BaseException) -> str:
 
     if isinstance(error, (SimulationError, SingularMassError, OutsideMeshError)):
         return ABORTED
-    if isinstance(error, (checkpoint.RunInterrupted, KeyboardInterrupt)):
+    if isinstance(error, (stops.RunInterrupted, KeyboardInterrupt)):
         return INTERRUPTED
     return FAILED
 
@@ -114,7 +114,7 @@ def run(
 
     Raises:
         fempm.SimulationError: A health limit or a failed step (after the summary is written).
-        fempm.io.checkpoint.RunInterrupted: SIGTERM or SIGINT (after the checkpoint).
+        fempm.io.stops.RunInterrupted: SIGTERM or SIGINT (after the checkpoint).
         fempm.io.checkpoint.CheckpointError: ``resume`` with a damaged checkpoint or a scene
             that differs from the checkpoint's, naming the difference.
         fempm.io.OutputSizeError: Frames larger than ``output_limit``, before anything is
@@ -164,6 +164,7 @@ class Run:
         self.frames = Frames(scene.t_end / max(scene.frames, 1))
         if saved is not None:
             checkpoint.restore_solver(solver, self.monitor, saved, arrays)
+            checkpoint.restore_watch(scene.watch, saved)
             self.history[0] = saved["writer"]["initial"]
             self.frames = Frames(saved["writer"]["frame_interval"], saved["writer"]["next_frame"])
             if solver.t >= scene.t_end:
@@ -232,7 +233,7 @@ class Run:
                    unit="", bar_format="{l_bar}{bar}| t = {n:.4g} / {total:g} [{elapsed}<{remaining}{postfix}]",
                    leave=False)
         try:
-            with bar, checkpoint.stop_requests(comm) if self.out is not None else contextlib.nullcontext([0]) as stop:
+            with bar, stops.stop_requests(comm) if self.out is not None else contextlib.nullcontext([0]) as stop:
                 self.loop(self.observers(bar, stop, callback))
             self.monitor.outcome = "completed"
         except (Exception, KeyboardInterrupt) as e:

@@ -8,7 +8,7 @@ from __future__ import annotations
 from collections.abc import Callable
 from typing import TYPE_CHECKING
 
-from fempm.io import checkpoint
+from fempm.io import stops
 
 if TYPE_CHECKING:
     from fempm.scene.loop import Run
@@ -76,8 +76,8 @@ class Checkpoints(Observer):
         step = run.solver.step_count
         if (self.every is not None and step % self.every == 0) or (self.at_end and final):
             run.save()
-        if run.out is not None and (signum := checkpoint.requested(self.stop, run.comm)):
-            raise checkpoint.RunInterrupted(signum, run.solver.t, run.save())
+        if run.out is not None and (signum := stops.requested(self.stop, run.comm)):
+            raise stops.RunInterrupted(signum, run.solver.t, run.save())
 
 
 class Progress(Observer):

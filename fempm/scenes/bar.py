@@ -9,12 +9,13 @@ from mpi4py import MPI
 from fempm.boundary.walls import fixed
 from fempm.materials.linear_elastic import LinearElastic
 from fempm.particles.seeding import create_particles, per_direction
-from fempm.scene.definition import Scene, check_counts
+from fempm.scene.definition import Scene, check_counts, checked
 from fempm.stepping.options import StepOptions
 
 __all__ = ["vibrating_bar"]
 
 
+@checked(positive=("L", "E", "rho"))
 def vibrating_bar(
     cells: int = 16, ppc: int | None = None, scheme: str = "MUSL", flip: float = 1.0, mass: str = "lumped",
     cfl: float = 0.5, t_end: float = 40.0, L: float = 25.0, E: float = 100.0, rho: float = 1.0,

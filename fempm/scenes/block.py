@@ -12,7 +12,7 @@ from fempm.meshes.generators import unstructured_rectangle
 from fempm.particles.corners import box_corners
 from fempm.particles.particle_set import Particles
 from fempm.particles.seeding import per_direction
-from fempm.scene.definition import Scene, check_counts
+from fempm.scene.definition import Scene, check_counts, checked
 from fempm.stepping.loads import Loads
 from fempm.stepping.options import StepOptions
 from fempm.transfer.domains import step_domain
@@ -20,6 +20,7 @@ from fempm.transfer.domains import step_domain
 __all__ = ["hanging_block", "largest_neighbour_gap"]
 
 
+@checked(positive=("E", "rho"), non_negative=("g",))
 def hanging_block(
     cells: int = 10, ppc: int = 9, domain: str = "point", mesh: str = "structured", scheme: str = "MUSL",
     flip: float = 0.99, mass: str = "lumped", cfl: float = 0.4, t_end: float = 0.5, g: float = 1000.0,

@@ -10,7 +10,7 @@ from fempm.boundary.walls import fixed
 from fempm.materials.linear_elastic import LinearElastic
 from fempm.materials.neo_hookean import NeoHookean
 from fempm.particles.seeding import create_particles, per_direction
-from fempm.scene.definition import Scene, check_counts, check_finite, dofs_per_cell
+from fempm.scene.definition import Scene, check_counts, check_finite, checked, dofs_per_cell
 from fempm.stepping.loads import Loads
 from fempm.stepping.options import StepOptions
 from fempm.transfer.domains import step_domain
@@ -38,6 +38,7 @@ def cantilever_tip(particles, params: dict) -> tuple[float, float]:
     return x / n, w / n
 
 
+@checked(positive=("L", "H", "E", "rho"), non_negative=("g", "mass_cutoff"))
 def cantilever(
     cells: int = 4, ppc: int | None = None, scheme: str = "MUSL", flip: float = 0.95, mass: str = "lumped",
     cfl: float = 0.4, t_end: float = 0.6, L: float = 0.7, H: float = 0.047, E: float = 6e7, nu: float = 0.0,

@@ -22,7 +22,7 @@ from mpi4py import MPI
 from fempm.boundary.walls import friction, slip
 from fempm.materials.drucker_prager import DruckerPrager
 from fempm.particles.seeding import create_particles, per_direction
-from fempm.scene.definition import Scene, check_counts
+from fempm.scene.definition import Scene, check_counts, checked
 from fempm.stepping.loads import Loads
 from fempm.stepping.options import StepOptions
 
@@ -68,6 +68,7 @@ def deposit(scene: Scene, solver) -> dict:
             "kinetic_fraction": kinetic / released if released > 0 else np.inf}
 
 
+@checked(positive=("aspect", "width", "rho", "E"), non_negative=("cohesion", "floor_friction", "g"))
 def column_collapse(
     aspect: float = 1.0, width: float = 0.2, cells: int = 16, ppc: int = 4, rho: float = 2000.0, E: float = 5.0e6,
     nu: float = 0.3, friction_angle: float = 30.0, dilation_angle: float = 0.0, cohesion: float = 0.0,

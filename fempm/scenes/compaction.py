@@ -25,7 +25,7 @@ from mpi4py import MPI
 from fempm.boundary.walls import fixed, slip
 from fempm.materials.linear_elastic import LinearElastic
 from fempm.particles.seeding import create_particles, per_direction
-from fempm.scene.definition import Scene, check_counts
+from fempm.scene.definition import Scene, check_counts, checked
 from fempm.stepping.loads import Loads
 from fempm.stepping.options import StepOptions
 from fempm.transfer.domains import step_domain
@@ -33,6 +33,7 @@ from fempm.transfer.domains import step_domain
 __all__ = ["compaction", "stress_error"]
 
 
+@checked(positive=("height", "E", "rho"), non_negative=("g",))
 def compaction(
     cells: int = 8, ppc: int = 4, domain: str = "point", mass: str = "lumped", steps: int = 5, height: float = 50.0,
     E: float = 1.0e6, nu: float = 0.0, rho: float = 80.0, g: float = 10.0, t_end: float = 1.0, frames: int = 5,

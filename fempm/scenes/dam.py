@@ -9,7 +9,7 @@ from mpi4py import MPI
 from fempm.boundary.walls import slip
 from fempm.materials.newtonian_eos import NewtonianTait
 from fempm.particles.seeding import create_particles, per_direction
-from fempm.scene.definition import Scene, check_counts
+from fempm.scene.definition import Scene, check_counts, checked
 from fempm.stepping.health import Health
 from fempm.stepping.loads import Loads
 from fempm.stepping.options import StepOptions
@@ -31,6 +31,7 @@ def surge_front(particles, params: dict) -> float:
     return (front + params["spacing"] / 2) / params["a"]
 
 
+@checked(positive=("a", "box", "rho0", "kappa", "gamma"), non_negative=("viscosity", "g"))
 def dam_break(
     cells: int = 10, ppc: int = 4, scheme: str = "MUSL", flip: float = 0.99, mass: str = "lumped",
     cfl: float = 0.4, t_end: float = 0.22, a: float = 0.1, box: float = 0.4, rho0: float = 1000.0,

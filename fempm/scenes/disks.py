@@ -9,13 +9,14 @@ from mpi4py import MPI
 from fempm.materials.linear_elastic import LinearElastic
 from fempm.meshes.generators import MESHES, read_msh
 from fempm.particles.seeding import create_particles
-from fempm.scene.definition import Scene, check_counts
+from fempm.scene.definition import Scene, check_counts, checked
 from fempm.stepping.contact import Contact
 from fempm.stepping.options import StepOptions
 
 __all__ = ["two_disks"]
 
 
+@checked(positive=("E", "rho", "radius"), non_negative=("speed", "friction"))
 def two_disks(
     mesh: str | dm.Mesh = "structured", cells: int = 20, ppc: int = 4, scheme: str = "MUSL", flip: float = 1.0,
     mass: str = "lumped", cfl: float = 0.4, t_end: float = 3.0, E: float = 1000.0, nu: float = 0.3,

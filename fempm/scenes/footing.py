@@ -32,7 +32,8 @@ from fempm.colliders.collider import Collider
 from fempm.colliders.shapes import box
 from fempm.materials.von_mises import VonMises
 from fempm.particles.seeding import create_particles
-from fempm.scene.definition import Scene, check_counts, check_finite
+from fempm.scene.definition import Scene, check_counts, check_finite, checked
+from fempm.scene.recorder import Recorder
 from fempm.stepping.options import StepOptions
 
 __all__ = ["LAYER", "PressureCurve", "footing", "prandtl"]
@@ -43,9 +44,11 @@ LAYER = (5.0, 2.0)
 ROOM = 0.5
 
 
-class PressureCurve:
+class PressureCurve(Recorder):
     """The footing's (penetration / width, mean contact pressure) after every step, ``points``
-    (a scene ``watch``: the collider's displacement and force)."""
+    (a scene ``watch``: the collider's displacement and force; checkpointed)."""
+
+    state_keys = ("points",)
 
     def __init__(self, width: float):
         self.width = width
@@ -69,6 +72,7 @@ def _ramp(speed: float, t_ramp: float):
     return velocity
 
 
+@checked(positive=("width", "E", "yield_stress", "rho"))
 def footing(cells: int = 8, depth: float = 0.1, width: float = 1.0, E: float = 1.0e7, nu: float = 0.3,
             yield_stress: float = 1.0e4 * np.sqrt(3.0), rho: float = 1000.0, speed: float = 0.2, ppc: int = 4,
             scheme: str = "MUSL", flip: float = 0.95, cfl: float = 0.4, frames: int = 0,

@@ -32,7 +32,8 @@ from mpi4py import MPI
 from fempm.boundary.walls import slip
 from fempm.materials.neo_hookean import NeoHookean
 from fempm.particles.seeding import create_particles, per_direction
-from fempm.scene.definition import Scene, check_counts
+from fempm.scene.definition import Scene, check_counts, checked
+from fempm.scene.recorder import Recorder
 from fempm.stepping.contact import Contact, shared_cells
 from fempm.stepping.options import StepOptions
 
@@ -41,11 +42,13 @@ __all__ = ["PLATE", "disk_impact"]
 PLATE = (0.1, 0.9, 0.2)  # x from, x to, thickness
 
 
-class _Overlap:
+class _Overlap(Recorder):
     """The deepest interpenetration of the disk (``fields["impactor"]`` 1) into the plate (0)
     after every step (a scene ``watch``), in columns of width ``spacing`` over
     :math:`|x - 0.5| <` ``half`` (under the disk's middle, where the plate cannot wrap around
-    its sides and the interface is nearly level)."""
+    its sides and the interface is nearly level). Checkpointed."""
+
+    state_keys = ("deepest",)
 
     def __init__(self, spacing: float, half: float):
         self.spacing = spacing
@@ -71,6 +74,7 @@ class _Overlap:
             self.deepest = max(self.deepest, float((top[both] + bottom[both]).max()) / self.spacing)
 
 
+@checked(positive=("radius", "E", "rho"), non_negative=("gap", "speed", "friction"))
 def disk_impact(
     cells: int = 40, ppc: int = 4, speed: float = 10.0, radius: float = 0.1, E: float = 1.0e5, nu: float = 0.3,
     rho: float = 1000.0, contact: bool = True, friction: float = 0.0, gap: float = 0.8, scheme: str = "USL",

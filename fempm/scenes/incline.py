@@ -56,7 +56,8 @@ from fempm.colliders.shapes import plane as collider_plane
 from fempm.materials.von_mises import VonMises
 from fempm.meshes.generators import tagged_polygon
 from fempm.particles.seeding import create_particles, per_direction
-from fempm.scene.definition import Scene, check_counts
+from fempm.scene.definition import Scene, check_counts, checked
+from fempm.scene.recorder import Recorder
 from fempm.stepping.contact import Contact
 from fempm.stepping.loads import Loads
 from fempm.stepping.options import StepOptions
@@ -95,9 +96,11 @@ def analytic_acceleration(body: str, angle: float, mu: float, g: float = 9.81) -
     return float(2.0 / 3.0 * g * np.sin(th) if mu >= np.tan(th) / 3.0 else sliding)
 
 
-class _Track:
+class _Track(Recorder):
     """The body's centre of mass along the slope (the unit vector ``down``) after every step (a
-    scene ``watch``)."""
+    scene ``watch``; checkpointed)."""
+
+    state_keys = ("t", "x")
 
     def __init__(self, down=(1.0, 0.0)):
         self.down = np.asarray(down, dtype=float)
@@ -123,6 +126,7 @@ def slope_acceleration(track: _Track, t_end: float) -> float:
     return float(2.0 * np.polyfit(t[late], x[late], 2)[0])
 
 
+@checked(positive=("size", "E", "rho"), non_negative=("gap", "friction", "g"))
 def incline(
     body: str = "block", angle: float = 30.0, friction: float = 0.2, cells: int = 8, ppc: int | None = None,
     size: float = 0.1, E: float = 1.0e6, nu: float = 0.3, rho: float = 1000.0, g: float = 9.81,

@@ -27,7 +27,8 @@ from fempm.boundary.tagged import tagged
 from fempm.materials.drucker_prager import DruckerPrager
 from fempm.meshes.generators import tagged_polygon
 from fempm.particles.seeding import create_particles
-from fempm.scene.definition import Scene, check_counts, check_finite
+from fempm.scene.definition import Scene, check_counts, check_finite, checked
+from fempm.scene.recorder import Recorder
 from fempm.stepping.loads import Loads
 from fempm.stepping.options import StepOptions
 
@@ -41,9 +42,11 @@ OUTLET_HEIGHT, FLOOR, CHAMBER, TOP = 0.2, 0.4, 1.0, 0.5
 WINDOW = (0.85, 0.35)
 
 
-class HopperMass:
+class HopperMass(Recorder):
     """The mass above the outlet, (t, mass) from the fill at t = 0 and after every step,
-    ``points`` (a scene ``watch``). Collective."""
+    ``points`` (a scene ``watch``; checkpointed). Collective."""
+
+    state_keys = ("points",)
 
     def __init__(self, particles):
         self.points = [(0.0, self.mass(particles))]  # the fill: all above the outlet
@@ -75,6 +78,7 @@ def _outline(outlet: float, half_angle: float) -> tuple[np.ndarray, list[int], f
     return vertices, tags, top
 
 
+@checked(positive=("outlet", "half_angle", "fill", "rho", "E", "friction_angle"), non_negative=("wall_friction", "floor_friction", "g"))
 def silo(cells: int = 5, outlet: float = 0.1, half_angle: float = 30.0, fill: float = 0.3, ppc: int = 4,
          rho: float = 2000.0, E: float = 2.0e6, nu: float = 0.3, friction_angle: float = 30.0,
          wall_friction: float = 0.3, floor_friction: float = 0.5, g: float = 9.81, t_end: float = 1.0,

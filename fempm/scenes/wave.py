@@ -30,7 +30,7 @@ from fempm.boundary.absorbing import absorbing
 from fempm.boundary.walls import fixed, slip
 from fempm.materials.linear_elastic import LinearElastic
 from fempm.particles.seeding import create_particles
-from fempm.scene.definition import Scene, check_counts, check_finite
+from fempm.scene.definition import Scene, check_counts, check_finite, checked
 from fempm.stepping import diagnostics
 from fempm.stepping.options import StepOptions
 
@@ -43,6 +43,7 @@ BOUNDARIES = ("absorbing", "fixed")
 START, HALF_WIDTH = 0.3, 0.1
 
 
+@checked(positive=("E", "rho", "length", "amplitude"))
 def wave(cells: int = 64, rows: int = 2, ppc: int = 4, boundary: str = "absorbing", E: float = 1.0, nu: float = 0.25,
          rho: float = 1.0, length: float = 1.0, amplitude: float = 1e-3, scheme: str = "MUSL", flip: float = 1.0,
          cfl: float = 0.5, frames: int = 0, comm: MPI.Comm = MPI.COMM_WORLD) -> Scene:

@@ -5,7 +5,8 @@ contact, compiled passes), loads, the laws' calls, energies and the run's health
 from fempm.meshes.cell_sizes import cell_sizes
 from fempm.stepping.laws import law_state, law_stress
 from fempm.stepping.loads import Loads
-from fempm.stepping.options import Scheme, SimulationError, StepOptions
+from fempm.stepping.options import SchemeName, SimulationError, StepOptions
+from fempm.stepping.schemes import Scheme
 from fempm.stepping.solver import ExplicitSolver, StepRecord
 from fempm.transfer.mass_models import MASS_RATIO_ITERATIONS, MASS_RATIO_SAFETY
 
@@ -15,6 +16,7 @@ __all__ = [
     "ExplicitSolver",
     "Loads",
     "Scheme",
+    "SchemeName",
     "SimulationError",
     "StepOptions",
     "StepRecord",

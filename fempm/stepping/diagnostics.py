@@ -10,14 +10,17 @@ import basix.ufl
 import dolfinx.fem
 import numpy as np
 import numpy.typing as npt
+from mpi4py import MPI
 
+from fempm.materials.linear_elastic import LinearElastic
 from fempm.particles.particle_set import Particles
 from fempm.stepping.laws import law_state, material_groups
 from fempm.stepping.options import StepOptions
 from fempm.transfer.basis import is_nonnegative
 from fempm.transfer.projection import Projector
 
-__all__ = ["energies", "energy_row", "grid_stress", "momentum_scale", "strain_energy", "stress_space"]
+__all__ = ["energies", "energy_row", "grid_stress", "momentum_scale", "small_strain_rotation", "strain_energy",
+           "stress_space"]
 
 
 def stress_space(V: dolfinx.fem.FunctionSpace) -> dolfinx.fem.FunctionSpace:
@@ -108,3 +111,20 @@ def momentum_scale(particles: Particles) -> float:
     r""":math:`\sum_p M_p |v_p|` over all ranks (the scale of the momentum drift). Collective."""
     p = particles
     return p.comm.allreduce(float(p.mass @ np.linalg.norm(p.fields["v"], axis=1)))
+
+
+def small_strain_rotation(particles: Particles, materials: Sequence) -> float:
+    r"""The largest rotation (degrees) of a particle of a small-strain law (:class:`LinearElastic`),
+    the angle of :math:`R` in :math:`F = R U`: 0 without such a body. Collective."""
+    from_small = [k for k, mat in enumerate(materials) if isinstance(mat, LinearElastic)]
+    angle = 0.0
+    f = particles.fields
+    if from_small and len(particles):
+        mask = np.isin(f["body"], from_small)
+        if mask.any():
+            u, _, vt = np.linalg.svd(f["F"][mask])
+            R = u @ vt
+            d = R.shape[-1]
+            cos = (np.trace(R, axis1=1, axis2=2) - (d - 2)) / 2.0 if d > 1 else np.ones(len(R))
+            angle = float(np.degrees(np.arccos(np.clip(cos, -1.0, 1.0))).max())
+    return particles.comm.allreduce(angle, op=MPI.MAX)

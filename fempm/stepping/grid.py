@@ -30,7 +30,7 @@ import numpy.typing as npt
 from mpi4py import MPI
 
 from fempm import kernels
-from fempm.stepping.laws import law_stress, material_groups
+from fempm.stepping.laws import material_groups, stresses_of
 from fempm.stepping.loads import external_forces
 from fempm.transfer import g2p
 from fempm.transfer.basis import ParticleBasis
@@ -221,9 +221,7 @@ class BasisGrid(Grid):
         s.record.j_range = (-float(flags[2]), float(flags[3]))
         f["F"] = F
         p.volume = J * f["volume0"]
-        rho = p.mass / p.volume
-        for mat, idx in material_groups(f, s.materials):
-            f["sigma"][idx] = law_stress(mat, F[idx], L[idx], f["sigma"][idx], dt, rho[idx], f, idx)
+        stresses_of(p.comm, material_groups(f, s.materials), F, L, f["sigma"], dt, p.mass / p.volume, f)
 
     def move(self, at_grid: npt.NDArray, corner_velocity, dt: float) -> None:
         """The particle domain's motion (:meth:`fempm.transfer.domains.Domain.move`) with the grid

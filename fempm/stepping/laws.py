@@ -8,7 +8,9 @@ from collections.abc import Sequence
 import numpy as np
 import numpy.typing as npt
 
-__all__ = ["law_state", "law_stress", "material_groups"]
+from fempm.abort import raise_together
+
+__all__ = ["law_state", "law_stress", "material_groups", "stresses_of"]
 
 
 def law_state(mat, fields: dict, idx: npt.NDArray) -> dict:
@@ -33,6 +35,21 @@ def law_stress(mat, F: npt.NDArray, L: npt.NDArray, sigma: npt.NDArray, dt: floa
         raise ValueError(f"{type(mat).__name__}.stress returned an array of shape {new.shape} for {len(F)} "
                          f"particle(s); expected {sigma.shape}")
     return new
+
+
+def stresses_of(comm, groups, F: npt.NDArray, L: npt.NDArray, sigma: npt.NDArray, dt: float, rho: npt.NDArray,
+                fields: dict) -> None:
+    """The laws' stress of the particles of each (law, indices) of ``groups`` into ``sigma``
+    (:func:`law_stress`). A law that raises on some ranks only (a user's law, a particle
+    state one rank holds) is raised on every rank (:func:`fempm.abort.raise_together`), so
+    that no rank waits for ever in the step's next collective. Collective."""
+    error = None
+    try:
+        for mat, idx in groups:
+            sigma[idx] = law_stress(mat, F[idx], L[idx], sigma[idx], dt, rho[idx], fields, idx)
+    except Exception as e:  # noqa: BLE001 - whatever the law raised, on every rank
+        error = e
+    raise_together(comm, error)
 
 
 def material_groups(fields: dict, materials: Sequence):

@@ -44,7 +44,7 @@ from fempm.stepping import diagnostics
 from fempm.stepping.consistent import ConsistentNodalMass
 from fempm.stepping.fmpm_mass import FMPMNodalMass
 from fempm.stepping.grid import Grid
-from fempm.stepping.laws import law_stress, material_groups
+from fempm.stepping.laws import material_groups, stresses_of
 from fempm.stepping.loads import external_forces
 from fempm.stepping.nodal import NodalMass, kept_nodal_array, sum_ghosts
 from fempm.stepping.spaces import compiled_space
@@ -241,11 +241,11 @@ class PointGrid(Grid):
                 s.fail(f"inverted deformation J <= 0 at particle(s) {s.particle_ids(p.volume <= 0)}")
             s.record.j_range = (-float(flags[2]), float(flags[3]))
             if external:  # laws without a compiled kernel
-                rho = p.mass / p.volume
-                for b, (mat, idx) in enumerate(material_groups(f, s.materials)):
-                    if self.law[b] == 0 and len(idx):
-                        f["sigma"][idx] = law_stress(mat, f["F"][idx], L[idx], f["sigma"][idx], dt, rho[idx], f, idx)
-                        nonfinite += int(np.count_nonzero(~np.isfinite(f["sigma"][idx]).all(axis=(1, 2))))
+                groups = [(mat, idx) for b, (mat, idx) in enumerate(material_groups(f, s.materials))
+                          if self.law[b] == 0 and len(idx)]
+                stresses_of(p.comm, groups, f["F"], L, f["sigma"], dt, p.mass / p.volume, f)
+                for _, idx in groups:
+                    nonfinite += int(np.count_nonzero(~np.isfinite(f["sigma"][idx]).all(axis=(1, 2))))
         return nonfinite, left
 
     def _state(self) -> tuple:

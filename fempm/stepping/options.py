@@ -8,13 +8,15 @@ from typing import Literal
 from fempm.arguments import check_numbers
 from fempm.implicit.dynamics import time_integration
 from fempm.stepping.fbar import volumetric
-from fempm.stepping.schemes import scheme
+from fempm.stepping.schemes import Scheme, scheme
 from fempm.transfer.domains import step_domain
 from fempm.transfer.mass_models import FMPM, mass_model
 
-__all__ = ["Scheme", "SimulationError", "StepOptions"]
+__all__ = ["SchemeName", "SimulationError", "StepOptions"]
 
-Scheme = Literal["USL", "USF", "MUSL"]
+#: the names of the built-in schemes (the option's values; a :class:`fempm.stepping.schemes.Scheme`
+#: subclass may be given instead)
+SchemeName = Literal["USL", "USF", "MUSL"]
 
 
 
@@ -65,7 +67,7 @@ class StepOptions:
     implicit step with :mod:`fempm.implicit.fbar`).
     """
 
-    scheme: Scheme = "MUSL"
+    scheme: SchemeName | Scheme = "MUSL"
     flip: float = 1.0
     mass: str = "lumped"
     cfl: float = 0.4

@@ -54,6 +54,9 @@ class StepRecord:
         extended_steps: steps whose particle domains reached beyond this rank's ghost cells.
         newton_iterations: the Newton iterations of the implicit steps so far.
         cut_steps: how often an implicit step that did not converge was halved.
+        load_work: the work of the external loads in the last implicit step, the trapezoidal
+            rule over its nodal displacement increments (:mod:`fempm.implicit.step`).
+        load_impulse: the impulse of the external loads in the last implicit step (d,).
     """
 
     terms: Counter = field(default_factory=Counter)
@@ -62,6 +65,8 @@ class StepRecord:
     extended_steps: int = 0
     newton_iterations: int = 0
     cut_steps: int = 0
+    load_work: float = 0.0
+    load_impulse: npt.NDArray = field(default_factory=lambda: np.zeros(0))
 
 
 @dataclass
@@ -151,6 +156,8 @@ class ExplicitSolver:
         self._grid: Grid | None = None
         self._grid_key: tuple | None = None
         self._implicit: tuple | None = None  # (id of the options, ImplicitStep)
+        if self.options.integration is not None:
+            self.implicit  # noqa: B018 - made now: what the implicit step cannot take is an error before any step
 
     # the record's entries, read and set as the solver's (checkpoints restore them)
     terms = property(lambda self: self.record.terms, lambda self, v: setattr(self.record, "terms", v))
@@ -271,7 +278,7 @@ class ExplicitSolver:
         grid.totals = totals
         stable = grid.open(dt)
         dt = self._time_step(stable, dt, dt_max)
-        self.collisions.begin(self.t)
+        self.collisions.begin(self.t, dt)
         v_new = self.options.stages.update(grid, dt)
         grid.close()
         self.collisions.end(dt)
@@ -283,14 +290,20 @@ class ExplicitSolver:
 
     def _time_step(self, stable: float, dt: float | None, dt_max: float) -> float:
         """The step: ``dt`` if given (an error above the stability limit, CFL > 1), else the
-        ``stable`` one, at most ``dt_max``."""
+        ``stable`` one, at most ``dt_max``; either way no collider moves more than the CFL
+        number (given: 1) times the smallest cell in it (:meth:`ColliderContact.max_step`)."""
+        cfl = self.options.cfl
         if dt is None:
             dt = min(stable, dt_max)
             if not np.isfinite(dt):
                 raise ValueError("no stable time step: every particle is at rest and its law has wave speed 0; "
                                  "give dt or dt_max")
-        elif dt > stable / self.options.cfl:
-            self.fail(f"time step {dt:.3g} exceeds the stability limit {stable / self.options.cfl:.3g} (CFL > 1)")
+            dt = self.collisions.max_step(self.t, dt, cfl)
+        elif dt > stable / cfl:
+            self.fail(f"time step {dt:.3g} exceeds the stability limit {stable / cfl:.3g} (CFL > 1)")
+        elif self.collisions.max_step(self.t, dt, 1.0) < dt:
+            self.fail(f"time step {dt:.3g} lets a collider move more than the smallest cell "
+                      f"({self.collisions.h_min:.3g}) in one step: it could pass through a body")
         if not self.t + dt > self.t:  # e.g. a particle at 1e200 m/s: the stable step underflows
             self.check_finite()  # collective: names a non-finite velocity first
             self.fail(f"time step collapse: dt = {dt:.3g} does not advance t = {self.t:.6g}")

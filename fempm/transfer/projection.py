@@ -29,6 +29,7 @@ import numpy as np
 import numpy.typing as npt
 from mpi4py import MPI
 
+from fempm.abort import raise_together
 from fempm.particles.location import as_points3
 from fempm.particles.particle_set import Particles
 from fempm.transfer.basis import ParticleBasis
@@ -45,7 +46,13 @@ MassMode = Literal["consistent", "lumped", "fmpm"] | str  # also "fmpmK", "fmpm(
 def _particle_values(values: npt.ArrayLike | Callable, particles: Particles, bs: int) -> npt.NDArray:
     if callable(values):  # DOLFINx convention: f(x) with x of shape (3, n)
         values = np.asarray(values(as_points3(particles.x).T), dtype=np.float64)
-        values = values.reshape(bs, len(particles)).T  # (n, bs)
+        n = len(particles)
+        if values.size != bs * n:
+            shape = "(n,)" if bs == 1 else f"({bs}, n)"
+            raise ValueError(f"the function of x returned an array of shape {values.shape} for {n} particles; the "
+                             f"space has {bs} component(s) per point: return {shape} values (the DOLFINx convention, "
+                             f"e.g. np.vstack([...]) of {bs} rows)")
+        values = values.reshape(bs, n).T  # (n, bs)
     f = np.asarray(values, dtype=np.float64)
     f = f[:, None] if f.ndim == 1 else f.reshape(f.shape[0], int(np.prod(f.shape[1:])))
     if f.shape[0] != len(particles):
@@ -220,7 +227,12 @@ class Projector:
     ) -> dolfinx.fem.Function:
         """Project particle values (n,) / (n, bs), or a function of x, onto ``V``."""
         bs = self.basis.bs
-        f = _particle_values(values, self.particles, bs)
+        f, error = None, None
+        try:  # values of the wrong shape on one rank are an error on every rank
+            f = _particle_values(values, self.particles, bs)
+        except ValueError as e:
+            error = e
+        raise_together(self.particles.comm, error)
         b = self.rhs(f)
         u = out if out is not None else dolfinx.fem.Function(self.V)
         u.x.array[:] = self.solve(b)[: self.basis.num_dofs_space].ravel()

@@ -18,7 +18,6 @@ from fempm.scene import Scene, run
 from fempm.stepping import Loads, StepOptions
 from fempm.stepping.loads import external_forces
 
-pytestmark = pytest.mark.parallel  # also under mpiexec -n 2 (scripts/run-tests)
 
 CELLS = {"triangle": 2, "quadrilateral": 2, "tetrahedron": 3, "hexahedron": 3}
 TOP = 2
@@ -43,6 +42,7 @@ def total(p, load, t=0.0):
 
 
 @pytest.mark.parametrize("cell", list(CELLS))
+@pytest.mark.parallel(only=("triangle", "tetrahedron"))
 def test_the_total_force_is_exact_on_every_cell_type(cell):
     d = CELLS[cell]
     mesh, tags = tagged_box(cell, 4)
@@ -60,6 +60,7 @@ def test_the_total_force_is_exact_on_every_cell_type(cell):
 
 
 @pytest.mark.parametrize("quadrilateral", [False, True], ids=["triangles", "quadrilaterals"])
+@pytest.mark.parallel(only=("triangles",))
 def test_the_total_force_is_exact_on_a_gmsh_body_with_an_inclined_top(quadrilateral):
     vertices = np.array([[0.0, 0.0], [1.0, 0.0], [1.0, 0.7], [0.0, 1.2]])  # the top inclined
     data = tagged_polygon(MPI.COMM_WORLD, vertices, 0.1, [0, 0, 5, 0], quadrilateral=quadrilateral)
@@ -145,6 +146,7 @@ def test_a_traction_keeps_its_direction_and_total_as_the_plate_turns():
                                [0.0, -0.1 * 0.25], atol=1e-14)
 
 
+@pytest.mark.parallel
 def test_two_ranks_turn_the_plate_as_one():
     comm = MPI.COMM_WORLD
     ends = []
@@ -165,6 +167,7 @@ def test_the_cofactor_is_nanson(d):
     np.testing.assert_allclose(cofactor_apply(F, A), want, rtol=1e-12, atol=1e-12)
 
 
+@pytest.mark.parallel
 def test_bad_surface_loads_are_named():
     mesh, tags = tagged_box("quadrilateral", 4)
     p = fempm.create_particles(mesh, 4, cells=lambda x: x[1] < 1.0)

@@ -14,7 +14,6 @@ import fempm  # noqa: F401  (before dolfinx)
 from fempm.boundary import Fixed, Friction, Slip, tagged
 from fempm.meshes import tagged_polygon
 
-pytestmark = pytest.mark.parallel  # also under mpiexec -n 2 (scripts/run-tests)
 
 comm = MPI.COMM_WORLD
 THETA = np.radians(30.0)
@@ -27,6 +26,7 @@ def _space(mesh, degree=1):
 
 @pytest.mark.parametrize("quadrilateral", [False, True], ids=["triangles", "quadrilaterals"])
 @pytest.mark.parametrize("degree", [1, 2])
+@pytest.mark.parallel(only=("1-triangles",))
 def test_an_inclined_wall_slips_along_itself(degree, quadrilateral):
     data = tagged_polygon(comm, SLOPE, 0.2, [1, 2, 3, 2], quadrilateral=quadrilateral)
     V = _space(data.mesh, degree)
@@ -76,6 +76,7 @@ def test_a_frictional_wall_with_a_normal_per_node_applies_coulomb():
     np.testing.assert_allclose(v, [[0.0, 2.0], [0.0, 0.5], [-1.0, 1.0]], atol=1e-15)
 
 
+@pytest.mark.parallel
 def test_two_ranks_find_the_serial_normals():
     data = tagged_polygon(comm, SLOPE, 0.2, [1, 2, 2, 2])
     V = _space(data.mesh)
@@ -91,6 +92,7 @@ def test_two_ranks_find_the_serial_normals():
     assert comm.allreduce(len(set(mine) - set(reference))) == 0
 
 
+@pytest.mark.parallel
 def test_bad_input_is_named():
     data = tagged_polygon(comm, SLOPE, 0.3, [1, 2, 0, 2])
     V = _space(data.mesh)

@@ -13,7 +13,6 @@ from fempm.boundary import friction, slip
 from fempm.materials import LinearElastic
 from fempm.stepping import ExplicitSolver, Loads, StepOptions
 
-pytestmark = pytest.mark.parallel  # also under mpiexec -n 2 (scripts/run-tests)
 
 comm = MPI.COMM_WORLD
 G, V0 = 10.0, 1.0
@@ -104,6 +103,7 @@ def test_a_wall_with_a_gap_holds_only_the_nodes_the_body_touches():
         wall.apply(v)
 
 
+@pytest.mark.parallel
 def test_a_wall_shares_its_normal_momentum_per_patch_over_ranks():
     """The floor of an 8 x 8 unit square distributed over the ranks, gap 0.1: the nodes at
     x <= 1/2 and at x = 1 touch it (two patches), those between do not. Every wall node,

@@ -2,6 +2,7 @@
 and Moyce (section 9), at the demos' default resolution."""
 
 import numpy as np
+import pytest
 from test_demos import load
 
 cantilever = load("cantilever")
@@ -28,6 +29,7 @@ def test_dam_break_front_converges_ahead_of_martin_moyce(tmp_path):
     assert fine["mass_defect"] < 1e-13
 
 
+@pytest.mark.slow  # 20 s: make test-all
 def test_cantilever_with_particle_domains_runs_pure_flip(tmp_path):
     """GIMP and CPDI1 remove the cell-crossing noise that makes the point basis need 5 % PIC:
     pure FLIP over a full period, within 5 % at two cells through the thickness (measured

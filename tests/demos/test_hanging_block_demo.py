@@ -1,11 +1,13 @@
 """The hanging-block demo (docs/verification.md) on both meshes, up to t = 0.08 (near
 the largest stretch): standard MPM and GIMP separate, CPDI1 and CPDI2 stay continuous."""
 
+import pytest
 from test_demos import load
 
 demo = load("hanging_block")
 
 
+@pytest.mark.slow  # 50 s and a dozen kernels of its own: make test-all (tests/scenes/test_hanging_block.py in the default run)
 def test_hanging_block_demo(tmp_path):
     s = demo.main(["--t-end", "0.08", "--out", str(tmp_path)])
     for mesh in ("structured", "unstructured"):

@@ -17,7 +17,6 @@ from fempm.scenes.bar import vibrating_bar
 from fempm.scenes.cook import cook_membrane, corner_displacement
 from fempm.stepping import StepOptions
 
-pytestmark = pytest.mark.parallel
 
 #: u_y(C) per unit load, Taylor-Hood P2/P1 at h = 0.5, nu = 0.4999 (docs/verification.md)
 COOK_REFERENCE_NEARLY_INCOMPRESSIBLE = 19.411
@@ -74,6 +73,7 @@ def test_averaged_stress_derivatives_match_central_differences(d):
 
 
 @pytest.mark.parametrize("law", [LinearElastic(1.0, 0.45), NeoHookean(1.0, 0.45)], ids=["trace", "det"])
+@pytest.mark.parallel
 def test_the_assembled_tangent_is_the_derivative_of_the_residual(law):
     """On one rank: the particles' blocks alone miss the patch coupling by the order of the
     tangent; with it the assembled matrix is the residual's derivative to 1e-8 of its size."""
@@ -115,6 +115,7 @@ def cook_fbar(h, comm=MPI.COMM_WORLD, **options):
 
 
 @pytest.mark.parametrize("steps", [1, 4])
+@pytest.mark.parallel(only=("1",))
 def test_cook_near_incompressible_within_3_percent_with_fbar(steps):
     """h = 2, P1, nu = 0.4999: the standard implicit step locks (-20 %); F-bar +1.1 %
     (docs/implicit.md); Newton converges in each load step without cuts."""
@@ -145,6 +146,7 @@ def test_newton_with_fbar_converges_quadratically(law, load, floor):
     assert orders and min(orders) >= 1.8, orders
 
 
+@pytest.mark.parallel
 def test_two_ranks_equal_one_rank_with_fbar():
     world, alone = cook_fbar(4.0), cook_fbar(4.0, comm=MPI.COMM_SELF)
     world.step(1.0)

@@ -12,7 +12,6 @@ from fempm.scenes.bar import vibrating_bar
 from fempm.scenes.cook import cook_membrane, corner_displacement
 from fempm.stepping import ExplicitSolver, Loads, SimulationError, StepOptions
 
-pytestmark = pytest.mark.parallel  # also under mpiexec -n 2 (scripts/run-tests)
 
 #: the vertical displacement of C per unit load, DOLFINx Taylor-Hood P2/P1 at h = 0.5, nu = 1/3
 #: (docs/verification.md, fempm.scenes.cook.fe_reference)
@@ -73,6 +72,7 @@ def test_a_plastic_membrane_converges_in_load_steps():
 
 
 @pytest.mark.parametrize("steps", [1, 4])
+@pytest.mark.parallel(only=("1",))
 def test_cook_corner_displacement_within_1p5_percent_quasi_static(steps):
     s = cook_solver(2.0, load_ramp=1.0)
     for _ in range(steps):
@@ -82,6 +82,7 @@ def test_cook_corner_displacement_within_1p5_percent_quasi_static(steps):
     assert s.t == pytest.approx(1.0) and s.record.cut_steps == 0
 
 
+@pytest.mark.parallel
 def test_two_ranks_equal_one_rank():
     world = cook_solver(4.0)
     world.step(1.0)
@@ -93,6 +94,7 @@ def test_two_ranks_equal_one_rank():
 
 
 @pytest.mark.parametrize("mass", ["lumped", "consistent"])
+@pytest.mark.parallel(only=("consistent",))
 def test_newmark_on_the_vibrating_bar_at_courant_4(mass):
     scene = vibrating_bar(cells=16)
     pr = scene.params
@@ -115,6 +117,7 @@ def test_newmark_on_the_vibrating_bar_at_courant_4(mass):
     assert s.record.newton_iterations == round(period / dt)  # linear: one Newton step each
 
 
+@pytest.mark.parallel
 def test_a_step_newton_cannot_take_is_halved(petsc_options):
     petsc_options(fempm_implicit_snes_max_it=1)  # too few for this nonlinear step
     s = cook_solver(6.0, max_cuts=2)
@@ -123,6 +126,7 @@ def test_a_step_newton_cannot_take_is_halved(petsc_options):
     assert s.record.cut_steps == 2 and s.t == 0.0
 
 
+@pytest.mark.parallel
 def test_a_free_body_in_a_quasi_static_step_has_a_singular_tangent():
     import dolfinx.fem
     import dolfinx.mesh

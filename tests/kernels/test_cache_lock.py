@@ -51,3 +51,49 @@ def test_concurrent_cache_saves_keep_each_kernel_its_own_data(tmp_path):
     assert _race(str(tmp_path / "locked"), locked=True) == ["A", "B"]
     (tmp_path / "unlocked").mkdir()
     assert _race(str(tmp_path / "unlocked"), locked=False) != ["A", "B"]  # the race the lock prevents
+
+
+_WORKLOAD = """
+import json, sys
+from numba.core import event
+import fempm
+from fempm.scenes import two_disks
+from fempm.stepping import StepOptions
+
+compiled = []
+
+class Listener(event.Listener):
+    def on_start(self, ev):
+        pass
+    def on_end(self, ev):
+        f = getattr(ev.data.get("dispatcher"), "py_func", None)
+        if f is not None and f.__module__.startswith("fempm."):
+            compiled.append(f.__module__ + "." + f.__qualname__)
+
+event.register("numba:compile", Listener())
+for domain in ("cpdi1", "ugimp"):  # CPDI1: the planar sample passes and corner location; uGIMP: the box pieces
+    scene = two_disks(mesh="structured", cells=6, t_end=1.0)
+    scene.options = StepOptions(scheme="USL", domain=domain)
+    solver = scene.solver()
+    solver.step()
+json.dump(compiled, sys.stdout)
+"""
+
+
+def test_a_second_process_loads_every_kernel_from_the_cache(tmp_path):
+    """A kernel whose cache key changes from process to process (a compiled helper held in its
+    closure pickles with a random id) compiles again in every process and every MPI rank: the
+    second process with the same cache must compile nothing of fempm's."""
+    import json
+    import os
+    import subprocess
+    import sys
+
+    env = {**os.environ, "NUMBA_CACHE_DIR": str(tmp_path / "cache")}
+    runs = [subprocess.run([sys.executable, "-c", _WORKLOAD], capture_output=True, text=True, env=env, timeout=600)
+            for _ in range(2)]
+    for r in runs:
+        assert r.returncode == 0, r.stderr[-2000:]
+    first, second = (json.loads(r.stdout.strip().splitlines()[-1]) for r in runs)
+    assert any("planar_samples" in name for name in first) and any("boxes" in name for name in first), first
+    assert second == [], second

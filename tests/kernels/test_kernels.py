@@ -158,8 +158,10 @@ def _pass_state(simplex: bool, seed: int, multilinear: bool = False, d: int = 2)
                 h=rng.random(ncell) + 0.1, g=np.array([0.3, -9.8, 0.2][:d]), fext=rng.standard_normal((n, d)))
 
 
+# affine quads: the Q1 basis of the one, the pull-back of the other; the default run checks the
+# triangle's (the compiled step of every cell against the numpy step: tests/stepping/test_compiled_step.py)
 @pytest.mark.parametrize("cell", ["triangle", pytest.param("quadrilateral", marks=pytest.mark.slow),
-                                  "quadrilateral-multilinear"])  # affine quads: the Q1 basis of the one, the pull-back of the other
+                                  pytest.param("quadrilateral-multilinear", marks=pytest.mark.slow)])
 def test_planar_kernels_equal_the_generic_ones_bit_for_bit(cell):
     """fempm.kernels.planar (scalar 2D) against the dimension-generic passes of
     fempm.kernels.lumped: identical results, not only to round-off, in variants that together
@@ -221,7 +223,9 @@ def test_planar_kernels_equal_the_generic_ones_bit_for_bit(cell):
             assert 0 < np.count_nonzero(l0) and 0 < moved and np.count_nonzero(l0) + moved < len(l0)
 
 
-@pytest.mark.parametrize("cell", ["tetrahedron", "hexahedron"])
+# 30 s of kernels each: make test-all (the compiled 3D step against the numpy step: tests/stepping/test_compiled_step.py)
+@pytest.mark.parametrize("cell", [pytest.param("tetrahedron", marks=pytest.mark.slow),
+                                  pytest.param("hexahedron", marks=pytest.mark.slow)])
 def test_solid_kernels_equal_the_generic_ones(cell):
     """fempm.kernels.solid (scalar 3D, tetrahedra and affine hexahedra) against the
     dimension-generic passes of fempm.kernels.lumped: equal to round-off (the gradients sum
@@ -276,7 +280,7 @@ def test_solid_kernels_equal_the_generic_ones(cell):
             assert np.abs(L0).max() > 1.0
 
 
-@pytest.mark.parametrize("cell", ["triangle", "quadrilateral-multilinear"])
+@pytest.mark.parametrize("cell", ["triangle", pytest.param("quadrilateral-multilinear", marks=pytest.mark.slow)])
 def test_grouped_passes_are_the_one_field_passes_of_each_group(cell):
     """Multi-field contact's passes (a group per particle, fempm.stepping.contact_points): the
     grouped P2G into G = 3 blocks of columns [m | m v | f | grad m] equals the one-field P2G of

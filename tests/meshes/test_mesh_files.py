@@ -26,3 +26,22 @@ def test_an_unreadable_mesh_file_is_an_error_on_every_rank(tmp_path, content):
 def test_the_shipped_mesh_reads_on_every_rank():
     mesh = read_msh(MESHES / "unit_square_tri.msh", comm, gdim=2).mesh
     assert comm.allreduce(mesh.topology.index_map(2).size_local) == 946
+
+
+def test_a_mesh_without_physical_groups_is_named(tmp_path):
+    """gmsh meshes every entity, DOLFINx reads the cells of physical groups only: the file is
+    named and the fix said (DOLFINx said "No 'physical groups' in gmsh mesh. Cannot continue.")."""
+    path = Path(comm.bcast(str(tmp_path / "plain.msh") if comm.rank == 0 else None))
+    if comm.rank == 0:
+        import gmsh
+
+        gmsh.initialize()
+        gmsh.option.setNumber("General.Terminal", 0)
+        gmsh.model.occ.addRectangle(0.0, 0.0, 0.0, 1.0, 1.0)
+        gmsh.model.occ.synchronize()
+        gmsh.model.mesh.generate(2)
+        gmsh.write(str(path))
+        gmsh.finalize()
+    comm.Barrier()
+    with pytest.raises(MeshFileError, match="plain.msh' has no physical group of its 2-dimensional cells"):
+        read_msh(path, comm)

@@ -103,3 +103,55 @@ def test_a_failure_on_one_rank_ends_every_rank(tmp_path, failure, entry):
     summary = json.loads((out / "summary.json").read_text())
     assert summary["status"] == "failed" and "rank 1" in summary["health"]["error"]
     assert summary["steps"] >= 1 and summary["scene"] == "two_disks"
+
+
+BARE = {
+    "particles": """
+import numpy as np
+import dolfinx.mesh as dm
+mesh = dm.create_unit_square(MPI.COMM_WORLD, 4, 4)
+n = 5
+mass = np.ones(n + (1 if MPI.COMM_WORLD.rank == 1 else 0))  # one mass too many on rank 1 only
+try:
+    fempm.Particles(mesh, np.full((n, 2), 0.5), mass, np.ones(n))
+except Exception as e:
+    open(f"{sys.argv[1]}.{MPI.COMM_WORLD.rank}", "w").write(f"raised {type(e).__name__}: {e}")
+""",
+    "step": """
+import dataclasses
+import numpy as np
+from fempm.materials import LinearElastic
+from fempm.scenes import two_disks
+@dataclasses.dataclass(frozen=True)
+class Failing(LinearElastic):  # a user law (no compiled kernel) that fails on rank 1
+    def stress(self, F, L, sigma, dt, rho):
+        if MPI.COMM_WORLD.rank == 1:
+            raise RuntimeError("the law failed on rank 1")
+        return super().stress(F, L, sigma, dt, rho)
+scene = two_disks(cells=10)
+scene.materials = [Failing(1000.0, 0.3)]
+solver = scene.solver()
+try:
+    solver.step()
+except Exception as e:
+    open(f"{sys.argv[1]}.{MPI.COMM_WORLD.rank}", "w").write(f"raised {type(e).__name__}: {e}")
+""",
+}
+
+
+@pytest.mark.parametrize("case", sorted(BARE))
+def test_an_error_on_one_rank_is_raised_on_every_rank(tmp_path, case):
+    """Outside fempm.scene.run and without abort_on_error (they hung): a Particles array of the
+    wrong length on rank 1 only, and a law raising on rank 1 in a bare solver.step(): every rank
+    raises, naming the error (the constructor's checks and the step's law calls are collective)."""
+    script = tmp_path / "bare.py"
+    script.write_text("import sys\nfrom mpi4py import MPI\nimport fempm\n" + BARE[case])
+    mpiexec = Path(sys.executable).with_name("mpiexec")
+    said = tmp_path / "raised"
+    r = subprocess.run([str(mpiexec), "-n", "2", sys.executable, str(script), str(said)], capture_output=True,
+                       text=True, timeout=120)
+    assert r.returncode == 0, r.stderr[-3000:]
+    lines = [Path(f"{said}.{rank}").read_text() for rank in (0, 1)]  # (a rank that hung would have no file)
+    expected = "mass has shape (6,) for 5 particles" if case == "particles" else "the law failed on rank 1"
+    assert all(line.startswith("raised ") and expected in line for line in lines), lines
+    assert "RankError: rank 1 of 2 failed" in lines[0], lines

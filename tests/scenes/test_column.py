@@ -12,7 +12,6 @@ from fempm.cli import main
 from fempm.scene import run
 from fempm.scenes import column_collapse
 
-pytestmark = pytest.mark.parallel  # also under mpiexec -n 2 (scripts/run-tests)
 
 comm = MPI.COMM_WORLD
 
@@ -27,6 +26,7 @@ def test_a_column_collapses_to_a_deposit_at_rest():
 
 
 @pytest.mark.skipif(comm.size > 1, reason="one output folder")
+@pytest.mark.parallel
 def test_the_command_line_writes_runout_and_final_height(tmp_path):
     assert main(["run", "column", "--aspect", "0.5", "--cells", "4", "--out", str(tmp_path)]) == 0
     summary = json.loads(Path(tmp_path / "summary.json").read_text())

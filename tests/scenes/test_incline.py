@@ -12,7 +12,6 @@ from mpi4py import MPI
 from fempm.scene import run
 from fempm.scenes.incline import analytic_acceleration, incline
 
-pytestmark = pytest.mark.parallel  # also under mpiexec -n 2 (scripts/run-tests)
 
 comm = MPI.COMM_WORLD
 
@@ -52,8 +51,8 @@ def test_a_block_near_the_friction_angle_slides_or_sticks_with_the_scene_default
 
 
 @pytest.mark.skipif(comm.size > 1, reason="the accuracy in serial")
-@pytest.mark.parametrize("plane", ["grid", "rigid"])
-@pytest.mark.parametrize("mu", [0.5, 0.6])
+@pytest.mark.parametrize(("mu", "plane"), [(0.5, "grid"), pytest.param(0.6, "grid", marks=pytest.mark.slow),
+                                           (0.5, "rigid"), pytest.param(0.6, "rigid", marks=pytest.mark.slow)])
 def test_a_block_on_a_frictional_plane_with_consistent_mass(mu, plane):
     """Consistent mass, PIC (damps the sliding instability, as consistent mass does not): the
     rows of the frictional wall's and contact's nodes are lumped, so that node-wise Coulomb
@@ -72,6 +71,7 @@ def test_a_block_on_a_frictional_plane_with_consistent_mass(mu, plane):
 
 
 @pytest.mark.parametrize("mu", [0.0, 0.2, 0.5, 0.6, 0.7])
+@pytest.mark.parallel(only=("0.2",))
 def test_a_block_on_a_tagged_inclined_wall(mu):
     """The slope as the tagged floor of a gmsh triangle mesh turned by 30 degrees (gravity
     vertical, fempm.boundary.tagged): slides with g (sin - mu cos) within 2 % below the friction
@@ -121,6 +121,7 @@ def _disk_steps(c, plane):
 
 @pytest.mark.skipif(comm.size == 1, reason="compares several ranks with one")
 @pytest.mark.parametrize("plane", ["grid", "rigid"])
+@pytest.mark.parallel
 def test_the_disk_on_several_ranks(plane):
     """The wall's and the contact's position checks (nodal centres of mass summed over ranks)
     give the serial run to 1e-10."""
@@ -135,6 +136,7 @@ def test_analytic_accelerations():
     assert analytic_acceleration("disk", 30.0, 0.1) == pytest.approx(g * (np.sin(th) - 0.1 * np.cos(th)), rel=1e-14)
 
 
+@pytest.mark.parallel
 def test_cli_writes_acceleration_and_analytic(tmp_path):
     from fempm.cli import main
 

@@ -20,7 +20,6 @@ from fempm.boundary import prescribed, slip
 from fempm.materials import VonMises
 from fempm.stepping import ExplicitSolver, StepOptions
 
-pytestmark = pytest.mark.parallel  # also under mpiexec -n 2 (scripts/run-tests)
 
 comm = MPI.COMM_WORLD
 E, NU, SY, V = 1.0e4, 0.3, 10.0, 0.005

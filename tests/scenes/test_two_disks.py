@@ -9,7 +9,6 @@ from mpi4py import MPI
 from fempm.scene import run
 from fempm.scenes import two_disks
 
-pytestmark = pytest.mark.parallel  # also under mpiexec -n 2 (scripts/run-tests)
 
 comm = MPI.COMM_WORLD
 
@@ -33,6 +32,7 @@ def test_two_disks_conserve_momentum_and_rebound(mesh, tmp_path):
     assert r["terms_assembled"] == {"internal": r["steps"]}  # no gravity, no traction work
 
 
+@pytest.mark.parallel
 def test_two_disks_parallel_equals_serial():
     serial = run(two_disks(t_end=2.5, comm=MPI.COMM_SELF), None, progress=False)["history"]
     world = run(two_disks(t_end=2.5, comm=comm), None, progress=False)["history"]

@@ -14,7 +14,6 @@ from fempm.scenes.disks import two_disks
 from fempm.scene import run
 from fempm.stepping import ExplicitSolver, StepOptions
 
-pytestmark = pytest.mark.parallel  # also under mpiexec -n 2 (scripts/run-tests)
 
 comm = MPI.COMM_WORLD
 
@@ -25,6 +24,7 @@ def _gather_sorted(p, a):
 
 
 @pytest.mark.parametrize("scheme", ["USL", "MUSL"])
+@pytest.mark.parallel
 def test_one_group_is_the_single_field_step(scheme):
     out = []
     for contact in (None, Contact(field="group", mass_cutoff=0.0)):  # the single field's cut-off
@@ -87,6 +87,7 @@ def _disks_with_contact(c, mass="lumped"):
 
 
 @pytest.mark.parametrize("mass", ["lumped", "consistent"])
+@pytest.mark.parallel(only=("lumped",))
 def test_two_disks_separate_with_contact_and_serial_equals_two_ranks(mass):
     """The elastic disks with one field per disk (USL, CFL 0.4): after the impact they move
     apart, more than a cell from each other, with zero total momentum to round-off; the run on
@@ -119,6 +120,7 @@ def test_disks_with_particle_domains_separate(domain):
     assert shared_cells(p, "disk") == 0
 
 
+@pytest.mark.parallel
 def test_shared_cells_counts_the_cells_holding_two_groups():
     """Apart, the disks share no cell; the particle of the lower disk nearest (0.21, 0.23),
     relabelled as the upper disk, shares exactly its own (full) cell with it."""
@@ -130,6 +132,7 @@ def test_shared_cells_counts_the_cells_holding_two_groups():
     assert shared_cells(p, "disk") == 1
 
 
+@pytest.mark.parallel
 def test_contact_refuses_what_it_does_not_support():
     scene = two_disks(cells=6, frames=0, scheme="USL")
     solver = scene.solver()

@@ -14,7 +14,6 @@ from fempm.stepping import ExplicitSolver, StepOptions
 from fempm.stepping.fbar import FBar, patch_average
 from fempm.transfer.basis import ParticleBasis
 
-pytestmark = pytest.mark.parallel  # also under mpiexec -n 2 (scripts/run-tests)
 
 
 @pytest.fixture(params=["triangle", "quadrilateral"])
@@ -36,6 +35,7 @@ def increments(p, scale=0.05, seed=3):
     return np.eye(2) + scale * rng.standard_normal((len(p), 2, 2))
 
 
+@pytest.mark.parallel
 def test_volume_is_conserved_and_isochoric_parts_kept(particles):
     V, p = particles
     basis = ParticleBasis(V, p)
@@ -48,6 +48,7 @@ def test_volume_is_conserved_and_isochoric_parts_kept(particles):
     assert p.comm.allreduce(float(np.abs(J_bar - J).max(initial=0.0)), op=MPI.MAX) > 1e-3  # it did average
 
 
+@pytest.mark.parallel
 def test_uniform_dilations_are_left_and_bodies_kept_apart(particles):
     V, p = particles
     basis = ParticleBasis(V, p)
@@ -56,6 +57,7 @@ def test_uniform_dilations_are_left_and_bodies_kept_apart(particles):
     np.testing.assert_allclose(averaged(basis, p.volume, body, 2, dF), dF, rtol=1e-14)
 
 
+@pytest.mark.parallel
 def test_the_average_is_self_adjoint_in_the_volume_weights(particles):
     """sum_p V_p a_p avg(b)_p = sum_p V_p avg(a)_p b_p: the averaged pressure's force is the
     derivative of the averaged volume change's work (FBar.force_stress)."""
@@ -89,6 +91,7 @@ class Unknown:
         return np.zeros(len(F))
 
 
+@pytest.mark.parallel
 def test_fbar_errors(particles):
     V, p = particles
     with pytest.raises(ValueError, match=r"unknown option volumetric='bbar'"):
@@ -102,6 +105,7 @@ def test_fbar_errors(particles):
 
 @pytest.mark.parametrize("scheme", ["USL", "MUSL", "USF"])
 @pytest.mark.parametrize("law", [NeoHookean(10.0, 0.3), LinearElastic(10.0, 0.3)], ids=["det-F", "trace-F"])
+@pytest.mark.parallel
 def test_a_step_with_fbar_keeps_the_averaged_measure(particles, scheme, law):
     """One step from the same state: the same velocity gradients, so the same total of what the
     law's F-bar averages (the volume for NeoHookean, sum_p V_p tr F_p for LinearElastic, whose
@@ -125,6 +129,7 @@ def test_a_step_with_fbar_keeps_the_averaged_measure(particles, scheme, law):
 
 @pytest.mark.parametrize("law", [NeoHookean(1000.0, 0.4999), LinearElastic(1000.0, 0.4999)],
                          ids=["neo-hookean", "linear-elastic"])
+@pytest.mark.parallel(only=("neo-hookean",))
 def test_colliding_near_incompressible_disks_do_not_gain_energy(law):
     """The two disks at nu = 0.4999 through their impact (MUSL, lumped, FLIP) with F-bar: the
     averaged pressure's force is the derivative of the stored energy of the averaged measure

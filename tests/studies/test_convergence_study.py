@@ -9,7 +9,9 @@ from mpi4py import MPI
 
 from fempm.studies import convergence
 
-pytestmark = pytest.mark.xdist_group("test_convergence_study")  # one worker computes its module fixtures
+# one worker computes its module fixtures; the whole quick study (3 minutes with its kernels) in
+# make test-all, one problem in the default run (tests/studies/test_study_samples.py)
+pytestmark = [pytest.mark.xdist_group("test_convergence_study"), pytest.mark.slow]
 
 
 @pytest.fixture(scope="module")

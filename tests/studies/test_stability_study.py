@@ -11,7 +11,9 @@ from conftest import quick_study
 from fempm.studies import stability
 from fempm.studies.stability_cases import CASES
 
-pytestmark = pytest.mark.xdist_group("test_stability_study")  # one worker computes its module fixtures
+# one worker computes its module fixtures; the whole quick catalogue (2 minutes) in make test-all,
+# one case in the default run (tests/studies/test_study_samples.py)
+pytestmark = [pytest.mark.xdist_group("test_stability_study"), pytest.mark.slow]
 
 
 @pytest.fixture(scope="module")

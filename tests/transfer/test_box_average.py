@@ -14,7 +14,6 @@ from fempm.transfer.domains import GIMP, make_domain
 from fempm.particles import Particles
 from fempm.particles.seeding import create_particles
 
-pytestmark = pytest.mark.parallel  # also under mpiexec -n 2 (scripts/run-tests)
 
 #: meshes whose cells map affinely (or as axis-aligned boxes): the box integrals are exact
 EXACT = ["interval", "triangle", "quadrilateral", "tetrahedron", "hexahedron", "unstructured-tetrahedron"]
@@ -47,6 +46,7 @@ def summed(rows, values, m):
 
 @pytest.mark.parametrize("name", EXACT)
 @pytest.mark.parametrize("degree", [1, 2])
+@pytest.mark.parallel
 def test_box_integrals_are_exact(name, degree):
     """Sum_i f(x_i) int_box N_i = int_box f for every f the space reproduces: 1, x, and for
     degree 2 the quadratic monomials; int grad N_i x_i^T = |box| I. Boxes inside the mesh,
@@ -77,6 +77,7 @@ def test_box_integrals_are_exact(name, degree):
                 assert np.abs(q - m2[:, a, b]).max() <= 1e-13, (a, b)
 
 
+@pytest.mark.parallel
 def test_clipped_simplices_keep_the_volume_inside_the_box():
     """A tetrahedron clipped by boxes: the pieces' volumes equal a fine Monte Carlo estimate of
     the intersection (and, for a box holding the whole tetrahedron, the tetrahedron)."""
@@ -94,6 +95,7 @@ def test_clipped_simplices_keep_the_volume_inside_the_box():
     assert np.all((P >= lo - 1e-15) & (P <= hi + 1e-15))
 
 
+@pytest.mark.parallel
 def test_exact_gimp_is_the_closed_form_1d_gimp_function():
     """1D linear hats, box half-width l <= h/2: <N_0>_p equals Bardenhagen and Kober's GIMP
     function of the distance |x| to the node (where the Gauss rule is not exact)."""
@@ -129,6 +131,7 @@ def _stretch(p, domain: str) -> None:
 
 @pytest.mark.parametrize("cell", ["triangle", "quadrilateral"])
 @pytest.mark.parametrize("domain", ["point", "gimp", "ugimp", "cpgimp", "cpdi1", "cpdi2"])
+@pytest.mark.parallel
 def test_domains_in_the_boundary_cells_keep_unity_and_conservation(cell, domain):
     """Particles fill every cell of the unit square, domains reach past its sides (stretched by
     a shear F): the part beyond is cut off, the averaged basis keeps the partition of unity and
@@ -176,8 +179,10 @@ def _serial_body(cell: str, domain: str):
     return mesh, p
 
 
-@pytest.mark.parametrize("mesh", ["structured", "triangles"])
-@pytest.mark.parametrize("domain", ["point", "gimp", "ugimp", "cpgimp", "cpdi1", "cpdi2"])
+@pytest.mark.parametrize(("domain", "mesh"), [
+    pytest.param(d, m, marks=pytest.mark.slow) if (d, m) == ("cpdi2", "structured") else (d, m)
+    for d in ["point", "gimp", "ugimp", "cpgimp", "cpdi1", "cpdi2"] for m in ["structured", "triangles"]])
+@pytest.mark.parallel(only=("cpdi1-triangles", "ugimp-structured"))
 def test_every_domain_runs_the_loop_in_the_boundary_cells(mesh, domain):
     """The 2D axis-aligned solution fills the unit square (slip walls) with particles in every
     boundary cell: each domain type runs a fifth of a period, with errors a few percent of the

@@ -111,3 +111,19 @@ def test_eigenvalue_bounds_decide_like_eigvalsh():
         ref = np.linalg.eigvalsh(B)[:, 0] > 1e-10
         assert np.array_equal(_smallest_above(B, 1e-10), ref)
         assert 0 < ref.sum() < len(ref) or k == 8
+
+
+@pytest.mark.parametrize("n", [16, 32])
+def test_dofs_shared_by_cells_are_tested_sparsely_at_any_size(n):
+    """P2 on triangles with 4 lattice particles each: no cell's particles determine its 6 dofs,
+    and the matrix over the dofs the cells share has 2 null directions. At 16 x 16 (1089 dofs)
+    the dense test found them too; at 32 x 32 (4225 dofs) it was skipped with a warning and the
+    projection went on with a singular matrix. The sparse test (MUMPS' null pivots) finds them
+    at both sizes."""
+    from fempm.transfer import SingularMassError
+
+    mesh = dm.create_unit_square(MPI.COMM_WORLD, n, n)
+    p = fempm.create_particles(mesh, 4, density=1.0)
+    V = fem.functionspace(mesh, ("Lagrange", 2))
+    with pytest.raises(SingularMassError, match=rf"no unique value on 2 direction\(s\) of the {(2 * n + 1) ** 2} dofs"):
+        fempm.project(V, p, lambda x: x[0] ** 2, mass="consistent")
