@@ -42,6 +42,9 @@ class GridConditions:
         zero_components: whether every condition only holds velocity components at 0.
         other_kinds: what the conditions that do more than that are (their ``kind``: "a
             frictional wall", "colliders", ...), in order, each once.
+        held_dofs: the dofs (owned + ghost, sorted) of the conditions on given nodes (every
+            condition but the colliders), None if there are none: where the supports and walls
+            take their reactions (:mod:`fempm.stepping.reactions`).
     """
 
     def __init__(self, V: dolfinx.fem.FunctionSpace, bcs: Sequence = ()):
@@ -60,6 +63,8 @@ class GridConditions:
         self.on_update = tuple(bc for bc in self.bcs if getattr(bc, "acts_on_update", False))
         self.needs_positions = any(bc.needs_positions for bc in self.bcs)
         self.zero_components = all(bc.zero_components for bc in self.bcs)
+        held = [bc.dofs for bc in self.bcs if getattr(bc, "dofs", None) is not None]
+        self.held_dofs = np.unique(np.concatenate(held)).astype(np.int32) if held else None
         self.other_kinds = tuple(dict.fromkeys(getattr(bc, "kind", type(bc).__name__) for bc in self.bcs
                                                if not bc.zero_components))
 

@@ -129,6 +129,8 @@ class ColliderContact:
         self.force = np.zeros((n, d))  # of the last step
         self.work = np.zeros(n)  # done on the bodies over the run
         self._step = np.zeros((n, d))  # this step's impulse
+        #: this step's impulse of all colliders at each owned dof (owned + ghost dofs, d; ghosts 0)
+        self.nodal_impulse = np.zeros((len(self.points), d)) if self.colliders else np.zeros((0, d))
 
     def __len__(self) -> int:
         return len(self.colliders)
@@ -153,6 +155,7 @@ class ColliderContact:
         """A step from time ``t`` of size ``dt`` starts: each collider's mean velocity over it."""
         self.t = t
         self._step[:] = 0.0
+        self.nodal_impulse.fill(0.0)
         for k, c in enumerate(self.colliders):
             self._mean[k] = 0.5 * sum(w * c.velocity_at(t + 0.5 * dt * (1.0 + x)) for x, w in zip(*GAUSS))
 
@@ -184,7 +187,9 @@ class ColliderContact:
         dwn = np.where(inside, wn, dwn)
         new = np.where(held[:, None], u + coulomb(w - wn[:, None] * n, wn, n, dwn, c.friction), v[dofs])
         owned = dofs < self.num_owned
-        taken = m[owned] @ (v[dofs[owned]] - new[owned]) if len(dofs) else np.zeros(self.d)
+        nodal = m[owned, None] * (v[dofs[owned]] - new[owned])
+        self.nodal_impulse[dofs[owned]] += nodal
+        taken = nodal.sum(axis=0)
         v[dofs] = new
         return self.comm.allreduce(np.asarray(taken, dtype=np.float64), op=MPI.SUM)
 

@@ -92,8 +92,8 @@ def _scalar_state(obj, names) -> dict:
 
 
 #: the HealthMonitor attributes that accumulate over a run
-MONITOR_STATE = ("e0", "e_max", "momentum0", "work", "work_path", "impulse", "_power", "_force", "first_dt", "_t_prev",
-                 "j_min", "j_max", "p_scale", "drift", "ratio", "total_mass")
+MONITOR_STATE = ("e0", "e_max", "momentum0", "work", "work_path", "impulse", "reactions", "_power", "_force",
+                 "first_dt", "_t_prev", "j_min", "j_max", "p_scale", "drift", "ratio", "total_mass")
 
 
 def mesh_digest(mesh) -> str:

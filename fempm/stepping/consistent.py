@@ -61,6 +61,7 @@ class ConsistentNodalMass(NodalMass):
                                          nonnegative=nonnegative)
         self.cell_mass = kc.cell_mass(grid.cell)
         self._ghosted = grid.nodal_array(grid.d)
+        self._signed: tuple | None = None  # a kept nodal array: degree-2 Lagrange's signed lumped masses
         self._accel: npt.NDArray | None = None  # the last acceleration, the warm start of its solve
         self._spare: npt.NDArray | None = None  # the array of the acceleration before it
         self.ratio_age = RATIO_EVERY  # steps since the stable-step estimate
@@ -109,6 +110,19 @@ class ConsistentNodalMass(NodalMass):
         if "ratio_key" in arrays:
             self._ratio_key = int(arrays["ratio_key"][0])
         self.systems.restore({k[5:]: v for k, v in arrays.items() if k.startswith("mass:")})
+
+    def lumped(self, nodal: npt.NDArray) -> npt.NDArray:
+        r"""The lumped masses :math:`\sum_p M_p N_{ip}`: the P2G mass column, or for a signed
+        basis (degree-2 Lagrange, whose column holds :math:`\sum_p M_p |N_{ip}|`) :math:`M_C 1`,
+        one more particle pass."""
+        g = self.grid
+        if space_of(g.cell) != (2, False):
+            return nodal[:, 0]
+        vec, out = self._signed = self._signed or g.nodal_array(1)
+        out.fill(0.0)
+        g.mass_apply(np.ones((g.num_dofs, 1)), np.zeros(0, dtype=np.bool_), out)
+        sum_ghosts(vec)
+        return out[:, 0]
 
     def _ghosts(self, u: npt.NDArray) -> npt.NDArray:
         """Owned values of ``u`` (dofs, d) to the ghosts (in place)."""

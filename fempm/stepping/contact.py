@@ -272,7 +272,7 @@ class ContactGrid(BasisGrid):
         contact impulse of the step to the particles (and MUSL's re-mapped ones are not
         corrected again)."""
         p = self.solver.particles
-        mom = [p2g(self.basis, (p.mass * k)[:, None] * p.fields["v"]) for k in self.masks]
+        self.momentum = mom = [p2g(self.basis, (p.mass * k)[:, None] * p.fields["v"]) for k in self.masks]
         return self.constrain(np.stack([self.ops[g].solve(mom[g]) if g in self.ops else mom[g] * self.inv[g]
                                         for g in range(self.num_groups)]))
 
@@ -298,6 +298,8 @@ class ContactGrid(BasisGrid):
         fld = p.fields
         d = p.gdim
         vp, at_grid, L = fld["v"].copy(), fld["v"].copy(), np.zeros((len(p), d, d))
+        if blend:
+            self.record_reaction(v_new, v_old, dt)
         for g in self.deformable:
             k = self.masks[g][:, None]
             if blend:
@@ -313,6 +315,11 @@ class ContactGrid(BasisGrid):
             self.update_kinematics(L, dt)
         if move:
             self.move(at_grid, lambda: self.corner_velocity(v_new), dt)
+
+    def reaction_fields(self, v_new: npt.NDArray, v_old: npt.NDArray) -> list[tuple]:
+        """The deformable groups' fields (rigid ones take no conditions)."""
+        return [(self.m_has[g], self.momentum[g], self.force[g], v_old[g], v_new[g], ~self.weak[g])
+                for g in self.deformable]
 
     def corner_velocity(self, v_new: npt.NDArray) -> npt.NDArray:
         """Each body's corners move with its own field, rigid ones rigidly."""

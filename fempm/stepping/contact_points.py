@@ -188,6 +188,14 @@ class ContactPointGrid(PointGrid):
         return self.kernels.g2p_update(p.cells, p.X, self.K, self.cell_dofs, v_new, v_old, flip, dt, blend,
                                        kinematics, move, *state, group=self.group, rigid=self.rigid)
 
+    def reaction_fields(self, v_new: npt.NDArray, v_old: npt.NDArray) -> list[tuple]:
+        """The deformable groups' fields (rigid ones take no conditions)."""
+        d, nodal = self.d, self._nodal[1]
+        mass, mom = self._by_group(nodal, 0, 1)[:, :, 0], self._by_group(nodal, 1, d)
+        force, old, new = self._by_group(nodal, 1 + d, d), self._by_group(v_old, 0, d), self._by_group(v_new, 0, d)
+        return [(mass[g], mom[g], force[g], old[g], new[g], mass[g] > self.weak_max)
+                for g in np.flatnonzero(~self.rigid)]
+
     def nodal(self, v: npt.NDArray) -> npt.NDArray:
         """The centre-of-mass velocity of the groups at each node (owned + ghost dofs)."""
         out = np.empty((self.num_dofs, self.d))

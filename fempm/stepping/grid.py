@@ -32,6 +32,7 @@ from mpi4py import MPI
 from fempm import kernels
 from fempm.stepping.laws import material_groups, stresses_of
 from fempm.stepping.loads import external_forces
+from fempm.stepping.reactions import damping_impulse, nodal_reaction
 from fempm.transfer import g2p
 from fempm.transfer.basis import ParticleBasis
 from fempm.transfer.mapping import nodal_centroids, p2g, p2g_gradients, sum_over_ranks
@@ -57,6 +58,7 @@ class Grid:
         self.options = solver.options
         #: whether this step's passes also sum the new state's energies (:meth:`state_sums`)
         self.totals = False
+        self._reaction_rows: npt.NDArray | None = None
 
     def for_step(self) -> Grid:
         """The grid that takes the next step: this one (the default), or one this grid hands the
@@ -99,6 +101,40 @@ class Grid:
     def close(self) -> None:
         """The checks after the particle update (finite state). Collective."""
         raise NotImplementedError
+
+    def reaction_fields(self, v_new: npt.NDArray, v_old: npt.NDArray) -> list[tuple]:
+        """Per velocity field the grid takes the conditions on: (lumped masses (dofs,), mapped
+        momenta, forces, ``v_old``, ``v_new`` (dofs, d), where the update applied accelerations
+        (dofs,) bool) of the step's update (:func:`fempm.stepping.reactions.nodal_reaction`)."""
+        raise NotImplementedError
+
+    def record_reaction(self, v_new: npt.NDArray, v_old: npt.NDArray, dt: float) -> None:
+        """The momentum the grid conditions took in the step whose update led from ``v_old``
+        to ``v_new``, and the impulse of the damping (:mod:`fempm.stepping.reactions`), on this
+        rank, into the step record's ``reaction`` and ``damping_impulse`` (nothing without
+        conditions on given nodes, or without damping). Called by the blend."""
+        s, opts = self.solver, self.options
+        held = s.conditions.held_dofs
+        damping = float(opts.damping)
+        if held is None and damping == 0.0:
+            return
+        num_owned = s.V.dofmap.index_map.size_local
+        fields = self.reaction_fields(v_new, v_old)
+        if damping > 0.0:
+            s.record.damping_impulse = sum(damping_impulse(m, vo, moving, dt, damping, num_owned)
+                                           for m, _, _, vo, _, moving in fields)
+        if held is None:
+            return
+        if self._reaction_rows is None:
+            coupled = opts.mass_model.couples_dofs  # the free rows balance only together
+            self._reaction_rows = np.arange(num_owned) if coupled else held[held < num_owned]
+        rows = self._reaction_rows
+        total = np.zeros(s.particles.gdim)
+        for field in fields:
+            total += nodal_reaction(*field, dt, float(opts.flip), damping, rows)
+        if len(s.collisions):  # theirs, counted as the colliders' impulses
+            total -= s.collisions.nodal_impulse[rows].sum(axis=0)
+        s.record.reaction = total
 
     def relocate(self) -> None:
         """Locate the moved particles (migration between ranks). Collective."""
@@ -265,7 +301,8 @@ class SingleFieldGrid(BasisGrid):
     def map_velocity(self, guess: npt.NDArray | None) -> npt.NDArray:
         """Grid velocity from the particle momenta (P2G + mass solve), constrained."""
         p = self.solver.particles
-        v = self.mass_op.solve(p2g(self.basis, p.mass[:, None] * p.fields["v"]), guess=guess)
+        self.momentum = p2g(self.basis, p.mass[:, None] * p.fields["v"])
+        v = self.mass_op.solve(self.momentum, guess=guess)
         self.solver.conditions.apply(v, self.centroids)
         return self.basis.update_ghosts(v)  # extra ghosts (remote domain samples) take their owners' values
 
@@ -299,6 +336,7 @@ class SingleFieldGrid(BasisGrid):
         fld = self.solver.particles.fields
         basis = self.basis
         if blend:
+            self.record_reaction(v_new, v_old, dt)
             fld["v"], at_grid, L = g2p.blend(basis, v_new, v_old, fld["v"], self.options.flip)
         elif kinematics or move:
             at_grid, L = g2p.velocity_and_gradient(basis, v_new)
@@ -306,6 +344,9 @@ class SingleFieldGrid(BasisGrid):
             self.update_kinematics(L, dt)
         if move:
             self.move(at_grid, lambda: basis.gather_samples(v_new), dt)
+
+    def reaction_fields(self, v_new: npt.NDArray, v_old: npt.NDArray) -> list[tuple]:
+        return [(self.mass_op.lumped_masses(), self.momentum, self.f_grid, v_old, v_new, ~self.weak)]
 
     def nodal(self, v: npt.NDArray) -> npt.NDArray:
         """The grid velocity kept after the step (the space's dofs)."""

@@ -33,9 +33,12 @@ the cause when
 
 The :meth:`HealthMonitor.summary` records the outcome and the energy ratio
 :math:`E(t)/(E(0) + W(t))`, the momentum drift
-:math:`|P(t) - P(0) - I(t)| / \max_s \sum_p M_p |v_p|(s)` (with :math:`I` the impulse of the
-external loads less that the colliders took; supports and walls change momentum legitimately, so this is a figure, not a
-check) and the range of :math:`J`.
+:math:`|P(t) - P(0) - I(t) + R(t) + J(t)| / \max_s \sum_p M_p |v_p|(s)` (with :math:`I` the
+impulse of the external loads and of the grid damping, :math:`R` the reactions of the grid conditions, the momentum
+the supports and walls took (:mod:`fempm.stepping.reactions`, ``reaction_impulse``), and
+:math:`J` the impulse the colliders took: round-off where these are the only external actions;
+a figure, not a check) and the range of :math:`J = \det F`. The reactions of an implicit
+step are not counted (its drift includes them).
 """
 
 from __future__ import annotations
@@ -103,6 +106,7 @@ class HealthMonitor:
         self.work = 0.0
         self.work_path = 0.0  # explicit: along the steps' motion (the check's other measure)
         self.impulse = np.zeros_like(self.momentum0)
+        self.reactions = np.zeros_like(self.momentum0)  # what the grid conditions took
         self._power, self._force = self._external(solver.t, self.momentum0)
         self.first_dt: float | None = None
         self._t_prev = solver.t
@@ -171,7 +175,16 @@ class HealthMonitor:
         gone = s.removed  # what the particles that left the mesh took: it has left, not vanished
         if gone.count:
             mom = mom + np.asarray(gone.momentum)
-        mom = mom + s.collisions.total_impulse  # what the colliders took
+        rec = s.record
+        if rec.reaction.size or rec.damping_impulse.size:  # (collective: the same conditions and damping on every rank)
+            d = len(mom)
+            local = np.concatenate([rec.reaction if rec.reaction.size else np.zeros(d),
+                                    rec.damping_impulse if rec.damping_impulse.size else np.zeros(d)])
+            total = s.particles.comm.allreduce(local)
+            self.reactions = self.reactions + total[:d]  # what the supports and walls took
+            self.impulse = self.impulse + total[d:]  # the damping's, an external action as the loads'
+            rec.reaction, rec.damping_impulse = np.zeros(0), np.zeros(0)
+        mom = mom + s.collisions.total_impulse + self.reactions  # what the colliders and the conditions took
         e = energies["total"] + gone.kinetic + gone.strain
         self.e_max = max(self.e_max, e)
         budget = self.e0 + self.work + s.collisions.total_work
@@ -216,5 +229,6 @@ class HealthMonitor:
     def summary(self) -> dict:
         return {
             "outcome": self.outcome, "error": self.error, "energy_ratio": self.ratio, "momentum_drift": self.drift,
-            "j_min": self.j_min, "j_max": self.j_max, "external_work": self.work, "limits": self.health.asdict(),
+            "j_min": self.j_min, "j_max": self.j_max, "external_work": self.work,
+            "reaction_impulse": self.reactions.tolist(), "limits": self.health.asdict(),
         }

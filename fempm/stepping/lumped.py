@@ -314,6 +314,8 @@ class PointGrid(Grid):
 
     def to_particles(self, v_new: npt.NDArray, v_old: npt.NDArray, dt: float, *, blend: bool = False,
                      kinematics: bool = False, move: bool = False, remap: bool = False) -> None:
+        if blend:
+            self.record_reaction(v_new, v_old, dt)
         if remap:  # the blended particle momenta into the kept nodal array, for velocity(remapped=True)
             vec, mom = self._nodal_d
             mom.fill(0.0)
@@ -325,6 +327,11 @@ class PointGrid(Grid):
         if move:
             self.left = left
             self._summed = self.totals
+
+    def reaction_fields(self, v_new: npt.NDArray, v_old: npt.NDArray) -> list[tuple]:
+        nodal, d = self._nodal[1], self.d
+        moving = nodal[:, 0] > self.weak_max
+        return [(self.mass.lumped(nodal), nodal[:, 1:1 + d], self.force[:, self.cf:self.cf + d], v_old, v_new, moving)]
 
     def close(self) -> None:
         if self.solver.particles.comm.allreduce(self.nonfinite):

@@ -42,6 +42,11 @@ class NodalMass:
     def __init__(self, grid):
         self.grid = grid
 
+    def lumped(self, nodal: np.ndarray) -> np.ndarray:
+        r"""The lumped masses :math:`\sum_p M_p N_{ip}` (owned + ghost dofs) of the step's P2G
+        ``nodal`` array (its mass column)."""
+        return nodal[:, 0]
+
     def checkpoint_state(self) -> tuple[dict, dict[str, np.ndarray]]:
         """(counters, arrays) a resumed run needs to repeat the next steps bit for bit."""
         return {}, {}

@@ -57,6 +57,10 @@ class StepRecord:
         load_work: the work of the external loads in the last implicit step, the trapezoidal
             rule over its nodal displacement increments (:mod:`fempm.implicit.step`).
         load_impulse: the impulse of the external loads in the last implicit step (d,).
+        reaction: the momentum the grid conditions took in the last explicit step on this rank
+            (d,; empty without conditions on given nodes; :mod:`fempm.stepping.reactions`).
+        damping_impulse: the impulse of the grid damping in the last explicit step on this rank
+            (d,; empty without damping).
     """
 
     terms: Counter = field(default_factory=Counter)
@@ -67,6 +71,8 @@ class StepRecord:
     cut_steps: int = 0
     load_work: float = 0.0
     load_impulse: npt.NDArray = field(default_factory=lambda: np.zeros(0))
+    reaction: npt.NDArray = field(default_factory=lambda: np.zeros(0))
+    damping_impulse: npt.NDArray = field(default_factory=lambda: np.zeros(0))
 
 
 @dataclass
