@@ -102,6 +102,8 @@ class ImplicitStep(BasisGrid):
                              "condition, so there is no stable step to default to")
         record = self.solver.record
         record.load_work, record.load_impulse = 0.0, np.zeros(self.solver.particles.gdim)
+        if self.integration.inertia:
+            record.reaction = np.zeros(self.solver.particles.gdim)
         self._advance(self.solver.t, dt, 0)
         return dt
 
@@ -183,6 +185,8 @@ class ImplicitStep(BasisGrid):
                 obj.destroy()
         self.last = result
         self._count_loads(op, t, dt, fext, du, owned)
+        if integ.inertia:
+            self._count_reactions(op, t, dt, fext, (du, v, a), m, free[:owned])
         self._update(basis, op, du, v, a, dt)
         return True
 
@@ -206,6 +210,32 @@ class ImplicitStep(BasisGrid):
         sums = comm.allreduce(np.concatenate([[float(np.einsum("nd,nd->", mean, du[:owned]))], mean.sum(axis=0)]))
         record.load_work += float(sums[0])
         record.load_impulse = record.load_impulse + dt * sums[1:]
+
+    def _count_reactions(self, op: IncrementOperator, t: float, dt: float, fext: npt.NDArray, motion: tuple,
+                         m: npt.NDArray, free: npt.NDArray[np.bool_]) -> None:
+        r"""Add what the held components took over the accepted Newmark (sub)step ``[t, t + dt]``
+        to the record's ``reaction`` (this rank's owned dofs; :mod:`fempm.stepping.reactions`).
+        The particles' momentum changes by :math:`\sum_a m_a (v^+_a - v_a) + (1-\alpha)
+        (\sum_a m_a v_a - P^n)` with :math:`v^+ = v + \Delta t ((1-\gamma) a + \gamma a^+)`;
+        at the end of the step the free rows balance, :math:`M a^+ = f^{ext} - f^{int}`, so the
+        :math:`\gamma` part of what the held rows took is their residual
+        :math:`\sum_{held} (f^{ext} - f^{int} - M a^+)`; the projected :math:`a` and :math:`v`
+        of the particles balance only over all rows (as a mass that couples the dofs), so the
+        :math:`1-\gamma` part is :math:`F^{ext}(t) - \sum_a m_a a_a` and the PIC part
+        :math:`(1-\alpha)(P^n - \sum_a m_a v_a)`. ``motion``: the converged increment and the
+        projected :math:`v, a` (owned + ghost dofs, d); ``m``: the lumped masses; ``free``: the
+        owned dofs' free components."""
+        s, integ = self.solver, self.integration
+        p = s.particles
+        du, v, a = motion
+        owned = len(free)
+        a_new = integ.acceleration(du, v, a, dt)
+        R = fext - op.internal_force(op.forces(op.gradients(du))) - op.mass_times(a_new, self.consistent, m)
+        held = np.where(free, 0.0, R[:owned]).sum(axis=0)
+        mo = m[:owned]
+        old = self._loads(op, t)[:owned].sum(axis=0) - mo @ a[:owned]
+        pic = (1.0 - self.options.flip) * (p.mass @ p.fields["v"] - mo @ v[:owned])
+        s.record.reaction = s.record.reaction + dt * ((1.0 - integ.gamma) * old + integ.gamma * held) + pic
 
     def _solve(self, residual, jacobian, J: PETSc.Mat, x: PETSc.Vec, guess: npt.NDArray, scale: float):
         """Newton from ``guess`` with the line search of the options; where it fails, once more

@@ -2,6 +2,7 @@
 ``python -m fempm run NAME --option value``; one scene per module."""
 
 from fempm.scenes.bar import vibrating_bar
+from fempm.scenes.bowl import bowl
 from fempm.scenes.block import hanging_block, largest_neighbour_gap
 from fempm.scenes.cantilever import cantilever, cantilever_reference, cantilever_tip
 from fempm.scenes.column import column_collapse, deposit
@@ -18,10 +19,10 @@ from fempm.scenes.wave import wave
 
 SCENES = {"bar": vibrating_bar, "disks": two_disks, "cantilever": cantilever, "dam": dam_break, "block": hanging_block,
           "cook": cook_membrane, "column": column_collapse, "incline": incline, "impact": disk_impact,
-          "compaction": compaction, "wave": wave, "footing": footing, "silo": silo}
+          "compaction": compaction, "wave": wave, "footing": footing, "silo": silo, "bowl": bowl}
 
 __all__ = [
-    "MARTIN_MOYCE", "SCENES", "cantilever", "cantilever_reference", "cantilever_tip", "column_collapse", "compaction",
+    "MARTIN_MOYCE", "SCENES", "bowl", "cantilever", "cantilever_reference", "cantilever_tip", "column_collapse", "compaction",
     "cook_membrane",
     "dam_break", "deposit", "disk_impact", "footing",
     "hanging_block", "incline",

@@ -37,8 +37,8 @@ The :meth:`HealthMonitor.summary` records the outcome and the energy ratio
 impulse of the external loads and of the grid damping, :math:`R` the reactions of the grid conditions, the momentum
 the supports and walls took (:mod:`fempm.stepping.reactions`, ``reaction_impulse``), and
 :math:`J` the impulse the colliders took: round-off where these are the only external actions;
-a figure, not a check) and the range of :math:`J = \det F`. The reactions of an implicit
-step are not counted (its drift includes them).
+a figure, not a check; an implicit Newmark step counts its held components' reactions,
+:meth:`fempm.implicit.step.ImplicitStep._count_reactions`) and the range of :math:`J = \det F`.
 """
 
 from __future__ import annotations
@@ -210,8 +210,9 @@ class HealthMonitor:
                     f"{self.first_dt:.3g} or no longer advances time")
 
     def _growth_message(self, e: float, budget: float, scale: float, gone) -> str:
-        """What the energy check says: every term of the budget, and where a small-strain law
-        turned far, that its stored energy is not meant for that (collective)."""
+        """What the energy check says: every term of the budget; with pure FLIP and a frictional
+        wall, the blend that keeps it; where a small-strain law turned far, that its stored energy
+        is not meant for that (collective)."""
         s = self.solver
         terms = [f"the initial energy {self.e0:.6g}", f"the work of the loads {max(self.work, self.work_path):.6g}"]
         if len(s.collisions):
@@ -220,6 +221,9 @@ class HealthMonitor:
         message = (f"energy growth: the total energy {e:.6g}{held} exceeds its budget {budget:.6g} = "
                    f"{' + '.join(terms)} by {100 * (e - budget) / scale:.3g} % (tolerance "
                    f"{100 * self.health.energy_tolerance:g} %): the run is unstable")
+        if s.options.flip == 1.0 and s.conditions.frictional:
+            message += ("; pure FLIP (flip = 1) with a frictional wall gains energy where a body rolls or slides along "
+                        "a curved wall (docs/boundaries.md, 'Friction on a curved wall'): take a blend, e.g. flip = 0.95")
         angle = diagnostics.small_strain_rotation(s.particles, s.materials)
         if angle > SMALL_STRAIN_ROTATION:
             message += (f"; or a small-strain law (LinearElastic) has turned by up to {angle:.3g} degrees, which its "
