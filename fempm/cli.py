@@ -5,6 +5,7 @@
     python -m fempm study convergence [--quick] [--problems NAME ...] [--out DIR]
     python -m fempm study stability [--quick] [--cases NAME ...] [--out DIR]
     python -m fempm study error-vs-time [--quick] [--problems NAME ...] [--out DIR]
+    python -m fempm study scenes [--quick] [--problems NAME ...] [--out DIR]
     python -m fempm study all [--out DIR]   (the quick version of every study, into DIR/study-NAME)
     python -m fempm run SCENE [--out DIR] [--overwrite] [--force] [--checkpoint-every N] [--option value ...]
     python -m fempm resume OUT [--t-end T] [--checkpoint-every N]
@@ -44,7 +45,7 @@ from fempm.scene.loop import run
 from fempm.scenes import SCENES
 from fempm.stepping.health import Health
 from fempm.stepping.options import SimulationError
-from fempm.studies import convergence, error_vs_time, mapping, particle_basis, stability
+from fempm.studies import convergence, error_vs_time, mapping, particle_basis, scenes, stability
 from fempm.studies.harness import Provenance
 from fempm.transfer.mapping import SingularMassError
 
@@ -65,7 +66,7 @@ def main(argv: list[str] | None = None) -> int:
 
 
 #: the studies of ``python -m fempm study NAME`` (``all``: the quick version of each)
-STUDIES = ("mapping", "particle-basis", "convergence", "stability", "error-vs-time")
+STUDIES = ("mapping", "particle-basis", "convergence", "stability", "error-vs-time", "scenes")
 
 
 def _parser() -> argparse.ArgumentParser:
@@ -79,7 +80,8 @@ def _parser() -> argparse.ArgumentParser:
     study.add_argument("--full", action="store_true", help="mapping: more mesh sizes and particle densities")
     study.add_argument("--quick", action="store_true",
                        help="convergence, stability, error-vs-time: fewer configurations and smaller sizes")
-    study.add_argument("--problems", nargs="+", metavar="NAME", help="convergence, error-vs-time: a subset of the problems")
+    study.add_argument("--problems", nargs="+", metavar="NAME",
+                       help="convergence, error-vs-time: a subset of the problems; scenes: scenes or scene/variant series")
     study.add_argument("--cases", nargs="+", metavar="NAME", help="stability: a subset of the cases")
     study.add_argument("--sizes", type=int, nargs="+", help="cells per side (default 8 16 32; --full: 8 ... 128)")
     study.add_argument("--ppc", type=int, nargs="+", help="particles per cell (default 4 9; --full: 1 4 9 16)")
@@ -166,8 +168,13 @@ def _error_vs_time(args, out: Path, provenance: Provenance) -> str:
     return "error_vs_time.csv, error_vs_time.md, error_vs_time_*.png"
 
 
+def _scenes(args, out: Path, provenance: Provenance) -> str:
+    scenes.run_study(out, quick=args.quick, problems=args.problems, provenance=provenance)
+    return "scenes_convergence.csv, scenes_convergence.md, scenes_*.png"
+
+
 _STUDY_RUNS = {"mapping": _mapping, "particle-basis": _particle_basis, "convergence": _convergence,
-               "stability": _stability, "error-vs-time": _error_vs_time}
+               "stability": _stability, "error-vs-time": _error_vs_time, "scenes": _scenes}
 
 
 def _summary(builder) -> str:

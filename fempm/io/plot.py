@@ -12,7 +12,7 @@ import numpy.typing as npt
 from fempm.particles.particle_set import Particles
 
 __all__ = [
-    "plot_convergence", "plot_curves", "plot_energies", "plot_error_vs_time", "plot_pareto",
+    "plot_convergence", "plot_curves", "plot_energies", "plot_error_vs_time", "plot_errors", "plot_pareto",
     "plot_particle_frame", "plot_projection", "plot_stability",
 ]
 
@@ -143,6 +143,21 @@ def plot_curves(path: Path, curves: Sequence[tuple], *, xlabel: str, ylabel: str
     ax.set_xlabel(xlabel)
     ax.set_ylabel(ylabel)
     ax.legend()
+    if title:
+        ax.set_title(title)
+    _save(fig, path)
+
+
+def plot_errors(path: Path, series: Sequence[tuple], *, xlabel: str, ylabel: str, title: str = "") -> None:
+    """Log-log plot of ``series``, each ``(label, x, error)``: a refinement study's errors."""
+    plt = _pyplot()
+    fig, ax = plt.subplots(figsize=(7, 5))
+    for label, x, err in series:
+        ax.loglog(x, err, "o-", label=label)
+    ax.set_xlabel(xlabel)
+    ax.set_ylabel(ylabel)
+    if series:
+        ax.legend(fontsize=7)
     if title:
         ax.set_title(title)
     _save(fig, path)

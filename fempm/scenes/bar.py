@@ -10,9 +10,30 @@ from fempm.boundary.walls import fixed
 from fempm.materials.linear_elastic import LinearElastic
 from fempm.particles.seeding import create_particles, per_direction
 from fempm.scene.definition import Scene, check_counts, checked
+from fempm.scene.recorder import Recorder
+from fempm.scenes.periods import crossing_period
 from fempm.stepping.options import StepOptions
 
-__all__ = ["vibrating_bar"]
+__all__ = ["CentreVelocity", "vibrating_bar"]
+
+
+class CentreVelocity(Recorder):
+    """The bar's centre-of-mass velocity along it after every step, ``points`` of (t, v_cm)
+    (a scene ``watch``; checkpointed). Collective."""
+
+    state_keys = ("points",)
+
+    def __init__(self, particles, v):
+        self.points = [(0.0, self.velocity(particles, v))]
+
+    @staticmethod
+    def velocity(particles, v) -> float:
+        sums = particles.comm.allreduce(np.array([particles.mass @ v[:, 0], particles.mass.sum()]))
+        return float(sums[0] / sums[1])
+
+    def __call__(self, solver) -> None:
+        p = solver.particles
+        self.points.append((solver.t, self.velocity(p, p.fields["v"])))
 
 
 @checked(positive=("L", "E", "rho"))
@@ -25,7 +46,9 @@ def vibrating_bar(
     it as a 2D strip of one cell height (nu = 0: plane stress = plane strain = 1D).
 
     Exact: v_cm(t) = v0 / (beta L) cos(omega t), beta = (2 mode - 1) pi / (2 L), omega = beta c.
-    The mesh extends 4 cells past the free end so the bar can stretch.
+    The mesh extends 4 cells past the free end so the bar can stretch. Summary: ``period`` (from
+    the crossings of zero by v_cm, :class:`CentreVelocity`), ``period_reference`` (2 pi / omega)
+    and ``period_error`` (relative).
     """
     check_counts(cells=cells, mode=mode, dim=dim)
     if dim not in (1, 2):
@@ -42,10 +65,18 @@ def vibrating_bar(
     beta = (2 * mode - 1) * np.pi / (2 * L)
     p.fields["v"] = np.zeros((len(p), dim))
     p.fields["v"][:, 0] = v0 * np.sin(beta * p.x[:, 0])
+    omega = beta * np.sqrt(E / rho)
     params = dict(cells=cells, ppc=ppc, scheme=scheme, flip=flip, mass=mass, cfl=cfl, L=L, E=E, rho=rho, v0=v0,
-                  beta=beta, omega=beta * np.sqrt(E / rho), dim=dim)
+                  beta=beta, omega=omega, dim=dim)
+    centre = CentreVelocity(p, p.fields["v"])
+
+    def results(scene, solver) -> dict:
+        period = crossing_period(*np.array(centre.points).T)
+        return {"period": period, "period_reference": 2 * np.pi / omega, "period_error": period * omega / (2 * np.pi) - 1}
+
     return Scene(
         name="vibrating_bar", mesh=mesh, particles=p, materials=[LinearElastic(E, 0.0)], t_end=t_end,
         bcs=lambda V: [fixed(V, lambda x: np.isclose(x[0], 0.0))],
         options=StepOptions(scheme=scheme, flip=flip, mass=mass, cfl=cfl, lumped_forces=lumped_forces), params=params,
+        watch=centre, results=results,
     )

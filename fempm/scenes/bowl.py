@@ -35,10 +35,11 @@ from fempm.meshes.generators import tagged_polygon
 from fempm.particles.seeding import create_particles
 from fempm.scene.definition import Scene, check_counts, check_finite, checked
 from fempm.scene.recorder import Recorder
+from fempm.scenes.periods import crossing_period
 from fempm.stepping.loads import Loads
 from fempm.stepping.options import StepOptions
 
-__all__ = ["WALL_TAG", "DiskMotion", "bowl", "crossing_period", "pendulum_period"]
+__all__ = ["WALL_TAG", "DiskMotion", "bowl", "pendulum_period"]
 
 #: the tag of the bowl's arc
 WALL_TAG = 1
@@ -51,16 +52,6 @@ def pendulum_period(length: float, g: float, amplitude: float) -> float:
     for _ in range(60):
         a, b = 0.5 * (a + b), np.sqrt(a * b)
     return 4.0 * np.sqrt(length / g) * np.pi / (2.0 * a)
-
-
-def crossing_period(t: np.ndarray, x: np.ndarray) -> float:
-    """Twice the mean time between the crossings of 0 by ``x(t)`` (linear between samples);
-    NaN with fewer than two crossings."""
-    i = np.flatnonzero(np.signbit(x[:-1]) != np.signbit(x[1:]))
-    if len(i) < 2:
-        return float("nan")
-    tc = t[i] - x[i] * (t[i + 1] - t[i]) / (x[i + 1] - x[i])
-    return float(2.0 * np.mean(np.diff(tc)))
 
 
 class DiskMotion(Recorder):

@@ -9,7 +9,8 @@ import pytest
 import fempm  # noqa: F401  (before dolfinx)
 from fempm.scene import run
 from fempm.scenes import bowl
-from fempm.scenes.bowl import crossing_period, pendulum_period
+from fempm.scenes.bowl import pendulum_period
+from fempm.scenes.periods import crossing_period
 from fempm.stepping import SimulationError
 
 
