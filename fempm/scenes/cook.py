@@ -144,11 +144,12 @@ def corner_displacement(particles) -> np.ndarray:
     return coef[0]
 
 
-def fe_reference(nu: float, h: float = 1.0, E: float = 1.0, load: float = 1.0, comm: MPI.Comm = MPI.COMM_SELF) -> np.ndarray:
+def fe_reference(nu: float, h: float = 1.0, E: float = 1.0, load: float = 1.0, comm: MPI.Comm = MPI.COMM_SELF,
+                 degree: int = 2) -> np.ndarray:
     r"""Displacement of C from the small-strain, plane-strain finite element solution of the
-    same panel: Taylor-Hood :math:`P_2/P_1` displacement-pressure elements (no locking as
-    :math:`\nu \to 1/2`), :math:`p = \lambda \operatorname{div} u`, on gmsh triangles of size
-    ``h``, solved with MUMPS:
+    same panel: Taylor-Hood :math:`P_k/P_{k-1}` displacement-pressure elements (``degree`` k >= 2;
+    no locking as :math:`\nu \to 1/2`), :math:`p = \lambda \operatorname{div} u`, on gmsh
+    triangles of size ``h``, solved with MUMPS:
 
     .. math::
         (2\mu\, \varepsilon(u), \varepsilon(v)) + (p, \operatorname{div} v) = (\bar t, v)_{BC}, \qquad
@@ -163,8 +164,10 @@ def fe_reference(nu: float, h: float = 1.0, E: float = 1.0, load: float = 1.0, c
 
     mesh = unstructured_polygon(comm, CORNERS, h)
     cell = mesh.basix_cell()
+    if degree < 2:
+        raise ValueError(f"degree={degree}: Taylor-Hood needs a displacement degree of at least 2")
     W = dolfinx.fem.functionspace(mesh, basix.ufl.mixed_element([
-        basix.ufl.element("Lagrange", cell, 2, shape=(2,)), basix.ufl.element("Lagrange", cell, 1)]))
+        basix.ufl.element("Lagrange", cell, degree, shape=(2,)), basix.ufl.element("Lagrange", cell, degree - 1)]))
     (u, p), (v, q) = ufl.TrialFunctions(W), ufl.TestFunctions(W)
     lam, mu = lame(E, nu)
     eps = ufl.sym

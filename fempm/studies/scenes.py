@@ -8,7 +8,8 @@ it is refined over) at every size and writes
   ``value``, its ``reference`` (a closed form or an independent solution; empty where there is
   none), the relative ``error`` (against the reference, else against the extrapolated value),
   and the series' fitted ``order`` and ``extrapolated`` value on each of its rows;
-* ``DIR/scenes_convergence.md``, the table with the provenance line;
+* ``DIR/scenes_convergence.md``, the table with the provenance line, and the runs that failed
+  with their reasons (also in ``DIR/scenes_failures.csv``: scene, variant, size, reason);
 * ``DIR/scenes_<scene>.png``, the error of each of the scene's series against the cell size.
 
 The order: with a reference, the slope of :math:`\log |e|` against :math:`\log h` fitted by
@@ -47,8 +48,9 @@ __all__ = ["COLUMNS", "COOK_FE", "SERIES", "Series", "fit", "run_series", "run_s
 COLUMNS = ["scene", "quantity", "variant", "size", "value", "reference", "error", "order", "extrapolated", "wall_s"]
 
 #: Cook's membrane, the vertical displacement of C per unit load: the Taylor-Hood P2/P1, P3/P2 and
-#: P4/P3 solutions at h = 2, 1, 0.5 (1, 0.5 for P4) extrapolated by Richardson at their fitted
-#: order (about 1: the clamped corners' singularities), which agree to 3e-3 (docs/convergence.md)
+#: P4/P3 solutions at h = 2, 1, 0.5 extrapolated by Richardson at their fitted order (about 1: the
+#: clamped corners' singularities), which agree within 1.1e-3 (``python benchmarks/cook_reference.py``,
+#: docs/convergence.md)
 COOK_FE = {1 / 3: 22.611, 0.4999: 19.429}
 
 
@@ -138,24 +140,24 @@ def run_series(series: Series, size, comm: MPI.Comm = MPI.COMM_WORLD) -> dict:
     builder = SCENES[series.scene]
     if "frames" in inspect.signature(builder).parameters:
         options["frames"] = 0
-    scene = builder(**options, **{series.size: size}, comm=comm)
-    if stepping:
-        scene.options = dataclasses.replace(scene.options, **stepping)
-    if series.steps:
-        scene.dt = scene.t_end / series.steps
     start = time.perf_counter()
     try:
+        scene = builder(**options, **{series.size: size}, comm=comm)
+        if stepping:
+            scene.options = dataclasses.replace(scene.options, **stepping)
+        if series.steps:
+            scene.dt = scene.t_end / series.steps
         summary = run_scene(scene, None, progress=False)
         value = _value(summary, series.quantity) * series.scale
     except Exception as e:  # noqa: BLE001 - a run that fails stays a row, with its reason
-        summary, value = {"error": f"{type(e).__name__}: {e}"}, float("nan")
+        summary, value = {"reason": f"{type(e).__name__}: {e}"}, float("nan")
     wall = comm.allreduce(time.perf_counter() - start, op=MPI.MAX)
     ref = series.reference
     if isinstance(ref, str):
         ref = _value(summary, ref[1:])
     return {"scene": series.scene, "quantity": series.quantity, "variant": series.variant, "size": size,
             "value": value, "reference": float("nan") if ref is None else float(ref), "error": float("nan"),
-            "order": float("nan"), "extrapolated": float("nan"), "wall_s": wall}
+            "order": float("nan"), "extrapolated": float("nan"), "wall_s": wall, "reason": summary.get("reason", "")}
 
 
 def fit(h: np.ndarray, values: np.ndarray, reference: float) -> tuple[float, float]:
@@ -196,7 +198,8 @@ def _finish(rows: list[dict], series: Series) -> None:
     sizes = np.array([r["size"] for r in mine], dtype=float)
     h = sizes if series.size == "h" else 1.0 / sizes
     values = np.array([r["value"] for r in mine])
-    reference = mine[-1]["reference"]
+    known = [r["reference"] for r in mine if np.isfinite(r["reference"])]
+    reference = known[-1] if known else float("nan")  # (a run that failed has no summary to give it)
     order, extrapolated = fit(h, values, reference)
     base = reference if np.isfinite(reference) else extrapolated
     for r in mine:
@@ -254,6 +257,14 @@ def write_report(rows: list[dict], out: Path, provenance: Provenance) -> None:
         lines.append(f"| {r['scene']} | {r['quantity']} | {r['variant']} | {_text(r['size'])} | {_text(r['value'])} | "
                      f"{_text(r['reference'])} | {error} | {_text(r['order'])} | {_text(r['extrapolated'])} | "
                      f"{r['wall_s']:.1f} |")
+    failed = [r for r in rows if r["reason"]]
+    with open(out / "scenes_failures.csv", "w", newline="") as f:
+        w = csv.DictWriter(f, ["scene", "variant", "size", "reason"])
+        w.writeheader()
+        w.writerows({k: _text(r[k]) for k in ("scene", "variant", "size", "reason")} for r in failed)
+    if failed:
+        lines += ["", "Runs that failed:", ""]
+        lines += [f"- {r['scene']} {r['variant']} at {_text(r['size'])}: {r['reason']}" for r in failed]
     (out / "scenes_convergence.md").write_text("\n".join(lines) + "\n")
     _figures(rows, out)
 

@@ -29,3 +29,18 @@ def test_cooks_membrane_nearly_incompressible_locks(tmp_path):
     assert 19.2 < row["u_y_fe"] < 19.6
     assert 0.5 < row["u_y"] / row["u_y_fe"] < 0.8  # measured 0.68: volumetric locking of P1 triangles
     assert np.isfinite(row["u_x"])
+
+
+def test_the_fe_reference_rises_with_the_degree_towards_the_recorded_value():
+    """Taylor-Hood P2/P1 and P3/P2 at h = 4 (22.449, 22.528) lie below the extrapolated 22.611
+    (fempm.studies.scenes.COOK_FE) and approach it; a degree below 2 is refused."""
+    import pytest
+
+    from fempm.scenes.cook import fe_reference
+    from fempm.studies.scenes import COOK_FE
+
+    p2, p3 = (fe_reference(1 / 3, 4.0, degree=k)[1] for k in (2, 3))
+    assert COOK_FE[1 / 3] - p2 == pytest.approx(0.162, abs=0.005)  # measured 22.4492, 22.5278
+    assert COOK_FE[1 / 3] - p3 == pytest.approx(0.083, abs=0.005)
+    with pytest.raises(ValueError, match="degree=1"):
+        fe_reference(1 / 3, 4.0, degree=1)

@@ -57,3 +57,10 @@ def test_an_unknown_scene_is_a_usage_error(capsys):
     with pytest.raises(SystemExit) as e:
         main(["study", "scenes", "--quick", "--problems", "teapot", "--out", "unused"])
     assert e.value.code == 2 and "unknown scene 'teapot'" in capsys.readouterr().err
+
+
+def test_a_run_that_fails_stays_a_row_with_its_reason():
+    from fempm.studies.scenes import Series, run_series
+
+    row = run_series(Series("bar", "period", "too large a step", "cells", (8,), (8,), {"cfl": 2.0}, 10.0), 8)
+    assert np.isnan(row["value"]) and "cfl" in row["reason"].lower()
