@@ -76,7 +76,8 @@ class Newton:
             self.snes.getLineSearch().setFromOptions()
 
     def solve(self, residual: Callable[[PETSc.Vec, PETSc.Vec], None], jacobian: Callable[[PETSc.Vec, PETSc.Mat], None],
-              J: PETSc.Mat, x: PETSc.Vec, force_scale: float = 0.0, line_search: str | None = None) -> NewtonResult:
+              J: PETSc.Mat, x: PETSc.Vec, force_scale: float = 0.0, line_search: str | None = None,
+              floor: Callable[[PETSc.Vec], float] | None = None) -> NewtonResult:
         """Solve ``residual(x, r) = 0`` from the guess in ``x`` (the solution left there), with
         ``jacobian(x, J)`` filling the tangent ``J``; ``residual`` may fill ``r`` with infinities
         where ``x`` is outside its domain (the line search then steps back, or the solve fails).
@@ -84,14 +85,22 @@ class Newton:
         :data:`FORCE_ATOL` of it has converged (the round-off floor of a small load increment on
         a loaded body lies above the relative tolerance), unless the options database sets
         ``snes_atol``. ``line_search``: a PETSc line search type for this solve instead of the
-        configured one (e.g. ``"basic"``: full Newton steps)."""
+        configured one (e.g. ``"basic"``: full Newton steps). ``floor``: the round-off floor of the
+        residual at ``x``; a solve that SNES ends without convergence but whose last residual lies
+        below it has converged as far as the residual can show (``CONVERGED_ROUND_OFF``: near
+        incompressibility the internal forces are differences of terms many times larger, and
+        the force tolerance can lie below what they can resolve)."""
         snes = self.snes
         ls = snes.getLineSearch()
         configured = ls.getType()
         if line_search is not None:
             ls.setType(line_search)
         try:
-            return self._solve(residual, jacobian, J, x, force_scale)
+            result = self._solve(residual, jacobian, J, x, force_scale)
+            if not result.converged and floor is not None and len(result.residuals) \
+                    and result.residuals[-1] <= floor(x):
+                return NewtonResult(True, "CONVERGED_ROUND_OFF", result.iterations, result.residuals)
+            return result
         finally:
             if line_search is not None:
                 ls.setType(configured)

@@ -56,6 +56,9 @@ from fempm.transfer.mapping import SUPPORT_TOL
 if TYPE_CHECKING:
     from fempm.stepping.solver import ExplicitSolver
 
+#: the residual's round-off floor in machine epsilons of the norm of its terms' magnitudes
+ROUND_OFF = 100.0
+
 __all__ = ["ImplicitStep"]
 
 
@@ -175,8 +178,11 @@ class ImplicitStep(BasisGrid):
         guess = (dt * v[:owned] if integ.inertia else np.zeros((owned, d))).ravel()  # constant velocity
         forces = np.concatenate([fext[:owned].ravel(), op.internal_force(op.sigma)[:owned].ravel()])
         scale = float(np.sqrt(p.comm.allreduce(float(forces @ forces))))  # what the residual balances
+        def floor(xx) -> float:
+            return self._round_off(J, xx)
+
         try:
-            result = self._solve(residual, jacobian, J, x, guess, scale)
+            result = self._solve(residual, jacobian, J, x, guess, scale, floor)
             if result is None:
                 return False
             du = increment(x)
@@ -198,6 +204,17 @@ class ImplicitStep(BasisGrid):
         if not self.integration.inertia and self.options.load_ramp is not None:
             f *= min(1.0, t / self.options.load_ramp)
         return f
+
+    def _round_off(self, J: PETSc.Mat, x: PETSc.Vec) -> float:
+        r"""The round-off floor of the residual's norm at the increment ``x`` with the tangent
+        ``J``: :math:`c\, \epsilon\, \|J\|_\infty \max(\|x\|_\infty, \|u\|_\infty) \sqrt{N}` (``c`` =
+        :data:`ROUND_OFF`, :math:`u` the particles' displacements so far, :math:`N` the unknowns):
+        the residual is a difference of internal forces of about :math:`J u`, each known to
+        about :math:`\epsilon` of that. Collective."""
+        p = self.solver.particles
+        moved = np.abs(p.x - p.fields["X0"]).max(initial=0.0)
+        u = max(x.norm(PETSc.NormType.INFINITY), p.comm.allreduce(float(moved), op=MPI.MAX))
+        return ROUND_OFF * np.finfo(float).eps * J.norm(PETSc.NormType.INFINITY) * u * np.sqrt(x.getSize())
 
     def _count_loads(self, op: IncrementOperator, t: float, dt: float, fext: npt.NDArray, du: npt.NDArray,
                      owned: int) -> None:
@@ -237,17 +254,19 @@ class ImplicitStep(BasisGrid):
         pic = (1.0 - self.options.flip) * (p.mass @ p.fields["v"] - mo @ v[:owned])
         s.record.reaction = s.record.reaction + dt * ((1.0 - integ.gamma) * old + integ.gamma * held) + pic
 
-    def _solve(self, residual, jacobian, J: PETSc.Mat, x: PETSc.Vec, guess: npt.NDArray, scale: float):
+    def _solve(self, residual, jacobian, J: PETSc.Mat, x: PETSc.Vec, guess: npt.NDArray, scale: float, floor=None):
         """Newton from ``guess`` with the line search of the options; where it fails, once more
         with full Newton steps (``basic``: near incompressibility the first full step can raise
         the residual many times over on its way to the quadratic range, and the backtracking
         search then creeps); the :class:`~fempm.implicit.newton.NewtonResult` that converged,
-        else None (:attr:`last_failure` says why). A singular quasi-static tangent stops the run."""
+        else None (:attr:`last_failure` says why). A singular quasi-static tangent stops the run.
+        ``floor``: the residual's round-off floor at an iterate (:meth:`_round_off`)."""
         s = self.solver
         failures = []
         for line_search in (None, "basic"):
             x.array[:] = guess
-            result = self.newton.solve(residual, jacobian, J, x, force_scale=scale, line_search=line_search)
+            result = self.newton.solve(residual, jacobian, J, x, force_scale=scale, line_search=line_search,
+                                       floor=floor)
             s.record.newton_iterations += result.iterations
             if result.converged:
                 return result
