@@ -33,6 +33,8 @@ class GridConditions:
             some fall below mu times their normal velocity change and the friction there is
             cut short (docs/contact.md, "The sliding block").
         frictional: whether a wall has Coulomb friction (mu > 0), on any rank.
+        curved: whether a slip or frictional wall has a normal per node (a tagged wall that is
+            not straight), on any rank.
         on_update: the conditions that act on the velocity update of a step only (their
             ``acts_on_update``; e.g. the absorbing dashpots, :class:`~fempm.boundary.absorbing.Dashpot`,
             and the colliders, :class:`~fempm.colliders.grid.ColliderContact`), with their
@@ -62,6 +64,7 @@ class GridConditions:
                 mask[bc.dofs] = True
         self.friction_dofs = mask if mask.any() else None
         self.frictional = any(isinstance(bc, Friction) and bc.mu > 0.0 for bc in self.bcs)
+        self.curved = any(isinstance(bc, (Slip, Friction)) and np.ndim(bc.normal) == 2 for bc in self.bcs)
         self.on_update = tuple(bc for bc in self.bcs if getattr(bc, "acts_on_update", False))
         self.needs_positions = any(bc.needs_positions for bc in self.bcs)
         self.zero_components = all(bc.zero_components for bc in self.bcs)

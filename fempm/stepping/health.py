@@ -211,7 +211,7 @@ class HealthMonitor:
 
     def _growth_message(self, e: float, budget: float, scale: float, gone) -> str:
         """What the energy check says: every term of the budget; with pure FLIP and a frictional
-        wall, the blend that keeps it; where a small-strain law turned far, that its stored energy
+        or curved wall, the blend that keeps it; where a small-strain law turned far, that its stored energy
         is not meant for that (collective)."""
         s = self.solver
         terms = [f"the initial energy {self.e0:.6g}", f"the work of the loads {max(self.work, self.work_path):.6g}"]
@@ -221,9 +221,10 @@ class HealthMonitor:
         message = (f"energy growth: the total energy {e:.6g}{held} exceeds its budget {budget:.6g} = "
                    f"{' + '.join(terms)} by {100 * (e - budget) / scale:.3g} % (tolerance "
                    f"{100 * self.health.energy_tolerance:g} %): the run is unstable")
-        if s.options.flip == 1.0 and s.conditions.frictional:
-            message += ("; pure FLIP (flip = 1) with a frictional wall gains energy where a body rolls or slides along "
-                        "a curved wall (docs/boundaries.md, 'Friction on a curved wall'): take a blend, e.g. flip = 0.95")
+        if s.options.flip == 1.0 and (s.conditions.frictional or s.conditions.curved):
+            message += ("; pure FLIP (flip = 1) gains energy where a body rolls or slides along a curved wall, "
+                        "frictional or not (docs/boundaries.md, 'Friction on a curved wall'): take a blend, e.g. "
+                        "flip = 0.99")
         angle = diagnostics.small_strain_rotation(s.particles, s.materials)
         if angle > SMALL_STRAIN_ROTATION:
             message += (f"; or a small-strain law (LinearElastic) has turned by up to {angle:.3g} degrees, which its "
