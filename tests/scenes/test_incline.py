@@ -52,7 +52,8 @@ def test_a_block_near_the_friction_angle_slides_or_sticks_with_the_scene_default
 
 @pytest.mark.skipif(comm.size > 1, reason="the accuracy in serial")
 @pytest.mark.parametrize(("mu", "plane"), [(0.5, "grid"), pytest.param(0.6, "grid", marks=pytest.mark.slow),
-                                           (0.5, "rigid"), pytest.param(0.6, "rigid", marks=pytest.mark.slow)])
+                                           pytest.param(0.5, "rigid", marks=pytest.mark.slow),
+                                           pytest.param(0.6, "rigid", marks=pytest.mark.slow)])
 def test_a_block_on_a_frictional_plane_with_consistent_mass(mu, plane):
     """Consistent mass, PIC (damps the sliding instability, as consistent mass does not): the
     rows of the frictional wall's and contact's nodes are lumped, so that node-wise Coulomb
