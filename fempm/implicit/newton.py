@@ -86,28 +86,26 @@ class Newton:
         a loaded body lies above the relative tolerance), unless the options database sets
         ``snes_atol``. ``line_search``: a PETSc line search type for this solve instead of the
         configured one (e.g. ``"basic"``: full Newton steps). ``floor``: the round-off floor of the
-        residual at ``x``; a solve that SNES ends without convergence but whose last residual lies
-        below it has converged as far as the residual can show (``CONVERGED_ROUND_OFF``: near
-        incompressibility the internal forces are differences of terms many times larger, and
-        the force tolerance can lie below what they can resolve)."""
+        residual at an iterate; a solve whose residual lies below it has converged as far as the
+        residual can show and stops there (``CONVERGED_ROUND_OFF``, :class:`_ConvergenceTest`:
+        near incompressibility the internal forces are differences of terms many times larger,
+        and the force tolerance can lie below what they can resolve)."""
         snes = self.snes
         ls = snes.getLineSearch()
         configured = ls.getType()
         if line_search is not None:
             ls.setType(line_search)
         try:
-            result = self._solve(residual, jacobian, J, x, force_scale)
-            if not result.converged and floor is not None and len(result.residuals) \
-                    and result.residuals[-1] <= floor(x):
-                return NewtonResult(True, "CONVERGED_ROUND_OFF", result.iterations, result.residuals)
-            return result
+            return self._solve(residual, jacobian, J, x, force_scale, floor)
         finally:
             if line_search is not None:
                 ls.setType(configured)
                 ls.setFromOptions()  # the options database's settings of the configured search
 
-    def _solve(self, residual, jacobian, J: PETSc.Mat, x: PETSc.Vec, force_scale: float) -> NewtonResult:
+    def _solve(self, residual, jacobian, J: PETSc.Mat, x: PETSc.Vec, force_scale: float, floor) -> NewtonResult:
         snes = self.snes
+        test = _ConvergenceTest(floor)
+        snes.setConvergenceTest(test)
         if not PETSc.Options().hasName(self.prefix + "snes_atol"):
             rtol, _, stol, max_it = snes.getTolerances()
             snes.setTolerances(rtol=rtol, atol=max(FORCE_ATOL * force_scale, NEWTON_OPTIONS["snes_atol"]), stol=stol,
@@ -126,4 +124,43 @@ class Newton:
         norms = np.asarray(snes.getConvergenceHistory()[0], dtype=float).copy()
         names = {v: k for k, v in vars(PETSc.SNES.ConvergedReason).items() if isinstance(v, int)}
         r.destroy()
-        return NewtonResult(reason > 0, names.get(reason, str(reason)), snes.getIterationNumber(), norms)
+        snes.setConvergenceTest("default")
+        name = "CONVERGED_ROUND_OFF" if test.at_floor and reason > 0 else names.get(reason, str(reason))
+        return NewtonResult(reason > 0, name, snes.getIterationNumber(), norms)
+
+
+class _ConvergenceTest:
+    """PETSc's default Newton convergence test (the absolute and relative residual and the step
+    tolerances, the divergence tolerance, a non-finite residual), and with a ``floor`` (a
+    callable of the iterate) convergence where the residual lies below that round-off floor:
+    the solve stops there instead of searching below what the residual can resolve."""
+
+    def __init__(self, floor: Callable[[PETSc.Vec], float] | None):
+        self.floor = floor
+        self.at_floor = False
+        self.target = 0.0  # max(atol, rtol |F_0|)
+        self.first = 0.0
+
+    def __call__(self, snes: PETSc.SNES, its: int, norms: tuple[float, float, float]) -> int:
+        R = PETSc.SNES.ConvergedReason
+        xnorm, ynorm, fnorm = norms
+        rtol, atol, stol, _ = snes.getTolerances()
+        if its == 0:
+            self.first, self.target = fnorm, max(atol, rtol * fnorm)
+        if not np.isfinite(fnorm):
+            return R.DIVERGED_FUNCTION_NANORINF
+        if fnorm < atol:
+            return R.CONVERGED_FNORM_ABS
+        if its == 0:
+            return R.CONVERGED_ITERATING
+        if fnorm <= self.target:
+            return R.CONVERGED_FNORM_RELATIVE
+        if ynorm < stol * xnorm:
+            return R.CONVERGED_SNORM_RELATIVE
+        divtol = snes.getDivergenceTolerance()
+        if divtol > 0 and fnorm > divtol * self.first:
+            return R.DIVERGED_DTOL
+        if self.floor is not None and fnorm <= self.floor(snes.getSolution()):
+            self.at_floor = True
+            return R.CONVERGED_FNORM_ABS
+        return R.CONVERGED_ITERATING
