@@ -29,7 +29,8 @@ from fempm.boundary import fixed, surface_load
 from fempm.materials import LinearElastic
 from fempm.meshes import tagged_polygon
 from fempm.scene import Scene, run
-from fempm.scenes.cook import CORNERS, EDGE, cook_membrane, corner_displacement, fe_reference, first_frequency
+from fempm.scenes.cook import (CORNERS, EDGE, cook_membrane, corner_displacement, fe_reference, first_frequency,
+                               value_at_corner)
 from fempm.stepping import Loads, StepOptions
 from fempm.studies.scenes import COOK_FE, fit
 
@@ -41,8 +42,6 @@ def p1_fe(h: float, nu: float = 1 / 3) -> float:
     """u_y(C) per unit load of the displacement-based P1 solution on the scene's mesh of size h."""
     import dolfinx.fem
     import dolfinx.fem.petsc
-    import dolfinx.geometry
-    import dolfinx.mesh
     import ufl
 
     from fempm.materials.base import lame
@@ -59,11 +58,7 @@ def p1_fe(h: float, nu: float = 1 / 3) -> float:
     bc = dolfinx.fem.dirichletbc(np.zeros(2), dolfinx.fem.locate_dofs_geometrical(V, lambda x: np.isclose(x[0], 0.0)), V)
     uh = dolfinx.fem.petsc.LinearProblem(a, L, bcs=[bc], petsc_options_prefix="cook_p1_", petsc_options={
         "ksp_type": "preonly", "pc_type": "lu", "pc_factor_mat_solver_type": "mumps"}).solve()
-    uh = uh[0] if isinstance(uh, tuple) else uh
-    pt = np.array([[48.0, 60.0, 0.0]])
-    tree = dolfinx.geometry.bb_tree(mesh, 2)
-    cells = dolfinx.geometry.compute_colliding_cells(mesh, dolfinx.geometry.compute_collisions_points(tree, pt), pt)
-    return float(uh.eval(pt, cells.links(0)[:1])[1])
+    return float(value_at_corner(uh[0] if isinstance(uh, tuple) else uh)[1])
 
 
 def lattice(h: float, factor: float) -> tuple[float, int]:

@@ -56,7 +56,8 @@ from fempm.transfer.mapping import SUPPORT_TOL
 if TYPE_CHECKING:
     from fempm.stepping.solver import ExplicitSolver
 
-#: the residual's round-off floor in machine epsilons of the norm of its terms' magnitudes
+#: the residual's round-off floor in machine epsilons of |J|_inf max(|du|_inf, |u|_inf) sqrt(N)
+#: (:meth:`ImplicitStep._round_off`)
 ROUND_OFF = 100.0
 
 __all__ = ["ImplicitStep"]
@@ -178,8 +179,10 @@ class ImplicitStep(BasisGrid):
         guess = (dt * v[:owned] if integ.inertia else np.zeros((owned, d))).ravel()  # constant velocity
         forces = np.concatenate([fext[:owned].ravel(), op.internal_force(op.sigma)[:owned].ravel()])
         scale = float(np.sqrt(p.comm.allreduce(float(forces @ forces))))  # what the residual balances
-        def floor(xx) -> float:
-            return self._round_off(J, xx)
+        moved = p.comm.allreduce(float(np.abs(p.x - p.fields["X0"]).max(initial=0.0)), op=MPI.MAX)
+
+        def floor(xx) -> float:  # (the particles stay where they are during the solve)
+            return self._round_off(J, xx, moved)
 
         try:
             result = self._solve(residual, jacobian, J, x, guess, scale, floor)
@@ -205,15 +208,14 @@ class ImplicitStep(BasisGrid):
             f *= min(1.0, t / self.options.load_ramp)
         return f
 
-    def _round_off(self, J: PETSc.Mat, x: PETSc.Vec) -> float:
+    @staticmethod
+    def _round_off(J: PETSc.Mat, x: PETSc.Vec, moved: float) -> float:
         r"""The round-off floor of the residual's norm at the increment ``x`` with the tangent
         ``J``: :math:`c\, \epsilon\, \|J\|_\infty \max(\|x\|_\infty, \|u\|_\infty) \sqrt{N}` (``c`` =
-        :data:`ROUND_OFF`, :math:`u` the particles' displacements so far, :math:`N` the unknowns):
-        the residual is a difference of internal forces of about :math:`J u`, each known to
-        about :math:`\epsilon` of that. Collective."""
-        p = self.solver.particles
-        moved = np.abs(p.x - p.fields["X0"]).max(initial=0.0)
-        u = max(x.norm(PETSc.NormType.INFINITY), p.comm.allreduce(float(moved), op=MPI.MAX))
+        :data:`ROUND_OFF`, ``moved`` :math:`= \|u\|_\infty` the particles' largest displacement so
+        far over all ranks, :math:`N` the unknowns): the residual is a difference of internal
+        forces of about :math:`J u`, each known to about :math:`\epsilon` of that. Collective."""
+        u = max(x.norm(PETSc.NormType.INFINITY), moved)
         return ROUND_OFF * np.finfo(float).eps * J.norm(PETSc.NormType.INFINITY) * u * np.sqrt(x.getSize())
 
     def _count_loads(self, op: IncrementOperator, t: float, dt: float, fext: npt.NDArray, du: npt.NDArray,

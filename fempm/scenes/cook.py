@@ -33,7 +33,7 @@ from fempm.transfer.domains import step_domain
 
 __all__ = [
     "CORNERS", "EDGE", "cook_membrane", "corner_displacement", "fe_reference", "first_frequency",
-    "panel_lattice", "panel_map",
+    "panel_lattice", "panel_map", "value_at_corner",
 ]
 
 CORNERS = np.array([[0.0, 0.0], [48.0, 44.0], [48.0, 60.0], [0.0, 44.0]])  # A, B, C, D
@@ -158,7 +158,6 @@ def fe_reference(nu: float, h: float = 1.0, E: float = 1.0, load: float = 1.0, c
     import basix.ufl
     import dolfinx.fem
     import dolfinx.fem.petsc
-    import dolfinx.geometry
     import dolfinx.mesh
     import ufl
 
@@ -186,10 +185,18 @@ def fe_reference(nu: float, h: float = 1.0, E: float = 1.0, load: float = 1.0, c
         petsc_options={"ksp_type": "preonly", "pc_type": "lu", "pc_factor_mat_solver_type": "mumps"})
     w = problem.solve()
     w = w[0] if isinstance(w, tuple) else w
-    uh = w.sub(0).collapse()
-    tree = dolfinx.geometry.bb_tree(mesh, 2)
+    return value_at_corner(w.sub(0).collapse())
+
+
+def value_at_corner(uh) -> np.ndarray:
+    """The value (2,) of a finite element field ``uh`` at the corner C (48, 60), gathered from
+    the rank whose cell holds it. Collective."""
+    import dolfinx.geometry
+
+    mesh = uh.function_space.mesh
+    tree = dolfinx.geometry.bb_tree(mesh, mesh.topology.dim)
     C = np.array([[48.0, 60.0, 0.0]])
     cells = dolfinx.geometry.compute_colliding_cells(mesh, dolfinx.geometry.compute_collisions_points(tree, C), C)
     local = uh.eval(C, cells.links(0)[:1]) if len(cells.links(0)) else np.full(2, np.nan)
-    vals = [r for r in comm.allgather(np.asarray(local).ravel()) if np.all(np.isfinite(r))]
+    vals = [r for r in mesh.comm.allgather(np.asarray(local).ravel()) if np.all(np.isfinite(r))]
     return vals[0]

@@ -57,8 +57,9 @@ class StepRecord:
         load_work: the work of the external loads in the last implicit step, the trapezoidal
             rule over its nodal displacement increments (:mod:`fempm.implicit.step`).
         load_impulse: the impulse of the external loads in the last implicit step (d,).
-        reaction: the momentum the grid conditions took in the last explicit step on this rank
-            (d,; empty without conditions on given nodes; :mod:`fempm.stepping.reactions`).
+        reaction: the momentum the grid conditions took in the last step on this rank (d,;
+            explicit: empty without conditions on given nodes, :mod:`fempm.stepping.reactions`;
+            implicit: the held components', with Newmark's method).
         damping_impulse: the impulse of the grid damping in the last explicit step on this rank
             (d,; empty without damping).
     """
