@@ -10,12 +10,13 @@ the order fitted to each degree's last three sizes and Richardson's value at it
 clamped corners' singularities hold every degree to an order of about 1.
 
 ``--seeding``: at nu = 1/3, the quasi-static MPM answer (10 implicit steps, load 1e-4 so that
-no particle crosses the panel's edge) with the scene's lattice at spacings h/2 (its default) and
-h/4, and with particles seeded per triangle (``create_particles(mesh, ppc)``: each triangle's
-particles hold exactly its area, so the P1 stiffness is integrated exactly) at 4 and 9 per
-triangle, the traction on BC then a surface load on the tagged edge
-(:func:`fempm.boundary.surface_load`), beside the displacement-based P1 finite element solution
-on the same meshes: what point particles integrate, and the floor a P1 background has.
+no particle crosses the panel's edge) with the scene's default seeding (4 particles per
+triangle, each triangle's particles holding exactly its area so that the P1 stiffness is
+integrated exactly, the traction the consistent nodal load), 9 per triangle, the scene's
+lattice at spacings h/2 (its default before 2026-12) and h/4, and 9 per triangle with the
+traction a surface load on the tagged edge (:func:`fempm.boundary.surface_load`: the right
+total force on the particles nearest the edge), beside the displacement-based P1 finite element
+solution on the same meshes (:func:`fempm.scenes.cook.displacement_reference`).
 """
 
 import argparse
@@ -29,8 +30,8 @@ from fempm.boundary import fixed, surface_load
 from fempm.materials import LinearElastic
 from fempm.meshes import tagged_polygon
 from fempm.scene import Scene, run
-from fempm.scenes.cook import (CORNERS, EDGE, cook_membrane, corner_displacement, fe_reference, first_frequency,
-                               value_at_corner)
+from fempm.scenes.cook import (CORNERS, EDGE, cook_membrane, corner_displacement, displacement_reference, fe_reference,
+                               first_frequency)
 from fempm.stepping import Loads, StepOptions
 from fempm.studies.scenes import COOK_FE, fit
 
@@ -38,32 +39,10 @@ LOAD = 1e-4
 QUASI_STATIC = {"integrator": "implicit", "dynamics": "quasi-static"}
 
 
-def p1_fe(h: float, nu: float = 1 / 3) -> float:
-    """u_y(C) per unit load of the displacement-based P1 solution on the scene's mesh of size h."""
-    import dolfinx.fem
-    import dolfinx.fem.petsc
-    import ufl
-
-    from fempm.materials.base import lame
-
-    data = tagged_polygon(MPI.COMM_SELF, CORNERS, h, [0, 1, 0, 0])
-    mesh = data.mesh
-    V = dolfinx.fem.functionspace(mesh, ("Lagrange", 1, (2,)))
-    u, v = ufl.TrialFunction(V), ufl.TestFunction(V)
-    lam, mu = lame(1.0, nu)
-    eps = lambda w: ufl.sym(ufl.grad(w))  # noqa: E731
-    ds = ufl.Measure("ds", domain=mesh, subdomain_data=data.facet_tags)
-    a = (2 * mu * ufl.inner(eps(u), eps(v)) + lam * ufl.div(u) * ufl.div(v)) * ufl.dx
-    L = ufl.inner(dolfinx.fem.Constant(mesh, np.array([0.0, 1.0 / EDGE])), v) * ds(1)
-    bc = dolfinx.fem.dirichletbc(np.zeros(2), dolfinx.fem.locate_dofs_geometrical(V, lambda x: np.isclose(x[0], 0.0)), V)
-    uh = dolfinx.fem.petsc.LinearProblem(a, L, bcs=[bc], petsc_options_prefix="cook_p1_", petsc_options={
-        "ksp_type": "preonly", "pc_type": "lu", "pc_factor_mat_solver_type": "mumps"}).solve()
-    return float(value_at_corner(uh[0] if isinstance(uh, tuple) else uh)[1])
-
-
-def lattice(h: float, factor: float) -> tuple[float, int]:
-    """The scene's own particles at spacing h / factor: (u_y(C) per unit load, particles)."""
-    scene = cook_membrane(h=h, spacing=h / factor, load=LOAD, frames=0)
+def scene_answer(h: float, **seeding) -> tuple[float, int]:
+    """The scene's quasi-static answer with its ``seeding`` (``spacing`` or ``ppc``; none: its
+    default): (u_y(C) per unit load, particles)."""
+    scene = cook_membrane(h=h, load=LOAD, frames=0, **seeding)
     scene.options = dataclasses.replace(scene.options, **QUASI_STATIC)
     scene.dt = scene.t_end / 10
     s = run(scene, None, progress=False)
@@ -86,9 +65,12 @@ def per_cell(h: float, ppc: int) -> tuple[float, int]:
 
 def seeding(hs: list[float]) -> None:
     ref = COOK_FE[1 / 3]
-    columns = [("lattice h/2 (default)", lambda h: lattice(h, 2)), ("lattice h/4", lambda h: lattice(h, 4)),
-               ("4 per triangle", lambda h: per_cell(h, 4)), ("9 per triangle", lambda h: per_cell(h, 9)),
-               ("P1 FE", lambda h: (p1_fe(h), 0))]
+    columns = [("4 per triangle, consistent load (default)", lambda h: scene_answer(h)),
+               ("9 per triangle, consistent load", lambda h: scene_answer(h, ppc=9)),
+               ("lattice h/2", lambda h: scene_answer(h, spacing=h / 2)),
+               ("lattice h/4", lambda h: scene_answer(h, spacing=h / 4)),
+               ("9 per triangle, surface_load", lambda h: per_cell(h, 9)),
+               ("P1 FE", lambda h: (displacement_reference(1 / 3, h)[1], 0))]
     print(f"u_y(C) per unit load at nu = 1/3 against {ref} (error %, particles)")
     print("| h | " + " | ".join(c for c, _ in columns) + " |")
     print("|---|" + "---|" * len(columns))

@@ -7,14 +7,16 @@ incompressible $\nu = 0.4999$, where low-order displacement elements lock. The q
 interest is the vertical displacement of the corner $C$ per unit load.
 
 **MPM.** The background mesh is the panel itself, meshed by gmsh with triangles of size $h$;
-P1 velocity space, lumped mass, MUSL, standard (point) particles on a lattice of the panel's
-bilinear map, two per $h$ in each direction, independent of the triangles. The particles in the
-last lattice column own exact pieces of the loaded edge, so the particle traction applies
-exactly $F$ (``fields["area"]``). The load is switched on at $t = 0$ and mass-proportional grid
+P1 velocity space, lumped mass, MUSL, standard (point) particles seeded 4 per triangle, each
+with its sub-triangle's area: the particles integrate the P1 stiffness exactly, and their
+weights on the loaded edge apply the traction as the finite element's consistent nodal load
+(``fields["area"]``, :func:`fempm.boundary.consistent_load.consistent_weights`). The answer is
+then the P1 finite element answer on the same mesh, first order in $h$ (docs/convergence.md).
+The load is switched on at $t = 0$ and mass-proportional grid
 damping at twice the estimated first eigenfrequency brings the panel to rest by
 $t = 12 / \omega_1$; the load $F = 10^{-3}$ keeps the motion in the small-strain regime.
-The corner displacement is a linear least-squares fit of the 8 particles nearest to $C$,
-evaluated at $C$.
+The corner displacement is a linear least-squares fit of the particles seeded in the triangle
+at $C$, evaluated at $C$.
 
 **Reference.** The same plane-strain problem solved by DOLFINx with Taylor-Hood $P_2/P_1$
 displacement-pressure elements on gmsh triangles of size 0.5 (locking-free): $u_y(C) = 22.59$

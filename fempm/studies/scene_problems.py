@@ -23,13 +23,13 @@ from mpi4py import MPI
 
 from fempm.scene.loop import run as run_scene
 from fempm.scenes.compaction import compaction
-from fempm.scenes.cook import cook_membrane
+from fempm.scenes.cook import FE_REFERENCE, cook_membrane
 from fempm.studies.convergence import Config
 
 __all__ = ["COOK_LOAD", "COOK_REFERENCE", "COOK_WIDTH", "PROBLEMS", "compaction_case", "cook_case"]
 
-#: u_y(C) per unit load, Taylor-Hood P2/P1 at h = 0.5, nu = 1/3 (docs/verification.md)
-COOK_REFERENCE = 22.592
+#: u_y(C) per unit load at nu = 1/3, converged (:data:`fempm.scenes.cook.FE_REFERENCE`)
+COOK_REFERENCE = FE_REFERENCE[1 / 3]
 COOK_LOAD = 1e-3
 COOK_WIDTH = 48.0
 

@@ -41,17 +41,15 @@ from mpi4py import MPI
 from fempm.io.plot import plot_errors
 from fempm.scene.loop import run as run_scene
 from fempm.scenes import SCENES
+from fempm.scenes.cook import FE_REFERENCE
 from fempm.studies.harness import Provenance, chosen, prepare, sweep
 
 __all__ = ["COLUMNS", "COOK_FE", "SERIES", "Series", "fit", "run_series", "run_study", "write_report"]
 
 COLUMNS = ["scene", "quantity", "variant", "size", "value", "reference", "error", "order", "extrapolated", "wall_s"]
 
-#: Cook's membrane, the vertical displacement of C per unit load: the Taylor-Hood P2/P1, P3/P2 and
-#: P4/P3 solutions at h = 2, 1, 0.5 extrapolated by Richardson at their fitted order (about 1: the
-#: clamped corners' singularities), which agree within 1.1e-3 (``python benchmarks/cook_reference.py``,
-#: docs/convergence.md)
-COOK_FE = {1 / 3: 22.611, 0.4999: 19.429}
+#: Cook's membrane, the vertical displacement of C per unit load (:data:`fempm.scenes.cook.FE_REFERENCE`)
+COOK_FE = FE_REFERENCE
 
 
 @dataclass(frozen=True)

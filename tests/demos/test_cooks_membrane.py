@@ -1,6 +1,6 @@
 """Cook's membrane demo at a small size: MPM (P1 triangles, point particles, damped to rest)
 within 5 % of the DOLFINx Taylor-Hood reference at nu = 1/3; at nu = 0.4999 the P1 background
-locks (the corner moves about a third less than the reference on the coarse mesh)."""
+locks (the corner moves about half as far as the reference on the coarse mesh)."""
 
 from pathlib import Path
 
@@ -16,7 +16,7 @@ def test_cooks_membrane_against_fe(tmp_path):
     fe = rows[0]["u_y_fe"]
     assert 22.4 < fe < 22.7  # plane strain; CoFEA's codes: 32.27 at E = 70, F = 100, i.e. 22.59
     finest = min(rows, key=lambda r: r["h"])
-    assert abs(finest["rel_error"]) < 0.05, finest  # measured -0.63 % at h = 3
+    assert abs(finest["rel_error"]) < 0.05, finest  # measured -3.27 % at h = 3 (P1 on that mesh)
     assert all(r["kinetic_end"] < 1e-8 for r in rows)  # damped to rest
     if MPI.COMM_WORLD.rank == 0:
         assert (Path(out) / "cook.png").stat().st_size > 10_000 and (Path(out) / "cook.csv").exists()
@@ -27,7 +27,7 @@ def test_cooks_membrane_nearly_incompressible_locks(tmp_path):
     out = MPI.COMM_WORLD.bcast(str(tmp_path), root=0)
     row = demo.main(["--h", "6", "--nu", "0.4999", "--fe-h", "1.0", "--out", out, "--no-plot"])["rows"][0]
     assert 19.2 < row["u_y_fe"] < 19.6
-    assert 0.5 < row["u_y"] / row["u_y_fe"] < 0.8  # measured 0.68: volumetric locking of P1 triangles
+    assert 0.5 < row["u_y"] / row["u_y_fe"] < 0.8  # measured 0.56: volumetric locking of P1 triangles
     assert np.isfinite(row["u_x"])
 
 
