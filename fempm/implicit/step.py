@@ -80,6 +80,10 @@ class ImplicitStep(BasisGrid):
         if not solver.conditions.zero_components:
             raise ValueError(f"the implicit step takes fixed dofs and slip walls normal to a coordinate axis, not "
                              f"{' or '.join(solver.conditions.other_kinds)}: take the explicit step")
+        for mat in solver.materials:
+            if getattr(mat, "rate_dependent", False):
+                raise ValueError(f"{type(mat).__name__} is rate-dependent: the implicit step gives the laws an "
+                                 "increment, not a rate; take the explicit step")
         if opts.tangent == "analytic":
             for mat in solver.materials:
                 if not hasattr(mat, "tangent"):

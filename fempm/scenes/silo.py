@@ -25,6 +25,7 @@ from mpi4py import MPI
 
 from fempm.boundary.tagged import tagged
 from fempm.materials.drucker_prager import DruckerPrager
+from fempm.materials.mu_i import MuI
 from fempm.meshes.generators import tagged_polygon
 from fempm.particles.seeding import create_particles
 from fempm.scene.definition import Scene, check_counts, check_finite, checked
@@ -32,12 +33,14 @@ from fempm.scene.recorder import Recorder
 from fempm.stepping.loads import Loads
 from fempm.stepping.options import StepOptions
 
-__all__ = ["FLOOR", "FLOOR_TAG", "OUTLET_HEIGHT", "WALL_TAG", "HopperMass", "discharge_rate", "silo"]
+__all__ = ["FLOOR", "FLOOR_TAG", "LAWS", "OUTLET_HEIGHT", "WALL_TAG", "HopperMass", "discharge_rate", "silo"]
 
 #: the facet tags of the hopper's walls and of the floor
 WALL_TAG, FLOOR_TAG = 2, 1
 #: the outlet's height above the floor, the floor's and the chamber's widths, the hopper's top width (m)
 OUTLET_HEIGHT, FLOOR, CHAMBER, TOP = 0.2, 0.4, 1.0, 0.5
+#: the grains' laws the scene takes (``law``)
+LAWS = ("mu-i", "dp")
 #: the window of the hopper's mass (fractions of its fill) over which the discharge is steady
 WINDOW = (0.85, 0.35)
 
@@ -78,19 +81,25 @@ def _outline(outlet: float, half_angle: float) -> tuple[np.ndarray, list[int], f
     return vertices, tags, top
 
 
-@checked(positive=("outlet", "half_angle", "fill", "rho", "E", "friction_angle"), non_negative=("wall_friction", "floor_friction", "g"))
+@checked(positive=("outlet", "half_angle", "fill", "rho", "E", "friction_angle", "grain_diameter"), non_negative=("wall_friction", "floor_friction", "g"))
 def silo(cells: int = 5, outlet: float = 0.1, half_angle: float = 30.0, fill: float = 0.3, ppc: int = 4,
          rho: float = 2000.0, E: float = 2.0e6, nu: float = 0.3, friction_angle: float = 30.0,
          wall_friction: float = 0.3, floor_friction: float = 0.5, g: float = 9.81, t_end: float = 1.0,
-         scheme: str = "MUSL", flip: float = 0.99, cfl: float = 0.4, frames: int = 20,
-         comm: MPI.Comm = MPI.COMM_WORLD) -> Scene:
-    """The silo of the module, ``cells`` cells across the outlet (the gmsh size ``outlet / cells``).
+         scheme: str = "MUSL", flip: float = 0.99, cfl: float = 0.4, frames: int = 20, law: str = "mu-i",
+         grain_diameter: float = 0.53e-3, comm: MPI.Comm = MPI.COMM_WORLD) -> Scene:
+    """The silo of the module, ``cells`` cells across the outlet (the gmsh size ``outlet / cells``),
+    the grains a ``law`` of :data:`LAWS`: ``"mu-i"`` the :math:`\mu(I)` rheology
+    (:class:`fempm.materials.MuI`, Jop et al.'s glass beads of ``grain_diameter``; the
+    discharge converges under refinement and follows Beverloo's law), ``"dp"`` Drucker-Prager
+    with ``friction_angle`` (rate-independent: no length, the discharge grows with refinement).
 
     Raises:
         ValueError: Counts that are not positive, a half-angle outside (0, 60) degrees, a fill
             above the hopper's top or not positive, non-finite numbers.
     """
     check_counts(cells=cells, ppc=ppc)
+    if law not in LAWS:
+        raise ValueError(f"unknown option law={law!r}; expected one of {', '.join(LAWS)}")
     check_finite(outlet=outlet, fill=fill, rho=rho, E=E, nu=nu, g=g, t_end=t_end)
     if not 0.0 < half_angle < 60.0:
         raise ValueError(f"half_angle={half_angle:g} must lie in (0, 60) degrees")
@@ -119,8 +128,10 @@ def silo(cells: int = 5, outlet: float = 0.1, half_angle: float = 30.0, fill: fl
 
     params = {"cells": cells, "outlet": outlet, "half_angle": half_angle, "fill": fill, "ppc": ppc, "rho": rho,
               "E": E, "nu": nu, "friction_angle": friction_angle, "wall_friction": wall_friction,
-              "floor_friction": floor_friction, "g": g, "scheme": scheme, "flip": flip, "cfl": cfl}
-    return Scene(name="silo", mesh=data.mesh, particles=p, materials=[DruckerPrager(E, nu, friction_angle)],
+              "floor_friction": floor_friction, "g": g, "scheme": scheme, "flip": flip, "cfl": cfl, "law": law,
+              "grain_diameter": grain_diameter}
+    material = MuI(E, nu, grain_diameter=grain_diameter) if law == "mu-i" else DruckerPrager(E, nu, friction_angle)
+    return Scene(name="silo", mesh=data.mesh, particles=p, materials=[material],
                  t_end=t_end, bcs=bcs, loads=Loads(body_force=(0.0, -g)),
                  options=StepOptions(scheme=scheme, flip=flip, cfl=cfl), frames=frames, params=params,
                  results=results, watch=hopper, outside="remove")

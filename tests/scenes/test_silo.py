@@ -66,3 +66,5 @@ def test_bad_silo_options_are_named():
         silo(fill=2.0)
     with pytest.raises(ValueError, match=r"outlet=0.6 must lie in \(0, 0.5\)"):
         silo(outlet=0.6)
+    with pytest.raises(ValueError, match=r"unknown option law='coulomb'; expected one of mu-i, dp"):
+        silo(law="coulomb")
