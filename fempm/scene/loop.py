@@ -149,6 +149,9 @@ class Run:
 
         self.scene, self.out, self.every, self.resumed, self.rebuild = scene, out, checkpoint_every, resume, rebuild
         self.comm = comm = scene.mesh.comm
+        # the particles the scene starts with (a resumed run's as its first part's: some may have
+        # left the mesh since, and the checkpoint holds only the survivors)
+        self.num_particles = scene.particles.num_global
         saved, arrays = checkpoint.restore_particles(out, scene, comm) if resume else (None, {})
         self.solver = solver = scene.solver()
         if saved is not None:
@@ -169,7 +172,6 @@ class Run:
             self.frames = Frames(saved["writer"]["frame_interval"], saved["writer"]["next_frame"])
             if solver.t >= scene.t_end:
                 raise ValueError(f"the run in {out} is already at t = {solver.t:.6g}: give a later t_end")
-        self.num_particles = scene.particles.num_global
         self.steps0 = solver.step_count
         self.momentum_scale: float | None = None  # the last step's sum_p M_p |v_p|, for the health checks
         self.agreement = FailureAgreement(comm)

@@ -87,7 +87,7 @@ def silo(cells: int = 5, outlet: float = 0.1, half_angle: float = 30.0, fill: fl
          wall_friction: float = 0.3, floor_friction: float = 0.5, g: float = 9.81, t_end: float = 1.0,
          scheme: str = "MUSL", flip: float = 0.99, cfl: float = 0.4, frames: int = 20, law: str = "mu-i",
          grain_diameter: float = 0.53e-3, comm: MPI.Comm = MPI.COMM_WORLD) -> Scene:
-    """The silo of the module, ``cells`` cells across the outlet (the gmsh size ``outlet / cells``),
+    r"""The silo of the module, ``cells`` cells across the outlet (the gmsh size ``outlet / cells``),
     the grains a ``law`` of :data:`LAWS`: ``"mu-i"`` the :math:`\mu(I)` rheology
     (:class:`fempm.materials.MuI`, Jop et al.'s glass beads of ``grain_diameter``; the
     discharge converges under refinement and follows Beverloo's law), ``"dp"`` Drucker-Prager

@@ -16,7 +16,7 @@ from fempm.scenes.silo import discharge_rate, silo
 
 
 def _short(comm=MPI.COMM_WORLD):
-    return silo(cells=3, t_end=0.7, frames=0, comm=comm)
+    return silo(cells=3, t_end=0.4, frames=0, comm=comm)
 
 
 def test_the_silo_discharges_and_accounts_what_left(tmp_path):
