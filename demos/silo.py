@@ -1,14 +1,17 @@
 r"""# Granular flow out of a hopper onto a floor
 
 The silo scene (`python -m fempm run silo --cells N`, `fempm.scenes.silo`): a wedge hopper with
-gmsh-tagged frictional walls (`fempm.boundary.tagged`) drains a cohesionless Drucker-Prager fill
-through its outlet onto a floor, from whose edges the material spills out of the mesh and is
-removed (`outside="remove"`). The demo runs each resolution (cells across the outlet) and writes
-`silo.csv` and `silo.md` (command, commit, date): the steady discharge rate, what left the mesh,
-and the mass balance (particles + removed - fill); with `--figure` the flow at three times and
-the hopper's mass against time (`silo.png`).
+gmsh-tagged frictional walls (`fempm.boundary.tagged`) drains a cohesionless granular fill (the
+mu(I) rheology, or Drucker-Prager with `--law dp`) through its outlet onto a floor, from whose
+edges the material spills out of the mesh and is removed (`outside="remove"`). The demo runs
+each resolution (cells across the outlet) and each outlet width, and writes `silo.csv` and
+`silo.md` (command, commit, date): the steady discharge rate, Beverloo's coefficient, what left
+the mesh, and the mass balance (particles + removed - fill); with several outlets at one cell
+size (`--h`) the exponent of the discharge in the outlet width, fitted (Beverloo: 3/2); with
+`--figure` the flow at three times and the hopper's mass against time (`silo.png`).
 
-Run: `python demos/silo.py [--cells 5 10] [--t-end 1.0] [--out docs/silo] [--figure]`
+Run: `python demos/silo.py [--cells 5 10] [--outlets 0.1] [--h H] [--fill 0.3] [--law mu-i|dp] [--t-end 1.0]
+[--out docs/silo] [--figure]`
 """
 
 from __future__ import annotations
@@ -22,11 +25,12 @@ from mpi4py import MPI
 
 import fempm  # noqa: F401
 from fempm.scene import run
-from fempm.scenes.silo import WINDOW, silo
+from fempm.scenes.silo import LAWS, WINDOW, silo
 from fempm.studies.harness import Provenance, write_table
 
 #: the table's columns: (row key, heading, format)
-TABLE = [("cells", "cells across the outlet", ""), ("discharge_rate", "discharge (kg/s per m)", ".2f"),
+TABLE = [("law", "law", ""), ("outlet", "outlet D (m)", ".3g"), ("cells", "cells across the outlet", ""),
+         ("discharge_rate", "discharge (kg/s per m)", ".2f"), ("beverloo", "Beverloo C", ".3f"),
          ("removed_mass", "removed (kg)", ".3f"), ("hopper_mass", "left in the hopper (kg)", ".3f"),
          ("fill", "fill (kg)", ".3f"), ("balance", "(particles + removed - fill) / fill", ".1e"),
          ("steps", "steps", ""), ("wall_s", "wall (s)", ".0f")]
@@ -34,10 +38,11 @@ TABLE = [("cells", "cells across the outlet", ""), ("discharge_rate", "discharge
 SNAPSHOTS = (0.15, 0.5, 1.0)
 
 
-def run_case(cells: int, t_end: float) -> tuple[dict, dict]:
+def run_case(cells: int, t_end: float, outlet: float = 0.1, fill: float = 0.3, law: str = "mu-i"
+             ) -> tuple[dict, dict]:
     """One run: its row, and for the figure the snapshots (t -> (x, speed)) and the hopper's mass
     (the scene's :class:`~fempm.scenes.silo.HopperMass`)."""
-    scene = silo(cells=cells, t_end=t_end, frames=0)
+    scene = silo(cells=cells, t_end=t_end, frames=0, outlet=outlet, fill=fill, law=law)
     p = scene.particles
     fill = p.comm.allreduce(float(p.mass.sum()))
     shots = {}
@@ -53,7 +58,8 @@ def run_case(cells: int, t_end: float) -> tuple[dict, dict]:
     t0 = time.perf_counter()
     s = run(scene, None, progress=False, callback=record)
     left = p.comm.allreduce(float(p.mass.sum()))
-    row = {"cells": cells, "discharge_rate": s["discharge_rate"], "removed_mass": s["removed"]["mass"],
+    row = {"law": law, "outlet": outlet, "cells": cells, "discharge_rate": s["discharge_rate"],
+           "beverloo": s["beverloo_coefficient"], "removed_mass": s["removed"]["mass"],
            "hopper_mass": s["hopper_mass"], "fill": fill, "balance": (left + s["removed"]["mass"] - fill) / fill,
            "steps": s["steps"], "wall_s": time.perf_counter() - t0}
     return row, {"shots": shots, "history": np.array(scene.watch.points), "outline": scene.mesh.geometry.x[:, :2]}
@@ -93,20 +99,31 @@ def figure(cases: dict, out: Path) -> None:
 def main(argv: list[str] | None = None) -> list[dict]:
     ap = argparse.ArgumentParser(description="granular discharge from a hopper")
     ap.add_argument("--cells", type=int, nargs="+", default=[5, 10])
+    ap.add_argument("--outlets", type=float, nargs="+", default=[0.1], help="outlet widths D (m)")
+    ap.add_argument("--h", type=float, default=None,
+                    help="one cell size for every outlet (cells = D / h) instead of --cells")
+    ap.add_argument("--fill", type=float, default=0.3, help="the fill's height above the outlet (m)")
+    ap.add_argument("--law", choices=LAWS, default="mu-i")
     ap.add_argument("--t-end", type=float, default=1.0)
     ap.add_argument("--out", type=Path, default=Path("output/silo"))
     ap.add_argument("--figure", action="store_true")
     a = ap.parse_args(argv)
     provenance = Provenance.now(command="python demos/silo.py " + " ".join(argv if argv is not None else []))
     rows, cases = [], {}
-    for cells in a.cells:
-        row, cases[cells] = run_case(cells, a.t_end)
-        rows.append(row)
-        if MPI.COMM_WORLD.rank == 0:
-            print(f"{cells:3d} cells: discharge {row['discharge_rate']:.2f} kg/s, "
-                  f"removed {row['removed_mass']:.3f} kg, "
-                  f"balance {row['balance']:.1e}, {row['wall_s']:.0f} s", flush=True)
-            write_table(a.out, "silo", rows, provenance, TABLE)
+    for outlet in a.outlets:
+        for cells in ([int(round(outlet / a.h))] if a.h else a.cells):
+            row, case = run_case(cells, a.t_end, outlet, a.fill, a.law)
+            if outlet == a.outlets[0]:
+                cases[cells] = case
+            rows.append(row)
+            if MPI.COMM_WORLD.rank == 0:
+                print(f"D = {outlet:g}, {cells:3d} cells: discharge {row['discharge_rate']:.2f} kg/s "
+                      f"(Beverloo C {row['beverloo']:.3f}), removed {row['removed_mass']:.3f} kg, "
+                      f"balance {row['balance']:.1e}, {row['wall_s']:.0f} s", flush=True)
+                write_table(a.out, "silo", rows, provenance, TABLE)
+    if a.h and len(a.outlets) > 1 and MPI.COMM_WORLD.rank == 0:
+        exponent = np.polyfit(np.log([r["outlet"] for r in rows]), np.log([r["discharge_rate"] for r in rows]), 1)[0]
+        print(f"discharge ~ D^{exponent:.3f} at h = {a.h:g} (Beverloo: D^1.5)")
     if a.figure and MPI.COMM_WORLD.rank == 0:
         figure(cases, a.out)
     return rows

@@ -1,8 +1,8 @@
-r"""Granular flow out of a hopper onto a floor (plane strain, Drucker-Prager).
+r"""Granular flow out of a hopper onto a floor (plane strain, mu(I) or Drucker-Prager).
 
 A wedge hopper with walls at ``half_angle`` :math:`\alpha` from the vertical, an outlet of width
 ``outlet`` :math:`W_o` at the height :math:`y_o` = :data:`OUTLET_HEIGHT`, is filled to ``fill``
-above the outlet with a cohesionless Drucker-Prager material at rest; the outlet is open at
+above the outlet with a cohesionless granular material at rest; the outlet is open at
 :math:`t = 0`. The material falls onto a floor of width :data:`FLOOR` under the outlet, heaps on
 it and spills over its edges out of the mesh, where it is removed (``outside="remove"``,
 :mod:`fempm.stepping.outside`). The mesh is a gmsh triangulation of the hopper and the chamber
@@ -14,8 +14,13 @@ chamber's sides and the bottom beside the floor are open.
 Results: ``discharge_rate``, the mass per second (per unit thickness) leaving the hopper over the
 steady part of the flow (the slope of a least-squares line through the hopper's mass, kept by
 the scene's ``watch``, a :class:`HopperMass`, while it
-holds between 85 % and 35 % of its fill; NaN if the run ends before), ``hopper_mass`` (the mass
-still above the outlet at the end) and the run's ``removed`` entry (the mass that left the mesh).
+holds between 85 % and 35 % of its fill; NaN if the run ends before), ``beverloo_coefficient``
+(:func:`beverloo_coefficient`), ``hopper_mass`` (the mass still above the outlet at the end) and
+the run's ``removed`` entry (the mass that left the mesh).
+
+The grains follow the :math:`\mu(I)` rheology by default (:class:`fempm.materials.MuI`,
+``law="mu-i"``), or Drucker-Prager (``law="dp"``). The walls leave their ends at the outlet's
+lips free (:func:`fempm.boundary.tagged.open_ends`).
 """
 
 from __future__ import annotations
@@ -33,7 +38,8 @@ from fempm.scene.recorder import Recorder
 from fempm.stepping.loads import Loads
 from fempm.stepping.options import StepOptions
 
-__all__ = ["FLOOR", "FLOOR_TAG", "LAWS", "OUTLET_HEIGHT", "WALL_TAG", "HopperMass", "discharge_rate", "silo"]
+__all__ = ["FLOOR", "FLOOR_TAG", "LAWS", "OUTLET_HEIGHT", "WALL_TAG", "HopperMass", "beverloo_coefficient",
+           "discharge_rate", "silo"]
 
 #: the facet tags of the hopper's walls and of the floor
 WALL_TAG, FLOOR_TAG = 2, 1
@@ -69,6 +75,13 @@ def discharge_rate(t: np.ndarray, mass: np.ndarray) -> float:
     if np.count_nonzero(steady) < 3:
         return float("nan")
     return float(-np.polyfit(t[steady], mass[steady], 1)[0])
+
+
+def beverloo_coefficient(rate: float, rho: float, g: float, outlet: float) -> float:
+    r"""The coefficient :math:`C` of Beverloo's law in a plane hopper (per unit thickness),
+    :math:`W = C \rho \sqrt{g}\, D^{3/2}`, of a discharge ``rate`` :math:`W` through an outlet
+    :math:`D` (the grains' size correction :math:`D - k d` left out: :math:`d \ll D`)."""
+    return float(rate / (rho * np.sqrt(g) * outlet**1.5)) if g > 0 else float("nan")
 
 
 def _outline(outlet: float, half_angle: float) -> tuple[np.ndarray, list[int], float]:
@@ -120,7 +133,9 @@ def silo(cells: int = 5, outlet: float = 0.1, half_angle: float = 30.0, fill: fl
 
     def results(scene, solver) -> dict:
         t, m = np.array(hopper.points).T
-        return {"discharge_rate": discharge_rate(t, m), "hopper_mass": float(m[-1])}
+        rate = discharge_rate(t, m)
+        return {"discharge_rate": rate, "hopper_mass": float(m[-1]),
+                "beverloo_coefficient": beverloo_coefficient(rate, rho, g, outlet)}
 
     def bcs(V):
         return [tagged(V, data.facet_tags, WALL_TAG, "friction", wall_friction),

@@ -109,3 +109,34 @@ def test_bad_input_is_named():
         tagged(V, cells, 1, "slip")
     with pytest.raises(ValueError, match=r"edge_tags needs one tag >= 0 per edge \(4\)"):
         tagged_polygon(comm, SLOPE, 0.3, [1, 2])
+
+
+@pytest.mark.parametrize("quadrilateral", [False, True], ids=["triangles", "quadrilaterals"])
+@pytest.mark.parametrize("degree", [1, 2])
+@pytest.mark.parallel(only=("1-triangles",))
+def test_a_wall_ending_at_an_opening_leaves_its_end_free(degree, quadrilateral):
+    """A hopper's walls end at the outlet's lips, where the boundary turns outward round the
+    chamber below (reflex corners): slip and friction walls leave those two nodes free (a
+    condition there turned the material falling past the lip along the wall, a cell into the
+    outlet); the convex top corners and a fixed wall keep every node."""
+    import importlib
+
+    silo = importlib.import_module("fempm.scenes.silo")
+    vertices, tags, top = silo._outline(0.1, 30.0)
+    data = tagged_polygon(comm, vertices, 0.025, tags, quadrilateral=quadrilateral)
+    V = _space(data.mesh, degree)
+    lips = np.array([[-0.05, silo.OUTLET_HEIGHT], [0.05, silo.OUTLET_HEIGHT]])
+    tops = np.array([[-0.25, top], [0.25, top]])
+
+    def held(points, condition):
+        x = V.tabulate_dof_coordinates()[condition.dofs, :2]
+        found = [bool(np.any(np.linalg.norm(x - p, axis=1) < 1e-9)) for p in points]
+        return [bool(v) for v in np.logical_or.reduce(comm.allgather(np.array(found)))]
+
+    for kind in ("slip", "friction"):
+        wall = tagged(V, data.facet_tags, silo.WALL_TAG, kind, 0.3)
+        assert held(lips, wall) == [False, False] and held(tops, wall) == [True, True], kind
+    fixed = tagged(V, data.facet_tags, silo.WALL_TAG, "fixed")
+    assert held(lips, fixed) == [True, True]
+    floor = tagged(V, data.facet_tags, silo.FLOOR_TAG, "slip")  # a straight run on: both ends held
+    assert held(np.array([[-0.2, 0.0], [0.2, 0.0]]), floor) == [True, True]
