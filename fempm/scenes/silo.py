@@ -84,27 +84,29 @@ def beverloo_coefficient(rate: float, rho: float, g: float, outlet: float) -> fl
     return float(rate / (rho * np.sqrt(g) * outlet**1.5)) if g > 0 else float("nan")
 
 
-def _outline(outlet: float, half_angle: float) -> tuple[np.ndarray, list[int], float]:
-    """The polygon of the hopper and the chamber, its edge tags, and the hopper's top height."""
-    top = OUTLET_HEIGHT + 0.5 * (TOP - outlet) / np.tan(np.radians(half_angle))
-    yo, wo, wc, wf, wt = OUTLET_HEIGHT, 0.5 * outlet, 0.5 * CHAMBER, 0.5 * FLOOR, 0.5 * TOP
+def _outline(outlet: float, half_angle: float, width: float = TOP) -> tuple[np.ndarray, list[int], float]:
+    """The polygon of the hopper (top ``width``) and the chamber, its edge tags, and the
+    hopper's top height."""
+    top = OUTLET_HEIGHT + 0.5 * (width - outlet) / np.tan(np.radians(half_angle))
+    yo, wo, wc, wf, wt = OUTLET_HEIGHT, 0.5 * outlet, 0.5 * CHAMBER, 0.5 * FLOOR, 0.5 * width
     vertices = np.array([[-wc, 0.0], [-wf, 0.0], [wf, 0.0], [wc, 0.0], [wc, yo], [wo, yo], [wt, top], [-wt, top],
                          [-wo, yo], [-wc, yo]])
     tags = [0, FLOOR_TAG, 0, 0, 0, WALL_TAG, 0, WALL_TAG, 0, 0]
     return vertices, tags, top
 
 
-@checked(positive=("outlet", "half_angle", "fill", "rho", "E", "friction_angle", "grain_diameter"), non_negative=("wall_friction", "floor_friction", "g"))
+@checked(positive=("outlet", "half_angle", "fill", "rho", "E", "friction_angle", "grain_diameter", "width"), non_negative=("wall_friction", "floor_friction", "g"))
 def silo(cells: int = 5, outlet: float = 0.1, half_angle: float = 30.0, fill: float = 0.3, ppc: int = 4,
          rho: float = 2000.0, E: float = 2.0e6, nu: float = 0.3, friction_angle: float = 30.0,
          wall_friction: float = 0.3, floor_friction: float = 0.5, g: float = 9.81, t_end: float = 1.0,
          scheme: str = "MUSL", flip: float = 0.99, cfl: float = 0.4, frames: int = 20, law: str = "mu-i",
-         grain_diameter: float = 0.53e-3, comm: MPI.Comm = MPI.COMM_WORLD) -> Scene:
+         grain_diameter: float = 0.53e-3, width: float = TOP, comm: MPI.Comm = MPI.COMM_WORLD) -> Scene:
     r"""The silo of the module, ``cells`` cells across the outlet (the gmsh size ``outlet / cells``),
     the grains a ``law`` of :data:`LAWS`: ``"mu-i"`` the :math:`\mu(I)` rheology
     (:class:`fempm.materials.MuI`, Jop et al.'s glass beads of ``grain_diameter``; the
     discharge converges under refinement and follows Beverloo's law), ``"dp"`` Drucker-Prager
-    with ``friction_angle`` (rate-independent: no length, the discharge grows with refinement).
+    with ``friction_angle``; ``width`` the hopper's top width (a wider hopper holds a taller
+    fill: the steady part of the discharge lasts longer).
 
     Raises:
         ValueError: Counts that are not positive, a half-angle outside (0, 60) degrees, a fill
@@ -116,9 +118,9 @@ def silo(cells: int = 5, outlet: float = 0.1, half_angle: float = 30.0, fill: fl
     check_finite(outlet=outlet, fill=fill, rho=rho, E=E, nu=nu, g=g, t_end=t_end)
     if not 0.0 < half_angle < 60.0:
         raise ValueError(f"half_angle={half_angle:g} must lie in (0, 60) degrees")
-    if not 0.0 < outlet < TOP:
-        raise ValueError(f"outlet={outlet:g} must lie in (0, {TOP:g}) (the hopper's top width)")
-    vertices, tags, top = _outline(outlet, half_angle)
+    if not 0.0 < outlet < width:
+        raise ValueError(f"outlet={outlet:g} must lie in (0, {width:g}) (the hopper's top width)")
+    vertices, tags, top = _outline(outlet, half_angle, width)
     if not 0.0 < fill < top - OUTLET_HEIGHT:
         raise ValueError(f"fill={fill:g} must lie in (0, {top - OUTLET_HEIGHT:.4g}) (the hopper's height)")
     data = tagged_polygon(comm, vertices, outlet / cells, tags)
@@ -144,7 +146,7 @@ def silo(cells: int = 5, outlet: float = 0.1, half_angle: float = 30.0, fill: fl
     params = {"cells": cells, "outlet": outlet, "half_angle": half_angle, "fill": fill, "ppc": ppc, "rho": rho,
               "E": E, "nu": nu, "friction_angle": friction_angle, "wall_friction": wall_friction,
               "floor_friction": floor_friction, "g": g, "scheme": scheme, "flip": flip, "cfl": cfl, "law": law,
-              "grain_diameter": grain_diameter}
+              "grain_diameter": grain_diameter, "width": width}
     material = MuI(E, nu, grain_diameter=grain_diameter) if law == "mu-i" else DruckerPrager(E, nu, friction_angle)
     return Scene(name="silo", mesh=data.mesh, particles=p, materials=[material],
                  t_end=t_end, bcs=bcs, loads=Loads(body_force=(0.0, -g)),
