@@ -5,6 +5,7 @@ locks (the corner moves about half as far as the reference on the coarse mesh)."
 from pathlib import Path
 
 import numpy as np
+import pytest
 from mpi4py import MPI
 from test_demos import load
 
@@ -22,6 +23,7 @@ def test_cooks_membrane_against_fe(tmp_path):
         assert (Path(out) / "cook.png").stat().st_size > 10_000 and (Path(out) / "cook.csv").exists()
 
 
+@pytest.mark.slow  # locking is in the default run at the scene's level (tests/implicit/test_implicit_step.py)
 def test_cooks_membrane_nearly_incompressible_locks(tmp_path):
     demo = load("cooks_membrane")
     out = MPI.COMM_WORLD.bcast(str(tmp_path), root=0)
