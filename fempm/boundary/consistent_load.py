@@ -100,7 +100,8 @@ def consistent_weights(particles, facets: npt.NDArray[np.int32], element: basix.
         rows = order[starts[c]:starts[c + 1]]
         if len(rows) < element.dim:
             raise ValueError(f"cell {c} holds {len(rows)} particle(s) and its element {element.dim} basis functions: "
-                             "a consistent load needs at least as many particles as basis functions in each loaded cell")
+                             "a consistent load needs at least as many particles as basis functions in each "
+                             "loaded cell")
         A = element.tabulate(0, particles.X[rows, :tdim])[0, :, :, 0].T  # (ndofs, np)
         if np.linalg.matrix_rank(A) < element.dim:
             raise ValueError(f"the particles of cell {c} do not determine its {element.dim} basis functions "

@@ -32,7 +32,7 @@ import numpy as np
 import numpy.typing as npt
 
 from fempm.kernels.choice import pick
-from fempm.kernels.plasticity import split
+from fempm.kernels.plasticity import invariants_at, split
 
 __all__ = ["mu_i_return", "mu_i_return_numpy"]
 
@@ -63,12 +63,7 @@ try:
     def _mu_i_return(S, eps_p, dt, mu_s, mu_2, I_0, grain_d, grain_rho, G, out, eps_out):  # pragma: no cover
         sqrt3 = np.sqrt(3.0)
         for n in range(S.shape[0]):
-            p = (S[n, 0, 0] + S[n, 1, 1] + S[n, 2, 2]) / 3.0
-            ss = 0.0
-            for i in range(3):
-                for j in range(3):
-                    dv = S[n, i, j] - p if i == j else S[n, i, j]
-                    ss += dv * dv
+            p, ss = invariants_at(S, n)
             P = -p
             tau = np.sqrt(0.5 * ss)
             excess = tau - mu_s * P

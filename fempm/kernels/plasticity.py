@@ -27,8 +27,8 @@ from fempm.kernels.choice import pick
 from fempm.kernels.kinematics import skew, sym
 
 __all__ = [
-    "drucker_prager_return", "drucker_prager_return_numpy", "jaumann_trial", "jaumann_trial_numpy", "split",
-    "to3", "von_mises_return", "von_mises_return_numpy",
+    "drucker_prager_return", "drucker_prager_return_numpy", "invariants_at", "jaumann_trial", "jaumann_trial_numpy",
+    "split", "to3", "von_mises_return", "von_mises_return_numpy",
 ]
 
 
@@ -119,7 +119,7 @@ try:
                     S[p, i, j] = v
 
     @njit(inline="always")
-    def _invariants(S, p):  # pragma: no cover - compiled
+    def invariants_at(S, p):  # pragma: no cover - compiled
         """(pressure, s : s) of the stress S[p] (3 x 3)."""
         pr = (S[p, 0, 0] + S[p, 1, 1] + S[p, 2, 2]) / 3
         ss = 0.0
@@ -140,7 +140,7 @@ try:
     @njit(cache=True)
     def _von_mises_return(S, eps_p, yield_stress, hardening, mu, out, eps_out):  # pragma: no cover - compiled
         for p in range(S.shape[0]):
-            pr, ss = _invariants(S, p)
+            pr, ss = invariants_at(S, p)
             q = np.sqrt(1.5 * ss)
             f = q - (yield_stress + hardening * eps_p[p])
             dgamma = 0.0
@@ -155,7 +155,7 @@ try:
     def _drucker_prager_return(S, eps_p, eta, k, eta_bar, p_t, G, K, out, eps_out):  # pragma: no cover - compiled
         sqrt3 = np.sqrt(3.0)
         for p in range(S.shape[0]):
-            pr, ss = _invariants(S, p)
+            pr, ss = invariants_at(S, p)
             root = np.sqrt(0.5 * ss)
             f = root + eta * pr - k
             scale = 1.0
@@ -195,6 +195,12 @@ try:
                           float(yield_stress), float(hardening), float(mu), out, eps_out)
         return out, eps_out
 except ImportError:  # pragma: no cover
+    def invariants_at(S, p):
+        """(pressure, s : s) of the stress S[p] (3 x 3)."""
+        pr = np.trace(S[p]) / 3
+        dev = S[p] - pr * np.eye(3)
+        return pr, float(np.sum(dev * dev))
+
     jaumann_trial_numba, von_mises_return_numba = jaumann_trial_numpy, von_mises_return_numpy
     drucker_prager_return_numba = drucker_prager_return_numpy
 

@@ -47,7 +47,8 @@ from fempm.stepping.options import StepOptions
 from fempm.transfer.domains import step_domain
 
 __all__ = [
-    "CORNERS", "EDGE", "FE_REFERENCE", "cook_membrane", "corner_displacement", "displacement_reference", "fe_reference", "first_frequency",
+    "CORNERS", "EDGE", "FE_REFERENCE", "cook_membrane", "corner_displacement", "displacement_reference", "fe_reference",
+    "first_frequency",
     "panel_lattice", "panel_map", "value_at_corner",
 ]
 
@@ -121,8 +122,8 @@ def cook_membrane(
     def tractions(t):
         return p.fields["loaded"][:, None] * traction
 
-    params = dict(h=h, nu=nu, E=E, rho=rho, load=load, spacing=spacing, ppc=ppc, lattice=(nx, ny), degree=degree, mass=mass,
-                  domain=domain, scheme=scheme, omega1=omega1)
+    params = dict(h=h, nu=nu, E=E, rho=rho, load=load, spacing=spacing, ppc=ppc, lattice=(nx, ny), degree=degree,
+                  mass=mass, domain=domain, scheme=scheme, omega1=omega1)
     return Scene(
         name="cook_membrane", mesh=mesh, particles=p, materials=[LinearElastic(E, nu)],
         t_end=12.0 / omega1 if t_end is None else t_end, frames=frames,
