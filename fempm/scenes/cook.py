@@ -232,7 +232,7 @@ def fe_reference(nu: float, h: float = 1.0, E: float = 1.0, load: float = 1.0, c
     W = dolfinx.fem.functionspace(mesh, basix.ufl.mixed_element([
         basix.ufl.element("Lagrange", cell, degree, shape=(2,)), basix.ufl.element("Lagrange", cell, degree - 1)]))
     (u, p), (v, q) = ufl.TrialFunctions(W), ufl.TestFunctions(W)
-    lam, mu = lame(E, nu)
+    lam, mu = _moduli(mesh, E, nu)
     eps = ufl.sym
     a = (2 * mu * ufl.inner(eps(ufl.grad(u)), eps(ufl.grad(v))) + p * ufl.div(v) + q * ufl.div(u) - p * q / lam) * ufl.dx
     V0, _ = W.sub(0).collapse()
@@ -253,10 +253,17 @@ def displacement_reference(nu: float, h: float = 1.0, E: float = 1.0, load: floa
     mesh = unstructured_polygon(comm, CORNERS, h)
     V = dolfinx.fem.functionspace(mesh, ("Lagrange", degree, (2,)))
     u, v = ufl.TrialFunction(V), ufl.TestFunction(V)
-    lam, mu = lame(E, nu)
+    lam, mu = _moduli(mesh, E, nu)
     eps = lambda w: ufl.sym(ufl.grad(w))  # noqa: E731
     a = (2 * mu * ufl.inner(eps(u), eps(v)) + lam * ufl.div(u) * ufl.div(v)) * ufl.dx
     return value_at_corner(_solve_panel(a, v, load, V, V, "fempm_cook_p1_"))
+
+
+def _moduli(mesh, E: float, nu: float):
+    """The Lame parameters as DOLFINx constants: one compiled form for every E and nu."""
+    import dolfinx.fem
+
+    return tuple(dolfinx.fem.Constant(mesh, float(c)) for c in lame(E, nu))
 
 
 def _solve_panel(a, v, load: float, clamped_space, V0, prefix: str):
@@ -270,7 +277,7 @@ def _solve_panel(a, v, load: float, clamped_space, V0, prefix: str):
     facets = dolfinx.mesh.locate_entities_boundary(mesh, 1, lambda x: np.isclose(x[0], CORNERS[1, 0]))
     tags = dolfinx.mesh.meshtags(mesh, 1, facets, np.full(len(facets), 1, dtype=np.int32))
     ds = ufl.Measure("ds", domain=mesh, subdomain_data=tags)
-    L = ufl.inner(dolfinx.fem.Constant(mesh, np.array([0.0, load / EDGE])), v) * ds(1)
+    L = ufl.inner(dolfinx.fem.Constant(mesh, np.array([0.0, load / EDGE])), v) * ds(1)  # load a constant too
     clamp = dolfinx.fem.locate_dofs_geometrical(clamped_space, lambda x: np.isclose(x[0], 0.0))
     zero = dolfinx.fem.Function(V0)
     bc = (dolfinx.fem.dirichletbc(zero, clamp, clamped_space[0]) if isinstance(clamped_space, tuple)
