@@ -6,12 +6,13 @@ mu(I) rheology, or Drucker-Prager with `--law dp`) through its outlet onto a flo
 edges the material spills out of the mesh and is removed (`outside="remove"`). The demo runs
 each resolution (cells across the outlet) and each outlet width, and writes `silo.csv` and
 `silo.md` (command, commit, date): the steady discharge rate, Beverloo's coefficient, what left
-the mesh, and the mass balance (particles + removed - fill); with several outlets at one cell
-size (`--h`) the exponent of the discharge in the outlet width, fitted (Beverloo: 3/2); with
+the mesh, and the mass balance (particles + removed - fill); with several outlets the exponent
+of the discharge in the outlet width, fitted at each number of cells across the outlet (or at
+one cell size, `--h`; Beverloo: 3/2); with
 `--figure` the flow at three times and the hopper's mass against time (`silo.png`).
 
-Run: `python demos/silo.py [--cells 5 10] [--outlets 0.1] [--h H] [--fill 0.3] [--law mu-i|dp] [--t-end 1.0]
-[--out docs/silo] [--figure]`
+Run: `python demos/silo.py [--cells 5 10] [--outlets 0.1] [--h H] [--fill 0.3] [--width 0.5] [--no-floor]
+[--law mu-i|dp] [--t-end 1.0 ...] [--out docs/silo] [--figure]`
 """
 
 from __future__ import annotations
@@ -38,11 +39,11 @@ TABLE = [("law", "law", ""), ("outlet", "outlet D (m)", ".3g"), ("cells", "cells
 SNAPSHOTS = (0.15, 0.5, 1.0)
 
 
-def run_case(cells: int, t_end: float, outlet: float = 0.1, fill: float = 0.3, law: str = "mu-i"
-             ) -> tuple[dict, dict]:
+def run_case(cells: int, t_end: float, outlet: float = 0.1, fill: float = 0.3, law: str = "mu-i",
+             width: float = 0.5, floor: bool = True) -> tuple[dict, dict]:
     """One run: its row, and for the figure the snapshots (t -> (x, speed)) and the hopper's mass
     (the scene's :class:`~fempm.scenes.silo.HopperMass`)."""
-    scene = silo(cells=cells, t_end=t_end, frames=0, outlet=outlet, fill=fill, law=law)
+    scene = silo(cells=cells, t_end=t_end, frames=0, outlet=outlet, fill=fill, law=law, width=width, floor=floor)
     p = scene.particles
     fill = p.comm.allreduce(float(p.mass.sum()))
     shots = {}
@@ -104,15 +105,23 @@ def main(argv: list[str] | None = None) -> list[dict]:
                     help="one cell size for every outlet (cells = D / h) instead of --cells")
     ap.add_argument("--fill", type=float, default=0.3, help="the fill's height above the outlet (m)")
     ap.add_argument("--law", choices=LAWS, default="mu-i")
-    ap.add_argument("--t-end", type=float, default=1.0)
+    ap.add_argument("--width", type=float, default=0.5, help="the hopper's top width (m)")
+    ap.add_argument("--no-floor", action="store_true",
+                    help="no floor: the grains fall out of the mesh (no heap chokes the outlet)")
+    ap.add_argument("--t-end", type=float, nargs="+", default=[1.0],
+                    help="the run's length: one for every outlet, or one per outlet (without a floor, before the "
+                         "hopper is empty)")
     ap.add_argument("--out", type=Path, default=Path("output/silo"))
     ap.add_argument("--figure", action="store_true")
     a = ap.parse_args(argv)
     provenance = Provenance.now(command="python demos/silo.py " + " ".join(argv if argv is not None else []))
     rows, cases = [], {}
-    for outlet in a.outlets:
+    if len(a.t_end) not in (1, len(a.outlets)):
+        ap.error(f"--t-end takes one value or one per outlet ({len(a.outlets)})")
+    for k, outlet in enumerate(a.outlets):
+        t_end = a.t_end[k if len(a.t_end) > 1 else 0]
         for cells in ([int(round(outlet / a.h))] if a.h else a.cells):
-            row, case = run_case(cells, a.t_end, outlet, a.fill, a.law)
+            row, case = run_case(cells, t_end, outlet, a.fill, a.law, a.width, not a.no_floor)
             if outlet == a.outlets[0]:
                 cases[cells] = case
             rows.append(row)
@@ -121,9 +130,14 @@ def main(argv: list[str] | None = None) -> list[dict]:
                       f"(Beverloo C {row['beverloo']:.3f}), removed {row['removed_mass']:.3f} kg, "
                       f"balance {row['balance']:.1e}, {row['wall_s']:.0f} s", flush=True)
                 write_table(a.out, "silo", rows, provenance, TABLE)
-    if a.h and len(a.outlets) > 1 and MPI.COMM_WORLD.rank == 0:
-        exponent = np.polyfit(np.log([r["outlet"] for r in rows]), np.log([r["discharge_rate"] for r in rows]), 1)[0]
-        print(f"discharge ~ D^{exponent:.3f} at h = {a.h:g} (Beverloo: D^1.5)")
+    if len(a.outlets) > 1 and MPI.COMM_WORLD.rank == 0:
+        for cells in sorted({r["cells"] for r in rows}) if not a.h else [None]:
+            same = [r for r in rows if cells is None or r["cells"] == cells]
+            if len(same) > 1:
+                exponent = np.polyfit(np.log([r["outlet"] for r in same]),
+                                      np.log([r["discharge_rate"] for r in same]), 1)[0]
+                at = f"h = {a.h:g}" if a.h else f"{cells} cells across each outlet"
+                print(f"discharge ~ D^{exponent:.3f} at {at} (Beverloo: D^1.5)")
     if a.figure and MPI.COMM_WORLD.rank == 0:
         figure(cases, a.out)
     return rows

@@ -101,13 +101,17 @@ def silo(cells: int = 5, outlet: float = 0.1, half_angle: float = 30.0, fill: fl
          rho: float = 2000.0, E: float = 2.0e6, nu: float = 0.3, friction_angle: float = 30.0,
          wall_friction: float = 0.3, floor_friction: float = 0.5, g: float = 9.81, t_end: float = 1.0,
          scheme: str = "MUSL", flip: float = 0.99, cfl: float = 0.4, frames: int = 20, law: str = "mu-i",
-         grain_diameter: float = 0.53e-3, width: float = TOP, comm: MPI.Comm = MPI.COMM_WORLD) -> Scene:
+         grain_diameter: float = 0.53e-3, width: float = TOP, floor: bool = True,
+         comm: MPI.Comm = MPI.COMM_WORLD) -> Scene:
     r"""The silo of the module, ``cells`` cells across the outlet (the gmsh size ``outlet / cells``),
     the grains a ``law`` of :data:`LAWS`: ``"mu-i"`` the :math:`\mu(I)` rheology
     (:class:`fempm.materials.MuI`, Jop et al.'s glass beads of ``grain_diameter``; the
     discharge converges under refinement and follows Beverloo's law), ``"dp"`` Drucker-Prager
     with ``friction_angle``; ``width`` the hopper's top width (a wider hopper holds a taller
-    fill: the steady part of the discharge lasts longer).
+    fill: the steady part of the discharge lasts longer). ``floor=False`` leaves the floor open:
+    the grains fall out of the mesh and are removed, and no heap under the outlet chokes a large
+    discharge (Beverloo's regime; choose ``t_end`` before the hopper is empty, or the run ends
+    with every particle gone).
 
     Raises:
         ValueError: Counts that are not positive, a half-angle outside (0, 60) degrees, a fill
@@ -141,13 +145,13 @@ def silo(cells: int = 5, outlet: float = 0.1, half_angle: float = 30.0, fill: fl
                 "beverloo_coefficient": beverloo_coefficient(rate, rho, g, outlet)}
 
     def bcs(V):
-        return [tagged(V, data.facet_tags, WALL_TAG, "friction", wall_friction),
-                tagged(V, data.facet_tags, FLOOR_TAG, "friction", floor_friction)]
+        walls = [tagged(V, data.facet_tags, WALL_TAG, "friction", wall_friction)]
+        return walls + ([tagged(V, data.facet_tags, FLOOR_TAG, "friction", floor_friction)] if floor else [])
 
     params = {"cells": cells, "outlet": outlet, "half_angle": half_angle, "fill": fill, "ppc": ppc, "rho": rho,
               "E": E, "nu": nu, "friction_angle": friction_angle, "wall_friction": wall_friction,
               "floor_friction": floor_friction, "g": g, "scheme": scheme, "flip": flip, "cfl": cfl, "law": law,
-              "grain_diameter": grain_diameter, "width": width}
+              "grain_diameter": grain_diameter, "width": width, "floor": floor}
     material = MuI(E, nu, grain_diameter=grain_diameter) if law == "mu-i" else DruckerPrager(E, nu, friction_angle)
     return Scene(name="silo", mesh=data.mesh, particles=p, materials=[material],
                  t_end=t_end, bcs=bcs, loads=Loads(body_force=(0.0, -g)),
