@@ -26,11 +26,16 @@ does, and a refinement converges as the finite element solution on the same mesh
 from __future__ import annotations
 
 import basix
-import dolfinx.mesh
 import numpy as np
 import numpy.typing as npt
 
+from fempm.meshes.facets import facet_area_vectors
+
 __all__ = ["consistent_weights"]
+
+#: the reference cell of each cell type's facets
+_FACET_CELL = {"triangle": "interval", "quadrilateral": "interval", "tetrahedron": "triangle",
+               "hexahedron": "quadrilateral"}
 
 
 def consistent_weights(particles, facets: npt.NDArray[np.int32], element: basix.finite_element.FiniteElement
@@ -76,13 +81,11 @@ def consistent_weights(particles, facets: npt.NDArray[np.int32], element: basix.
         qwts = qwts / qwts.sum()
     else:  # a vertex of an interval: the value there
         qpts, qwts = np.zeros((1, 0)), np.ones(1)
-    gdim = mesh.geometry.dim
-    x = mesh.geometry.x[:, :gdim]
-    fnodes = dolfinx.mesh.entities_to_geometry(mesh, fdim, facets)
+    measure = np.linalg.norm(facet_area_vectors(mesh, facets), axis=1)
     order = np.argsort(particles.cells, kind="stable")
     starts = np.searchsorted(particles.cells[order], np.arange(num_owned + 1))
     rhs: dict[int, npt.NDArray] = {}
-    for f, nodes in zip(facets, fnodes):
+    for f, size in zip(facets, measure):
         cells = f2c.links(f)
         if len(cells) != 1:
             raise ValueError(f"facet {f} has {len(cells)} cells beside it: a consistent load needs facets of "
@@ -95,7 +98,7 @@ def consistent_weights(particles, facets: npt.NDArray[np.int32], element: basix.
         # the facet's quadrature points in the cell's reference coordinates
         X = verts[0] + qpts @ (verts[1 : fdim + 1] - verts[0])
         phi = element.tabulate(0, X)[0, :, :, 0]  # (q, ndofs)
-        rhs[c] = rhs.get(c, 0.0) + _measure(x[nodes[: len(verts)]]) * (qwts @ phi)
+        rhs[c] = rhs.get(c, 0.0) + size * (qwts @ phi)
     for c, b in rhs.items():
         rows = order[starts[c]:starts[c + 1]]
         if len(rows) < element.dim:
@@ -108,18 +111,3 @@ def consistent_weights(particles, facets: npt.NDArray[np.int32], element: basix.
                              "(they lie on fewer points than a unisolvent set)")
         w[rows] = np.linalg.lstsq(A, b, rcond=None)[0]
     return w
-
-
-_FACET_CELL = {"triangle": "interval", "quadrilateral": "interval", "tetrahedron": "triangle",
-               "hexahedron": "quadrilateral"}
-
-
-def _measure(p: npt.NDArray) -> float:
-    """The measure of a straight (planar) facet from its vertices."""
-    if len(p) == 1:
-        return 1.0
-    if len(p) == 2:
-        return float(np.linalg.norm(p[1] - p[0]))
-    if len(p) == 4:  # a planar quadrilateral, vertices 0 1 3 2 round it
-        return float(0.5 * np.linalg.norm(np.cross(p[3] - p[0], p[2] - p[1])))
-    return float(0.5 * np.linalg.norm(np.cross(p[1] - p[0], p[2] - p[0])))
