@@ -10,8 +10,8 @@
 
 Elastic: :class:`LinearElastic`, :class:`NeoHookean`; fluid: :class:`NewtonianTait`;
 plastic (hypoelastic, Jaumann rate, plane strain in 2D): :class:`VonMises`,
-:class:`DruckerPrager`; granular flow: :class:`MuI` (rate-dependent, explicit only). A user law is any object with these members
-(:class:`fempm.materials.base.Material`).
+:class:`DruckerPrager`; granular flow: :class:`MuI` (rate-dependent, explicit only). A user law
+is any object with these members (:class:`fempm.materials.base.Material`).
 """
 
 from fempm.materials.base import Internal, Material
@@ -22,4 +22,5 @@ from fempm.materials.neo_hookean import NeoHookean
 from fempm.materials.newtonian_eos import NewtonianTait
 from fempm.materials.von_mises import VonMises
 
-__all__ = ["DruckerPrager", "Internal", "LinearElastic", "Material", "MuI", "NeoHookean", "NewtonianTait", "VonMises"]
+__all__ = ["DruckerPrager", "Internal", "LinearElastic", "Material", "MuI", "NeoHookean", "NewtonianTait",
+           "VonMises"]

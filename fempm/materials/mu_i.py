@@ -16,8 +16,8 @@ grain diameter and :math:`\rho_s` the grains' density. Below :math:`\mu_s P` the
 elastic (a Drucker-Prager cone :math:`\sqrt{J_2} = \mu_s P` at rest); the friction rises to
 :math:`\mu_2` at high rates. The flow is isochoric (no dilatancy), and where the pressure would
 turn to tension the grains separate and carry no stress. Unlike a rate-independent law this one
-has a length, :math:`d`: the hopper's discharge follows Beverloo's
-:math:`W \propto \sqrt g\, D^{3/2}` (docs/verification.md). The return mapping over a step
+has a length, :math:`d` (the silo's discharge with it and Beverloo's
+:math:`W \propto \sqrt g\, D^{3/2}`, measured: docs/boundaries.md). The return mapping over a step
 solves a quadratic for :math:`\Delta\gamma` exactly
 (:func:`fempm.kernels.granular.mu_i_return`, compiled).
 

@@ -105,8 +105,7 @@ def silo(cells: int = 5, outlet: float = 0.1, half_angle: float = 30.0, fill: fl
          comm: MPI.Comm = MPI.COMM_WORLD) -> Scene:
     r"""The silo of the module, ``cells`` cells across the outlet (the gmsh size ``outlet / cells``),
     the grains a ``law`` of :data:`LAWS`: ``"mu-i"`` the :math:`\mu(I)` rheology
-    (:class:`fempm.materials.MuI`, Jop et al.'s glass beads of ``grain_diameter``; the
-    discharge converges under refinement and follows Beverloo's law), ``"dp"`` Drucker-Prager
+    (:class:`fempm.materials.MuI`, Jop et al.'s glass beads of ``grain_diameter``), ``"dp"`` Drucker-Prager
     with ``friction_angle``; ``width`` the hopper's top width (a wider hopper holds a taller
     fill: the steady part of the discharge lasts longer). ``floor=False`` leaves the floor open:
     the grains fall out of the mesh and are removed, and no heap under the outlet chokes a large
