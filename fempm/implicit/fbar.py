@@ -142,8 +142,8 @@ class FBarIncrementOperator(IncrementOperator):
     """
 
     def __init__(self, basis: ParticleBasis, particles: Particles, materials: Sequence,
-                 finite_difference: bool = False):
-        super().__init__(basis, particles, materials, finite_difference)
+                 finite_difference: bool = False, dt: float = 1.0):
+        super().__init__(basis, particles, materials, finite_difference, dt)
         self.body = particles.fields["body"]
         self.bodies = len(materials)
         self.trace = trace_measure(materials)[self.body]

@@ -42,10 +42,12 @@ class IncrementOperator:
         materials: The laws, one per body index.
         finite_difference: Take the laws' tangents by central differences
             (:func:`fempm.materials.tangent.finite_difference_tangent`) instead of their own.
+        dt: The step's length, given to the laws with the increments (a rate-dependent law's
+            stress depends on it: :func:`fempm.materials.tangent.stress_after`).
     """
 
     def __init__(self, basis: ParticleBasis, particles: Particles, materials: Sequence,
-                 finite_difference: bool = False):
+                 finite_difference: bool = False, dt: float = 1.0):
         f = particles.fields
         self.basis = basis
         self.d = particles.gdim
@@ -55,6 +57,7 @@ class IncrementOperator:
         self.F, self.sigma = f["F"], f["sigma"]
         self.groups = [(mat, idx, law_state(mat, f, idx)) for mat, idx in material_groups(f, materials)]
         self.finite_difference = finite_difference
+        self.dt = dt
         self._last: tuple[npt.NDArray, npt.NDArray] | None = None  # (G, sigma) of the last call
 
     def gradients(self, du: npt.NDArray) -> npt.NDArray:
@@ -74,10 +77,11 @@ class IncrementOperator:
         D = np.empty((n, d, d, d, d)) if tangent else None
         for mat, idx, state in self.groups:
             if not known:
-                sigma[idx] = stress_after(mat, self.F[idx], G[idx], self.sigma[idx], self.rho[idx], state)[0]
+                sigma[idx] = stress_after(mat, self.F[idx], G[idx], self.sigma[idx], self.rho[idx], state,
+                                          self.dt)[0]
             if D is not None:
                 D[idx] = tangent_of(mat, self.F[idx], G[idx], self.sigma[idx], self.rho[idx], state,
-                                    finite_difference=self.finite_difference)
+                                    finite_difference=self.finite_difference, dt=self.dt)
         self._last = (G, sigma)
         return nominal_stress(sigma, D, G)
 

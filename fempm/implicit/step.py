@@ -80,10 +80,6 @@ class ImplicitStep(BasisGrid):
         if not solver.conditions.zero_components:
             raise ValueError(f"the implicit step takes fixed dofs and slip walls normal to a coordinate axis, not "
                              f"{' or '.join(solver.conditions.other_kinds)}: take the explicit step")
-        for mat in solver.materials:
-            if getattr(mat, "rate_dependent", False):
-                raise ValueError(f"{type(mat).__name__} is rate-dependent: the implicit step gives the laws an "
-                                 "increment, not a rate; take the explicit step")
         if opts.tangent == "analytic":
             for mat in solver.materials:
                 if not hasattr(mat, "tangent"):
@@ -133,7 +129,7 @@ class ImplicitStep(BasisGrid):
         basis = self.open_basis()
         fbar = self.options.volumetric_average is not None
         op = (FBarIncrementOperator if fbar else IncrementOperator)(
-            basis, p, s.materials, finite_difference=self.options.tangent == "finite-difference")
+            basis, p, s.materials, finite_difference=self.options.tangent == "finite-difference", dt=dt)
         m = op.nodal(p.mass[:, None])[:, 0]
         free = self._free(op.support(), basis.num_dofs_local)
         v, a = np.zeros_like(free, dtype=float), np.zeros_like(free, dtype=float)
@@ -356,7 +352,7 @@ class ImplicitStep(BasisGrid):
             f["v"] = np.zeros_like(f["v"])
             s.grid_velocity = np.zeros((basis.num_dofs_space, p.gdim))
         G = op.gradients(du)
-        self.update_kinematics(op.law_gradients(G), 1.0, averaged=False)
+        self.update_kinematics(op.law_gradients(G) / dt, dt, averaged=False)  # L dt = G
         self.move(basis.gather(du), lambda: basis.gather_samples(du), 1.0)
         self.close()
         self.relocate()

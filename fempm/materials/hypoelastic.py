@@ -66,13 +66,14 @@ class HypoelasticPlastic(IsotropicElastic):
                                                                    + np.einsum("il,jk->ijkl", e, e))
         return T
 
-    def tangent(self, F, G, sigma, state) -> npt.NDArray:
+    def tangent(self, F, G, sigma, state, **rate) -> npt.NDArray:
         r""":math:`\partial \sigma / \partial G` (n, d, d, d, d) of the increment (the consistent,
         algorithmic tangent): the return mapping's derivative (``return_tangent``) applied to
-        the trial stress's (:meth:`trial_tangent`), at the step's internal variables ``state``."""
+        the trial stress's (:meth:`trial_tangent`), at the step's internal variables ``state``;
+        ``rate``: the step's ``dt`` for a rate-dependent law's return (:class:`fempm.materials.MuI`)."""
         d = G.shape[1]
         S = self.trial(G, sigma, 1.0, state)
-        R = self.return_tangent(S, state["eps_p"], d)
+        R = self.return_tangent(S, state["eps_p"], d, **rate)
         return np.einsum("nijab,nabkl->nijkl", R, self.trial_tangent(sigma, state))[:, :d, :d]
 
     def finish(self, S: npt.NDArray, d: int, state: dict) -> npt.NDArray:

@@ -35,6 +35,7 @@ import numpy as np
 import numpy.typing as npt
 
 from fempm.kernels.granular import mu_i_return
+from fempm.kernels.plasticity import split
 from fempm.materials.base import Internal
 from fempm.materials.hypoelastic import SIGMA_ZZ, HypoelasticPlastic
 
@@ -55,8 +56,9 @@ class MuI(HypoelasticPlastic):
         grain_density: :math:`\rho_s > 0`, the grains' own density.
 
     Note:
-        Rate-dependent: its stress depends on the step's length, which the implicit step does
-        not give the laws (it refuses this law).
+        Rate-dependent (``rate_dependent``): its stress depends on the step's length as well as
+        on the increment; the implicit step passes its ``dt`` to the stress and to the
+        algorithmic tangent (:meth:`return_tangent`).
     """
 
     mu_s: float = float(np.tan(np.radians(20.9)))
@@ -65,7 +67,7 @@ class MuI(HypoelasticPlastic):
     grain_diameter: float = 0.53e-3
     grain_density: float = 2450.0
     history: ClassVar[tuple[Internal, ...]] = (Internal("eps_p"), SIGMA_ZZ)
-    #: the stress depends on the rate, not only on the increment (the implicit step refuses it)
+    #: the stress depends on the rate, not only on the increment (the implicit step passes it dt)
     rate_dependent: ClassVar[bool] = True
 
     def __post_init__(self):
@@ -93,10 +95,48 @@ class MuI(HypoelasticPlastic):
         return mu_i_return(S, eps_p, dt, self.mu_s, self.mu_2, self.I_0, self.grain_diameter, self.grain_density,
                            self.lame[1])
 
-    @property
-    def tangent(self):
-        """Not defined: the law is rate-dependent (see the class's note)."""
-        raise AttributeError("MuI is rate-dependent and has no tangent for the implicit step")
+    def return_tangent(self, S: npt.NDArray, eps_p: npt.NDArray, d: int, dt: float = 1.0) -> npt.NDArray:
+        r""":math:`\partial \sigma_{ij} / \partial \sigma^{tr}_{ab}` (n, 3, 3, 3, 3) of the return
+        over a step ``dt`` of trial stresses ``S`` (the algorithmic tangent). Where the grains
+        flow, :math:`\Delta\gamma` solves
+        :math:`h = \tau^{tr} - G\Delta\gamma - \mu(I) P = 0` with :math:`I = c\,\Delta\gamma`,
+        :math:`c = d / (\Delta t \sqrt{P/\rho_s})` (so :math:`\partial I / \partial P = -I / (2P)`):
+
+        .. math::
+            \mathrm{d}\Delta\gamma = \frac{\mathrm{d}\tau^{tr}
+                + \big(\tfrac12 \mu'(I)\, I - \mu(I)\big)\, \mathrm{d}P}{G + \mu'(I)\, c P},
+            \qquad \mu'(I) = \frac{(\mu_2 - \mu_s) I_0}{(I_0 + I)^2},
+
+        with :math:`\partial \tau^{tr} / \partial \sigma^{tr} = s^{tr} / (2 \tau^{tr})`,
+        :math:`\partial P / \partial \sigma^{tr} = -I / 3`, and the returned
+        :math:`\sigma = (\tau / \tau^{tr})\, s^{tr} - P I`, :math:`\tau = \tau^{tr} - G\Delta\gamma`.
+        Elastic: the identity; separated grains (zero stress): zero."""
+        G = self.lame[1]
+        p, dev, ss = split(S)
+        P = -p
+        tau = np.sqrt(0.5 * ss)
+        free = P <= 0.0
+        flows = ~free & (tau - self.mu_s * P > 0.0)
+        returned, _ = self.return_map(S, eps_p, dt)
+        t = np.where(flows, tau, 1.0)
+        Pf = np.where(flows, P, 1.0)
+        tau_new = np.sqrt(0.5 * split(returned)[2])
+        dgamma = np.where(flows, (tau - tau_new) / G, 0.0)
+        c = self.grain_diameter / (dt * np.sqrt(Pf / self.grain_density))
+        inertial = c * dgamma
+        slope = (self.mu_2 - self.mu_s) * self.I_0 / (self.I_0 + inertial) ** 2
+        e = np.eye(3)
+        iso = np.einsum("ij,ab->ijab", e, e) / 3.0
+        ddev = np.einsum("ia,jb->ijab", e, e) - iso  # d s_ij / d S_ab
+        dtau = dev / (2.0 * t[:, None, None])
+        dP = np.broadcast_to(-e / 3.0, S.shape)
+        ddg = (dtau + (0.5 * slope * inertial - self.friction(inertial))[:, None, None] * dP) \
+            / (G + slope * c * Pf)[:, None, None]
+        scale = np.where(flows, tau_new / t, 1.0)
+        dscale = np.where(flows[:, None, None], (dtau - G * ddg - scale[:, None, None] * dtau) / t[:, None, None], 0.0)
+        R = np.einsum("nij,nab->nijab", dev, dscale) + scale[:, None, None, None, None] * ddev + iso
+        R[free] = 0.0
+        return R
 
     def stress(self, F, L, sigma, dt, rho, state) -> npt.NDArray:
         S, state["eps_p"] = self.return_map(self.trial(L, sigma, dt, state), state["eps_p"], dt)
