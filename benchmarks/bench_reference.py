@@ -334,7 +334,7 @@ def main(argv=None) -> None:
     for row in out["rows"]:
         vs, spread = row.get("vs", {}), row.get("vs_range", {})
 
-        def ratio(impl):
+        def ratio(impl, vs=vs, spread=spread):
             lo, hi = spread.get(impl, (None, None))
             return f"{vs.get(impl, float('nan')):.2f}" + (f" ({lo:.2f}-{hi:.2f})" if lo is not None else "")
 

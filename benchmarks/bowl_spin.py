@@ -3,8 +3,11 @@ centre (docs/boundaries.md, "The slip wall's drag").
 
     .venv/bin/python benchmarks/bowl_spin.py CELLS
 """
-import sys, numpy as np
-import fempm
+import sys
+
+import numpy as np
+
+import fempm  # noqa: F401  (before dolfinx)
 from fempm.scenes.bowl import bowl
 from fempm.scene.loop import run
 cells = int(sys.argv[1])

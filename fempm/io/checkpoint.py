@@ -288,7 +288,7 @@ def _load(path: Path, data: dict) -> dict:
     except (OSError, ValueError, EOFError, zipfile.BadZipFile) as e:
         raise CheckpointError(f"{path.parent.name}/{path.name} cannot be read: {e}") from None
     n = len(arrays.get("x", ()))
-    for name, (trailing, dtype) in data["fields"].items():
+    for name, (trailing, _dtype) in data["fields"].items():
         a = arrays.get(f"field:{name}")
         if a is None:
             raise CheckpointError(f"{path.parent.name}/{path.name} lacks the particle field {name!r}")

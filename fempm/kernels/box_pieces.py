@@ -136,8 +136,8 @@ if AVAILABLE:
     def tetrahedron_piece(T, x0, K, c, lo, hi, P, acc, cen):  # pragma: no cover - compiled
         r"""The volume of the part of the box ``[lo, hi]`` in tetrahedron ``c`` (vertices ``T``)
         and its centroid's reference coordinates ``cen``, by the divergence theorem over the
-        piece's faces, :math:`|P| = 	frac13 \oint x \cdot n`, :math:`\int_P x =
-        	frac14 \oint x\, (x \cdot n)`: the tetrahedron's faces clipped by the box, and the
+        piece's faces, :math:`|P| = \frac13 \oint x \cdot n`, :math:`\int_P x =
+        \frac14 \oint x\, (x \cdot n)`: the tetrahedron's faces clipped by the box, and the
         box's faces clipped by the tetrahedron (strictly: a box face on a face of the
         tetrahedron counts once), about the box's centre (``P`` (32, 3), ``acc`` (4,): work)."""
         o0, o1, o2 = 0.5 * (lo[0] + hi[0]), 0.5 * (lo[1] + hi[1]), 0.5 * (lo[2] + hi[2])
@@ -149,13 +149,13 @@ if AVAILABLE:
         for e in range(4):
             acc[e] = 0.0
         for k in range(4):  # the face opposite vertex k, turned outwards
-            i, j, l = (k + 1) % 4, (k + 2) % 4, (k + 3) % 4
+            i, j, m = (k + 1) % 4, (k + 2) % 4, (k + 3) % 4
             u0, u1, u2 = T[j, 0] - T[i, 0], T[j, 1] - T[i, 1], T[j, 2] - T[i, 2]
-            w0, w1, w2 = T[l, 0] - T[i, 0], T[l, 1] - T[i, 1], T[l, 2] - T[i, 2]
+            w0, w1, w2 = T[m, 0] - T[i, 0], T[m, 1] - T[i, 1], T[m, 2] - T[i, 2]
             n0, n1, n2 = u1 * w2 - u2 * w1, u2 * w0 - u0 * w2, u0 * w1 - u1 * w0
             if n0 * (T[k, 0] - T[i, 0]) + n1 * (T[k, 1] - T[i, 1]) + n2 * (T[k, 2] - T[i, 2]) > 0.0:
-                j, l = l, j
-            for r, v in enumerate((i, j, l)):
+                j, m = m, j
+            for r, v in enumerate((i, j, m)):
                 P[r, 0], P[r, 1], P[r, 2] = T[v, 0] - o0, T[v, 1] - o1, T[v, 2] - o2
             n, at = 3, 0
             for a in range(3):

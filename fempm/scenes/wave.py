@@ -83,7 +83,10 @@ def wave(cells: int = 64, rows: int = 2, ppc: int = 4, boundary: str = "absorbin
     def bcs(V):
         walls = [slip(V, lambda x: np.isclose(x[1], 0.0) | np.isclose(x[1], height), (0.0, 1.0)),
                  slip(V, lambda x: np.isclose(x[0], 0.0), (1.0, 0.0))]
-        end = lambda x: np.isclose(x[0], length)
+
+        def end(x):
+            return np.isclose(x[0], length)
+
         if boundary == "fixed":
             return [*walls, fixed(V, end)]
         return [*walls, absorbing(V, rho=rho, cp=cp, cs=cs, where=end)]

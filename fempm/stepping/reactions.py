@@ -31,7 +31,6 @@ taken out: they are counted as theirs. The damping's own impulse,
 
 from __future__ import annotations
 
-import numpy as np
 import numpy.typing as npt
 
 __all__ = ["damping_impulse", "nodal_reaction"]

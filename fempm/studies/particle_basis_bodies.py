@@ -4,7 +4,7 @@ a line, on a quadrilateral grid and on unstructured triangles, with their dense 
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Callable
+from collections.abc import Callable
 
 import dolfinx
 import dolfinx.mesh as dm

@@ -36,8 +36,9 @@ def examples() -> dict:
     return namespace
 
 
-def solver(options=StepOptions(), law=None, bcs=None, cells=6):
+def solver(options=None, law=None, bcs=None, cells=6):
     """A small elastic square moving and shearing, on triangles."""
+    options = StepOptions() if options is None else options
     mesh = dm.create_rectangle(comm, [[0.0, 0.0], [2.0, 2.0]], [2 * cells, 2 * cells], dm.CellType.triangle)
     V = fem.functionspace(mesh, ("Lagrange", 1, (2,)))
     p = fempm.create_particles(mesh, 4, density=1000.0, cells=lambda x: (x[0] > 0.5) & (x[0] < 1.5)

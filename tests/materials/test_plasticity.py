@@ -100,7 +100,7 @@ def test_the_return_is_the_closest_point_in_the_energy_norm(name):
     closest-point projection in the energy norm; von Mises keeps the pressure."""
     law = LAWS[name]
     checked = 0
-    for trial, S, state, _ in _random_steps(law, 3, seed=5):
+    for trial, S, _state, _ in _random_steps(law, 3, seed=5):
         p = np.trace(S, axis1=1, axis2=2) / 3
         dev = S - p[:, None, None] * np.eye(3)
         root = np.sqrt(0.5 * np.einsum("nij,nij->n", dev, dev))

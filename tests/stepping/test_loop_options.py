@@ -83,7 +83,7 @@ def test_traction_gives_the_exact_total_force(ppc):
             q.fields["area"] = areas
         q.fields["v"] = np.zeros((len(q), 2))
         traction = np.where(layer[:, None], t_bar, 0.0)
-        solver = ExplicitSolver(V, q, [LinearElastic(1.0, 0.0)], loads=Loads(traction=lambda t: traction))
+        solver = ExplicitSolver(V, q, [LinearElastic(1.0, 0.0)], loads=Loads(traction=lambda t, traction=traction: traction))
         x0 = q.x.copy()
         solver.step(dt)
         assert np.allclose(_momentum(q), t_bar * dt, rtol=1e-12)
@@ -126,7 +126,7 @@ def test_the_default_surface_share_gives_the_total_force_on_every_cell_type(mesh
             layer = p.x[:, 0] > 1.0 - band
             assert p.comm.allreduce(int(layer.sum())) > 0
             traction = np.where(layer[:, None], t_bar, 0.0)
-            solver = ExplicitSolver(V, p, [LinearElastic(1.0, 0.0)], loads=Loads(traction=lambda t: traction))
+            solver = ExplicitSolver(V, p, [LinearElastic(1.0, 0.0)], loads=Loads(traction=lambda t, traction=traction: traction))
             solver.step(dt)
             assert np.allclose(_momentum(p), t_bar * dt, rtol=1e-12), (ppc, band)
             assert "surface_share" in p.fields and "area" not in p.fields

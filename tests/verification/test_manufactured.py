@@ -106,7 +106,7 @@ def test_velocity_and_deformation_are_derivatives_of_the_motion(name):
         v, v_fd = problem.velocity(X, t), fd_velocity(problem, X, t)
         assert np.abs(v - v_fd).max() <= 1e-8 * np.abs(v).max()
         F = problem.deformation_gradient(X, t)
-        F_fd = np.eye(problem.dim) + fd_gradient(lambda Z: problem.displacement(Z, t), X, 1e-4 * L)
+        F_fd = np.eye(problem.dim) + fd_gradient(lambda Z, t=t: problem.displacement(Z, t), X, 1e-4 * L)
         assert np.abs(F - F_fd).max() <= 1e-8
 
 
