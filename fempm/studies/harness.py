@@ -24,6 +24,8 @@ from mpi4py import MPI
 __all__ = ["Provenance", "chosen", "prepare", "read_rows", "sweep", "write_table"]
 
 REPOSITORY = Path(__file__).resolve().parents[2]
+#: the interpreter the docs' commands name (the virtual environment the Makefile builds)
+VENV_PYTHON = ".venv/bin/python"
 
 
 def _git(*args: str) -> str:
@@ -37,11 +39,12 @@ def _git(*args: str) -> str:
 
 
 def _command(argv: Sequence[str]) -> str:
-    """The command line of this process as a user would type it."""
+    """The command line of this process as a user would type it, with the venv's Python
+    (``make demo`` and ``make test`` build ``.venv``)."""
     args = shlex.join(argv[1:])
     if Path(argv[0]).name == "__main__.py" and Path(argv[0]).parent.name == "fempm":
-        return f"python -m fempm {args}".strip()
-    return f"python {shlex.quote(argv[0])} {args}".strip()
+        return f"{VENV_PYTHON} -m fempm {args}".strip()
+    return f"{VENV_PYTHON} {shlex.quote(argv[0])} {args}".strip()
 
 
 @dataclass(frozen=True)

@@ -83,7 +83,7 @@ def test_incline_demo_writes_its_table(tmp_path):
     assert rows[1]["ppc"] == 16 and np.isfinite(rows[1]["acceleration"])
     table = (tmp_path / "incline.md").read_text()
     assert table.count("\n| ") == 3 and "disk mu=0.3" in table
-    assert table.startswith("Made by `python demos/incline.py --cells 4") and (tmp_path / "provenance.json").exists()
+    assert table.startswith("Made by `.venv/bin/python demos/incline.py --cells 4") and (tmp_path / "provenance.json").exists()
     with pytest.raises(ValueError, match="unknown case"):
         demo.main(["--cases", "sphere", "--out", str(tmp_path)])
 

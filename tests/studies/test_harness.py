@@ -26,8 +26,8 @@ def test_provenance_names_the_commit_command_and_date(tmp_path):
 
 
 def test_the_command_reads_as_typed():
-    assert _command(["/x/fempm/__main__.py", "study", "all", "--out", "a b"]) == "python -m fempm study all --out 'a b'"
-    assert _command(["benchmarks/bench_step.py", "--cells", "80"]) == "python benchmarks/bench_step.py --cells 80"
+    assert _command(["/x/fempm/__main__.py", "study", "all", "--out", "a b"]) == ".venv/bin/python -m fempm study all --out 'a b'"
+    assert _command(["benchmarks/bench_step.py", "--cells", "80"]) == ".venv/bin/python benchmarks/bench_step.py --cells 80"
 
 
 def test_chosen_keeps_the_order_and_names_an_unknown_name():
