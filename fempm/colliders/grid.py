@@ -231,13 +231,13 @@ class ColliderContact:
         return {"colliders": [{"force": f.tolist(), "impulse": i.tolist(), "displacement": s.tolist(), "work": float(w)}
                               for f, i, s, w in zip(self.force, self.impulse, self.displacement, self.work)]}
 
-    def state(self) -> dict:
-        """What a continued run needs (:meth:`restore`)."""
+    def state_dict(self) -> dict:
+        """What a continued run needs (:meth:`load_state_dict`; JSON values)."""
         return {"displacement": self.displacement.tolist(), "impulse": self.impulse.tolist(),
                 "force": self.force.tolist(), "work": self.work.tolist()}
 
-    def restore(self, state: dict) -> None:
-        """Restore :meth:`state`.
+    def load_state_dict(self, state: dict) -> None:
+        """Restore :meth:`state_dict`.
 
         Raises:
             ValueError: A state of another number of colliders or dimension.

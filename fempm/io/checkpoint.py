@@ -32,6 +32,14 @@ the matrix values each preconditioner was set up from, the warm starts and count
 preconditioners are set up again from those values. On another number of ranks the particles
 are distributed anew by their cells (:class:`fempm.particles.Particles`) and the warm starts
 and kept systems are dropped: results agree to round-off.
+
+Every component with a state of its own shares one protocol, and this module calls only that:
+``state_dict()`` returns the state (JSON values; a solver's rank-local arrays under
+``"arrays"``, which go into the rank files) and ``load_state_dict(state)`` puts it back: the
+solver (:meth:`fempm.stepping.ExplicitSolver.state_dict`, which holds its step record, its
+removed particles' account and its colliders' state, each by their own ``state_dict``), the
+run-health monitor (:meth:`fempm.stepping.health.HealthMonitor.state_dict`) and the scene's
+watch (:class:`fempm.scene.Recorder`); the writer's frame count is ``RunWriter.state_dict``.
 """
 
 from __future__ import annotations
@@ -50,7 +58,6 @@ from mpi4py import MPI
 from fempm.meshes.geometry import coordinate_map
 from fempm.particles.particle_set import Particles
 from fempm.io.stops import RunInterrupted, requested, stop_requests  # noqa: F401 (fempm.io.checkpoint names them)
-from fempm.stepping.outside import Removed
 
 __all__ = ["FOLDER", "FORMAT", "CheckpointError", "RunInterrupted", "check_fields", "choose", "manifest",
            "manifest_digest", "mesh_digest", "requested", "restore_particles", "restore_solver", "restore_watch",
@@ -81,19 +88,6 @@ def _jsonable(v):
 def _plain(data):
     """``data`` as it reads back from JSON (tuples as lists, numpy numbers as plain ones)."""
     return json.loads(json.dumps(data, default=_jsonable))
-
-
-def _scalar_state(obj, names) -> dict:
-    out = {}
-    for k in names:
-        v = getattr(obj, k)
-        out[k] = v.tolist() if isinstance(v, np.ndarray) else v
-    return out
-
-
-#: the HealthMonitor attributes that accumulate over a run
-MONITOR_STATE = ("e0", "e_max", "momentum0", "work", "work_path", "impulse", "reactions", "_power", "_force",
-                 "first_dt", "_t_prev", "j_min", "j_max", "p_scale", "drift", "ratio", "total_mass")
 
 
 def mesh_digest(mesh) -> str:
@@ -141,10 +135,9 @@ def write(out: Path, scene, solver, monitor, writer_state: dict, rebuild: dict |
     comm.Barrier()
     p = solver.particles
     arrays = {"x": p.x, "cells": p.cells, "X": p.X, **p.data_arrays()}
-    if solver.grid_velocity is not None:
-        arrays["solver:grid_velocity"] = solver.grid_velocity
-    counters, grid_arrays = solver.checkpoint_state()  # e.g. the consistent step's warm starts and kept systems
-    arrays.update({f"solver:{k}": v for k, v in grid_arrays.items()})
+    state = solver.state_dict()  # its rank's arrays: e.g. the consistent step's warm starts and kept systems
+    arrays.update({f"solver:{k}": v for k, v in state.pop("arrays").items()})
+    t, step_count = state.pop("t"), state.pop("step_count")
     name = f"rank_{comm.rank:05d}.npz"
     error, record = None, None
     try:
@@ -158,17 +151,13 @@ def write(out: Path, scene, solver, monitor, writer_state: dict, rebuild: dict |
     if errors:
         raise CheckpointError(f"writing the checkpoint in {tmp} failed: {'; '.join(errors)}")
     manifest = {
-        "format": FORMAT, "ranks": comm.size, "t": solver.t, "step_count": solver.step_count,
+        "format": FORMAT, "ranks": comm.size, "t": t, "step_count": step_count,
         "t_end": scene.t_end, "scene": scene.name, "params": scene.params, "rebuild": rebuild,
         "options": _options(scene), "health": scene.health.asdict(), "mesh": mesh_digest(scene.mesh),
         "fields": _fields(p), "files": {n: r for n, r, _ in gathered},
         "particles": p.num_global,
-        "solver": {"extended_steps": solver.extended_steps, "mass_ratio": solver.mass_ratio,
-                   "j_range": list(solver.j_range) if solver.j_range is not None else None,
-                   "terms": dict(solver.terms), "since_sort": counters.get("since_sort"),
-                   "ratio_age": counters.get("ratio_age"), "removed": solver.removed.asdict(),
-                   "colliders": solver.collisions.state()},
-        "monitor": _scalar_state(monitor, MONITOR_STATE),
+        "solver": state,
+        "monitor": monitor.state_dict(),
         "writer": writer_state,
         "watch": scene.watch.state_dict() if callable(getattr(scene.watch, "state_dict", None)) else None,
     }
@@ -368,20 +357,11 @@ def restore_watch(watch, data: dict) -> None:
 
 def restore_solver(solver, monitor, data: dict, solver_arrays: dict) -> None:
     """Put the checkpoint's solver and run-health state into a solver built on the restored
-    particles (and its monitor)."""
-    from collections import Counter
-
-    s = data["solver"]
-    solver.t, solver.step_count = float(data["t"]), int(data["step_count"])
-    solver.extended_steps, solver.mass_ratio = int(s["extended_steps"]), float(s["mass_ratio"])
-    solver.j_range = tuple(s["j_range"]) if s["j_range"] is not None else None
-    solver.terms = Counter(s["terms"])
-    if "removed" in s:  # what particles that left the mesh took (outside="remove")
-        solver.removal.removed = Removed(**s["removed"])
-    if "colliders" in s:  # the colliders' positions and reactions
-        solver.collisions.restore(s["colliders"])
-    solver.grid_velocity = solver_arrays.get("grid_velocity")
-    # collective: on another number of ranks every rank passes {} (no solver arrays)
-    solver.restore_state({"since_sort": s["since_sort"], "ratio_age": s["ratio_age"]}, solver_arrays)
-    for k, v in data["monitor"].items():
-        setattr(monitor, k, np.asarray(v) if isinstance(v, list) else v)
+    particles (and its monitor), through their ``load_state_dict`` (collective: on another
+    number of ranks every rank passes no solver arrays)."""
+    solver.load_state_dict({**data["solver"], "t": data["t"], "step_count": data["step_count"],
+                            "arrays": solver_arrays})
+    try:
+        monitor.load_state_dict(data["monitor"])
+    except ValueError as e:
+        raise CheckpointError(str(e)) from None

@@ -305,8 +305,8 @@ class RunWriter:
             if int(png.stem.split("_")[1]) >= self.frame:
                 png.unlink()
 
-    def state(self) -> dict:
-        """What a continuation needs (:mod:`fempm.io.checkpoint`)."""
+    def state_dict(self) -> dict:
+        """What a continuation needs (:mod:`fempm.io.checkpoint`; given back as ``resume``)."""
         return {"frame": self.frame, "rows": self.rows}
 
     def energies(self, row: dict) -> None:

@@ -179,7 +179,7 @@ class Run:
     def save(self) -> Path:
         """A checkpoint of the state now (collective)."""
 
-        state = {**self.writer.state(), "next_frame": self.frames.next_frame, "frame_interval": self.frames.interval,
+        state = {**self.writer.state_dict(), "next_frame": self.frames.next_frame, "frame_interval": self.frames.interval,
                  "initial": self.history[0]}
         return checkpoint.write(self.out, self.scene, self.solver, self.monitor, state, self.rebuild)
 

@@ -121,6 +121,29 @@ class HealthMonitor:
         integration = solver.options.integration
         self.checks_energy = integration is None or integration.inertia
 
+    #: the attributes that accumulate over a run (:meth:`state_dict`)
+    KEPT = ("e0", "e_max", "momentum0", "work", "work_path", "impulse", "reactions", "_power", "_force",
+            "first_dt", "_t_prev", "j_min", "j_max", "p_scale", "drift", "ratio", "total_mass")
+
+    def state_dict(self) -> dict:
+        """What a continued run's checks need: the sums and references of :attr:`KEPT` (JSON
+        values, the same on every rank)."""
+        return {k: (v.tolist() if isinstance(v, np.ndarray) else v) for k, v in ((k, getattr(self, k))
+                                                                                for k in self.KEPT)}
+
+    def load_state_dict(self, state: dict) -> None:
+        """Restore :meth:`state_dict` (lists back to arrays).
+
+        Raises:
+            ValueError: A state lacking one of :attr:`KEPT`.
+        """
+        missing = [k for k in self.KEPT if k not in state]
+        if missing:
+            raise ValueError(f"the run-health state lacks {', '.join(missing)}")
+        for k in self.KEPT:
+            v = state[k]
+            setattr(self, k, np.asarray(v) if isinstance(v, list) else v)
+
     # -- measures ------------------------------------------------------------------------------
     def _momentum(self) -> npt.NDArray:
         p = self.solver.particles

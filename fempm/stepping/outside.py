@@ -73,6 +73,14 @@ class Outside:
         #: energy check's work over the step in which they left counts them at its end)
         self.last_mass, self.last_momentum = 0.0, None
 
+    def state_dict(self) -> dict:
+        """What a continued run needs: what the removed particles took (:class:`Removed`)."""
+        return self.removed.asdict()
+
+    def load_state_dict(self, state: dict) -> None:
+        """Restore :meth:`state_dict`."""
+        self.removed = Removed(**state)
+
     @property
     def removed_now(self) -> bool:
         """Whether the last relocation removed particles."""

@@ -9,7 +9,6 @@ advances the time. The equations are in :mod:`fempm.stepping.grid`.
 
 from __future__ import annotations
 
-from collections import Counter
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from typing import Literal
@@ -39,41 +38,9 @@ from fempm.stepping.lumped import PointGrid
 from fempm.stepping.lumped import supported as point_grid_supported
 from fempm.stepping.options import SimulationError, StepOptions
 from fempm.stepping.outside import Outside, Removed
+from fempm.stepping.record import StepRecord
 
 __all__ = ["ExplicitSolver", "StepRecord"]
-
-
-@dataclass
-class StepRecord:
-    r"""What the steps report, kept by the solver and written by its grid.
-
-    Attributes:
-        terms: how often each force term was assembled.
-        j_range: the global (min, max) of J after the last step (None before the first).
-        mass_ratio: the last estimate of :math:`\lambda_{min}(M_L^{-1} M_C)` (consistent mass).
-        extended_steps: steps whose particle domains reached beyond this rank's ghost cells.
-        newton_iterations: the Newton iterations of the implicit steps so far.
-        cut_steps: how often an implicit step that did not converge was halved.
-        load_work: the work of the external loads in the last implicit step, the trapezoidal
-            rule over its nodal displacement increments (:mod:`fempm.implicit.step`).
-        load_impulse: the impulse of the external loads in the last implicit step (d,).
-        reaction: the momentum the grid conditions took in the last step on this rank (d,;
-            explicit: empty without conditions on given nodes, :mod:`fempm.stepping.reactions`;
-            implicit: the held components', with Newmark's method).
-        damping_impulse: the impulse of the grid damping in the last explicit step on this rank
-            (d,; empty without damping).
-    """
-
-    terms: Counter = field(default_factory=Counter)
-    j_range: tuple[float, float] | None = None
-    mass_ratio: float = 1.0
-    extended_steps: int = 0
-    newton_iterations: int = 0
-    cut_steps: int = 0
-    load_work: float = 0.0
-    load_impulse: npt.NDArray = field(default_factory=lambda: np.zeros(0))
-    reaction: npt.NDArray = field(default_factory=lambda: np.zeros(0))
-    damping_impulse: npt.NDArray = field(default_factory=lambda: np.zeros(0))
 
 
 @dataclass
@@ -166,12 +133,11 @@ class ExplicitSolver:
         if self.options.integration is not None:
             self.implicit  # noqa: B018 - made now: what the implicit step cannot take is an error before any step
 
-    # the record's entries, read and set as the solver's (checkpoints restore them)
-    terms = property(lambda self: self.record.terms, lambda self, v: setattr(self.record, "terms", v))
-    j_range = property(lambda self: self.record.j_range, lambda self, v: setattr(self.record, "j_range", v))
-    mass_ratio = property(lambda self: self.record.mass_ratio, lambda self, v: setattr(self.record, "mass_ratio", v))
-    extended_steps = property(lambda self: self.record.extended_steps,
-                              lambda self, v: setattr(self.record, "extended_steps", v))
+    # the record's entries, read as the solver's
+    terms = property(lambda self: self.record.terms)
+    j_range = property(lambda self: self.record.j_range)
+    mass_ratio = property(lambda self: self.record.mass_ratio)
+    extended_steps = property(lambda self: self.record.extended_steps)
 
     # -- the state's checks -------------------------------------------------------------------
     def particle_ids(self, mask: npt.NDArray[np.bool_]) -> list[int]:
@@ -322,14 +288,36 @@ class ExplicitSolver:
         advanced. The grid frame at t = 0 of :func:`fempm.scene.run`. Collective."""
         return SingleFieldGrid(self).initial_velocity()
 
-    def checkpoint_state(self) -> tuple[dict, dict[str, npt.NDArray]]:
-        """(counters, arrays) of the grid that a resumed run needs to repeat the next steps bit
-        for bit (:meth:`fempm.stepping.grid.Grid.checkpoint_state`; none before the first step)."""
-        return self._grid.checkpoint_state() if self._grid is not None else ({}, {})
+    def state_dict(self) -> dict:
+        """What a continued run needs to repeat the next steps bit for bit: the time, the step
+        count, the step record's running entries (:meth:`StepRecord.state_dict`), what removed
+        particles took and the colliders' state (their ``state_dict``), the grid's counters, and
+        under ``"arrays"`` this rank's arrays (the last grid velocity, the grid's warm starts and
+        kept systems, :meth:`fempm.stepping.grid.Grid.checkpoint_state`). Every other value is
+        JSON and the same on every rank. The particles are not part of it."""
+        counters, arrays = self._grid.checkpoint_state() if self._grid is not None else ({}, {})
+        if self.grid_velocity is not None:
+            arrays = {"grid_velocity": self.grid_velocity, **arrays}
+        return {"t": self.t, "step_count": self.step_count, **self.record.state_dict(),
+                "since_sort": counters.get("since_sort"), "ratio_age": counters.get("ratio_age"),
+                "removed": self.removal.state_dict(), "colliders": self.collisions.state_dict(), "arrays": arrays}
 
-    def restore_state(self, counters: dict, arrays: dict[str, npt.NDArray]) -> None:
-        """Restore :meth:`checkpoint_state` (collective)."""
-        self.grid.restore_state(counters, arrays)
+    def load_state_dict(self, state: dict) -> None:
+        """Restore :meth:`state_dict` into a solver built on the restored particles; ``"arrays"``
+        may be empty (a continuation on another number of ranks starts the grid afresh).
+
+        Note:
+            Collective.
+        """
+        arrays = dict(state.get("arrays", {}))
+        self.t, self.step_count = float(state["t"]), int(state["step_count"])
+        self.record.load_state_dict(state)
+        if "removed" in state:
+            self.removal.load_state_dict(state["removed"])
+        if "colliders" in state:
+            self.collisions.load_state_dict(state["colliders"])
+        self.grid_velocity = arrays.pop("grid_velocity", None)
+        self.grid.restore_state({"since_sort": state.get("since_sort"), "ratio_age": state.get("ratio_age")}, arrays)
 
     # -- diagnostics --------------------------------------------------------------------------
     def grid_stress(self, mass: Literal["lumped", "consistent"] | None = None) -> dolfinx.fem.Function:
