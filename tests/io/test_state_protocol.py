@@ -9,7 +9,6 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from mpi4py import MPI
 
 import fempm  # noqa: F401  (before dolfinx)
 from fempm.scenes.footing import footing
