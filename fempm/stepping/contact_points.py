@@ -36,7 +36,6 @@ from fempm.boundary.patches import Patches
 from fempm.kernels import contact as kc
 from fempm.stepping.contact import correct, particle_groups
 from fempm.stepping.lumped import BOUND_SAFETY, PointGrid
-from fempm.stepping.lumped import supported as point_supported
 from fempm.transfer.centres import NodalCentres
 from fempm.transfer.mapping import SUPPORT_TOL, mass_centres
 from fempm.transfer.mass_models import Lumped
@@ -44,19 +43,27 @@ from fempm.transfer.mass_models import Lumped
 if TYPE_CHECKING:
     from fempm.stepping.solver import ExplicitSolver
 
-__all__ = ["ContactPointGrid", "supported"]
-
-
-def supported(solver: ExplicitSolver) -> bool:
-    """Whether ``solver``'s contact takes a :class:`ContactPointGrid`: the options, space and
-    mesh of a :class:`~fempm.stepping.lumped.PointGrid` with lumped mass, USL or MUSL."""
-    return (point_supported(solver) and type(solver.options.mass_model) is Lumped
-            and solver.options.stages.forces_with_map)
+__all__ = ["ContactPointGrid"]
 
 
 class ContactPointGrid(PointGrid):
     """A velocity field per particle group of ``solver.contact``, corrected where groups meet
     (:mod:`fempm.stepping.contact`), in the compiled passes (see the module)."""
+
+    takes = "contact with point particles, lumped mass, USL or MUSL, on a space of the compiled passes"
+
+    @classmethod
+    def refusal(cls, solver: ExplicitSolver) -> str | None:
+        """Why ``solver``'s contact does not take this grid (None where it does): the options,
+        space and mesh of a :class:`~fempm.stepping.lumped.PointGrid` with lumped mass, USL or MUSL."""
+        reason = PointGrid.refusal(solver)
+        if reason is not None:
+            return reason
+        if type(solver.options.mass_model) is not Lumped:
+            return f"mass {solver.options.mass_model.label} with contact: lumped"
+        if not solver.options.stages.forces_with_map:
+            return f"scheme {solver.options.stages.name} with contact: USL or MUSL"
+        return None
 
     def __init__(self, solver: ExplicitSolver):
         super().__init__(solver)

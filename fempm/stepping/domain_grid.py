@@ -35,28 +35,14 @@ from fempm.kernels.shape import CELLS, space_of
 from fempm.particles.corners import corner_signs, domain_geometry
 from fempm.stepping.grid import Grid, SingleFieldGrid
 from fempm.stepping.lumped import PointGrid
-from fempm.stepping.spaces import compiled_space
+from fempm.stepping.spaces import compiled_space, space_refusal
 from fempm.transfer.domains import CPDI1, CPDI2, GIMP, half_widths
 from fempm.transfer.mass_models import FMPM, Lumped
 
 if TYPE_CHECKING:
     from fempm.stepping.solver import ExplicitSolver
 
-__all__ = ["DomainGrid", "frontier_cells", "supported"]
-
-
-def supported(solver: ExplicitSolver) -> bool:
-    """Whether ``solver``'s domain, mass, conditions, space and mesh take :class:`DomainGrid`."""
-    dom = solver.options.particle_domain
-    cell = compiled_space(solver)
-    if not (cell is not None and space_of(cell) == (1, False)  # P1 on affine or multilinear cells
-            and type(solver.options.mass_model) in (Lumped, FMPM) and not solver.conditions.needs_positions):
-        return False
-    # these types themselves: a subclass may make or move its samples otherwise
-    if type(dom) is GIMP and dom.exact:  # pieces averaged at their centroids: simplices and axis-aligned boxes
-        geo = solver.particles.locator.geometry
-        return cell in ("interval", "triangle", "tetrahedron") or (cell in ("quadrilateral", "hexahedron") and geo.axis_aligned)
-    return type(dom) in (CPDI1, CPDI2, GIMP)
+__all__ = ["DomainGrid", "frontier_cells"]
 
 
 def frontier_cells(locator) -> npt.NDArray[np.bool_]:
@@ -79,6 +65,35 @@ def frontier_cells(locator) -> npt.NDArray[np.bool_]:
 class DomainGrid(PointGrid):
     """:class:`~fempm.stepping.lumped.PointGrid` with particle domains of sample points (see the
     module)."""
+
+    takes = ("CPDI1, CPDI2 or GIMP domains (exact GIMP on simplices and axis-aligned boxes) with lumped or FMPM mass "
+             "on degree 1 of the compiled passes, no wall that checks contact by position")
+
+    @classmethod
+    def refusal(cls, solver: ExplicitSolver) -> str | None:
+        """Why ``solver``'s domain, mass, conditions, space and mesh do not take this grid (None
+        where they do)."""
+        dom = solver.options.particle_domain
+        space = space_refusal(solver)
+        if space is not None:
+            return space
+        cell = compiled_space(solver)
+        if space_of(cell) != (1, False):
+            return "the particle domains' compiled passes take degree 1 (P1 on affine or multilinear cells)"
+        if type(solver.options.mass_model) not in (Lumped, FMPM):
+            return f"mass {solver.options.mass_model.label} with particle domains: lumped or FMPM"
+        if solver.conditions.needs_positions:
+            return "a wall or collider that checks contact by position takes point particles"
+        # these types themselves: a subclass may make or move its samples otherwise
+        if type(dom) is GIMP and dom.exact:  # pieces averaged at their centroids: simplices and axis-aligned boxes
+            geo = solver.particles.locator.geometry
+            if not (cell in ("interval", "triangle", "tetrahedron")
+                    or (cell in ("quadrilateral", "hexahedron") and geo.axis_aligned)):
+                return "exact GIMP takes simplices and axis-aligned boxes (a Gauss-rule GIMP takes any cell)"
+            return None
+        if type(dom) not in (CPDI1, CPDI2, GIMP):
+            return f"particle domain {dom.name}: CPDI1, CPDI2 or GIMP"
+        return None
 
     def __init__(self, solver: ExplicitSolver):
         super().__init__(solver)

@@ -47,7 +47,7 @@ from fempm.stepping.grid import Grid
 from fempm.stepping.laws import material_groups, stresses_of
 from fempm.stepping.loads import external_forces
 from fempm.stepping.nodal import NodalMass, kept_nodal_array, sum_ghosts
-from fempm.stepping.spaces import compiled_space
+from fempm.stepping.spaces import compiled_space, space_refusal
 from fempm.transfer.centres import NodalCentres
 from fempm.transfer.domains import Point
 from fempm.transfer.grid_solves import negative_basis_message
@@ -57,7 +57,7 @@ from fempm.transfer.mass_models import FMPM, Consistent, Lumped
 if TYPE_CHECKING:
     from fempm.stepping.solver import ExplicitSolver
 
-__all__ = ["BOUND_SAFETY", "NODAL_MASSES", "SORT_EVERY", "LumpedNodalMass", "PointGrid", "supported"]
+__all__ = ["BOUND_SAFETY", "NODAL_MASSES", "SORT_EVERY", "LumpedNodalMass", "PointGrid"]
 
 
 #: steps between two sorts of the particles by cell
@@ -65,14 +65,6 @@ SORT_EVERY = 100
 #: a given dt at most this fraction of the bound of the stable time needs no exact check
 #: (the bound's own rounding)
 BOUND_SAFETY = 1.0 - 1e-12
-
-
-def supported(solver: ExplicitSolver) -> bool:
-    """Whether ``solver``'s options, space and mesh take a :class:`PointGrid` (point particles,
-    lumped, consistent (:mod:`fempm.stepping.consistent`) or FMPM (:mod:`fempm.stepping.fmpm_mass`) mass)."""
-    opts = solver.options
-    return (compiled_space(solver) and type(opts.mass_model) in NODAL_MASSES
-            and isinstance(opts.particle_domain, Point))
 
 
 def _law(mat) -> tuple[int, float, float, float]:
@@ -89,6 +81,24 @@ class PointGrid(Grid):
     """The stages of the explicit step in compiled passes, for point particles on affine
     degree-1 cells (see the module); the grid mass, lumped or consistent, is a
     :class:`LumpedNodalMass` or a :class:`fempm.stepping.consistent.ConsistentNodalMass`."""
+
+    #: the options this grid takes, in messages (:mod:`fempm.stepping.grid_choice`)
+    takes = "point particles with lumped, consistent or FMPM mass on a space of the compiled passes"
+
+    @classmethod
+    def refusal(cls, solver: ExplicitSolver) -> str | None:
+        """Why ``solver``'s options, space and mesh do not take this grid (None where they do):
+        point particles, lumped, consistent (:mod:`fempm.stepping.consistent`) or FMPM
+        (:mod:`fempm.stepping.fmpm_mass`) mass, a space of :func:`~fempm.stepping.spaces.compiled_space`."""
+        opts = solver.options
+        space = space_refusal(solver)
+        if space is not None:
+            return space
+        if type(opts.mass_model) not in NODAL_MASSES:
+            return f"mass {opts.mass_model.label}: lumped, consistent or FMPM"
+        if not isinstance(opts.particle_domain, Point):
+            return f"particle domain {opts.particle_domain.name}: point particles"
+        return None
 
     def __init__(self, solver: ExplicitSolver):
         super().__init__(solver)

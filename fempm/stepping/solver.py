@@ -25,17 +25,12 @@ from fempm.materials.base import check_materials, identity
 from fempm.meshes.cell_sizes import cell_sizes
 from fempm.particles.particle_set import Particles
 from fempm.stepping import checks, diagnostics
-from fempm.stepping.contact import Contact, ContactGrid
-from fempm.stepping.contact_points import ContactPointGrid
-from fempm.stepping.contact_points import supported as contact_points_supported
-from fempm.stepping.domain_grid import DomainGrid
-from fempm.stepping.domain_grid import supported as domain_grid_supported
+from fempm.stepping.contact import Contact
 from fempm.stepping.fbar import check_laws
 from fempm.stepping.grid import Grid, SingleFieldGrid
+from fempm.stepping.grid_choice import choose_grid
 from fempm.stepping.laws import material_groups
 from fempm.stepping.loads import Loads
-from fempm.stepping.lumped import PointGrid
-from fempm.stepping.lumped import supported as point_grid_supported
 from fempm.stepping.options import SimulationError, StepOptions
 from fempm.stepping.outside import Outside, Removed
 from fempm.stepping.record import StepRecord
@@ -195,7 +190,7 @@ class ExplicitSolver:
         ``compiled=False``), else a :class:`~fempm.stepping.grid.SingleFieldGrid`."""
         key = (id(self.options), self.compiled, id(self.contact))
         if self._grid is None or self._grid_key != key:
-            self._grid, self._grid_key = self._make_grid(), key
+            self._grid, self._grid_key = choose_grid(self), key
         return self._grid
 
     @property
@@ -205,30 +200,6 @@ class ExplicitSolver:
         if self._implicit is None or self._implicit[0] != id(self.options):
             self._implicit = (id(self.options), ImplicitStep(self))
         return self._implicit[1]
-
-    def _make_grid(self) -> Grid:
-        compiled = self.compiled is not False and self.options.volumetric_average is None  # F-bar: the numpy step
-        if self.compiled and not compiled:
-            raise ValueError("compiled=True with volumetric='fbar': F-bar runs on the numpy step (compiled=None)")
-        if self.contact is not None:  # one velocity field per body
-            if compiled and contact_points_supported(self):
-                return ContactPointGrid(self)
-            grid = ContactGrid(self)
-            if self.compiled:
-                raise ValueError("compiled=True with contact needs point particles, lumped mass and no rigid group on "
-                                 "a space of the compiled passes; this contact takes the generic step")
-            return grid
-        if compiled and point_grid_supported(self):
-            return PointGrid(self)
-        if compiled and domain_grid_supported(self):
-            return DomainGrid(self)
-        if self.compiled:
-            raise ValueError("compiled=True needs numba and a Lagrange space of degree 1 (any simplex, "
-                             "quadrilateral or hexahedron) or of degree 2 or Bernstein on simplices, with point "
-                             "particles and lumped, consistent or FMPM mass, or CPDI1, CPDI2 or Gauss-rule GIMP "
-                             "domains with lumped or FMPM mass on degree 1 (exact GIMP: on simplices and "
-                             "axis-aligned boxes)")
-        return SingleFieldGrid(self)
 
     def step(self, dt: float | None = None, *, dt_max: float = np.inf, totals: bool = False) -> float:
         """Advance one step; returns the ``dt`` used. ``dt`` defaults to the stable step

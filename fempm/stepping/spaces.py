@@ -13,7 +13,7 @@ from fempm.meshes.geometry import SIMPLICES
 if TYPE_CHECKING:
     from fempm.stepping.solver import ExplicitSolver
 
-__all__ = ["NODAL_VARIANTS", "compiled_space"]
+__all__ = ["NODAL_VARIANTS", "compiled_space", "space_refusal"]
 
 #: the Lagrange variants whose degree-2 basis is the nodal one of the vertices and edge midpoints
 NODAL_VARIANTS = (basix.LagrangeVariant.unset, basix.LagrangeVariant.equispaced, basix.LagrangeVariant.gll_warped,
@@ -39,3 +39,26 @@ def compiled_space(solver: ExplicitSolver) -> str | None:
         if element.lagrange_variant in NODAL_VARIANTS:
             return geo.cell_name + LAGRANGE2
     return None
+
+
+def space_refusal(solver: ExplicitSolver) -> str | None:
+    """Why ``solver``'s space and mesh do not take the compiled passes (None where they do,
+    exactly where :func:`compiled_space` gives a cell type)."""
+    if compiled_space(solver) is not None:
+        return None
+    V = solver.V
+    geo = solver.particles.locator.geometry
+    element = V.element.basix_element
+    if not AVAILABLE:
+        return "numba is not installed"
+    if V.dofmap.index_map_bs != solver.particles.gdim:
+        return f"the space has {V.dofmap.index_map_bs} components; the compiled passes take a vector space of the mesh's dimension"
+    if geo.kernel_cell is None:
+        return "the mesh's cells are not affine simplices or multilinear quadrilaterals or hexahedra (curved cells)"
+    if element.family != basix.ElementFamily.P or element.discontinuous:
+        return "the element is not a continuous Lagrange or Bernstein one"
+    if element.degree == 2 and not (geo.affine and geo.cell_name in SIMPLICES):
+        return "degree 2 takes the compiled passes on affine simplices only"
+    if element.degree == 2:
+        return f"the degree-2 Lagrange variant {element.lagrange_variant.name} is neither nodal nor Bernstein"
+    return f"degree {element.degree}: the compiled passes take degree 1, or degree 2 on simplices"

@@ -96,11 +96,14 @@ def test_contact_takes_the_compiled_passes_only_where_they_apply():
     """Consistent mass and particle domains keep the numpy contact step; compiled=True names
     what the compiled contact needs."""
     cell = "triangle"
-    for contact, options in [(Contact(field="group"), StepOptions(mass="consistent")),
-                             (Contact(field="group"), StepOptions(domain="cpdi1"))]:
+    for contact, options, why in [(Contact(field="group"), StepOptions(mass="consistent"),
+                                   "mass consistent with contact: lumped"),
+                                  (Contact(field="group"), StepOptions(domain="cpdi1"),
+                                   "particle domain cpdi1: point particles")]:
         solver = make_solver(cell, options, contact, "axis")
         assert type(solver.grid) is ContactGrid
         solver.compiled = True
-        with pytest.raises(ValueError, match="compiled=True with contact needs point particles, lumped mass"):
+        with pytest.raises(ValueError, match=r"no compiled grid takes these options: ContactPointGrid \(contact with "
+                                             r"point particles, lumped mass.*\): " + why):
             _ = solver.grid
     assert type(make_solver(cell, StepOptions(), Contact(field="group"), "axis").grid) is ContactPointGrid

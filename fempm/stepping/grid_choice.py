@@ -1,0 +1,103 @@
+"""Which grid steps a solver's options: one registry of the grids, tried in order.
+
+Each grid class says why a solver's options, space and mesh do not take it (its ``refusal``
+classmethod, None where they do) and what it takes (``takes``, for messages). The first grid of
+:data:`GRIDS` that the options take, among those for one field or for contact, steps them:
+
+============================================  ========  =======  ==========================
+grid                                          compiled  contact  takes
+============================================  ========  =======  ==========================
+:class:`~fempm.stepping.contact_points.ContactPointGrid`  yes  yes  point particles, lumped, USL/MUSL
+:class:`~fempm.stepping.contact.ContactGrid`  no        yes      any
+:class:`~fempm.stepping.lumped.PointGrid`     yes       no       point particles, lumped/consistent/FMPM
+:class:`~fempm.stepping.domain_grid.DomainGrid`  yes    no       CPDI1/CPDI2/GIMP, lumped/FMPM, degree 1
+:class:`~fempm.stepping.grid.SingleFieldGrid`  no       no       any
+============================================  ========  =======  ==========================
+
+``compiled=False`` and F-bar (``volumetric="fbar"``, the numpy step) leave the compiled grids
+out; ``compiled=True`` where no compiled grid takes the options is an error that gives each
+compiled grid's reason.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import TYPE_CHECKING
+
+from fempm.stepping.contact import ContactGrid
+from fempm.stepping.contact_points import ContactPointGrid
+from fempm.stepping.domain_grid import DomainGrid
+from fempm.stepping.grid import Grid, SingleFieldGrid
+from fempm.stepping.lumped import PointGrid
+
+if TYPE_CHECKING:
+    from fempm.stepping.solver import ExplicitSolver
+
+__all__ = ["GRIDS", "GridEntry", "choose_grid", "refusals"]
+
+
+@dataclass(frozen=True)
+class GridEntry:
+    """A grid of the registry: its class, whether it runs compiled passes and whether it steps
+    contact (one velocity field per body)."""
+
+    grid: type[Grid]
+    compiled: bool
+    contact: bool
+
+    def refusal(self, solver: ExplicitSolver) -> str | None:
+        """Why ``solver`` does not take this grid (None where it does); the generic grids take
+        every option of their kind."""
+        refuse = getattr(self.grid, "refusal", None)
+        return refuse(solver) if refuse is not None else None
+
+
+#: the grids, in the order they are tried
+GRIDS = (
+    GridEntry(ContactPointGrid, compiled=True, contact=True),
+    GridEntry(ContactGrid, compiled=False, contact=True),
+    GridEntry(PointGrid, compiled=True, contact=False),
+    GridEntry(DomainGrid, compiled=True, contact=False),
+    GridEntry(SingleFieldGrid, compiled=False, contact=False),
+)
+
+
+def refusals(solver: ExplicitSolver) -> dict[str, str]:
+    """Each compiled grid of ``solver``'s kind (one field or contact) that its options do not
+    take, by class name, with the reason."""
+    contact = solver.contact is not None
+    out = {}
+    for entry in GRIDS:
+        if entry.compiled and entry.contact == contact:
+            reason = entry.refusal(solver)
+            if reason is not None:
+                out[entry.grid.__name__] = reason
+    return out
+
+
+def choose_grid(solver: ExplicitSolver) -> Grid:
+    """The grid for ``solver``'s options (see the module), made.
+
+    Raises:
+        ValueError: ``compiled=True`` with F-bar, or where no compiled grid takes the options
+            (each one's reason given).
+    """
+    fbar = solver.options.volumetric_average is not None
+    if solver.compiled and fbar:
+        raise ValueError("compiled=True with volumetric='fbar': F-bar runs on the numpy step (compiled=None)")
+    compiled = solver.compiled is not False and not fbar
+    contact = solver.contact is not None
+    for entry in GRIDS:
+        if entry.contact != contact or (entry.compiled and not compiled):
+            continue
+        if not entry.compiled and solver.compiled:
+            reasons = "; ".join(f"{name} ({entry_takes(name)}): {why}" for name, why in refusals(solver).items())
+            raise ValueError(f"compiled=True, but no compiled grid takes these options: {reasons}")
+        if entry.refusal(solver) is None:
+            return entry.grid(solver)
+    raise AssertionError("the generic grids take every option")  # pragma: no cover
+
+
+def entry_takes(name: str) -> str:
+    """What the registered grid of class ``name`` takes."""
+    return next(e.grid.takes for e in GRIDS if e.grid.__name__ == name)
