@@ -80,7 +80,7 @@ class ImplicitStep(BasisGrid):
         if not solver.conditions.zero_components:
             raise ValueError(f"the implicit step takes fixed dofs and slip walls normal to a coordinate axis, not "
                              f"{' or '.join(solver.conditions.other_kinds)}: take the explicit step")
-        if opts.tangent == "analytic":
+        if not opts.finite_difference_tangent:
             for mat in solver.materials:
                 if not hasattr(mat, "tangent"):
                     raise TypeError(f"{type(mat).__name__} has no tangent(F, G, sigma, state), which the implicit step "
@@ -129,7 +129,7 @@ class ImplicitStep(BasisGrid):
         basis = self.open_basis()
         fbar = self.options.volumetric_average is not None
         op = (FBarIncrementOperator if fbar else IncrementOperator)(
-            basis, p, s.materials, finite_difference=self.options.tangent == "finite-difference", dt=dt)
+            basis, p, s.materials, finite_difference=self.options.finite_difference_tangent, dt=dt)
         m = op.nodal(p.mass[:, None])[:, 0]
         free = self._free(op.support(), basis.num_dofs_local)
         v, a = np.zeros_like(free, dtype=float), np.zeros_like(free, dtype=float)

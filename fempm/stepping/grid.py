@@ -265,7 +265,7 @@ class BasisGrid(Grid):
         s = self.solver
         try:
             self.options.particle_domain.move(s.particles, at_grid, corner_velocity, dt,
-                                              self.options.position == "particle")
+                                              self.options.particle_position)
         except ValueError as e:  # collective
             s.fail(f"inverted particle domain: {e}")
 

@@ -236,7 +236,7 @@ class PointGrid(Grid):
         external = kinematics and self.any_external
         L = np.empty((len(p) if external else 0, self.d, self.d))
         left = np.empty(len(p) if move else 0, dtype=np.bool_)
-        state = (opts.position == "particle", p.x, f["v"], f["F"], f["volume0"], p.volume, f["sigma"], f["body"],
+        state = (opts.particle_position, p.x, f["v"], f["F"], f["volume0"], p.volume, f["sigma"], f["body"],
                  self.law, self.lam, self.mu, L, self.x0, p.locator.tol, left, *p.locator.vertex_star(), p.mass,
                  remap if remap is not None else np.zeros((0, self.d)),
                  self._sums if move and self.totals else np.zeros(0))

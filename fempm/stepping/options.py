@@ -97,6 +97,8 @@ class StepOptions:
         self.mass_model = mass_model(self.mass, self.fmpm_order)
         if self.position not in ("grid", "particle"):
             raise ValueError(f"unknown option position={self.position!r}; expected grid or particle")
+        #: whether the particles move with their own updated velocities (position="particle")
+        self.particle_position = self.position == "particle"
         if not 0.0 <= self.flip <= 1.0:
             raise ValueError(f"flip={self.flip} must lie in [0, 1]")
         self.particle_domain = step_domain(self.domain, self.gimp_order, self.gimp_deform)
@@ -108,18 +110,20 @@ class StepOptions:
         if self.integration is not None and isinstance(self.mass_model, FMPM):
             raise ValueError("the implicit step takes lumped or consistent mass, not FMPM (an explicit step's "
                              "approximation of the consistent mass): give mass='consistent'")
-        if self.integration is not None and self.position == "particle":
+        if self.integration is not None and self.particle_position:
             raise ValueError("the implicit step moves the particles with the grid's displacement: position='particle' "
                              "does not apply")
         #: the volumetric average of the deformation increments (None: standard)
         self.volumetric_average = volumetric(self.volumetric)
         if self.tangent not in ("analytic", "finite-difference"):
             raise ValueError(f"unknown option tangent={self.tangent!r}; expected analytic or finite-difference")
+        #: whether the implicit step takes the laws' tangents by central differences
+        self.finite_difference_tangent = self.tangent == "finite-difference"
         if self.load_ramp is not None and not 0.0 < self.load_ramp < float("inf"):
             raise ValueError(f"load_ramp={self.load_ramp} must be a positive time (or None)")
         if self.max_cuts < 0:
             raise ValueError(f"max_cuts={self.max_cuts} must be a number of halvings >= 0")
-        if self.particle_domain.tracks_corners and self.position == "particle":
+        if self.particle_domain.tracks_corners and self.particle_position:
             raise ValueError(f"domain={self.domain!r} moves the particle domains' corners with the grid velocity and "
                              "the particle with its domain's centroid: position='particle' would detach them")
         if not self.damping >= 0.0:

@@ -25,7 +25,7 @@ from fempm.kernels.p2g import scatter_weighted
 from fempm.particles.halo import extend_index_map, remote_box_rows, remote_rows
 from fempm.particles.particle_set import Particles
 from fempm.transfer.box_average import BoxIntegrator
-from fempm.transfer.domains import make_domain
+from fempm.transfer.domains import Point, make_domain
 
 __all__ = ["ParticleBasis", "is_nonnegative"]
 
@@ -70,7 +70,7 @@ class ParticleBasis:
         self.nonnegative = is_nonnegative(element)
         self.domain = domain
         self.gradients: npt.NDArray | None = None
-        if domain is None or getattr(domain, "name", "") == "point":
+        if domain is None or isinstance(domain, Point):
             cells, X = particles.cells, particles.X
             self.cells: npt.NDArray[np.int32] | None = cells  # one cell per particle
             geo = particles.locator.geometry
