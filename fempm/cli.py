@@ -31,6 +31,7 @@ from mpi4py import MPI
 
 from fempm import __version__
 from fempm.abort import abort_on_error
+from fempm.docstrings import arguments, first_sentence, plain
 from fempm.io.checkpoint import CheckpointError, choose
 from fempm.io.stops import RunInterrupted
 from fempm.io.writers import (
@@ -40,7 +41,8 @@ from fempm.io.writers import (
     OutputWriteError,
 )
 from fempm.particles.location import OutsideMeshError
-from fempm.run_options import UsageError, health_options, scene_options, stepping_options, with_stepping
+from fempm.run_options import (UsageError, health_options, option_descriptions, scene_options, stepping_options,
+                                with_stepping)
 from fempm.scene.loop import run
 from fempm.scenes import SCENES
 from fempm.stepping.health import Health
@@ -202,16 +204,18 @@ def _run(args, rest: list[str]) -> int:
     if args.help:
         print(f"python -m fempm run {args.scene} [--out DIR] [--overwrite] [--force] [--checkpoint-every N] options "
               "(defaults):")
+        described = option_descriptions(builder)
         for k, v in inspect.signature(builder).parameters.items():
             if k != "comm":
-                print(f"  --{k.replace('_', '-')} {v.default}")
+                print(f"  --{k.replace('_', '-')} {v.default}  {described[k]}")
         print("stepping (every scene): --integrator explicit|implicit, --dynamics newmark|quasi-static (implicit), "
               "--steps N (fixed steps to t_end; implicit runs need it), --tangent analytic|finite-difference "
               "(implicit: the laws' own tangents or central differences), --volumetric standard|fbar, "
               "--outside raise|remove (particles that leave the mesh)")
         print("run health (fempm.stepping.health.Health; a crossed limit stops the run with exit code 3):")
+        limits = arguments(Health)
         for k, v in Health().asdict().items():
-            print(f"  --{k.replace('_', '-')} {v}")
+            print(f"  --{k.replace('_', '-')} {v}  {first_sentence(plain(limits[k]))}")
         return 0
     health, rest = health_options(rest)
     stepping, rest = stepping_options(rest)

@@ -8,12 +8,27 @@ import math
 
 from fempm.stepping.health import Health
 
-__all__ = ["STEPPING_FLAGS", "UsageError", "boolean", "health_options", "scene_options", "split_flags",
-           "stepping_options", "with_stepping"]
+__all__ = ["STEPPING_FLAGS", "UsageError", "boolean", "health_options", "option_descriptions", "scene_options",
+           "split_flags", "stepping_options", "with_stepping"]
 
 
 class UsageError(SystemExit):
     """A mistake in the command line: its message on one line, exit code 2, no traceback."""
+
+
+def option_descriptions(builder) -> dict[str, str]:
+    """Each option of a scene builder with its description, the first sentence on one line
+    without markup: from the builder's own ``Args:`` section, else (the options every scene
+    passes on to them) from :class:`fempm.stepping.StepOptions`'s or :class:`fempm.scene.Scene`'s;
+    "" where none says."""
+    import inspect
+
+    from fempm.docstrings import arguments, first_sentence, plain
+    from fempm.scene.definition import Scene
+    from fempm.stepping.options import StepOptions
+
+    docs = {**arguments(Scene), **arguments(StepOptions), **arguments(builder)}
+    return {k: first_sentence(plain(docs.get(k, ""))) for k in inspect.signature(builder).parameters if k != "comm"}
 
 
 def scene_options(builder, rest: list[str]) -> dict:

@@ -49,6 +49,17 @@ def vibrating_bar(
     The mesh extends 4 cells past the free end so the bar can stretch. Summary: ``period`` (from
     the crossings of zero by v_cm, :class:`CentreVelocity`), ``period_reference`` (2 pi / omega)
     and ``period_error`` (relative).
+
+    Args:
+        cells: Cells along the bar.
+        ppc: Particles per cell, a lattice (None: 2 per direction).
+        t_end: The end time (consistent units).
+        L: The bar's length.
+        E: Young's modulus (consistent units; nu = 0).
+        rho: The density.
+        v0: The velocity amplitude of the mode.
+        mode: Which mode (1: the first).
+        dim: 1 (intervals) or 2 (a strip one cell high).
     """
     check_counts(cells=cells, mode=mode, dim=dim)
     if dim not in (1, 2):

@@ -35,6 +35,16 @@ def hanging_block(
     (triangles of about that size, with a row of vertices on the block's top y = 0). Particles carry their lattice index
     ``fields["lattice"]`` (i, j) for the neighbour-gap measure; with ``domain="cpdi2"`` each particle is its lattice
     square, ``fields["corners"]``.
+
+    Args:
+        cells: Cells per unit length.
+        ppc: Particles per cell, a lattice.
+        mesh: "structured" (quadrilaterals) or "unstructured" (triangles).
+        t_end: The end time in s.
+        g: Gravity in m/s^2 (rho g L / E about 1 by default).
+        E: Young's modulus in Pa.
+        nu: Poisson's ratio.
+        rho: The density in kg/m^3.
     """
     check_counts(cells=cells, ppc=ppc)
     h = 1.0 / cells

@@ -82,9 +82,24 @@ class DiskMotion(Recorder):
 def bowl(cells: int = 8, ppc: int = 4, wall: str = "slip", friction: float = 0.3, release: float = 30.0,
          radius: float = 0.2, bowl_radius: float = 1.0, rho: float = 1000.0, E: float = 1.0e6, nu: float = 0.3,
          g: float = 10.0, periods: float = 2.0, segments: int = 48, scheme: str = "MUSL", flip: float = 1.0,
-         cfl: float = 0.4, frames: int = 20, comm: MPI.Comm = MPI.COMM_WORLD) -> Scene:
+         cfl: float = 0.4, frames: int = 20, mass: str = "lumped", comm: MPI.Comm = MPI.COMM_WORLD) -> Scene:
     """The disk and its bowl (the module), ``cells`` cells across the disk (the gmsh size
     ``2 radius / cells``), run for ``periods`` of the sliding pendulum.
+
+    Args:
+        cells: Cells across the disk.
+        ppc: Particles per cell (per triangle).
+        wall: The bowl's wall: "slip", "friction" or "fixed".
+        friction: The wall's Coulomb coefficient (``wall="friction"``).
+        release: The release angle in degrees.
+        radius: The disk's radius in m.
+        bowl_radius: The bowl's radius in m.
+        rho: The density in kg/m^3.
+        E: Young's modulus in Pa.
+        nu: Poisson's ratio.
+        g: Gravity in m/s^2.
+        periods: The run's length in periods of the sliding pendulum.
+        segments: The straight segments of the bowl's arc.
 
     Raises:
         ValueError: An unknown ``wall``, counts that are not positive, a release outside
@@ -128,7 +143,7 @@ def bowl(cells: int = 8, ppc: int = 4, wall: str = "slip", friction: float = 0.3
 
     params = {"cells": cells, "ppc": ppc, "wall": wall, "friction": friction, "release": release, "radius": radius,
               "bowl_radius": bowl_radius, "rho": rho, "E": E, "nu": nu, "g": g, "periods": periods,
-              "segments": segments, "scheme": scheme, "flip": flip, "cfl": cfl}
+              "segments": segments, "scheme": scheme, "flip": flip, "mass": mass, "cfl": cfl}
     return Scene(name="bowl", mesh=data.mesh, particles=p, materials=[NeoHookean(E, nu)], t_end=periods * sliding,
-                 bcs=bcs, loads=Loads(body_force=(0.0, -g)), options=StepOptions(scheme=scheme, flip=flip, cfl=cfl),
+                 bcs=bcs, loads=Loads(body_force=(0.0, -g)), options=StepOptions(scheme=scheme, flip=flip, mass=mass, cfl=cfl),
                  frames=frames, params=params, results=results, watch=motion)

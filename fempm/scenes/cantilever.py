@@ -63,6 +63,19 @@ def cantilever(
 
     ``ppc``: particles per cell, a square lattice (default :math:`(k + 1)^2` for degree
     :math:`k`: 4, and 9 for P2, which a consistent mass needs at least).
+
+    Args:
+        cells: Cells through the beam's thickness.
+        ppc: Particles per cell, a lattice (None: (degree + 1)^2).
+        t_end: The end time in s.
+        L: The beam's length in m.
+        H: The beam's thickness in m.
+        E: Young's modulus in Pa.
+        nu: Poisson's ratio.
+        rho: The density in kg/m^3.
+        g: Gravity in m/s^2.
+        material: "neo-hookean" or "linear" (small strain).
+        degree: The velocity space's degree (1 or 2).
     """
     ppc = (degree + 1) ** 2 if ppc is None else ppc
     check_counts(cells=cells, ppc=ppc, degree=degree)

@@ -73,12 +73,28 @@ def column_collapse(
     aspect: float = 1.0, width: float = 0.2, cells: int = 16, ppc: int = 4, rho: float = 2000.0, E: float = 5.0e6,
     nu: float = 0.3, friction_angle: float = 30.0, dilation_angle: float = 0.0, cohesion: float = 0.0,
     floor_friction: float = 0.5, g: float = 9.81, t_end: float | None = None, scheme: str = "MUSL",
-    flip: float = 0.99, cfl: float = 0.4, frames: int = 20, comm: MPI.Comm = MPI.COMM_WORLD,
+    flip: float = 0.99, cfl: float = 0.4, frames: int = 20, mass: str = "lumped", comm: MPI.Comm = MPI.COMM_WORLD,
 ) -> Scene:
     """The column collapse (see the module): ``cells`` square cells across the column width,
     ``ppc`` particles per cell (a square lattice: 4 = 2 x 2); the mesh reaches ``2 + 3 a`` column widths along the
     floor and ``1.05 a`` up. ``t_end`` defaults to :math:`6\\sqrt{H_0/g}` (the collapse ends
-    after about :math:`3\\sqrt{H_0/g}`)."""
+    after about :math:`3\\sqrt{H_0/g}`).
+
+    Args:
+        aspect: The column's height over its width, a = H0 / L0.
+        width: The column's width L0 in m.
+        cells: Cells across the column's width.
+        ppc: Particles per cell, a lattice.
+        rho: The density in kg/m^3.
+        E: Young's modulus in Pa.
+        nu: Poisson's ratio.
+        friction_angle: Drucker-Prager's friction angle in degrees.
+        dilation_angle: The dilation angle in degrees.
+        cohesion: The cohesion in Pa.
+        floor_friction: The floor's Coulomb coefficient.
+        g: Gravity in m/s^2.
+        t_end: The end time in s (None: 6 sqrt(H0 / g)).
+    """
     check_counts(cells=cells, ppc=ppc)
     if not 0.0 < aspect < np.inf or not 0.0 < width < np.inf:
         raise ValueError(f"column_collapse needs a positive aspect and width (got aspect={aspect}, width={width})")
@@ -100,11 +116,11 @@ def column_collapse(
         t_end = 6.0 * np.sqrt(H0 / g)
     params = dict(aspect=aspect, width=width, height=H0, cells=cells, ppc=ppc, rho=rho, E=E, nu=nu,
                   friction_angle=friction_angle, dilation_angle=dilation_angle, cohesion=cohesion,
-                  floor_friction=floor_friction, g=g, K0=K0, spacing=h / per_direction(ppc, 2), scheme=scheme, flip=flip, cfl=cfl)
+                  floor_friction=floor_friction, g=g, K0=K0, spacing=h / per_direction(ppc, 2), scheme=scheme, flip=flip, mass=mass, cfl=cfl)
     return Scene(
         name="column_collapse", mesh=mesh, particles=p, materials=[sand], t_end=t_end,
         bcs=lambda V: [slip(V, lambda x: np.isclose(x[0], 0.0), (-1.0, 0.0)),
                        friction(V, lambda x: np.isclose(x[1], 0.0), (0.0, -1.0), floor_friction)],
-        loads=Loads(body_force=(0.0, -g)), options=StepOptions(scheme=scheme, flip=flip, cfl=cfl),
+        loads=Loads(body_force=(0.0, -g)), options=StepOptions(scheme=scheme, flip=flip, mass=mass, cfl=cfl),
         frames=frames, params=params, results=deposit,
     )

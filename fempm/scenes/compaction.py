@@ -41,7 +41,19 @@ def compaction(
 ) -> Scene:
     """The column with ``cells`` quadrilaterals over its height (one across), ``ppc`` particles a
     cell, loaded in ``steps`` quasi-static steps to ``t_end`` (a pseudo-time: gravity reaches its
-    value there; see the module)."""
+    value there; see the module).
+
+    Args:
+        cells: Cells over the column's height.
+        ppc: Particles per cell, a lattice.
+        steps: The quasi-static load steps.
+        height: The column's height in m.
+        E: Young's modulus in Pa.
+        nu: Poisson's ratio.
+        rho: The density in kg/m^3.
+        g: Gravity in m/s^2, reached at ``t_end``.
+        t_end: The end of the load ramp (a pseudo-time).
+    """
     check_counts(cells=cells, ppc=ppc, steps=steps)
     per_direction(ppc, 2)
     h = height / cells

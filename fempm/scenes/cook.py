@@ -90,7 +90,20 @@ def cook_membrane(
     the traction as the consistent nodal load; or, with ``spacing``, on the panel's lattice of that
     spacing (with degree 2 a given spacing must leave every triangle at least 6 particles).
     ``damping`` defaults to :math:`2\\omega_1` with :math:`\\omega_1` estimated from a cantilever
-    of the panel's mean height; ``t_end`` to :math:`12 / \\omega_1`."""
+    of the panel's mean height; ``t_end`` to :math:`12 / \\omega_1`.
+
+    Args:
+        h: The triangles' size (the panel is 48 long).
+        nu: Poisson's ratio.
+        E: Young's modulus.
+        rho: The density.
+        load: The shear traction on the right edge (total, per unit thickness).
+        spacing: A lattice of this spacing instead of ``ppc`` per triangle (None: per triangle).
+        variant: The Lagrange variant of the velocity space, such as "bernstein" (None: DOLFINx's default).
+        damping: The grid damping rate in 1/s (None: twice the estimated first frequency).
+        t_end: The end time (None: 12 over the estimated first frequency).
+        ppc: Particles per triangle (None: 4 for degree 1, 9 for degree 2).
+    """
     check_counts(degree=degree)
     if spacing is not None and not 0.0 < spacing < np.inf:
         raise ValueError(f"spacing={spacing} must be a positive length")

@@ -46,6 +46,18 @@ def dam_break(
     cell. The column starts at rest in hydrostatic equilibrium: the particle density is
     :math:`\rho = \rho_0 (1 + \rho_0 g (2a - y) / \kappa)^{1/\gamma}` and its stress
     :math:`-p I`. Reference: the surge front of Martin and Moyce (1952), ``MARTIN_MOYCE``.
+
+    Args:
+        cells: Cells across the water column's width.
+        ppc: Particles per cell, a lattice.
+        t_end: The end time in s.
+        a: The column's width in m (its height is 2 a).
+        box: The tank's width in m.
+        rho0: The water's reference density in kg/m^3.
+        kappa: Tait's bulk coefficient in Pa.
+        gamma: Tait's exponent.
+        viscosity: The dynamic viscosity in Pa s.
+        g: Gravity in m/s^2.
     """
     check_counts(cells=cells, ppc=ppc)
     h = a / cells

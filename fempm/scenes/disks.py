@@ -32,6 +32,20 @@ def two_disks(
     ``mesh``: "structured" (quadrilaterals, ``cells`` per side), "unstructured"
     (triangles from ``meshes/unit_square_tri.msh``) or a mesh of the unit square (e.g. of a
     benchmark's size; ``cells`` unused).
+
+    Args:
+        mesh: "structured" (quadrilaterals, ``cells`` per side), "unstructured" (the triangles of
+            meshes/unit_square_tri.msh) or a DOLFINx mesh of the unit square.
+        cells: Cells along each side of the unit square.
+        ppc: Particles per cell, a lattice.
+        t_end: The end time in s.
+        E: Young's modulus in Pa.
+        nu: Poisson's ratio.
+        rho: The density in kg/m^3.
+        speed: Each disk's speed along each axis in m/s.
+        radius: The disks' radius in m.
+        contact: One velocity field per disk with Coulomb contact (else one field).
+        friction: The contact's Coulomb coefficient.
     """
     check_counts(cells=cells, ppc=ppc)
     if friction and not contact:

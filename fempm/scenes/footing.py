@@ -76,8 +76,19 @@ def _ramp(speed: float, t_ramp: float):
 def footing(cells: int = 8, depth: float = 0.1, width: float = 1.0, E: float = 1.0e7, nu: float = 0.3,
             yield_stress: float = 1.0e4 * np.sqrt(3.0), rho: float = 1000.0, speed: float = 0.2, ppc: int = 4,
             scheme: str = "MUSL", flip: float = 0.95, cfl: float = 0.4, frames: int = 0,
-            comm: MPI.Comm = MPI.COMM_WORLD) -> Scene:
+            mass: str = "lumped", comm: MPI.Comm = MPI.COMM_WORLD) -> Scene:
     """The footing of the module with ``cells`` cells across its width.
+
+    Args:
+        cells: Cells across the footing's width.
+        depth: The penetration at the end, in footing widths (0, 1].
+        width: The footing's width B in m.
+        E: Young's modulus in Pa.
+        nu: Poisson's ratio.
+        yield_stress: The von Mises yield stress in Pa (the cohesion is yield_stress / sqrt(3)).
+        rho: The density in kg/m^3.
+        speed: The footing's speed in m/s.
+        ppc: Particles per cell, a lattice.
 
     Raises:
         ValueError: Counts that are not positive, a depth outside (0, 1], non-finite numbers.
@@ -113,8 +124,8 @@ def footing(cells: int = 8, depth: float = 0.1, width: float = 1.0, E: float = 1
                 slip(V, lambda x: np.isclose(np.abs(x[0]), half), (1.0, 0.0))]
 
     params = {"cells": cells, "depth": depth, "width": width, "E": E, "nu": nu, "yield_stress": yield_stress,
-              "rho": rho, "speed": speed, "ppc": ppc, "scheme": scheme, "flip": flip, "cfl": cfl}
+              "rho": rho, "speed": speed, "ppc": ppc, "scheme": scheme, "flip": flip, "mass": mass, "cfl": cfl}
     return Scene(name="footing", mesh=mesh, particles=p, materials=[law], t_end=t_end, bcs=bcs,
-                 options=StepOptions(scheme=scheme, flip=flip, cfl=cfl), frames=frames, params=params,
+                 options=StepOptions(scheme=scheme, flip=flip, mass=mass, cfl=cfl), frames=frames, params=params,
                  results=results, watch=curve,
                  colliders=[Collider(shape, velocity=_ramp(speed, 0.25 * t_end))])

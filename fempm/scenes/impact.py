@@ -80,11 +80,25 @@ class _Overlap(Recorder):
 def disk_impact(
     cells: int = 40, ppc: int = 4, speed: float = 10.0, radius: float = 0.1, E: float = 1.0e5, nu: float = 0.3,
     rho: float = 1000.0, contact: bool = True, friction: float = 0.0, gap: float = 0.8, scheme: str = "USL",
-    flip: float = 1.0, cfl: float = 0.4, t_end: float = 0.08, frames: int = 10, comm: MPI.Comm = MPI.COMM_WORLD,
+    flip: float = 1.0, cfl: float = 0.4, t_end: float = 0.08, frames: int = 10, mass: str = "lumped", comm: MPI.Comm = MPI.COMM_WORLD,
 ) -> Scene:
     """The impact of the module on a grid of ``cells`` x ``0.6 cells`` quadrilaterals over
     :math:`[0, 1] \\times [0, 0.6]`, ``ppc`` particles per cell (a square lattice); the disk starts two
-    cells above the plate. ``gap``: the contact's position check in cells (0: none)."""
+    cells above the plate. ``gap``: the contact's position check in cells (0: none).
+
+    Args:
+        cells: Cells across the unit width.
+        ppc: Particles per cell, a lattice.
+        speed: The disk's speed in m/s.
+        radius: The disk's radius in m.
+        E: Young's modulus in Pa.
+        nu: Poisson's ratio.
+        rho: The density in kg/m^3.
+        contact: One velocity field per body with contact (else one field).
+        friction: The contact's Coulomb coefficient.
+        gap: The contact's position check in cells (0: none).
+        t_end: The end time in s.
+    """
     check_counts(cells=cells, ppc=ppc)
     if friction and not contact:
         raise ValueError(f"friction={friction} needs contact=True: without contact the disk and the plate share one "
@@ -120,10 +134,10 @@ def disk_impact(
                 "shared_cells": shared_cells(p, "impactor")}
 
     params = dict(cells=cells, ppc=ppc, speed=speed, radius=radius, E=E, nu=nu, rho=rho, contact=contact,
-                  friction=friction, gap=gap, scheme=scheme, flip=flip, cfl=cfl)
+                  friction=friction, gap=gap, scheme=scheme, flip=flip, mass=mass, cfl=cfl)
     return Scene(
         name="impact", mesh=mesh, particles=p, materials=[NeoHookean(E, nu)], t_end=t_end, frames=frames,
         bcs=lambda V: [slip(V, lambda x: np.isclose(x[1], 0.0), (0.0, -1.0))],
-        options=StepOptions(scheme=scheme, flip=flip, cfl=cfl), params=params, results=results, watch=overlap,
+        options=StepOptions(scheme=scheme, flip=flip, mass=mass, cfl=cfl), params=params, results=results, watch=overlap,
         contact=Contact(friction=friction, field="impactor", gap=gap * h or None) if contact else None,
     )

@@ -131,7 +131,7 @@ def incline(
     body: str = "block", angle: float = 30.0, friction: float = 0.2, cells: int = 8, ppc: int | None = None,
     size: float = 0.1, E: float = 1.0e6, nu: float = 0.3, rho: float = 1000.0, g: float = 9.81,
     t_end: float | None = None, scheme: str = "MUSL", flip: float | None = None, cfl: float = 0.4, frames: int = 10,
-    plane: str = "grid", gap: float | None = None, turned: bool = True, comm: MPI.Comm = MPI.COMM_WORLD,
+    plane: str = "grid", gap: float | None = None, turned: bool = True, mass: str = "lumped", comm: MPI.Comm = MPI.COMM_WORLD,
 ) -> Scene:
     """The incline of the module: ``cells`` cells across ``size``, ``ppc`` particles per
     cell, a square lattice (default 4 = 2 x 2 for the block, 16 = 4 x 4 for the disk, whose
@@ -148,7 +148,27 @@ def incline(
     tagged floor of a turned gmsh triangle mesh of size ``size / cells`` (the block; every node
     moving into the floor held, no gap), or ``collider``, a plane collider (the gap ``gap``
     cells, default half a cell) on the slope's grid turned with it (``turned``) or on an
-    axis-aligned grid."""
+    axis-aligned grid.
+
+    Args:
+        body: "block" (slides or sticks) or "disk" (rolls or slides).
+        angle: The slope's angle in degrees.
+        friction: The Coulomb coefficient between the body and the plane.
+        cells: Cells across ``size``.
+        ppc: Particles per cell, a lattice (None: 4 for the block, 16 for the disk).
+        size: The block's height or the disk's radius in m.
+        E: Young's modulus in Pa.
+        nu: Poisson's ratio.
+        rho: The density in kg/m^3.
+        g: Gravity in m/s^2.
+        t_end: The end time in s (None: the time to travel three sizes, at least 0.2 s).
+        flip: The PIC/FLIP blend (None: 0.7 for the block, 1 for the disk).
+        plane: "grid" (the grid's frictional boundary), "rigid" (a rigid layer of particles),
+            "tagged" (a turned gmsh mesh's tagged floor) or "collider" (a plane collider).
+        gap: How near, in cells, a node's centre of mass must come to the plane to touch it
+            (None: 0 for the block, 0.5 for the disk).
+        turned: The collider plane on the slope's turned grid (else an axis-aligned one).
+    """
     ppc = (16 if body == "disk" else 4) if ppc is None else ppc
     flip = (1.0 if body == "disk" else BLOCK_FLIP) if flip is None else flip
     gap = (0.5 if body == "disk" else 0.0) if gap is None else gap
@@ -187,7 +207,7 @@ def incline(
                 "analytic": analytic_acceleration(body, angle, friction, g)}
 
     params = {"body": body, "angle": angle, "friction": friction, "cells": cells, "ppc": ppc, "size": size, "E": E,
-              "nu": nu, "rho": rho, "g": g, "scheme": scheme, "flip": flip, "cfl": cfl, "plane": plane, "gap": gap,
+              "nu": nu, "rho": rho, "g": g, "scheme": scheme, "flip": flip, "mass": mass, "cfl": cfl, "plane": plane, "gap": gap,
               **({"turned": turned} if plane == "collider" else {})}
 
     def walls(V):
@@ -204,7 +224,7 @@ def incline(
         name="incline", mesh=mesh, particles=p, materials=[VonMises(E, nu)], t_end=t_end, bcs=walls,
         loads=Loads(body_force=(0.0, -g) if plane in ("tagged", "collider") else (g * np.sin(th), -g * np.cos(th))),
         colliders=colliders,
-        options=StepOptions(scheme=scheme, flip=flip, cfl=cfl), frames=frames, params=params, results=results,
+        options=StepOptions(scheme=scheme, flip=flip, mass=mass, cfl=cfl), frames=frames, params=params, results=results,
         watch=track, contact=Contact(friction=friction, field="plane", rigid=(1,), mass_cutoff=RIGID_MASS_CUTOFF,
                                      gap=(gap + _depth(ppc)) * h if gap > 0 else None) if plane == "rigid" else None,
     )

@@ -102,7 +102,7 @@ def silo(cells: int = 5, outlet: float = 0.1, half_angle: float = 30.0, fill: fl
          wall_friction: float = 0.3, floor_friction: float = 0.5, g: float = 9.81, t_end: float = 1.0,
          scheme: str = "MUSL", flip: float = 0.99, cfl: float = 0.4, frames: int = 20, law: str = "mu-i",
          grain_diameter: float = 0.53e-3, width: float = TOP, floor: bool = True,
-         comm: MPI.Comm = MPI.COMM_WORLD) -> Scene:
+         mass: str = "lumped", comm: MPI.Comm = MPI.COMM_WORLD) -> Scene:
     r"""The silo of the module, ``cells`` cells across the outlet (the gmsh size ``outlet / cells``),
     the grains a ``law`` of :data:`LAWS`: ``"mu-i"`` the :math:`\mu(I)` rheology
     (:class:`fempm.materials.MuI`, Jop et al.'s glass beads of ``grain_diameter``), ``"dp"`` Drucker-Prager
@@ -111,6 +111,25 @@ def silo(cells: int = 5, outlet: float = 0.1, half_angle: float = 30.0, fill: fl
     the grains fall out of the mesh and are removed, and no heap under the outlet chokes a large
     discharge (Beverloo's regime; choose ``t_end`` before the hopper is empty, or the run ends
     with every particle gone).
+
+    Args:
+        cells: Cells across the outlet.
+        outlet: The outlet's width D in m.
+        half_angle: The hopper walls' angle from the vertical in degrees.
+        fill: The fill's height above the outlet in m.
+        ppc: Particles per cell (per triangle).
+        rho: The bulk density in kg/m^3.
+        E: Young's modulus in Pa.
+        nu: Poisson's ratio.
+        friction_angle: Drucker-Prager's friction angle in degrees (``law="dp"``).
+        wall_friction: The hopper walls' Coulomb coefficient.
+        floor_friction: The floor's Coulomb coefficient.
+        g: Gravity in m/s^2.
+        t_end: The end time in s.
+        law: "mu-i" (the mu(I) rheology) or "dp" (Drucker-Prager).
+        grain_diameter: The grains' diameter in m (``law="mu-i"``).
+        width: The hopper's top width in m.
+        floor: A floor under the outlet (false: the grains fall out of the mesh).
 
     Raises:
         ValueError: Counts that are not positive, a half-angle outside (0, 60) degrees, a fill
@@ -149,10 +168,10 @@ def silo(cells: int = 5, outlet: float = 0.1, half_angle: float = 30.0, fill: fl
 
     params = {"cells": cells, "outlet": outlet, "half_angle": half_angle, "fill": fill, "ppc": ppc, "rho": rho,
               "E": E, "nu": nu, "friction_angle": friction_angle, "wall_friction": wall_friction,
-              "floor_friction": floor_friction, "g": g, "scheme": scheme, "flip": flip, "cfl": cfl, "law": law,
+              "floor_friction": floor_friction, "g": g, "scheme": scheme, "flip": flip, "mass": mass, "cfl": cfl, "law": law,
               "grain_diameter": grain_diameter, "width": width, "floor": floor}
     material = MuI(E, nu, grain_diameter=grain_diameter) if law == "mu-i" else DruckerPrager(E, nu, friction_angle)
     return Scene(name="silo", mesh=data.mesh, particles=p, materials=[material],
                  t_end=t_end, bcs=bcs, loads=Loads(body_force=(0.0, -g)),
-                 options=StepOptions(scheme=scheme, flip=flip, cfl=cfl), frames=frames, params=params,
+                 options=StepOptions(scheme=scheme, flip=flip, mass=mass, cfl=cfl), frames=frames, params=params,
                  results=results, watch=hopper, outside="remove")

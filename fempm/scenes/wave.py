@@ -46,8 +46,19 @@ START, HALF_WIDTH = 0.3, 0.1
 @checked(positive=("E", "rho", "length", "amplitude"))
 def wave(cells: int = 64, rows: int = 2, ppc: int = 4, boundary: str = "absorbing", E: float = 1.0, nu: float = 0.25,
          rho: float = 1.0, length: float = 1.0, amplitude: float = 1e-3, scheme: str = "MUSL", flip: float = 1.0,
-         cfl: float = 0.5, frames: int = 0, comm: MPI.Comm = MPI.COMM_WORLD) -> Scene:
+         cfl: float = 0.5, frames: int = 0, mass: str = "lumped", comm: MPI.Comm = MPI.COMM_WORLD) -> Scene:
     """The pulse and its end (the module), ``cells`` along the strip.
+
+    Args:
+        cells: Cells along the strip.
+        rows: Cells across the strip.
+        ppc: Particles per cell, a lattice.
+        boundary: The right end: "absorbing" or "fixed".
+        E: Young's modulus (consistent units).
+        nu: Poisson's ratio.
+        rho: The density.
+        length: The strip's length.
+        amplitude: The pulse's velocity amplitude (below the wave speed).
 
     Raises:
         ValueError: An unknown ``boundary``, counts that are not positive, a pulse narrower
@@ -95,6 +106,6 @@ def wave(cells: int = 64, rows: int = 2, ppc: int = 4, boundary: str = "absorbin
         return {"reflected_energy_ratio": solver.energies()["total"] / energy0, "pulse_energy": energy0}
 
     params = {"cells": cells, "rows": rows, "ppc": ppc, "boundary": boundary, "E": E, "nu": nu, "rho": rho,
-              "length": length, "amplitude": amplitude, "scheme": scheme, "flip": flip, "cfl": cfl, "cp": cp, "cs": cs}
+              "length": length, "amplitude": amplitude, "scheme": scheme, "flip": flip, "mass": mass, "cfl": cfl, "cp": cp, "cs": cs}
     return Scene(name="wave", mesh=mesh, particles=p, materials=[law], t_end=2 * (1 - START) * length / cp, bcs=bcs,
-                 options=StepOptions(scheme=scheme, flip=flip, cfl=cfl), frames=frames, params=params, results=results)
+                 options=StepOptions(scheme=scheme, flip=flip, mass=mass, cfl=cfl), frames=frames, params=params, results=results)

@@ -61,10 +61,15 @@ SMALL_STRAIN_ROTATION = 10.0
 
 @dataclass(frozen=True)
 class Health:
-    r"""Limits of a healthy run. ``energy_tolerance``: relative energy growth that stops the run
-    (None: no energy check, for scenes that inject energy on purpose or whose stored energy
-    does not describe their initial state); ``j_min``/``j_max``: bounds of J; ``dt_floor``:
-    smallest step as a fraction of the first one.
+    r"""Limits of a healthy run; a crossed one stops it.
+
+    Args:
+        energy_tolerance: The relative growth of the energy beyond the work of the loads that
+            stops the run (None: no energy check, for scenes that inject energy on purpose or
+            whose stored energy does not describe their initial state).
+        j_min: The smallest volume ratio J a particle may reach.
+        j_max: The largest volume ratio J a particle may reach.
+        dt_floor: The smallest time step, as a fraction of the first one.
 
     Why 20 %: the explicit update is symplectic Euler, whose computed energy (kinetic energy of
     :math:`v^{n+1}` plus strain energy of :math:`F^{n+1}`) oscillates about a conserved shadow

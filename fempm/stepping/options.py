@@ -26,45 +26,60 @@ class SimulationError(RuntimeError):
 
 @dataclass
 class StepOptions:
-    r"""Transfer and time-stepping options.
+    r"""Transfer and time-stepping options, parsed once into objects (:attr:`stages`,
+    :attr:`mass_model`, :attr:`particle_domain`, :attr:`integration`, :attr:`volumetric_average`)
+    and flags (:attr:`particle_position`, :attr:`finite_difference_tangent`).
 
-    scheme: USL, USF or MUSL (default: the stability catalogue, ``python -m fempm study
-    stability``, found MUSL lumped stable in 9 of its 13 hard cases and at every CFL number up
-    to 1 on the colliding disks, where USL was stable in 3 and only up to CFL 0.25; see
-    ``docs/error-vs-time-and-stability.md``). flip: PIC/FLIP blend alpha (1 = FLIP, 0 = PIC).
-    mass: lumped, consistent or FMPM(k) (``"fmpm"`` with ``fmpm_order`` k, or ``"fmpmK"``;
-    :mod:`fempm.transfer.fmpm`: k - 1 extra G2P/P2G sweeps, a step :math:`1/\sqrt{k}` of the lumped
-    one unless ``lumped_forces``). cfl: Courant number in (0, 1]. mass_cutoff: nodes whose
-    lumped mass (for P2 Lagrange: :math:`\sum_p M_p |N_{ip}|`) is below this fraction of the
-    largest get no force update (they keep the
-    mapped particle velocity, a bounded weighted average, instead of :math:`+\Delta t f_i/m_i`). position:
-    move particles with the grid velocity (default) or their own updated velocity (the seed's
-    :math:`x_p^+ = x_p + \Delta t\, v_p^+`). lumped_forces: with consistent mass, map the
-    velocity with the consistent matrix but divide the forces by the lumped mass (stable with
-    the CFL step when weakly supported boundary nodes make the consistent matrix nearly
-    singular). lump_below: with consistent mass, lump the rows of dofs whose lumped mass is
-    below this fraction of the largest (free-surface rims; raises the stable step). domain:
-    point (standard MPM), gimp (box average, integrated exactly over the box's pieces in the
-    cells, or with ``gimp_order`` Gauss points per axis; boxes of the initial size (uGIMP), or
-    stretched by the diagonal of F with ``gimp_deform``), ugimp and cpgimp (the same with the
-    box kept or stretched, whatever ``gimp_deform`` says), cpdi1
-    (parallelograms that follow F) or cpdi2 (domains tracked by their corners
-    ``fields["corners"]``, moved with the grid velocity; the particle sits at its domain's
-    centroid and has its volume), see :mod:`fempm.transfer.domains`. damping: mass-proportional
-    damping rate :math:`c` (1/s) of the grid acceleration, :math:`a_i \leftarrow a_i - c\, v_i`
-    (it leaves a static solution unchanged; :math:`c \approx 2\omega_1` damps the lowest mode
-    critically, for loading to a static state).
-    integrator: explicit (the default) or implicit (:mod:`fempm.implicit`: each step solves the
-    grid's momentum balance for the displacement increment by Newton's method, PETSc SNES with
-    the options prefix ``fempm_implicit_``). dynamics (implicit): newmark (``newmark_beta``,
-    ``newmark_gamma``; the trapezoidal rule by default) or quasi-static. tangent (implicit):
-    analytic (the laws' own ``tangent``) or finite-difference (central differences of the
-    stress update, for a law without one). max_cuts (implicit): how often a step that does not
-    converge is halved before the run stops. load_ramp (implicit, quasi-static): the loads are
-    scaled by :math:`\min(1, t / t_{ramp})` at a step's end time t (None: the loads as given).
-    volumetric: standard, or fbar (:mod:`fempm.stepping.fbar`: each particle's volume change
-    averaged over its nodal patch, against volumetric locking; the explicit numpy step, and the
-    implicit step with :mod:`fempm.implicit.fbar`).
+    Args:
+        scheme: The update scheme: USL, USF or MUSL. The stability catalogue (``python -m fempm
+            study stability``) found MUSL with lumped mass stable in 9 of its 13 hard cases and
+            at every CFL number up to 1 on the colliding disks, USL in 3 and up to CFL 0.25
+            (docs/error-vs-time-and-stability.md).
+        flip: The PIC/FLIP blend alpha in [0, 1] (1: FLIP, 0: PIC).
+        mass: The grid mass: lumped, consistent, or FMPM(k) as fmpmK (or ``fmpm`` with
+            ``fmpm_order`` k). FMPM(k) (:mod:`fempm.transfer.fmpm`) takes k - 1 extra G2P/P2G
+            sweeps, and a step :math:`1/\sqrt{k}` of the lumped one unless ``lumped_forces``.
+        cfl: The Courant number of the time step, in (0, 1].
+        mass_cutoff: Nodes whose lumped mass (P2 Lagrange: :math:`\sum_p M_p |N_{ip}|`) is below
+            this fraction of the largest get no force update (they keep the mapped velocity).
+        position: grid (move the particles with the grid velocity) or particle (with their own
+            updated velocity, :math:`x_p^+ = x_p + \Delta t\, v_p^+`).
+        lumped_forces: With consistent mass, divide the forces by the lumped mass (stable with
+            the CFL step where weakly supported boundary nodes make the consistent matrix
+            nearly singular).
+        lump_below: With consistent mass, lump the rows whose lumped mass is below this
+            fraction of the largest (free-surface rims; raises the stable step).
+        domain: The particle domain: point, gimp, ugimp, cpgimp, cpdi1 or cpdi2. point is
+            standard MPM; gimp a box average, exact or with ``gimp_order`` Gauss points per axis
+            (uGIMP, or cpGIMP with ``gimp_deform``; ugimp and cpgimp name them); cpdi1
+            parallelograms that follow F; cpdi2 domains tracked by their corners
+            (:mod:`fempm.transfer.domains`).
+        gimp_order: Gauss points per axis of GIMP's box average (None: exact).
+        gimp_deform: Stretch GIMP's boxes by the diagonal of F (cpGIMP).
+        petsc_options_prefix: The PETSc options prefix of the consistent mass solves.
+        damping: The mass-proportional damping rate :math:`c` (1/s) of the grid acceleration,
+            :math:`a_i \leftarrow a_i - c\, v_i` (:math:`c \approx 2\omega_1` damps the lowest
+            mode critically; a static solution is left as it is).
+        fmpm_order: The k of ``mass="fmpm"``.
+        integrator: explicit, or implicit (:mod:`fempm.implicit`: Newton's method on PETSc SNES,
+            options prefix ``fempm_implicit_``, for the grid's displacement increment).
+        dynamics: Implicit: newmark (``newmark_beta``, ``newmark_gamma``; the trapezoidal rule
+            by default) or quasi-static.
+        newmark_beta: Newmark's beta, in (0, 1/2].
+        newmark_gamma: Newmark's gamma, in [1/2, 1].
+        tangent: Implicit: analytic (the laws' own ``tangent``) or finite-difference (central
+            differences of the stress update, for a law without one).
+        max_cuts: Implicit: how often a step that does not converge is halved before the run
+            stops.
+        load_ramp: Implicit, quasi-static: the loads scaled by :math:`\min(1, t / t_{ramp})` at
+            a step's end time t (None: the loads as given).
+        volumetric: standard, or fbar (:mod:`fempm.stepping.fbar`: each particle's volume
+            change averaged over its nodal patch, against volumetric locking; the explicit numpy
+            step, and the implicit step with :mod:`fempm.implicit.fbar`).
+
+    Raises:
+        ValueError: An unknown name or a value out of range, naming the option.
+        TypeError: A number option given something else.
     """
 
     scheme: SchemeName | Scheme = "MUSL"

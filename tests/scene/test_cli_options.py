@@ -65,6 +65,33 @@ def test_version_and_the_list_of_scenes(capsys):
 
 
 @pytest.mark.skipif(MPI.COMM_WORLD.size > 1, reason="command-line output on one rank")
+@pytest.mark.parametrize("scene", ["bar", "disks", "cantilever", "dam", "block", "cook", "column", "incline", "impact",
+                                   "compaction", "wave", "footing", "silo", "bowl"])
+def test_every_scene_option_has_a_one_line_description_without_markup(scene, capsys):
+    """From the scene's own Args: section or, for the options every scene passes on, from
+    StepOptions' and Scene's; every scene takes --mass; the health limits are described too."""
+    import inspect
+
+    from fempm.cli import main
+    from fempm.scenes import SCENES
+
+    assert "mass" in inspect.signature(SCENES[scene]).parameters
+    assert main(["run", scene, "--help"]) == 0
+    out = capsys.readouterr().out
+    options = [x for x in out.splitlines() if x.startswith("  --")]
+    names = [k for k in inspect.signature(SCENES[scene]).parameters if k != "comm"]
+    assert len(options) == len(names) + 4  # and the four health limits
+    for line in options:
+        flag, default, *words = line.split()
+        assert len(words) >= 2, line  # a description
+        assert " ".join(words).endswith(".") or " ".join(words).endswith(")"), line
+        assert ":math:" not in line and ":class:" not in line and "``" not in line, line
+    for line in options:  # None is explained where it is a default
+        if line.split()[1] == "None":
+            assert "None" in " ".join(line.split()[2:]), line
+
+
+@pytest.mark.skipif(MPI.COMM_WORLD.size > 1, reason="command-line output on one rank")
 @pytest.mark.parametrize("argv, message", [
     (["run"], "fempm run: give a scene"),
     (["run", "nosuch"], "unknown scene 'nosuch'; scenes: bar, disks"),
