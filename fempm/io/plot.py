@@ -81,35 +81,51 @@ def _save(fig, path: Path) -> None:
 
 
 def plot_error_vs_time(rows: Sequence[dict], path: Path, *, title: str = "") -> None:
-    """Log-log L2 error against wall time, one line per (mesh, field, space, mass, ppc, domain)
-    series."""
+    """Log-log L2 error against wall time: a panel per (field, mass), a line per (mesh, space,
+    ppc, domain) series connecting its refinements; the colour is the particle domain, the
+    marker the mesh, the line style the space (solid P1, dashed P2, dotted others) and the
+    ppc, each told once in a legend of its own."""
     plt = _pyplot()
-    series: dict[tuple, list[dict]] = {}
-    for r in rows:
-        series.setdefault((r["mesh"], r["field"], r["space"], r["mass"], r["ppc"], r.get("domain", "point")), []).append(r)
-    fig, axes = plt.subplots(1, 2, figsize=(13, 5.5), sharey=False)
-    for ax, fld in zip(axes, sorted({r["field"] for r in rows})):
-        for key, rs in sorted(series.items()):
-            if key[1] != fld:
-                continue
-            rs = sorted(rs, key=lambda r: r["n"])  # connect refinements
-            ls = "-" if key[3] == "consistent" else "--"
-            marker = {"structured-tri": "o", "structured-quad": "s", "unstructured-tri": "^"}.get(key[0], "x")
-            ax.loglog(
-                [r["time_s"] for r in rs],
-                [max(r["l2_error"], 1e-17) for r in rs],
-                ls,
-                marker=marker,
-                label=f"{key[0]} {key[2]} {key[3]} ppc={key[4]}" + ("" if key[5] == "point" else f" {key[5]}"),
-            )
-        ax.set_xlabel("wall time of the projection [s]")
-        ax.set_ylabel("L2 error")
-        ax.set_title(f"field: {fld}")
-        ax.grid(True, which="both", alpha=0.3)
-    axes[-1].legend(fontsize=6, ncol=1, loc="center left", bbox_to_anchor=(1.0, 0.5))
+    from matplotlib.lines import Line2D
+
+    fields = sorted({r["field"] for r in rows})
+    masses = sorted({r["mass"] for r in rows})
+    domains = sorted({r.get("domain", "point") for r in rows})
+    meshes = sorted({r["mesh"] for r in rows})
+    styles = sorted({(r["space"], r["ppc"]) for r in rows}, key=str)
+    colour = {d: plt.get_cmap("tab10")(k % 10) for k, d in enumerate(domains)}
+    marker = {m: "os^Dv<>"[k % 7] for k, m in enumerate(meshes)}
+    dashes = ["-", "--", ":", "-."]
+    line = {st: dashes[k % len(dashes)] for k, st in enumerate(styles)}
+    fig, axes = plt.subplots(len(fields), len(masses), figsize=(4.2 * len(masses) + 2.5, 3.8 * len(fields)),
+                             squeeze=False, sharex=True, sharey="row")
+    for i, fld in enumerate(fields):
+        for j, mass in enumerate(masses):
+            ax = axes[i][j]
+            series: dict[tuple, list[dict]] = {}
+            for r in rows:
+                if r["field"] == fld and r["mass"] == mass:
+                    series.setdefault((r["mesh"], r["space"], r["ppc"], r.get("domain", "point")), []).append(r)
+            for (mesh, space, ppc, domain), rs in sorted(series.items(), key=lambda kv: str(kv[0])):
+                rs = sorted(rs, key=lambda r: r["n"])  # connect refinements
+                ax.loglog([r["time_s"] for r in rs], [max(r["l2_error"], 1e-17) for r in rs], line[(space, ppc)],
+                          marker=marker[mesh], color=colour[domain], ms=4)
+            ax.set_title(f"field {fld}, {mass} mass", fontsize=9)
+            ax.grid(True, which="both", alpha=0.3)
+            if i == len(fields) - 1:
+                ax.set_xlabel("wall time of the projection [s]")
+            if j == 0:
+                ax.set_ylabel("L2 error")
+    handles = ([Line2D([], [], color=colour[d], lw=2, label=f"domain {d}") for d in domains]
+               + [Line2D([], [], color="k", marker=marker[m], ls="none", label=m) for m in meshes]
+               + [Line2D([], [], color="k", ls=line[st], label=f"{st[0]} ppc={st[1]}") for st in styles])
     if title:
         fig.suptitle(title)
-    _save(fig, path)
+    fig.tight_layout(rect=(0.0, 0.0, 0.84, 1.0))
+    fig.legend(handles=handles, fontsize=7, loc="center right")
+    Path(path).parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(path, dpi=130)
+    _pyplot().close(fig)
 
 
 def plot_energies(history: Sequence[dict], path: Path, *, title: str = "", extra: dict | None = None) -> None:
@@ -248,24 +264,26 @@ def plot_pareto(rows: Sequence[dict], path: Path, *, title: str = "") -> None:
 
 def plot_stability(rows: Sequence[dict], path: Path, *, title: str = "") -> None:
     """The stability catalogue as a matrix: a row per case, a column per option, green stable,
-    orange unstable, red aborted, the energy ratio written in each cell."""
+    orange unstable, red aborted, grey refused (the configuration does not take the option: no
+    run), the energy ratio written in each cell that ran."""
     plt = _pyplot()
     from matplotlib.colors import ListedColormap
 
     cases = list(dict.fromkeys(r["case"] for r in rows))
     options = list(dict.fromkeys(r["option"] for r in rows))
-    code = {"stable": 0, "unstable": 1, "aborted": 2}
+    code = {"stable": 0, "unstable": 1, "aborted": 2, "refused": 3}
     grid = np.full((len(cases), len(options)), np.nan)
     for r in rows:
         grid[cases.index(r["case"]), options.index(r["option"])] = code[r["outcome"]]
     fig, ax = plt.subplots(figsize=(1.0 + 0.55 * len(options), 1.5 + 0.4 * len(cases)))
-    ax.imshow(np.ma.masked_invalid(grid), cmap=ListedColormap(["#4caf50", "#ff9800", "#e53935"]), vmin=0, vmax=2,
-              aspect="auto")
+    ax.imshow(np.ma.masked_invalid(grid), cmap=ListedColormap(["#4caf50", "#ff9800", "#e53935", "#bdbdbd"]), vmin=0,
+              vmax=3, aspect="auto")
     for r in rows:
         ratio = r["energy_ratio"]
-        ax.text(options.index(r["option"]), cases.index(r["case"]), f"{ratio:.2g}" if np.isfinite(ratio) else "-",
-                ha="center", va="center", fontsize=6)
+        text = "n/a" if r["outcome"] == "refused" else f"{ratio:.2g}" if np.isfinite(ratio) else "-"
+        ax.text(options.index(r["option"]), cases.index(r["case"]), text, ha="center", va="center", fontsize=6)
     ax.set_xticks(range(len(options)), options, rotation=90, fontsize=6)
     ax.set_yticks(range(len(cases)), cases, fontsize=7)
-    ax.set_title(title or "stability: green stable, orange unstable (energy), red aborted; E/E0 in the cells", fontsize=8)
+    ax.set_title(title or "stability: green stable, orange unstable (energy), red aborted, grey refused (n/a); "
+                 "E/E0 in the cells", fontsize=8)
     _save(fig, path)

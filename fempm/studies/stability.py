@@ -11,8 +11,11 @@ floor). The outcome of a run is
 * ``unstable``: the energy check stopped it (the energy grew beyond the tolerance: the
   discrete scheme amplifies some mode);
 * ``aborted``: another check stopped it (J <= 0 or out of bounds, non-finite state, a step
-  above the stability limit, a singular mass matrix, a particle leaving the mesh, an option
-  the configuration does not support); ``reason`` holds the message.
+  above the stability limit, a singular mass matrix, a particle leaving the mesh);
+* ``refused``: the configuration does not take the option (a ValueError or TypeError before
+  the first step: e.g. a law without the implicit step's tangent); not a run that failed.
+
+``reason`` holds the message.
 
 ``DIR/stability.csv`` has the columns :data:`COLUMNS`, one row per (case, option), written
 after every run; ``DIR/stability.md`` tabulates the outcomes per case and option and
@@ -42,6 +45,8 @@ __all__ = [
     "run_study", "write_csv", "write_markdown", "write_report",
 ]
 
+#: a run's outcomes (see the module)
+OUTCOMES = ("stable", "unstable", "aborted", "refused")
 COLUMNS = ["case", "option", "outcome", "reason", "energy_ratio", "momentum_drift", "j_min", "j_max", "steps", "wall_s"]
 
 #: the transfer options every case runs with: one factor at a time from the default
@@ -109,6 +114,8 @@ def run_one(case: str, opts: dict, *, quick: bool, comm: MPI.Comm = MPI.COMM_WOR
         if health is not None:
             _health(row, health)
             row["steps"] = health["steps"]
+        if type(e) in (ValueError, TypeError) and not row["steps"]:  # not a singular mass, a particle outside
+            row["outcome"] = "refused"
     row["wall_s"] = comm.allreduce(time.perf_counter() - t0, op=MPI.MAX)
     return row
 
@@ -193,9 +200,9 @@ def write_markdown(rows: list[dict], path: Path, *, quick: bool = False, wall: f
                          f"{r['j_min']:.3g} | {r['j_max']:.3g} | {r['steps']} | {r['wall_s']:.1f} | {reason} |")
         lines.append("")
     lines += ["![outcomes](stability.png)", "", "## Outcomes per option", "",
-              "| option | stable | unstable | aborted |", "|---|---|---|---|"]
+              "| option | stable | unstable | aborted | refused |", "|---|---|---|---|---|"]
     for opt in dict.fromkeys(r["option"] for r in rows):
         rs = [r for r in rows if r["option"] == opt]
-        count = {o: sum(r["outcome"] == o for r in rs) for o in ("stable", "unstable", "aborted")}
-        lines.append(f"| {opt} | {count['stable']} | {count['unstable']} | {count['aborted']} |")
+        count = {o: sum(r["outcome"] == o for r in rs) for o in OUTCOMES}
+        lines.append(f"| {opt} | {count['stable']} | {count['unstable']} | {count['aborted']} | {count['refused']} |")
     Path(path).write_text("\n".join(lines) + "\n")

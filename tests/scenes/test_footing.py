@@ -29,3 +29,17 @@ def test_bad_footing_options_are_named():
     with pytest.raises(ValueError, match=r"speed=-1 must be > 0"):
         footing(speed=-1.0)
     assert prandtl(np.sqrt(3.0)) == pytest.approx(2.0 + np.pi)
+
+
+@pytest.mark.slow
+def test_fbar_footing_with_16_particles_a_cell_converges_to_prandtl():
+    """F-bar's patch average integrated by 16 particles a cell: 1.187 and 0.976 of Prandtl at 8
+    and 16 cells (0.988 at 32, docs/colliders.md); with 4 a cell it levels 7.6 % below."""
+    from fempm.stepping import StepOptions
+
+    errors = []
+    for cells in (8, 16):
+        scene = footing(cells=cells, ppc=16)
+        scene.options = StepOptions(scheme="MUSL", flip=0.95, volumetric="fbar")
+        errors.append(abs(run(scene, None, progress=False)["bearing_ratio"] - 1.0))
+    assert errors[1] < 0.3 * errors[0] and errors[1] < 0.03, errors

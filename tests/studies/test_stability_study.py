@@ -50,11 +50,13 @@ def test_stable_rows_are_finite_and_within_the_limits(study):
 def test_failures_name_their_cause(study):
     _, rows = study
     for r in rows:
-        assert r["outcome"] in ("stable", "unstable", "aborted")
+        assert r["outcome"] in stability.OUTCOMES
         if r["outcome"] == "unstable":
             assert "energy growth" in r["reason"] and r["energy_ratio"] > 1.0, r
         if r["outcome"] == "aborted":
             assert r["reason"].split(":")[0] in ("SimulationError", "SingularMassError", "OutsideMeshError", "ValueError"), r
+        if r["outcome"] == "refused":  # the configuration does not take the option: no step was run
+            assert r["reason"].split(":")[0] in ("ValueError", "TypeError") and r["steps"] == 0, r
 
 
 def test_catalogue_findings(study):
