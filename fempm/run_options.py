@@ -4,9 +4,13 @@ run-health limits and the stepping options every scene takes, and the usage erro
 from __future__ import annotations
 
 import dataclasses
+import inspect
 import math
 
+from fempm.docstrings import arguments, first_sentence, plain
+from fempm.scene.definition import Scene
 from fempm.stepping.health import Health
+from fempm.stepping.options import StepOptions
 
 __all__ = ["STEPPING_FLAGS", "UsageError", "boolean", "health_options", "option_descriptions", "scene_options",
            "split_flags", "stepping_options", "with_stepping"]
@@ -21,20 +25,12 @@ def option_descriptions(builder) -> dict[str, str]:
     without markup: from the builder's own ``Args:`` section, else (the options every scene
     passes on to them) from :class:`fempm.stepping.StepOptions`'s or :class:`fempm.scene.Scene`'s;
     "" where none says."""
-    import inspect
-
-    from fempm.docstrings import arguments, first_sentence, plain
-    from fempm.scene.definition import Scene
-    from fempm.stepping.options import StepOptions
-
     docs = {**arguments(Scene), **arguments(StepOptions), **arguments(builder)}
     return {k: first_sentence(plain(docs.get(k, ""))) for k in inspect.signature(builder).parameters if k != "comm"}
 
 
 def scene_options(builder, rest: list[str]) -> dict:
     """``--name value`` pairs typed after the builder's defaults; unknown names are errors."""
-    import inspect
-
     signature = inspect.signature(builder).parameters
     params = {k: v.default for k, v in signature.items() if k != "comm"}
     opts = {}

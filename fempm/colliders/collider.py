@@ -5,10 +5,11 @@ from __future__ import annotations
 
 from collections.abc import Callable
 from dataclasses import dataclass
-from typing import Any
 
 import numpy as np
 import numpy.typing as npt
+
+from fempm.colliders.shapes import Shape
 
 __all__ = ["Collider"]
 
@@ -19,29 +20,32 @@ class Collider:
     touches a body (:mod:`fempm.colliders.grid`).
 
     Args:
-        shape: Its signed distance (:func:`~fempm.colliders.shapes.plane`,
-            :func:`~fempm.colliders.shapes.disk`, :func:`~fempm.colliders.shapes.box`,
-            :func:`~fempm.colliders.shapes.polygon`), at its position at t = 0.
+        shape: Its signed distance, a :class:`~fempm.colliders.shapes.Shape`
+            (:func:`~fempm.colliders.shapes.plane`, :func:`~fempm.colliders.shapes.disk`,
+            :func:`~fempm.colliders.shapes.box`, :func:`~fempm.colliders.shapes.polygon`, or one
+            of your own with ``dim``, ``distance`` and ``normal_at``), at its position at t = 0.
         velocity: Its velocity, constant (d,) or a callable ``t -> (d,)``; None: at rest.
         friction: The Coulomb coefficient mu >= 0 between it and the bodies.
         gap: How near a node's centre of mass must come to touch it (a length); None: half the
             smallest cell size around the node (over the degree).
 
     Raises:
-        TypeError: A shape that is not one of :mod:`fempm.colliders.shapes`.
+        TypeError: A shape without the members of :class:`~fempm.colliders.shapes.Shape`.
         ValueError: A velocity of another dimension than the shape's or not finite, a negative
             or non-finite friction, a gap not > 0.
     """
 
-    shape: Any
+    shape: Shape
     velocity: npt.ArrayLike | Callable[[float], npt.ArrayLike] | None = None
     friction: float = 0.0
     gap: float | None = None
 
     def __post_init__(self):
-        if not callable(getattr(self.shape, "distance", None)) or not callable(getattr(self.shape, "normal_at", None)):
-            raise TypeError(f"a collider's shape must be one of fempm.colliders' shapes (plane, disk, box, polygon); "
-                             f"got {type(self.shape).__name__}")
+        if not isinstance(self.shape, Shape):
+            missing = [m for m in ("dim", "distance", "normal_at") if not hasattr(self.shape, m)]
+            raise TypeError(f"a collider's shape needs dim, distance(x) and normal_at(x) (fempm.colliders.shapes.Shape: "
+                            f"plane, disk, box, polygon or your own); {type(self.shape).__name__} lacks "
+                            f"{', '.join(missing)}")
         if not 0.0 <= self.friction < np.inf:
             raise ValueError(f"a collider needs a finite friction coefficient mu >= 0 (got {self.friction!r})")
         if self.gap is not None and not 0.0 < self.gap < np.inf:

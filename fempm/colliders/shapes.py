@@ -9,16 +9,39 @@ positive outside :math:`S` (where a body may be) and negative inside, and its ou
 * :func:`box` (axis-aligned), :math:`\phi = |\max(q, 0)| + \min(\max_a q_a, 0)`,
   :math:`q = |x - c| - h` for the centre :math:`c` and half-sizes :math:`h`;
 * :func:`polygon` (2D), the distance to the nearest edge, negative inside (even-odd rule).
+
+Any object with these three members is a shape (:class:`Shape`, a protocol checked at run
+time): a user's own, e.g. a cylinder's end cap or a level set read from a file, collides as
+the built-in ones do (docs/architecture.md, "A collider shape of your own").
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Protocol, runtime_checkable
 
 import numpy as np
 import numpy.typing as npt
 
-__all__ = ["Box", "Disk", "Plane", "Polygon", "box", "disk", "plane", "polygon"]
+__all__ = ["Box", "Disk", "Plane", "Polygon", "Shape", "box", "disk", "plane", "polygon"]
+
+
+@runtime_checkable
+class Shape(Protocol):
+    """What a collider needs of its shape, at its position at t = 0 (the collider moves it).
+
+    Attributes:
+        dim: The space dimension (2 or 3).
+    """
+
+    @property
+    def dim(self) -> int: ...
+
+    def distance(self, x: npt.NDArray) -> npt.NDArray:
+        """The signed distance (k,) of points ``x`` (k, dim): positive outside the shape."""
+
+    def normal_at(self, x: npt.NDArray) -> npt.NDArray:
+        """The outward unit normals (k, dim), the gradient of :meth:`distance`, at ``x``."""
 
 
 def _point(value, what: str, dims: tuple[int, ...] = (2, 3)) -> npt.NDArray:

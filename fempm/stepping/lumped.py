@@ -41,18 +41,17 @@ from fempm.materials.base import IsotropicElastic
 from fempm.materials.linear_elastic import LinearElastic
 from fempm.materials.neo_hookean import NeoHookean
 from fempm.stepping import diagnostics
-from fempm.stepping.consistent import ConsistentNodalMass
-from fempm.stepping.fmpm_mass import FMPMNodalMass
 from fempm.stepping.grid import Grid
 from fempm.stepping.laws import material_groups, stresses_of
 from fempm.stepping.loads import external_forces
-from fempm.stepping.nodal import NodalMass, kept_nodal_array, sum_ghosts
+from fempm.stepping.lumped_mass import NODAL_MASSES, LumpedNodalMass
+from fempm.stepping.nodal import kept_nodal_array, sum_ghosts
 from fempm.stepping.spaces import compiled_space, space_refusal
 from fempm.transfer.centres import NodalCentres
 from fempm.transfer.domains import Point
 from fempm.transfer.grid_solves import negative_basis_message
 from fempm.transfer.mapping import SUPPORT_TOL, mass_centres
-from fempm.transfer.mass_models import FMPM, Consistent, Lumped
+from fempm.transfer.mass_models import Consistent
 
 if TYPE_CHECKING:
     from fempm.stepping.solver import ExplicitSolver
@@ -373,37 +372,3 @@ class PointGrid(Grid):
         if counters.get("since_sort") is not None:
             self.since_sort = int(counters["since_sort"])
         self.mass.restore_state(counters, arrays)
-
-
-class LumpedNodalMass(NodalMass):
-    r"""The lumped grid mass of a :class:`PointGrid`: :math:`v = (mv)/m`,
-    :math:`v^+ = v + \Delta t f/m` on the free components, fused into one pass where the
-    conditions allow."""
-
-    fusable = True
-
-    def stable_factor(self, nodal, need: bool) -> float:
-        """Called after P2G: the factor on the stable time of the state."""
-        return 1.0
-
-    def velocity(self, mass, mom, cv: int, active_min: float, guess=None, centroids=None) -> npt.NDArray:
-        """Grid velocity from the nodal momenta ``mom[:, cv:cv+d]``, constrained."""
-        g = self.grid
-        v = np.empty((g.num_dofs, g.d))
-        kl.grid_velocity(mass, mom, cv, g.free, active_min, v)
-        g.conditions.apply(v, centroids)
-        return v
-
-    def advance(self, mass, force, cf: int, active_min: float, weak_max: float, dt: float, v_old: npt.NDArray,
-                centroids=None) -> npt.NDArray:
-        r""":math:`v^+ = v + \Delta t\, a` from the nodal forces ``force[:, cf:cf+d]``, constrained."""
-        g = self.grid
-        v_new = np.empty((g.num_dofs, g.d))
-        kl.grid_advance(mass, force[:, cf:cf + g.d], g.free, active_min, weak_max, float(dt),
-                        float(g.options.damping), v_old, v_new)
-        g.conditions.apply(v_new, centroids, dt)
-        return v_new
-
-
-#: the compiled grid mass of each mass model
-NODAL_MASSES = {Lumped: LumpedNodalMass, Consistent: ConsistentNodalMass, FMPM: FMPMNodalMass}

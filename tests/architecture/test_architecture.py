@@ -27,7 +27,7 @@ def examples() -> dict:
     """The page's python blocks after "## Where things plug in", run in one namespace."""
     text = PAGE.read_text().split("## Where things plug in", 1)[1]
     blocks = re.findall(r"```python\n(.*?)```", text, re.S)
-    assert len(blocks) == 5
+    assert len(blocks) == 6
     for block in blocks:  # each example is short: under 30 lines
         assert len(block.strip().splitlines()) < 30
     namespace: dict = {}
@@ -36,7 +36,7 @@ def examples() -> dict:
     return namespace
 
 
-def solver(options=None, law=None, bcs=None, cells=6):
+def solver(options=None, law=None, bcs=None, cells=6, colliders=()):
     """A small elastic square moving and shearing, on triangles."""
     options = StepOptions() if options is None else options
     mesh = dm.create_rectangle(comm, [[0.0, 0.0], [2.0, 2.0]], [2 * cells, 2 * cells], dm.CellType.triangle)
@@ -45,7 +45,7 @@ def solver(options=None, law=None, bcs=None, cells=6):
                                & (x[1] > 0.5) & (x[1] < 1.5))
     p.fields["v"] = np.column_stack([0.1 + 0.2 * p.x[:, 1], -0.1 * p.x[:, 0]])
     law = law or LinearElastic(1e5, 0.3)
-    return ExplicitSolver(V, p, [law], bcs=bcs(V) if bcs else (), options=options)
+    return ExplicitSolver(V, p, [law], bcs=bcs(V) if bcs else (), options=options, colliders=colliders)
 
 
 def run(s, steps=3, dt=None):
@@ -95,3 +95,22 @@ def test_a_grid_condition_plugs_in(examples):
     x0 = s.particles.x.copy()
     run(s, dt=1e-3)
     assert np.abs(s.particles.x - x0).max() == 0.0 and np.abs(s.particles.fields["v"]).max() == 0.0
+
+
+def test_a_collider_shape_plugs_in(examples):
+    """An ellipse of one's own, moving down onto the square, pushes it: the square's momentum
+    changes by the impulse the collider takes, and a shape without the protocol is refused."""
+    from fempm.colliders import Collider, Shape
+
+    ellipse = examples["Ellipse"]((1.0, 1.85), 0.6, 0.3)
+    assert isinstance(ellipse, Shape)
+    assert ellipse.distance(np.array([[1.0, 1.55], [1.6, 1.85]])) == pytest.approx([0.0, 0.0], abs=1e-12)
+    s = solver(StepOptions(), colliders=[Collider(ellipse, velocity=(0.0, -2.0))])
+    p0 = total_momentum(s)
+    run(s, steps=25)
+    impulse = s.collisions.total_impulse
+    assert impulse[1] > 0.0  # the collider took upward momentum: the body was pushed down
+    assert total_momentum(s) == pytest.approx(p0 - impulse, abs=1e-9 * np.abs(impulse).max())
+    with pytest.raises(TypeError, match="lacks normal_at"):
+        Collider(type("Blob", (), {"dim": 2, "distance": lambda self, x: x[:, 0]})())
+

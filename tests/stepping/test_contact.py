@@ -148,5 +148,5 @@ def test_contact_refuses_what_it_does_not_support():
         solver.step()
     solver.options = StepOptions(mass="consistent")
     solver.compiled = True
-    with pytest.raises(ValueError, match="contact takes the generic step"):
+    with pytest.raises(ValueError, match="no compiled grid takes these options: ContactPointGrid .*: mass consistent with contact: lumped"):
         solver.step()
