@@ -26,7 +26,7 @@ from mpi4py import MPI
 import fempm  # noqa: F401
 from fempm.scene import run
 from fempm.scenes.footing import footing
-from fempm.studies.harness import Provenance, write_table
+from fempm.studies.harness import VENV_PYTHON, Provenance, write_table
 
 #: the table's columns: (row key, heading, format)
 TABLE = [("cells", "cells across B", ""), ("volumetric", "volumetric", ""), ("bearing_pressure", "q (Pa)", ".0f"),
@@ -78,7 +78,7 @@ def main(argv: list[str] | None = None) -> list[dict]:
     ap.add_argument("--out", type=Path, default=Path("output/footing"))
     ap.add_argument("--figure", action="store_true")
     a = ap.parse_args(argv)
-    provenance = Provenance.now(command="python demos/footing.py " + " ".join(argv if argv is not None else []))
+    provenance = Provenance.now(command=f"{VENV_PYTHON} demos/footing.py " + " ".join(argv if argv is not None else []))
     rows, curves = [], {}
     for volumetric in a.volumetric:
         for cells in a.cells:

@@ -38,7 +38,7 @@ from mpi4py import MPI
 import fempm  # noqa: F401
 from fempm.scene import run
 from fempm.scenes import incline
-from fempm.studies.harness import Provenance, write_table
+from fempm.studies.harness import VENV_PYTHON, Provenance, write_table
 
 G_SIN = 9.81 * np.sin(np.radians(30.0))
 
@@ -86,7 +86,7 @@ def main(argv: list[str] | None = None) -> list[dict]:
     unknown = [c for c in a.cases if c not in CASES]
     if unknown:
         raise ValueError(f"unknown case(s) {unknown}; expected some of {list(CASES)}")
-    provenance = Provenance.now(command="python demos/incline.py " + " ".join(argv if argv is not None else []))
+    provenance = Provenance.now(command=f"{VENV_PYTHON} demos/incline.py " + " ".join(argv if argv is not None else []))
     rows = []
     for name in a.cases:
         for cells in a.cells:

@@ -27,7 +27,7 @@ from mpi4py import MPI
 import fempm  # noqa: F401
 from fempm.scene import run
 from fempm.scenes.silo import LAWS, WINDOW, silo
-from fempm.studies.harness import Provenance, write_table
+from fempm.studies.harness import VENV_PYTHON, Provenance, write_table
 
 #: the table's columns: (row key, heading, format)
 TABLE = [("law", "law", ""), ("outlet", "outlet D (m)", ".3g"), ("cells", "cells across the outlet", ""),
@@ -114,7 +114,7 @@ def main(argv: list[str] | None = None) -> list[dict]:
     ap.add_argument("--out", type=Path, default=Path("output/silo"))
     ap.add_argument("--figure", action="store_true")
     a = ap.parse_args(argv)
-    provenance = Provenance.now(command="python demos/silo.py " + " ".join(argv if argv is not None else []))
+    provenance = Provenance.now(command=f"{VENV_PYTHON} demos/silo.py " + " ".join(argv if argv is not None else []))
     rows, cases = [], {}
     if len(a.t_end) not in (1, len(a.outlets)):
         ap.error(f"--t-end takes one value or one per outlet ({len(a.outlets)})")

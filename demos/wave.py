@@ -27,7 +27,7 @@ from mpi4py import MPI
 import fempm  # noqa: F401
 from fempm.scene import run
 from fempm.scenes.wave import BOUNDARIES, wave
-from fempm.studies.harness import Provenance, write_table
+from fempm.studies.harness import VENV_PYTHON, Provenance, write_table
 
 
 def run_case(boundary: str, cells: int) -> tuple[dict, np.ndarray]:
@@ -72,7 +72,7 @@ def main(argv: list[str] | None = None) -> list[dict]:
     ap.add_argument("--out", type=Path, default=Path("output/wave"))
     ap.add_argument("--figure", action="store_true")
     a = ap.parse_args(argv)
-    provenance = Provenance.now(command="python demos/wave.py " + " ".join(argv if argv is not None else []))
+    provenance = Provenance.now(command=f"{VENV_PYTHON} demos/wave.py " + " ".join(argv if argv is not None else []))
     rows, profiles = [], {}
     for cells in a.cells:
         for boundary in BOUNDARIES:

@@ -21,7 +21,7 @@ from pathlib import Path
 
 from mpi4py import MPI
 
-__all__ = ["Provenance", "chosen", "prepare", "read_rows", "sweep", "write_table"]
+__all__ = ["VENV_PYTHON", "Provenance", "chosen", "prepare", "read_rows", "sweep", "write_table"]
 
 REPOSITORY = Path(__file__).resolve().parents[2]
 #: the interpreter the docs' commands name (the virtual environment the Makefile builds)

@@ -114,7 +114,7 @@ SERIES = {s.name: s for s in [
     Series("footing", "bearing_ratio", "standard", "cells", (8, 16, 32, 64), (4, 8), {}, 1.0),
     Series("footing", "bearing_ratio", "fbar", "cells", (8, 16, 32, 64), (4, 8), {"volumetric": "fbar"}, 1.0),
     # F-bar's patch average integrated by 16 particles a cell (4 leave it 7.6 % soft: docs/colliders.md)
-    Series("footing", "bearing_ratio", "fbar ppc=16", "cells", (8, 16, 32), (), {"volumetric": "fbar", "ppc": 16}, 1.0),
+    Series("footing", "bearing_ratio", "fbar ppc=16", "cells", (4, 8, 16, 32), (), {"volumetric": "fbar", "ppc": 16}, 1.0),
     Series("silo", "discharge_rate", "mu(I)", "cells", (5, 7, 10, 15), (3, 4), {}, None),
     Series("silo", "discharge_rate", "Drucker-Prager", "cells", (5, 7, 10, 15), (3, 4), {"law": "dp"}, None),
     Series("column", "runout", "Drucker-Prager", "cells", (8, 16, 32, 64), (8, 16), {}, None),
