@@ -79,9 +79,18 @@ def raise_together(comm: MPI.Comm, error: BaseException | None) -> None:
 
 @contextlib.contextmanager
 def abort_on_error(comm=None):
-    """On more than one rank of ``comm`` (default ``MPI.COMM_WORLD``), an exception (or
-    KeyboardInterrupt) leaving the block prints its traceback with the rank and aborts all
-    ranks with exit code 1; on one rank it propagates. ``SystemExit`` passes through."""
+    """A context in which a failure on one rank ends every rank.
+
+    On more than one rank of ``comm``, an exception (or KeyboardInterrupt) leaving the block
+    prints its traceback with the rank and aborts all ranks with exit code 1
+    (``MPI_Abort``); on one rank it propagates. ``SystemExit`` passes through.
+
+    Args:
+        comm: The communicator whose ranks end together (None: ``MPI.COMM_WORLD``).
+
+    Example:
+        ``with fempm.abort_on_error(): run(scene, out)``
+    """
     try:
         yield
     except (Exception, KeyboardInterrupt) as e:

@@ -73,10 +73,22 @@ __all__ = ["Contact", "ContactGrid", "correct", "particle_groups", "shared_cells
 
 @dataclass(frozen=True)
 class Contact:
-    """Multi-velocity-field contact with Coulomb ``friction`` between the particle groups named
-    by ``fields[field]`` (integers 0, 1, ...; default the material index ``body``). The groups
-    in ``rigid`` are rigid bodies of prescribed motion; with a ``gap`` (a length) groups are in
-    contact only where they touch (see the module)."""
+    """Multi-velocity-field contact between particle groups (see the module).
+
+    Args:
+        friction: The Coulomb coefficient between the groups.
+        field: The particle field naming each particle's group (integers 0, 1, ...; default
+            the material index ``body``).
+        mass_cutoff: A node where a group has less than this fraction of the largest nodal
+            mass gives that group no force update there.
+        rigid: The groups that are rigid bodies of prescribed motion (their velocities stand).
+        gap: A length: groups are in contact only where they touch, their nodal centres of mass
+            within ``gap`` along the normal (None: wherever two groups share a node).
+
+    Raises:
+        ValueError: A gap not > 0, rigid groups that are not non-negative integers, a negative
+            or non-finite friction, a cut-off outside [0, 1).
+    """
 
     friction: float = 0.0
     field: str = "body"

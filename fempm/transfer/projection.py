@@ -65,47 +65,58 @@ def _particle_values(values: npt.ArrayLike | Callable, particles: Particles, bs:
 
 
 class Projector:
-    r"""Projection of particle data onto ``V`` with a fixed set of particles.
+    r"""Projection of particle data onto ``V`` with a fixed set of particles: the
+    mass-weighted least-squares fit
 
-    Assembles the mass (consistent matrix + KSP, or lumped vector) once; :meth:`project` then
-    costs one P2G and one solve per value component. ``exclude`` lists (block) dofs held at 0
-    (Dirichlet); ``exclude_components[c]`` lists dofs whose component ``c`` only is held at 0
-    (a slip wall normal to axis c): component c is then solved on its own active set, the
-    constrained least-squares fit, instead of being zeroed after an unconstrained solve.
-    ``domain``: particle domains, a name (``"gimp"``, ``"cpdi1"``, ... as in
-    :class:`fempm.stepping.StepOptions`) or a domain object (:mod:`fempm.transfer.domains`; default the
-    point).
-    ``lump_dofs`` (consistent mode and FMPM): a mask over owned + ghost dofs whose rows are
-    lumped as well (those of conditions that act node by node, :mod:`fempm.stepping.contact`,
-    :class:`fempm.boundary.Friction`).
-    ``lump_below`` (consistent mode): dofs whose lumped mass is below this
-    fraction of the largest get lumped rows and columns (see :func:`consistent_mass_matrix`),
-    so that the solve does not extrapolate into nodes that particles barely reach (FMPM: those
-    dofs keep the lumped solve, see :func:`fempm.transfer.fmpm.fmpm_solve`). It applies
-    to non-negative bases only: with P2 Lagrange, row sums can be zero or negative and moving
-    the (signed) couplings to the diagonal can make the matrix indefinite.
+    .. math::
+        \min_F \sum_p w_p \big(\langle F \rangle_p - f_p\big)^2,
 
-    ``weight``: "mass" (default) fits :math:`\min_F \sum_p M_p (\langle F \rangle_p - f_p)^2`,
-    for per-mass (intensive) fields such as velocity; "volume" weights by :math:`V_p`, for
-    per-volume fields such as stress; ``weights`` (one per particle) replaces either, e.g. the
-    masses of one body and zeros for the others, which gives that body's own mass (the
-    per-body fields of :mod:`fempm.stepping.contact`). This is the density-ratio kernel: dividing a
-    per-volume :math:`\sigma_p` by :math:`\rho_p = M_p / V_p`, mapping it with the mass
-    weights and multiplying the grid value by :math:`m_i / V_i` gives, for the lumped map,
-    :math:`\sigma_i = \sum_p \beta_{pi} \sigma_p = \sum_p V_p v_{ip} \sigma_p / V_i` with
-    :math:`V_i = \sum_p V_p v_{ip}`: the volume-weighted map, which conserves
-    :math:`\int \sigma` (:math:`\sum_i V_i \sigma_i = \sum_p V_p \sigma_p`) where the
-    mass-weighted one would not across a density jump.
+    :math:`w_p` the particles' masses (``weight="mass"``, for per-mass fields such as velocity)
+    or volumes (``"volume"``, per-volume fields such as stress). The mass (the consistent matrix
+    and its KSP, or the lumped vector) is assembled once; :meth:`project` then costs one P2G and
+    one solve per value component.
 
-    Attributes
-    ----------
-    active:
-        Mask over owned + ghost dofs that particles support; other dofs are excluded from the
-        solve and set to 0.
-    num_inactive:
-        Global number of unsupported dofs (also logged).
-    iterations:
-        KSP iterations of the last :meth:`project`, per component.
+    With volume weights the map is the density-ratio kernel: dividing a per-volume
+    :math:`\sigma_p` by :math:`\rho_p = M_p / V_p`, mapping it with the mass weights and
+    multiplying the grid value by :math:`m_i / V_i` gives, lumped,
+    :math:`\sigma_i = \sum_p V_p v_{ip} \sigma_p / V_i`, :math:`V_i = \sum_p V_p v_{ip}`,
+    which conserves :math:`\int \sigma` where the mass-weighted map would not across a
+    density jump.
+
+    Args:
+        V: The space to project onto.
+        particles: The particles.
+        mass: The mass model: ``"consistent"`` (the exact projection), ``"lumped"``, FMPM(k)
+            (``"fmpmK"``), or a :class:`~fempm.transfer.mass_models.MassModel`.
+        petsc_options_prefix: The PETSc options prefix of the consistent solve.
+        petsc_options: PETSc options set under that prefix.
+        basis: The particle basis, if made already (else made from ``domain``).
+        exclude: (Block) dofs held at 0 (Dirichlet).
+        exclude_components: ``exclude_components[c]`` lists dofs whose component ``c`` only is
+            held at 0 (a slip wall normal to axis c): component c is solved on its own active
+            set, the constrained least-squares fit.
+        lump_below: Consistent mass: dofs whose lumped mass is below this fraction of the
+            largest get lumped rows and columns (:func:`consistent_mass_matrix`), so that the
+            solve does not extrapolate into nodes particles barely reach (FMPM: those dofs keep
+            the lumped solve); non-negative bases only.
+        domain: The particle domain, a name (``"gimp"``, ``"cpdi1"``, ... as in
+            :class:`fempm.stepping.StepOptions`) or a domain object (:mod:`fempm.transfer.domains`;
+            default the point).
+        weight: ``"mass"`` or ``"volume"`` (see above).
+        fmpm_order: The k of ``mass="fmpm"``.
+        weights: Per-particle weights replacing ``weight``'s, e.g. the masses of one body and
+            zeros for the others (the per-body fields of :mod:`fempm.stepping.contact`).
+        lump_dofs: Consistent mass and FMPM: a mask over owned + ghost dofs whose rows are lumped
+            as well (those of conditions that act node by node: contact,
+            :class:`fempm.boundary.Friction`).
+
+    Note:
+        Construction and :meth:`project` are collective.
+
+    Attributes:
+        active: Mask over owned + ghost dofs that particles support; other dofs are excluded
+            from the solve and set to 0.
+        num_inactive: Global number of unsupported dofs (also logged).
     """
 
     def __init__(
