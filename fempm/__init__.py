@@ -29,6 +29,7 @@ from fempm.particles.location import CellLocator, OutsideMeshError
 from fempm.particles.particle_set import Particles
 from fempm.particles.seeding import create_particles
 from fempm.scene import Scene, run
+import fempm.implicit  # noqa: F401  (registers the implicit step with the solver)
 from fempm.stepping import ExplicitSolver, Loads, SimulationError, StepOptions
 from fempm.stepping.contact import Contact
 from fempm.transfer.basis import ParticleBasis

@@ -16,7 +16,7 @@ A step of :math:`\Delta t` from the particles' state at :math:`t_n`:
        R(\Delta u) = M a^{+}(\Delta u) + f^{int}(\Delta u) - f^{ext}(t_n + \Delta t) = 0
 
    (:mod:`fempm.implicit.operator`, with F-bar :mod:`fempm.implicit.fbar`;
-   :mod:`fempm.implicit.dynamics` for :math:`a^{+}`, no
+   :mod:`fempm.stepping.dynamics` for :math:`a^{+}`, no
    inertia when quasi-static, the loads then scaled by ``StepOptions.load_ramp``), the held
    components' rows :math:`\Delta u_{ai} = 0`;
 3. the particles: :math:`F_p \leftarrow (I + G_p) F_p`, the laws' stress and internal
@@ -47,7 +47,7 @@ from fempm import petsc as fpetsc
 from fempm.implicit.fbar import FBarIncrementOperator, PatchCoupling
 from fempm.implicit.newton import Newton, null_pivots
 from fempm.implicit.operator import IncrementOperator
-from fempm.stepping.grid import BasisGrid
+from fempm.stepping.particle_stages import ParticleStages
 from fempm.stepping.loads import external_forces
 from fempm.transfer.basis import is_nonnegative
 from fempm.transfer.grid_solves import negative_basis_message
@@ -63,8 +63,10 @@ ROUND_OFF = 100.0
 __all__ = ["ImplicitStep"]
 
 
-class ImplicitStep(BasisGrid):
-    """The implicit step of ``solver`` (see the module).
+class ImplicitStep:
+    """The implicit step of ``solver`` (see the module): it composes the particles' stages of a
+    step (:class:`~fempm.stepping.particle_stages.ParticleStages`: the basis, the kinematics and
+    the laws, the motion, the checks, the relocation) with its own Newton solve of the grid.
 
     Raises:
         ValueError: What the implicit step does not take (contact, conditions other than fixed
@@ -73,8 +75,9 @@ class ImplicitStep(BasisGrid):
     """
 
     def __init__(self, solver: ExplicitSolver):
-        super().__init__(solver)
-        opts = solver.options
+        self.solver = solver
+        self.options = opts = solver.options
+        self.particle_stages = ParticleStages(solver)
         if solver.contact is not None:
             raise ValueError("the implicit step does not take contact between bodies (contact=...) yet")
         if not solver.conditions.zero_components:
@@ -126,7 +129,7 @@ class ImplicitStep(BasisGrid):
         """One Newton solve over [t, t + dt]; the particles updated if it converged."""
         s, p, integ = self.solver, self.solver.particles, self.integration
         d = p.gdim
-        basis = self.open_basis()
+        basis = self.particle_stages.open_basis()
         fbar = self.options.volumetric_average is not None
         op = (FBarIncrementOperator if fbar else IncrementOperator)(
             basis, p, s.materials, finite_difference=self.options.finite_difference_tangent, dt=dt)
@@ -352,7 +355,7 @@ class ImplicitStep(BasisGrid):
             f["v"] = np.zeros_like(f["v"])
             s.grid_velocity = np.zeros((basis.num_dofs_space, p.gdim))
         G = op.gradients(du)
-        self.update_kinematics(op.law_gradients(G) / dt, dt, averaged=False)  # L dt = G
-        self.move(basis.gather(du), lambda: basis.gather_samples(du), 1.0)
-        self.close()
-        self.relocate()
+        self.particle_stages.update_kinematics(op.law_gradients(G) / dt, dt, averaged=False)  # L dt = G
+        self.particle_stages.move(basis.gather(du), lambda: basis.gather_samples(du), 1.0)
+        self.particle_stages.close()
+        self.particle_stages.relocate()

@@ -6,14 +6,45 @@ order :func:`fempm.scene.run` lists them."""
 from __future__ import annotations
 
 from collections.abc import Callable
-from typing import TYPE_CHECKING
+from pathlib import Path
+from typing import Protocol
+
+from mpi4py import MPI
 
 from fempm.io import stops
+from fempm.io.writers import RunWriter
+from fempm.stepping.health import HealthMonitor
+from fempm.stepping.solver import ExplicitSolver
 
-if TYPE_CHECKING:
-    from fempm.scene.loop import Run
+__all__ = ["Checkpoints", "Energies", "Frames", "HealthChecks", "Observer", "Progress", "Run", "Watch"]
 
-__all__ = ["Checkpoints", "Energies", "Frames", "HealthChecks", "Observer", "Progress", "Watch"]
+
+class Run(Protocol):
+    """What the observers read of a run (:class:`fempm.scene.loop.Run` is one).
+
+    Attributes:
+        solver: The scene's solver.
+        writer: Its outputs (None: a run without an output folder).
+        monitor: The run-health checks.
+        history: The energies rows so far.
+        momentum_scale: The last step's sum of the particles' |momentum| (the health checks').
+        out: The output folder (None: none).
+        comm: The run's communicator.
+    """
+
+    solver: ExplicitSolver
+    writer: RunWriter | None
+    monitor: HealthMonitor
+    history: list[dict]
+    momentum_scale: float | None
+    out: Path | None
+    comm: MPI.Comm
+
+    def save(self) -> Path:
+        """A checkpoint of the state now (collective)."""
+
+    def write_frame(self) -> None:
+        """A frame of the state now (collective)."""
 
 
 class Observer:

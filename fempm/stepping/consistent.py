@@ -23,7 +23,6 @@ stable step (``dt=None``) it is refreshed every step.
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING
 
 import numpy as np
 import numpy.typing as npt
@@ -33,9 +32,8 @@ from fempm.kernels.shape import space_of
 from fempm.stepping.mass_systems import ConsistentSystems
 from fempm.stepping.nodal import NodalMass, sum_ghosts
 from fempm.transfer.mass_models import MASS_RATIO_ITERATIONS
+from fempm.stepping.grid import Grid
 
-if TYPE_CHECKING:
-    from fempm.stepping.lumped import PointGrid
 
 __all__ = ["RATIO_EVERY", "ConsistentNodalMass"]
 
@@ -48,7 +46,7 @@ class ConsistentNodalMass(NodalMass):
 
     fusable = False  # the grid update solves with the consistent matrix
 
-    def __init__(self, grid: PointGrid):
+    def __init__(self, grid: Grid):
         super().__init__(grid)
         solver, opts = grid.solver, grid.options
         # no row lumped on a basis with negative values (P2 Lagrange): it could make the matrix

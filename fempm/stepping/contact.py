@@ -51,8 +51,6 @@ block, the colliding disks, the energy of MUSL with contact) is in ``docs/contac
 from __future__ import annotations
 
 from collections.abc import Callable
-from dataclasses import dataclass
-from typing import TYPE_CHECKING
 
 import numpy as np
 import numpy.typing as npt
@@ -60,52 +58,15 @@ from mpi4py import MPI
 
 from fempm.boundary.coulomb import coulomb
 from fempm.boundary.patches import Patches, depth_shares
+from fempm.stepping.contact_options import Contact
 from fempm.stepping.grid import BasisGrid
 from fempm.transfer import g2p
 from fempm.transfer.centres import NodalCentres
 from fempm.transfer.mapping import SUPPORT_TOL, mass_centres, p2g, p2g_gradients
+from fempm.stepping.state import StepState
 
-if TYPE_CHECKING:
-    from fempm.stepping.solver import ExplicitSolver
 
 __all__ = ["Contact", "ContactGrid", "correct", "particle_groups", "shared_cells"]
-
-
-@dataclass(frozen=True)
-class Contact:
-    """Multi-velocity-field contact between particle groups (see the module).
-
-    Args:
-        friction: The Coulomb coefficient between the groups.
-        field: The particle field naming each particle's group (integers 0, 1, ...; default
-            the material index ``body``).
-        mass_cutoff: A node where a group has less than this fraction of the largest nodal
-            mass gives that group no force update there.
-        rigid: The groups that are rigid bodies of prescribed motion (their velocities stand).
-        gap: A length: groups are in contact only where they touch, their nodal centres of mass
-            within ``gap`` along the normal (None: wherever two groups share a node).
-
-    Raises:
-        ValueError: A gap not > 0, rigid groups that are not non-negative integers, a negative
-            or non-finite friction, a cut-off outside [0, 1).
-    """
-
-    friction: float = 0.0
-    field: str = "body"
-    mass_cutoff: float = 1e-2
-    rigid: tuple[int, ...] = ()
-    gap: float | None = None
-
-    def __post_init__(self):
-        if self.gap is not None and not 0.0 < self.gap < np.inf:
-            raise ValueError(f"Contact needs a finite gap > 0 or None (got {self.gap!r})")
-        object.__setattr__(self, "rigid", tuple(self.rigid))
-        if not all(isinstance(g, (int, np.integer)) and not isinstance(g, bool) and g >= 0 for g in self.rigid):
-            raise ValueError(f"Contact needs rigid groups as non-negative integers (got {self.rigid!r})")
-        if not 0.0 <= self.friction < np.inf:
-            raise ValueError(f"Contact needs a finite friction coefficient >= 0 (got {self.friction})")
-        if not 0.0 <= self.mass_cutoff < 1.0:
-            raise ValueError(f"Contact needs 0 <= mass_cutoff < 1 (got {self.mass_cutoff})")
 
 
 def correct(m: npt.NDArray, v: npt.NDArray, grad: npt.NDArray, friction: float,
@@ -218,7 +179,7 @@ class ContactGrid(BasisGrid):
     """A velocity field per particle group of ``solver.contact``, corrected where groups meet
     (see the module); numpy stages on the particle basis, the schemes USL and MUSL."""
 
-    def __init__(self, solver: ExplicitSolver):
+    def __init__(self, solver: StepState):
         super().__init__(solver)
         if not self.options.stages.forces_with_map:
             raise ValueError(f"contact supports the schemes USL and MUSL (got {self.options.stages})")

@@ -26,7 +26,6 @@ compiled passes, USL and MUSL (consistent or FMPM mass with contact, and particl
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING
 
 import numpy as np
 import numpy.typing as npt
@@ -39,9 +38,8 @@ from fempm.stepping.lumped import BOUND_SAFETY, PointGrid
 from fempm.transfer.centres import NodalCentres
 from fempm.transfer.mapping import SUPPORT_TOL, mass_centres
 from fempm.transfer.mass_models import Lumped
+from fempm.stepping.state import StepState
 
-if TYPE_CHECKING:
-    from fempm.stepping.solver import ExplicitSolver
 
 __all__ = ["ContactPointGrid"]
 
@@ -53,7 +51,7 @@ class ContactPointGrid(PointGrid):
     takes = "contact with point particles, lumped mass, USL or MUSL, on a space of the compiled passes"
 
     @classmethod
-    def refusal(cls, solver: ExplicitSolver) -> str | None:
+    def refusal(cls, solver: StepState) -> str | None:
         """Why ``solver``'s contact does not take this grid (None where it does): the options,
         space and mesh of a :class:`~fempm.stepping.lumped.PointGrid` with lumped mass, USL or MUSL."""
         reason = PointGrid.refusal(solver)
@@ -65,7 +63,7 @@ class ContactPointGrid(PointGrid):
             return f"scheme {solver.options.stages.name} with contact: USL or MUSL"
         return None
 
-    def __init__(self, solver: ExplicitSolver):
+    def __init__(self, solver: StepState):
         super().__init__(solver)
         self.contact = solver.contact
         self.num_groups = 0

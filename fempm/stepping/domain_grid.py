@@ -22,7 +22,6 @@ changed between steps are given as a new array, as the moving step does).
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING
 
 import dolfinx.la
 import numpy as np
@@ -38,9 +37,8 @@ from fempm.stepping.lumped import PointGrid
 from fempm.stepping.spaces import compiled_space, space_refusal
 from fempm.transfer.domains import CPDI1, CPDI2, GIMP, half_widths
 from fempm.transfer.mass_models import FMPM, Lumped
+from fempm.stepping.state import StepState
 
-if TYPE_CHECKING:
-    from fempm.stepping.solver import ExplicitSolver
 
 __all__ = ["DomainGrid", "frontier_cells"]
 
@@ -70,7 +68,7 @@ class DomainGrid(PointGrid):
              "on degree 1 of the compiled passes, no wall that checks contact by position")
 
     @classmethod
-    def refusal(cls, solver: ExplicitSolver) -> str | None:
+    def refusal(cls, solver: StepState) -> str | None:
         """Why ``solver``'s domain, mass, conditions, space and mesh do not take this grid (None
         where they do)."""
         dom = solver.options.particle_domain
@@ -95,7 +93,7 @@ class DomainGrid(PointGrid):
             return f"particle domain {dom.name}: CPDI1, CPDI2 or GIMP"
         return None
 
-    def __init__(self, solver: ExplicitSolver):
+    def __init__(self, solver: StepState):
         super().__init__(solver)
         dom = self.options.particle_domain
         self.cpdi1 = isinstance(dom, CPDI1)

@@ -19,7 +19,6 @@ lumped mass is below ``mass_cutoff``; the stable step is :math:`1/\sqrt{k}` of t
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING
 
 import numpy as np
 import numpy.typing as npt
@@ -27,9 +26,8 @@ import numpy.typing as npt
 from fempm.kernels import consistent as kc
 from fempm.kernels import fmpm as kf
 from fempm.stepping.nodal import NodalMass, sum_ghosts
+from fempm.stepping.grid import Grid
 
-if TYPE_CHECKING:
-    from fempm.stepping.lumped import PointGrid
 
 __all__ = ["FMPMNodalMass"]
 
@@ -41,7 +39,7 @@ class FMPMNodalMass(NodalMass):
 
     fusable = False  # the grid update takes particle passes
 
-    def __init__(self, grid: PointGrid):
+    def __init__(self, grid: Grid):
         super().__init__(grid)
         self.order = grid.options.mass_model.order
         self._work: dict = {}  # (columns, lumping) -> kept nodal array of M_C y (and M_C 1_l)

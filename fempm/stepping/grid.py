@@ -23,24 +23,22 @@ and space: the reference of the compiled passes), :class:`fempm.stepping.contact
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING
 
 import numpy as np
 import numpy.typing as npt
 from mpi4py import MPI
 
 from fempm import kernels
-from fempm.stepping.laws import material_groups, stresses_of
 from fempm.stepping.loads import external_forces
+from fempm.stepping.particle_stages import ParticleStages
 from fempm.stepping.reactions import damping_impulse, nodal_reaction
 from fempm.transfer import g2p
 from fempm.transfer.basis import ParticleBasis
 from fempm.transfer.mapping import nodal_centroids, p2g, p2g_gradients, sum_over_ranks
 from fempm.transfer.mass_models import MASS_RATIO_ITERATIONS
 from fempm.transfer.projection import Projector
+from fempm.stepping.state import StepState
 
-if TYPE_CHECKING:
-    from fempm.stepping.solver import ExplicitSolver
 
 __all__ = ["BasisGrid", "Grid", "SingleFieldGrid"]
 
@@ -53,7 +51,7 @@ class Grid:
     the solver alone advances its time and step count.
     """
 
-    def __init__(self, solver: ExplicitSolver):
+    def __init__(self, solver: StepState):
         self.solver = solver
         self.options = solver.options
         #: whether this step's passes also sum the new state's energies (:meth:`state_sums`)
@@ -158,13 +156,28 @@ class BasisGrid(Grid):
     """The numpy stages on a :class:`~fempm.transfer.basis.ParticleBasis` (every particle domain,
     mass model and space): the reference of the compiled passes."""
 
+    def __init__(self, solver: StepState):
+        super().__init__(solver)
+        #: the particles' side of the step: basis, kinematics, motion, checks, relocation
+        self.particle_stages = ParticleStages(solver)
+
     def open_basis(self) -> ParticleBasis:
-        """The checks that open a step and its particle basis (values and gradients). Collective."""
-        s = self.solver
-        s.check_state()
-        basis = ParticleBasis(s.V, s.particles, gradients=True, domain=self.options.particle_domain)
-        s.record.extended_steps += basis.extended
-        return basis
+        """:meth:`ParticleStages.open_basis`."""
+        return self.particle_stages.open_basis()
+
+    def update_kinematics(self, L: npt.NDArray, dt: float, averaged: bool = True) -> None:
+        """:meth:`ParticleStages.update_kinematics` (F-bar over the step's basis)."""
+        self.particle_stages.update_kinematics(L, dt, averaged, getattr(self, "basis", None))
+
+    def move(self, at_grid: npt.NDArray, corner_velocity, dt: float) -> None:
+        """:meth:`ParticleStages.move`."""
+        self.particle_stages.move(at_grid, corner_velocity, dt)
+
+    def close(self) -> None:
+        self.particle_stages.close()
+
+    def relocate(self) -> None:
+        self.particle_stages.relocate()
 
     def mass_operator(self, basis: ParticleBasis, weights: npt.NDArray | None = None,
                       lump_dofs: npt.NDArray[np.bool_] | None = None) -> Projector:
@@ -231,50 +244,6 @@ class BasisGrid(Grid):
         if s.loads.any:
             f += p2g(basis, fext)
         return f
-
-    def update_kinematics(self, L: npt.NDArray, dt: float, averaged: bool = True) -> None:
-        r""":math:`F_p^+ = (I + \Delta t L_p) F_p`, :math:`V_p = J_p V_p^0` and the laws' stress,
-        with the checks of J (one collective); with F-bar :math:`L_p` is first replaced by
-        :math:`\bar L_p` (:meth:`fempm.stepping.fbar.FBar.rate`) unless ``averaged`` is False
-        (the implicit step's :math:`L_p` are averaged already)."""
-        s = self.solver
-        p = s.particles
-        f = p.fields
-        average = self.options.volumetric_average
-        if average is not None and averaged:  # F-bar: the increments' volume change averaged over the patches
-            L = average.rate(self.basis, p.volume, f["body"], s.materials, f["F"], L, dt)
-        F, J = kernels.deform(f["F"], L, dt)
-        nonfinite = ~np.isfinite(J)
-        bad = J <= 0
-        finite = J[~nonfinite]
-        flags = np.array([nonfinite.any(), bad.any(), -finite.min(initial=np.inf), finite.max(initial=-np.inf)],
-                         dtype=float)
-        p.comm.Allreduce(MPI.IN_PLACE, flags, op=MPI.MAX)  # one collective: both checks and the J range
-        if flags[0]:
-            s.fail(f"non-finite state (deformation gradient) at particle(s) {s.particle_ids(nonfinite)}")
-        if flags[1]:
-            s.fail(f"inverted deformation J <= 0 at particle(s) {s.particle_ids(bad)}")
-        s.record.j_range = (-float(flags[2]), float(flags[3]))
-        f["F"] = F
-        p.volume = J * f["volume0"]
-        stresses_of(p.comm, material_groups(f, s.materials), F, L, f["sigma"], dt, p.mass / p.volume, f)
-
-    def move(self, at_grid: npt.NDArray, corner_velocity, dt: float) -> None:
-        """The particle domain's motion (:meth:`fempm.transfer.domains.Domain.move`) with the grid
-        velocity at the particles ``at_grid`` and at the corners ``corner_velocity()``."""
-        s = self.solver
-        try:
-            self.options.particle_domain.move(s.particles, at_grid, corner_velocity, dt,
-                                              self.options.particle_position)
-        except ValueError as e:  # collective
-            s.fail(f"inverted particle domain: {e}")
-
-    def close(self) -> None:
-        self.solver.check_finite()
-
-    def relocate(self) -> None:
-        self.solver.relocate_particles()
-
 
 class SingleFieldGrid(BasisGrid):
     """One velocity field for every particle, numpy stages (see :class:`BasisGrid`)."""

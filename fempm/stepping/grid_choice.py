@@ -22,16 +22,14 @@ compiled grid's reason.
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import TYPE_CHECKING
 
 from fempm.stepping.contact import ContactGrid
 from fempm.stepping.contact_points import ContactPointGrid
 from fempm.stepping.domain_grid import DomainGrid
 from fempm.stepping.grid import Grid, SingleFieldGrid
 from fempm.stepping.lumped import PointGrid
+from fempm.stepping.state import StepState
 
-if TYPE_CHECKING:
-    from fempm.stepping.solver import ExplicitSolver
 
 __all__ = ["GRIDS", "GridEntry", "choose_grid", "refusals"]
 
@@ -45,7 +43,7 @@ class GridEntry:
     compiled: bool
     contact: bool
 
-    def refusal(self, solver: ExplicitSolver) -> str | None:
+    def refusal(self, solver: StepState) -> str | None:
         """Why ``solver`` does not take this grid (None where it does); the generic grids take
         every option of their kind."""
         refuse = getattr(self.grid, "refusal", None)
@@ -62,7 +60,7 @@ GRIDS = (
 )
 
 
-def refusals(solver: ExplicitSolver) -> dict[str, str]:
+def refusals(solver: StepState) -> dict[str, str]:
     """Each compiled grid of ``solver``'s kind (one field or contact) that its options do not
     take, by class name, with the reason."""
     contact = solver.contact is not None
@@ -75,7 +73,7 @@ def refusals(solver: ExplicitSolver) -> dict[str, str]:
     return out
 
 
-def choose_grid(solver: ExplicitSolver) -> Grid:
+def choose_grid(solver: StepState) -> Grid:
     """The grid for ``solver``'s options (see the module), made.
 
     Raises:

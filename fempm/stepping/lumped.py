@@ -28,7 +28,6 @@ kernels of :mod:`fempm.kernels.plasticity` there).
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING
 
 import numpy as np
 import numpy.typing as npt
@@ -52,9 +51,8 @@ from fempm.transfer.domains import Point
 from fempm.transfer.grid_solves import negative_basis_message
 from fempm.transfer.mapping import SUPPORT_TOL, mass_centres
 from fempm.transfer.mass_models import Consistent
+from fempm.stepping.state import StepState
 
-if TYPE_CHECKING:
-    from fempm.stepping.solver import ExplicitSolver
 
 __all__ = ["BOUND_SAFETY", "NODAL_MASSES", "SORT_EVERY", "LumpedNodalMass", "PointGrid"]
 
@@ -85,7 +83,7 @@ class PointGrid(Grid):
     takes = "point particles with lumped, consistent or FMPM mass on a space of the compiled passes"
 
     @classmethod
-    def refusal(cls, solver: ExplicitSolver) -> str | None:
+    def refusal(cls, solver: StepState) -> str | None:
         """Why ``solver``'s options, space and mesh do not take this grid (None where they do):
         point particles, lumped, consistent (:mod:`fempm.stepping.consistent`) or FMPM
         (:mod:`fempm.stepping.fmpm_mass`) mass, a space of :func:`~fempm.stepping.spaces.compiled_space`."""
@@ -99,7 +97,7 @@ class PointGrid(Grid):
             return f"particle domain {opts.particle_domain.name}: point particles"
         return None
 
-    def __init__(self, solver: ExplicitSolver):
+    def __init__(self, solver: StepState):
         super().__init__(solver)
         p, V = solver.particles, solver.V
         geo = p.locator.geometry

@@ -6,7 +6,7 @@ from dataclasses import dataclass
 from typing import Literal
 
 from fempm.arguments import check_numbers
-from fempm.implicit.dynamics import time_integration
+from fempm.stepping.dynamics import time_integration
 from fempm.stepping.fbar import volumetric
 from fempm.stepping.schemes import Scheme, scheme
 from fempm.transfer.domains import step_domain

@@ -10,18 +10,35 @@ r"""Update schemes: the order of the stages of an explicit step on a :class:`~fe
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING, ClassVar
+from typing import ClassVar, Protocol
 
 import numpy.typing as npt
 
-if TYPE_CHECKING:
-    from fempm.stepping.grid import Grid
+__all__ = ["MUSL", "SCHEMES", "USF", "USL", "Scheme", "Stages", "scheme"]
 
-__all__ = ["MUSL", "SCHEMES", "USF", "USL", "Scheme", "scheme"]
+
+class Stages(Protocol):
+    """The stages a scheme orders (:class:`fempm.stepping.grid.Grid` implements them)."""
+
+    def velocity(self, remapped: bool = False) -> npt.NDArray:
+        """The grid velocity of the mapped (or re-mapped) momenta."""
+
+    def forces(self) -> None:
+        """P2G of the internal and external forces."""
+
+    def advance(self, v_old: npt.NDArray, dt: float) -> npt.NDArray:
+        """The updated grid velocity."""
+
+    def update(self, dt: float) -> tuple[npt.NDArray, npt.NDArray]:
+        """(the grid velocity, the updated one): velocity and advance, maybe fused."""
+
+    def to_particles(self, v_new: npt.NDArray, v_old: npt.NDArray, dt: float, *, blend: bool = False,
+                     kinematics: bool = False, move: bool = False, remap: bool = False) -> npt.NDArray | None:
+        """G2P: the blend, the kinematics, the motion, the re-map, as asked."""
 
 
 class Scheme:
-    """An ordering of the stages of :class:`~fempm.stepping.grid.Grid`.
+    """An ordering of the :class:`Stages` of a grid (:class:`~fempm.stepping.grid.Grid`).
 
     Attributes:
         name: the option's name.
@@ -32,7 +49,7 @@ class Scheme:
     name: ClassVar[str] = ""
     forces_with_map: ClassVar[bool] = True
 
-    def update(self, grid: Grid, dt: float) -> npt.NDArray:
+    def update(self, grid: Stages, dt: float) -> npt.NDArray:
         """The stages after the map and the time step; returns the grid velocity the particles
         moved with (owned + ghost dofs, d)."""
         raise NotImplementedError
@@ -44,7 +61,7 @@ class Scheme:
 class USL(Scheme):
     name = "USL"
 
-    def update(self, grid: Grid, dt: float) -> npt.NDArray:
+    def update(self, grid: Stages, dt: float) -> npt.NDArray:
         v_old, v_new = grid.update(dt)
         grid.to_particles(v_new, v_old, dt, blend=True, kinematics=True, move=True)
         return v_new
@@ -54,7 +71,7 @@ class USF(Scheme):
     name = "USF"
     forces_with_map = False
 
-    def update(self, grid: Grid, dt: float) -> npt.NDArray:
+    def update(self, grid: Stages, dt: float) -> npt.NDArray:
         v_old = grid.velocity()
         grid.to_particles(v_old, v_old, dt, kinematics=True)  # the stress from the mapped velocity
         grid.forces()
@@ -66,7 +83,7 @@ class USF(Scheme):
 class MUSL(Scheme):
     name = "MUSL"
 
-    def update(self, grid: Grid, dt: float) -> npt.NDArray:
+    def update(self, grid: Stages, dt: float) -> npt.NDArray:
         v_old, v_new = grid.update(dt)
         grid.to_particles(v_new, v_old, dt, blend=True, remap=True)
         v_new = grid.velocity(remapped=True)

@@ -9,7 +9,7 @@ advances the time. The equations are in :mod:`fempm.stepping.grid`.
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from typing import Literal
 
@@ -20,7 +20,6 @@ from mpi4py import MPI
 
 from fempm.boundary.conditions import GridConditions
 from fempm.colliders.grid import ColliderContact
-from fempm.implicit.step import ImplicitStep
 from fempm.materials.base import check_materials, identity
 from fempm.meshes.cell_sizes import cell_sizes
 from fempm.particles.particle_set import Particles
@@ -35,7 +34,19 @@ from fempm.stepping.options import SimulationError, StepOptions
 from fempm.stepping.outside import Outside, Removed
 from fempm.stepping.record import StepRecord
 
-__all__ = ["ExplicitSolver", "StepRecord"]
+__all__ = ["ExplicitSolver", "StepRecord", "register_implicit_step"]
+
+
+#: the maker of the implicit step (see :func:`register_implicit_step`)
+_IMPLICIT_STEP: list[Callable] = []
+
+
+def register_implicit_step(maker: Callable) -> None:
+    """Make the implicit step of a solver with ``maker(solver)``, an object whose
+    ``step(dt) -> dt`` advances the particles (:class:`fempm.implicit.step.ImplicitStep`;
+    :mod:`fempm.implicit` registers it when imported, and ``import fempm`` imports that), so
+    that the explicit step's package does not import the implicit one."""
+    _IMPLICIT_STEP[:] = [maker]
 
 
 @dataclass
@@ -194,11 +205,14 @@ class ExplicitSolver:
         return self._grid
 
     @property
-    def implicit(self) -> ImplicitStep:
-        """The implicit step (``StepOptions(integrator="implicit")``, :mod:`fempm.implicit.step`),
+    def implicit(self):
+        """The implicit step (``StepOptions(integrator="implicit")``,
+        :class:`fempm.implicit.step.ImplicitStep`, as :func:`register_implicit_step` gave it),
         made on first use and remade when the options change."""
         if self._implicit is None or self._implicit[0] != id(self.options):
-            self._implicit = (id(self.options), ImplicitStep(self))
+            if not _IMPLICIT_STEP:
+                raise RuntimeError("the implicit step is not registered: import fempm (it imports fempm.implicit)")
+            self._implicit = (id(self.options), _IMPLICIT_STEP[0](self))
         return self._implicit[1]
 
     def step(self, dt: float | None = None, *, dt_max: float = np.inf, totals: bool = False) -> float:

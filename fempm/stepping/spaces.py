@@ -3,15 +3,13 @@ kernel cell type (a key of :data:`fempm.kernels.shape.CELLS`)."""
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING
 
 import basix
 
 from fempm.kernels.shape import AVAILABLE, BERNSTEIN2, LAGRANGE2
 from fempm.meshes.geometry import SIMPLICES
+from fempm.stepping.state import StepState
 
-if TYPE_CHECKING:
-    from fempm.stepping.solver import ExplicitSolver
 
 __all__ = ["NODAL_VARIANTS", "compiled_space", "space_refusal"]
 
@@ -20,7 +18,7 @@ NODAL_VARIANTS = (basix.LagrangeVariant.unset, basix.LagrangeVariant.equispaced,
                   basix.LagrangeVariant.gll_isaac, basix.LagrangeVariant.gll_centroid)
 
 
-def compiled_space(solver: ExplicitSolver) -> str | None:
+def compiled_space(solver: StepState) -> str | None:
     """The kernel cell type (:data:`fempm.kernels.shape.CELLS`) of ``solver``'s space and mesh
     where they take the compiled passes, else None: a vector degree-1 space on affine or
     multilinear cells, or a continuous degree-2 Lagrange or Bernstein space on affine
@@ -41,7 +39,7 @@ def compiled_space(solver: ExplicitSolver) -> str | None:
     return None
 
 
-def space_refusal(solver: ExplicitSolver) -> str | None:
+def space_refusal(solver: StepState) -> str | None:
     """Why ``solver``'s space and mesh do not take the compiled passes (None where they do,
     exactly where :func:`compiled_space` gives a cell type)."""
     if compiled_space(solver) is not None:

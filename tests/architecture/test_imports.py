@@ -1,6 +1,7 @@
 """The package's import structure, read from the source with ``ast``: no import cycles, layers
 that import only downward, and no fempm module imported inside a function (imports inside
-functions are for optional dependencies only)."""
+functions are for optional dependencies only); the imports for annotations only (under
+``if TYPE_CHECKING:``) are held to the same rules; no cycle between packages either."""
 
 from __future__ import annotations
 
@@ -13,14 +14,15 @@ PACKAGE = Path(__file__).resolve().parents[2] / "fempm"
 
 #: the layers, lowest first: a module may import modules of its own layer or of lower ones
 LAYERS = (
-    ("fempm.arguments", "fempm.abort", "fempm.petsc"),
+    ("fempm.arguments", "fempm.abort", "fempm.petsc", "fempm.docstrings"),
     ("fempm.kernels",),
     ("fempm.meshes",),
     ("fempm.materials",),
     ("fempm.particles",),
     ("fempm.transfer",),
     ("fempm.boundary", "fempm.colliders"),
-    ("fempm.stepping", "fempm.implicit"),  # the implicit step is a stepping of its own
+    ("fempm.stepping",),
+    ("fempm.implicit",),  # registers its step with the solver (fempm.stepping.solver.register_implicit_step)
     ("fempm.verification",),
     ("fempm.io",),
     ("fempm.scene",),
@@ -57,20 +59,32 @@ def is_type_checking(node: ast.If) -> bool:
 
 
 class Imports(ast.NodeVisitor):
-    """The fempm modules a module imports at run time, and those it imports inside functions."""
+    """The fempm modules a module imports at run time, those it imports for annotations only
+    (under ``if TYPE_CHECKING:``), and those it imports inside functions."""
 
     def __init__(self, module: str, is_package: bool):
         self.package = module if is_package else module.rpartition(".")[0]
         self.runtime: set[str] = set()
+        self.annotations: set[str] = set()
         self.in_functions: list[tuple[int, str]] = []
         self.depth = 0
+        self.typing = False
+
+    @property
+    def all(self) -> set[str]:
+        """Every fempm module imported, at run time or for annotations."""
+        return self.runtime | self.annotations
 
     def visit_If(self, node: ast.If) -> None:
-        if not is_type_checking(node):  # imports for annotations only are not run
+        if not is_type_checking(node):
             self.generic_visit(node)
-        else:
-            for child in node.orelse:
-                self.visit(child)
+            return
+        self.typing = True  # imports for annotations only: not run, but part of the structure
+        for child in node.body:
+            self.visit(child)
+        self.typing = False
+        for child in node.orelse:
+            self.visit(child)
 
     def visit_FunctionDef(self, node) -> None:
         self.depth += 1
@@ -81,7 +95,7 @@ class Imports(ast.NodeVisitor):
 
     def add(self, target: str, line: int) -> None:
         if target in MODULES:
-            self.runtime.add(target)
+            (self.annotations if self.typing else self.runtime).add(target)
             if self.depth:
                 self.in_functions.append((line, target))
 
@@ -105,6 +119,7 @@ def read_imports() -> dict[str, Imports]:
         visitor = Imports(name, path.name == "__init__.py")
         visitor.visit(ast.parse(path.read_text(), filename=str(path)))
         visitor.runtime.discard(name)
+        visitor.annotations.discard(name)
         out[name] = visitor
     return out
 
@@ -152,6 +167,29 @@ def test_the_package_has_no_import_cycle():
     assert cycles(graph) == []
 
 
+def test_no_cycle_through_the_imports_for_annotations():
+    graph = {name: imp.all for name, imp in IMPORTS.items()}
+    assert cycles(graph) == []
+
+
+def package_of(module: str) -> str:
+    """The subpackage holding ``module`` (``fempm.stepping.grid`` -> ``fempm.stepping``)."""
+    parts = module.split(".")
+    return ".".join(parts[:2]) if len(parts) > 1 and parts[1] in SUBPACKAGES else module
+
+
+SUBPACKAGES = {p.name for p in PACKAGE.iterdir() if (p / "__init__.py").exists()}
+
+
+def test_no_cycle_between_packages():
+    graph: dict[str, set[str]] = {}
+    for name, imp in IMPORTS.items():
+        for target in imp.all:
+            if package_of(target) != package_of(name):
+                graph.setdefault(package_of(name), set()).add(package_of(target))
+    assert cycles(graph) == []
+
+
 def test_the_cycle_finder_finds_a_cycle():
     assert cycles({"a": {"b"}, "b": {"c"}, "c": {"a"}, "d": {"a"}}) == [["a", "b", "c"]]
 
@@ -163,7 +201,7 @@ def test_every_module_lies_in_a_layer():
 
 def test_layers_import_only_downward():
     upward = [f"{name} (layer {layer_of(name)}) imports {target} (layer {layer_of(target)})"
-              for name, imp in IMPORTS.items() for target in sorted(imp.runtime)
+              for name, imp in IMPORTS.items() for target in sorted(imp.all)
               if layer_of(target) > layer_of(name)]
     assert upward == []
 
@@ -179,10 +217,11 @@ def test_no_fempm_module_is_imported_inside_a_function():
     ("from typing import TYPE_CHECKING\nif TYPE_CHECKING:\n    from fempm.stepping import solver\n", []),
     ("import numpy\n", []),
 ])
-def test_the_reader_sees_imports_in_functions_and_skips_type_checking(source, expected):
+def test_the_reader_sees_imports_in_functions_and_keeps_type_checking_apart(source, expected):
     visitor = Imports("fempm.x", False)
     visitor.visit(ast.parse(source))
     assert visitor.in_functions == expected
+    assert visitor.annotations == ({"fempm.stepping.solver"} if "TYPE_CHECKING" in source else set())
 
 
 def test_every_module_declares_its_public_names():

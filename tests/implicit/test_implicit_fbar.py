@@ -81,7 +81,7 @@ def test_the_assembled_tangent_is_the_derivative_of_the_residual(law):
     scene.materials = [law]
     scene.options = StepOptions(**FBAR)
     s = scene.solver()
-    basis = s.implicit.open_basis()
+    basis = s.implicit.particle_stages.open_basis()
     op = FBarIncrementOperator(basis, s.particles, s.materials)
     d, n = 2, basis.num_dofs_local
     du = 0.05 * np.random.default_rng(1).standard_normal((n, d))
