@@ -30,7 +30,7 @@ from fempm.particles.particle_set import Particles
 from fempm.particles.seeding import create_particles
 from fempm.scene import Scene, run
 import fempm.implicit  # noqa: F401  (registers the implicit step with the solver)
-from fempm.stepping import ExplicitSolver, Loads, SimulationError, StepOptions
+from fempm.stepping import ExplicitSolver, Loads, SimulationError, Solver, StepOptions
 from fempm.stepping.contact import Contact
 from fempm.transfer.basis import ParticleBasis
 from fempm.transfer.domains import make_domain
@@ -54,6 +54,7 @@ __all__ = [
     "Scene",
     "SimulationError",
     "SingularMassError",
+    "Solver",
     "StepOptions",
     "VonMises",
     "abort_on_error",

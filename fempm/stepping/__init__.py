@@ -7,7 +7,7 @@ from fempm.stepping.laws import law_state, law_stress
 from fempm.stepping.loads import Loads
 from fempm.stepping.options import SchemeName, SimulationError, StepOptions
 from fempm.stepping.schemes import Scheme
-from fempm.stepping.solver import ExplicitSolver, StepRecord
+from fempm.stepping.solver import ExplicitSolver, Solver, StepRecord
 from fempm.transfer.mass_models import MASS_RATIO_ITERATIONS, MASS_RATIO_SAFETY
 
 __all__ = [
@@ -18,6 +18,7 @@ __all__ = [
     "Scheme",
     "SchemeName",
     "SimulationError",
+    "Solver",
     "StepOptions",
     "StepRecord",
     "cell_sizes",

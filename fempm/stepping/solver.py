@@ -34,7 +34,7 @@ from fempm.stepping.options import SimulationError, StepOptions
 from fempm.stepping.outside import Outside, Removed
 from fempm.stepping.record import StepRecord
 
-__all__ = ["ExplicitSolver", "StepRecord", "register_implicit_step"]
+__all__ = ["ExplicitSolver", "Solver", "StepRecord", "register_implicit_step"]
 
 
 #: the maker of the implicit step (see :func:`register_implicit_step`)
@@ -50,8 +50,10 @@ def register_implicit_step(maker: Callable) -> None:
 
 
 @dataclass
-class ExplicitSolver:
-    """Explicit MPM on a vector Lagrange space (degree 1 or 2, or Bernstein) of the particles' mesh.
+class Solver:
+    """MPM on a vector Lagrange space (degree 1 or 2, or Bernstein) of the particles' mesh: it
+    owns the state and steps it explicitly or, with ``StepOptions(integrator="implicit")``,
+    implicitly (``ExplicitSolver`` is the same class, the name of existing code).
 
     :meth:`step` is one cycle: map the particles to the grid, solve for the grid velocity with
     the mass model, apply the grid conditions (and contact), update the particles, relocate
@@ -354,3 +356,7 @@ class ExplicitSolver:
         p.comm.Allreduce(MPI.IN_PLACE, sums, op=MPI.SUM)
         row = diagnostics.energy_row(self.t, sums[0], sums[1], sums[3:])
         return {**row, **self.removal.columns(), **self.collisions.columns()}, float(sums[2])
+
+
+#: the solver's name in existing code (the same class)
+ExplicitSolver = Solver

@@ -10,7 +10,7 @@ import fempm
 #: (module path, names) that stay importable (issue-fixed interface)
 KEPT = [
     ("fempm", ["Particles", "create_particles", "project", "interpolate", "Projector"]),
-    ("fempm.stepping", ["ExplicitSolver", "StepOptions", "Loads"]),
+    ("fempm.stepping", ["ExplicitSolver", "Solver", "StepOptions", "Loads"]),
     ("fempm.domains", ["make_domain", "box_corners", "domain_geometry", "GIMP", "CPDI1", "CPDI2", "Point"]),
     ("fempm.manufactured", ["PROBLEMS", "axis_aligned", "axis_aligned_1d", "generalized_vortex", "vibrating_bar"]),
     ("fempm.scene", ["run", "Scene"]),
@@ -39,6 +39,7 @@ def test_kept_paths_are_the_same_objects_as_their_homes():
     assert importlib.import_module("fempm.contact").Contact is Contact
     assert importlib.import_module("fempm.domains").make_domain is make_domain
     assert importlib.import_module("fempm.manufactured").PROBLEMS is PROBLEMS
+    assert fempm.ExplicitSolver is fempm.Solver  # the solver steps explicitly and implicitly
 
 
 def test_the_top_level_namespace_exports_what_all_lists():
