@@ -38,7 +38,7 @@ class CentreVelocity(Recorder):
 
 @checked(positive=("L", "E", "rho"))
 def vibrating_bar(
-    cells: int = 16, ppc: int | None = None, scheme: str = "MUSL", flip: float = 1.0, mass: str = "lumped",
+    *, cells: int = 16, ppc: int | None = None, scheme: str = "MUSL", flip: float = 1.0, mass: str = "lumped",
     cfl: float = 0.5, t_end: float = 40.0, L: float = 25.0, E: float = 100.0, rho: float = 1.0,
     v0: float = 0.1, mode: int = 1, dim: int = 1, lumped_forces: bool = False, comm: MPI.Comm = MPI.COMM_WORLD,
 ) -> Scene:

@@ -22,7 +22,7 @@ __all__ = ["hanging_block", "largest_neighbour_gap"]
 
 @checked(positive=("E", "rho"), non_negative=("g",))
 def hanging_block(
-    cells: int = 10, ppc: int = 9, domain: str = "point", mesh: str = "structured", scheme: str = "MUSL",
+    *, cells: int = 10, ppc: int = 9, domain: str = "point", mesh: str = "structured", scheme: str = "MUSL",
     flip: float = 0.99, mass: str = "lumped", cfl: float = 0.4, t_end: float = 0.5, g: float = 1000.0,
     E: float = 1e6, nu: float = 0.3, rho: float = 1050.0, frames: int = 10, comm: MPI.Comm = MPI.COMM_WORLD,
 ) -> Scene:

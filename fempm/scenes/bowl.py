@@ -79,7 +79,7 @@ class DiskMotion(Recorder):
 
 
 @checked(positive=("radius", "bowl_radius", "rho", "E", "g", "periods"), non_negative=("friction",))
-def bowl(cells: int = 8, ppc: int = 4, wall: str = "slip", friction: float = 0.3, release: float = 30.0,
+def bowl(*, cells: int = 8, ppc: int = 4, wall: str = "slip", friction: float = 0.3, release: float = 30.0,
          radius: float = 0.2, bowl_radius: float = 1.0, rho: float = 1000.0, E: float = 1.0e6, nu: float = 0.3,
          g: float = 10.0, periods: float = 2.0, segments: int = 48, scheme: str = "MUSL", flip: float = 1.0,
          cfl: float = 0.4, frames: int = 20, mass: str = "lumped", comm: MPI.Comm = MPI.COMM_WORLD) -> Scene:

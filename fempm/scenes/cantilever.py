@@ -40,7 +40,7 @@ def cantilever_tip(particles, params: dict) -> tuple[float, float]:
 
 @checked(positive=("L", "H", "E", "rho"), non_negative=("g", "mass_cutoff"))
 def cantilever(
-    cells: int = 4, ppc: int | None = None, scheme: str = "MUSL", flip: float = 0.95, mass: str = "lumped",
+    *, cells: int = 4, ppc: int | None = None, scheme: str = "MUSL", flip: float = 0.95, mass: str = "lumped",
     cfl: float = 0.4, t_end: float = 0.6, L: float = 0.7, H: float = 0.047, E: float = 6e7, nu: float = 0.0,
     rho: float = 1000.0, g: float = 10.0, material: str = "neo-hookean", degree: int = 1, mass_cutoff: float = 1e-9,
     domain: str = "point", frames: int = 20,

@@ -70,7 +70,7 @@ def deposit(scene: Scene, solver) -> dict:
 
 @checked(positive=("aspect", "width", "rho", "E"), non_negative=("cohesion", "floor_friction", "g"))
 def column_collapse(
-    aspect: float = 1.0, width: float = 0.2, cells: int = 16, ppc: int = 4, rho: float = 2000.0, E: float = 5.0e6,
+    *, aspect: float = 1.0, width: float = 0.2, cells: int = 16, ppc: int = 4, rho: float = 2000.0, E: float = 5.0e6,
     nu: float = 0.3, friction_angle: float = 30.0, dilation_angle: float = 0.0, cohesion: float = 0.0,
     floor_friction: float = 0.5, g: float = 9.81, t_end: float | None = None, scheme: str = "MUSL",
     flip: float = 0.99, cfl: float = 0.4, frames: int = 20, mass: str = "lumped", comm: MPI.Comm = MPI.COMM_WORLD,

@@ -35,7 +35,7 @@ __all__ = ["compaction", "stress_error"]
 
 @checked(positive=("height", "E", "rho"), non_negative=("g",))
 def compaction(
-    cells: int = 8, ppc: int = 4, domain: str = "point", mass: str = "lumped", steps: int = 5, height: float = 50.0,
+    *, cells: int = 8, ppc: int = 4, domain: str = "point", mass: str = "lumped", steps: int = 5, height: float = 50.0,
     E: float = 1.0e6, nu: float = 0.0, rho: float = 80.0, g: float = 10.0, t_end: float = 1.0, frames: int = 5,
     comm: MPI.Comm = MPI.COMM_WORLD,
 ) -> Scene:

@@ -80,7 +80,7 @@ def panel_lattice(nx: int, ny: int) -> tuple[np.ndarray, np.ndarray, np.ndarray,
 
 @checked(positive=("h", "E", "rho"), non_negative=("damping",))
 def cook_membrane(
-    h: float = 3.0, nu: float = 1 / 3, E: float = 1.0, rho: float = 1.0, load: float = 1e-3, spacing: float | None = None,
+    *, h: float = 3.0, nu: float = 1 / 3, E: float = 1.0, rho: float = 1.0, load: float = 1e-3, spacing: float | None = None,
     degree: int = 1, variant: str | None = None, mass: str = "lumped", domain: str = "point", scheme: str = "MUSL",
     flip: float = 1.0, cfl: float = 0.4, damping: float | None = None, t_end: float | None = None, frames: int = 10,
     ppc: int | None = None, comm: MPI.Comm = MPI.COMM_WORLD,

@@ -33,7 +33,7 @@ def surge_front(particles, params: dict) -> float:
 
 @checked(positive=("a", "box", "rho0", "kappa", "gamma"), non_negative=("viscosity", "g"))
 def dam_break(
-    cells: int = 10, ppc: int = 4, scheme: str = "MUSL", flip: float = 0.99, mass: str = "lumped",
+    *, cells: int = 10, ppc: int = 4, scheme: str = "MUSL", flip: float = 0.99, mass: str = "lumped",
     cfl: float = 0.4, t_end: float = 0.22, a: float = 0.1, box: float = 0.4, rho0: float = 1000.0,
     kappa: float = 2.0e4, gamma: float = 7.0, viscosity: float = 1.0e-3, g: float = 9.81, frames: int = 22,
     comm: MPI.Comm = MPI.COMM_WORLD,

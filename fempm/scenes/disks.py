@@ -18,7 +18,7 @@ __all__ = ["two_disks"]
 
 @checked(positive=("E", "rho", "radius"), non_negative=("speed", "friction"))
 def two_disks(
-    mesh: str | dm.Mesh = "structured", cells: int = 20, ppc: int = 4, scheme: str = "MUSL", flip: float = 1.0,
+    *, mesh: str | dm.Mesh = "structured", cells: int = 20, ppc: int = 4, scheme: str = "MUSL", flip: float = 1.0,
     mass: str = "lumped", cfl: float = 0.4, t_end: float = 3.0, E: float = 1000.0, nu: float = 0.3,
     rho: float = 1000.0, speed: float = 0.1, radius: float = 0.2, frames: int = 30, contact: bool = False,
     friction: float = 0.0, comm: MPI.Comm = MPI.COMM_WORLD,

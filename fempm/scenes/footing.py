@@ -73,7 +73,7 @@ def _ramp(speed: float, t_ramp: float):
 
 
 @checked(positive=("width", "E", "yield_stress", "rho"))
-def footing(cells: int = 8, depth: float = 0.1, width: float = 1.0, E: float = 1.0e7, nu: float = 0.3,
+def footing(*, cells: int = 8, depth: float = 0.1, width: float = 1.0, E: float = 1.0e7, nu: float = 0.3,
             yield_stress: float = 1.0e4 * np.sqrt(3.0), rho: float = 1000.0, speed: float = 0.2, ppc: int = 4,
             scheme: str = "MUSL", flip: float = 0.95, cfl: float = 0.4, frames: int = 0,
             mass: str = "lumped", comm: MPI.Comm = MPI.COMM_WORLD) -> Scene:

@@ -78,7 +78,7 @@ class _Overlap(Recorder):
 
 @checked(positive=("radius", "E", "rho"), non_negative=("gap", "speed", "friction"))
 def disk_impact(
-    cells: int = 40, ppc: int = 4, speed: float = 10.0, radius: float = 0.1, E: float = 1.0e5, nu: float = 0.3,
+    *, cells: int = 40, ppc: int = 4, speed: float = 10.0, radius: float = 0.1, E: float = 1.0e5, nu: float = 0.3,
     rho: float = 1000.0, contact: bool = True, friction: float = 0.0, gap: float = 0.8, scheme: str = "USL",
     flip: float = 1.0, cfl: float = 0.4, t_end: float = 0.08, frames: int = 10, mass: str = "lumped", comm: MPI.Comm = MPI.COMM_WORLD,
 ) -> Scene:

@@ -128,7 +128,7 @@ def slope_acceleration(track: _Track, t_end: float) -> float:
 
 @checked(positive=("size", "E", "rho"), non_negative=("gap", "friction", "g"))
 def incline(
-    body: str = "block", angle: float = 30.0, friction: float = 0.2, cells: int = 8, ppc: int | None = None,
+    body: str = "block", angle: float = 30.0, friction: float = 0.2, *, cells: int = 8, ppc: int | None = None,
     size: float = 0.1, E: float = 1.0e6, nu: float = 0.3, rho: float = 1000.0, g: float = 9.81,
     t_end: float | None = None, scheme: str = "MUSL", flip: float | None = None, cfl: float = 0.4, frames: int = 10,
     plane: str = "grid", gap: float | None = None, turned: bool = True, mass: str = "lumped", comm: MPI.Comm = MPI.COMM_WORLD,

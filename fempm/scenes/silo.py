@@ -97,7 +97,7 @@ def _outline(outlet: float, half_angle: float, width: float = TOP) -> tuple[np.n
 
 @checked(positive=("outlet", "half_angle", "fill", "rho", "E", "friction_angle", "grain_diameter", "width"),
          non_negative=("wall_friction", "floor_friction", "g"))
-def silo(cells: int = 5, outlet: float = 0.1, half_angle: float = 30.0, fill: float = 0.3, ppc: int = 4,
+def silo(*, cells: int = 5, outlet: float = 0.1, half_angle: float = 30.0, fill: float = 0.3, ppc: int = 4,
          rho: float = 2000.0, E: float = 2.0e6, nu: float = 0.3, friction_angle: float = 30.0,
          wall_friction: float = 0.3, floor_friction: float = 0.5, g: float = 9.81, t_end: float = 1.0,
          scheme: str = "MUSL", flip: float = 0.99, cfl: float = 0.4, frames: int = 20, law: str = "mu-i",

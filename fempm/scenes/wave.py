@@ -44,7 +44,7 @@ START, HALF_WIDTH = 0.3, 0.1
 
 
 @checked(positive=("E", "rho", "length", "amplitude"))
-def wave(cells: int = 64, rows: int = 2, ppc: int = 4, boundary: str = "absorbing", E: float = 1.0, nu: float = 0.25,
+def wave(*, cells: int = 64, rows: int = 2, ppc: int = 4, boundary: str = "absorbing", E: float = 1.0, nu: float = 0.25,
          rho: float = 1.0, length: float = 1.0, amplitude: float = 1e-3, scheme: str = "MUSL", flip: float = 1.0,
          cfl: float = 0.5, frames: int = 0, mass: str = "lumped", comm: MPI.Comm = MPI.COMM_WORLD) -> Scene:
     """The pulse and its end (the module), ``cells`` along the strip.

@@ -45,3 +45,21 @@ def test_the_measure_counts_code_not_the_docstring():
     assert length(f) == MAX_FUNCTION + 1
     (g,) = functions(ast.parse(f'def g():\n    """A\n\n    B\n    """\n{body}\n'))
     assert length(g) == MAX_FUNCTION + 1
+
+
+def positional_counts() -> list[tuple[int, str]]:
+    """(positional parameters, "module:function") of every function in fempm."""
+    out = []
+    for path in sorted(PACKAGE.rglob("*.py")):
+        for node in ast.walk(ast.parse(path.read_text())):
+            if isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef)):
+                out.append((len(node.args.posonlyargs) + len(node.args.args),
+                            f"{path.relative_to(PACKAGE.parent)}:{node.name}"))
+    return out
+
+
+def test_no_function_outside_the_kernels_takes_more_than_12_positional_parameters():
+    """Options go by keyword (the scenes' builders take theirs keyword-only). The compiled
+    kernels still take their arrays one by one (up to 41): bundling them is open."""
+    many = [f"{where} ({k})" for k, where in positional_counts() if k > 12 and "/kernels/" not in where]
+    assert many == []

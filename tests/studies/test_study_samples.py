@@ -5,6 +5,7 @@ convergence study on the vibrating bar, the stability catalogue on its one-parti
 import csv
 
 import numpy as np
+import pytest
 from conftest import shared_tmp
 
 from fempm.studies import convergence, stability
@@ -24,6 +25,7 @@ def test_the_convergence_study_of_the_vibrating_bar(tmp_path_factory):
         assert e[-1] < e[0] and np.all(np.isfinite(e)), (mass, e)
 
 
+@pytest.mark.slow  # 16 s; the whole quick catalogue runs in make test-all (test_stability_study.py)
 def test_the_stability_catalogue_of_one_particle_per_cell(tmp_path_factory):
     """ppc = 1: USL with point particles blows up, MUSL and the particle domains stay stable
     (docs/error-vs-time-and-stability.md); every option a row with a known cause."""

@@ -7,6 +7,7 @@ thinned domains' width); 48 cells run through (tests/studies/test_convergence_st
 from dataclasses import dataclass, field, replace
 
 import numpy as np
+import pytest
 
 from fempm.verification import manufactured as mf
 from fempm.particles.corners import domain_geometry
@@ -60,6 +61,7 @@ def test_exact_domains_stay_valid_and_the_loop_follows_them():
     assert np.isclose(solver.t, 1.0)
 
 
+@pytest.mark.slow  # 12 s: two runs to their inversion (make test-all)
 def test_grid_moved_corners_invert_on_the_coarse_grid_at_any_time_step():
     for cfl in (0.3, 0.05):
         scene = _scene(cfl=cfl)
