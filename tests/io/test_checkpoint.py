@@ -292,7 +292,9 @@ def test_a_damaged_checkpoint_falls_back_on_the_one_before_or_is_one_clear_line(
         assert f"checkpoint/{named}" in r.stderr and "continuing from checkpoint.prev/" in r.stderr, (kind, r.stderr)
         assert f"step {previous['step_count']}" in r.stderr
         assert (out / "energies.csv").read_bytes() == (whole / "energies.csv").read_bytes(), kind
-        # the one before damaged as well: nothing to continue from
+        if kind != DAMAGES[0]:
+            continue
+        # the one before damaged as well: nothing to continue from (the same path for every damage)
         shutil.rmtree(out)
         shutil.copytree(ran, out)
         _damage(out / "checkpoint", kind)
