@@ -23,17 +23,15 @@ stable step (``dt=None``) it is refreshed every step.
 
 from __future__ import annotations
 
-
 import numpy as np
 import numpy.typing as npt
 
 from fempm.kernels import consistent as kc
 from fempm.kernels.shape import space_of
+from fempm.stepping.grid import Grid
 from fempm.stepping.mass_systems import ConsistentSystems
 from fempm.stepping.nodal import NodalMass, sum_ghosts
 from fempm.transfer.mass_models import MASS_RATIO_ITERATIONS
-from fempm.stepping.grid import Grid
-
 
 __all__ = ["RATIO_EVERY", "ConsistentNodalMass"]
 

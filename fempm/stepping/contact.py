@@ -60,11 +60,10 @@ from fempm.boundary.coulomb import coulomb
 from fempm.boundary.patches import Patches, depth_shares
 from fempm.stepping.contact_options import Contact
 from fempm.stepping.grid import BasisGrid
+from fempm.stepping.state import StepState
 from fempm.transfer import g2p
 from fempm.transfer.centres import NodalCentres
 from fempm.transfer.mapping import SUPPORT_TOL, mass_centres, p2g, p2g_gradients
-from fempm.stepping.state import StepState
-
 
 __all__ = ["Contact", "ContactGrid", "correct", "particle_groups", "shared_cells"]
 

@@ -26,7 +26,6 @@ compiled passes, USL and MUSL (consistent or FMPM mass with contact, and particl
 
 from __future__ import annotations
 
-
 import numpy as np
 import numpy.typing as npt
 from mpi4py import MPI
@@ -35,11 +34,10 @@ from fempm.boundary.patches import Patches
 from fempm.kernels import contact as kc
 from fempm.stepping.contact import correct, particle_groups
 from fempm.stepping.lumped import BOUND_SAFETY, PointGrid
+from fempm.stepping.state import StepState
 from fempm.transfer.centres import NodalCentres
 from fempm.transfer.mapping import SUPPORT_TOL, mass_centres
 from fempm.transfer.mass_models import Lumped
-from fempm.stepping.state import StepState
-
 
 __all__ = ["ContactPointGrid"]
 

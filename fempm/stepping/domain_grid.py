@@ -22,7 +22,6 @@ changed between steps are given as a new array, as the moving step does).
 
 from __future__ import annotations
 
-
 import dolfinx.la
 import numpy as np
 import numpy.typing as npt
@@ -35,10 +34,9 @@ from fempm.particles.corners import corner_signs, domain_geometry
 from fempm.stepping.grid import Grid, SingleFieldGrid
 from fempm.stepping.lumped import PointGrid
 from fempm.stepping.spaces import compiled_space, space_refusal
+from fempm.stepping.state import StepState
 from fempm.transfer.domains import CPDI1, CPDI2, GIMP, half_widths
 from fempm.transfer.mass_models import FMPM, Lumped
-from fempm.stepping.state import StepState
-
 
 __all__ = ["DomainGrid", "frontier_cells"]
 

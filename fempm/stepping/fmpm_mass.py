@@ -19,15 +19,13 @@ lumped mass is below ``mass_cutoff``; the stable step is :math:`1/\sqrt{k}` of t
 
 from __future__ import annotations
 
-
 import numpy as np
 import numpy.typing as npt
 
 from fempm.kernels import consistent as kc
 from fempm.kernels import fmpm as kf
-from fempm.stepping.nodal import NodalMass, sum_ghosts
 from fempm.stepping.grid import Grid
-
+from fempm.stepping.nodal import NodalMass, sum_ghosts
 
 __all__ = ["FMPMNodalMass"]
 

@@ -23,7 +23,6 @@ and space: the reference of the compiled passes), :class:`fempm.stepping.contact
 
 from __future__ import annotations
 
-
 import numpy as np
 import numpy.typing as npt
 from mpi4py import MPI
@@ -32,13 +31,12 @@ from fempm import kernels
 from fempm.stepping.loads import external_forces
 from fempm.stepping.particle_stages import ParticleStages
 from fempm.stepping.reactions import damping_impulse, nodal_reaction
+from fempm.stepping.state import StepState
 from fempm.transfer import g2p
 from fempm.transfer.basis import ParticleBasis
 from fempm.transfer.mapping import nodal_centroids, p2g, p2g_gradients, sum_over_ranks
 from fempm.transfer.mass_models import MASS_RATIO_ITERATIONS
 from fempm.transfer.projection import Projector
-from fempm.stepping.state import StepState
-
 
 __all__ = ["BasisGrid", "Grid", "SingleFieldGrid"]
 

@@ -30,7 +30,6 @@ from fempm.stepping.grid import Grid, SingleFieldGrid
 from fempm.stepping.lumped import PointGrid
 from fempm.stepping.state import StepState
 
-
 __all__ = ["GRIDS", "GridEntry", "choose_grid", "refusals"]
 
 

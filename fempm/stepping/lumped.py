@@ -28,7 +28,6 @@ kernels of :mod:`fempm.kernels.plasticity` there).
 
 from __future__ import annotations
 
-
 import numpy as np
 import numpy.typing as npt
 from mpi4py import MPI
@@ -46,13 +45,12 @@ from fempm.stepping.loads import external_forces
 from fempm.stepping.lumped_mass import NODAL_MASSES, LumpedNodalMass
 from fempm.stepping.nodal import kept_nodal_array, sum_ghosts
 from fempm.stepping.spaces import compiled_space, space_refusal
+from fempm.stepping.state import StepState
 from fempm.transfer.centres import NodalCentres
 from fempm.transfer.domains import Point
 from fempm.transfer.grid_solves import negative_basis_message
 from fempm.transfer.mapping import SUPPORT_TOL, mass_centres
 from fempm.transfer.mass_models import Consistent
-from fempm.stepping.state import StepState
-
 
 __all__ = ["BOUND_SAFETY", "NODAL_MASSES", "SORT_EVERY", "LumpedNodalMass", "PointGrid"]
 

@@ -6,16 +6,14 @@ motion, the finite-state check and the relocation."""
 
 from __future__ import annotations
 
-
 import numpy as np
 import numpy.typing as npt
 from mpi4py import MPI
 
 from fempm import kernels
 from fempm.stepping.laws import material_groups, stresses_of
-from fempm.transfer.basis import ParticleBasis
 from fempm.stepping.state import StepState
-
+from fempm.transfer.basis import ParticleBasis
 
 __all__ = ["ParticleStages"]
 

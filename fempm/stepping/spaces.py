@@ -3,13 +3,11 @@ kernel cell type (a key of :data:`fempm.kernels.shape.CELLS`)."""
 
 from __future__ import annotations
 
-
 import basix
 
 from fempm.kernels.shape import AVAILABLE, BERNSTEIN2, LAGRANGE2
 from fempm.meshes.geometry import SIMPLICES
 from fempm.stepping.state import StepState
-
 
 __all__ = ["NODAL_VARIANTS", "compiled_space", "space_refusal"]
 
