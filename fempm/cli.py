@@ -31,7 +31,6 @@ from mpi4py import MPI
 
 from fempm import __version__
 from fempm.abort import abort_on_error
-from fempm.docstrings import arguments, first_sentence, plain
 from fempm.io.checkpoint import CheckpointError, choose
 from fempm.io.stops import RunInterrupted
 from fempm.io.writers import (
@@ -41,8 +40,8 @@ from fempm.io.writers import (
     OutputWriteError,
 )
 from fempm.particles.location import OutsideMeshError
-from fempm.run_options import (UsageError, health_options, option_descriptions, scene_options, stepping_options,
-                                with_stepping)
+from fempm.run_options import (UsageError, health_descriptions, health_options, option_descriptions, scene_options,
+                                stepping_options, with_stepping)
 from fempm.scene.loop import run
 from fempm.scenes import SCENES
 from fempm.stepping.health import Health
@@ -213,9 +212,9 @@ def _run(args, rest: list[str]) -> int:
               "(implicit: the laws' own tangents or central differences), --volumetric standard|fbar, "
               "--outside raise|remove (particles that leave the mesh)")
         print("run health (fempm.stepping.health.Health; a crossed limit stops the run with exit code 3):")
-        limits = arguments(Health)
+        limits = health_descriptions()
         for k, v in Health().asdict().items():
-            print(f"  --{k.replace('_', '-')} {v}  {first_sentence(plain(limits[k]))}")
+            print(f"  --{k.replace('_', '-')} {v}  {limits[k]}")
         return 0
     health, rest = health_options(rest)
     stepping, rest = stepping_options(rest)

@@ -12,8 +12,8 @@ from fempm.scene.definition import Scene
 from fempm.stepping.health import Health
 from fempm.stepping.options import StepOptions
 
-__all__ = ["STEPPING_FLAGS", "UsageError", "boolean", "health_options", "option_descriptions", "scene_options",
-           "split_flags", "stepping_options", "with_stepping"]
+__all__ = ["STEPPING_FLAGS", "UsageError", "boolean", "health_descriptions", "health_options", "one_line",
+           "option_descriptions", "scene_options", "split_flags", "stepping_options", "with_stepping"]
 
 
 class UsageError(SystemExit):
@@ -26,7 +26,18 @@ def option_descriptions(builder) -> dict[str, str]:
     passes on to them) from :class:`fempm.stepping.StepOptions`'s or :class:`fempm.scene.Scene`'s;
     "" where none says."""
     docs = {**arguments(Scene), **arguments(StepOptions), **arguments(builder)}
-    return {k: first_sentence(plain(docs.get(k, ""))) for k in inspect.signature(builder).parameters if k != "comm"}
+    return {k: one_line(docs.get(k, "")) for k in inspect.signature(builder).parameters if k != "comm"}
+
+
+def health_descriptions() -> dict[str, str]:
+    """Each run-health limit (:class:`fempm.stepping.health.Health`) with its description, as
+    :func:`option_descriptions` gives the scenes' options."""
+    return {k: one_line(v) for k, v in arguments(Health).items()}
+
+
+def one_line(description: str) -> str:
+    """An ``Args:`` entry as the help prints it: its first sentence, without markup."""
+    return first_sentence(plain(description))
 
 
 def scene_options(builder, rest: list[str]) -> dict:

@@ -72,9 +72,10 @@ def _pyplot():
     return plt
 
 
-def _save(fig, path: Path) -> None:
+def _save(fig, path: Path, rect: tuple[float, float, float, float] | None = None) -> None:
+    """Lay out (within ``rect`` of the figure: room left for a figure legend), write, close."""
     Path(path).parent.mkdir(parents=True, exist_ok=True)
-    fig.tight_layout()
+    fig.tight_layout(rect=rect)
     fig.savefig(path, dpi=130)
     fig.clf()
     _pyplot().close(fig)
@@ -121,11 +122,8 @@ def plot_error_vs_time(rows: Sequence[dict], path: Path, *, title: str = "") -> 
                + [Line2D([], [], color="k", ls=line[st], label=f"{st[0]} ppc={st[1]}") for st in styles])
     if title:
         fig.suptitle(title)
-    fig.tight_layout(rect=(0.0, 0.0, 0.84, 1.0))
     fig.legend(handles=handles, fontsize=7, loc="center right")
-    Path(path).parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(path, dpi=130)
-    _pyplot().close(fig)
+    _save(fig, path, rect=(0.0, 0.0, 0.84, 1.0))
 
 
 def plot_energies(history: Sequence[dict], path: Path, *, title: str = "", extra: dict | None = None) -> None:

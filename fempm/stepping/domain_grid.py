@@ -70,10 +70,9 @@ class DomainGrid(PointGrid):
         """Why ``solver``'s domain, mass, conditions, space and mesh do not take this grid (None
         where they do)."""
         dom = solver.options.particle_domain
-        space = space_refusal(solver)
-        if space is not None:
-            return space
         cell = compiled_space(solver)
+        if cell is None:
+            return space_refusal(solver)
         if space_of(cell) != (1, False):
             return "the particle domains' compiled passes take degree 1 (P1 on affine or multilinear cells)"
         if type(solver.options.mass_model) not in (Lumped, FMPM):

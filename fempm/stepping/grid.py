@@ -49,6 +49,15 @@ class Grid:
     the solver alone advances its time and step count.
     """
 
+    #: the options this grid takes, in messages (:mod:`fempm.stepping.grid_choice`)
+    takes = "every option of its kind"
+
+    @classmethod
+    def refusal(cls, solver: StepState) -> str | None:
+        """Why ``solver``'s options, space and mesh do not take this grid (None where they do;
+        the numpy grids take every option of their kind)."""
+        return None
+
     def __init__(self, solver: StepState):
         self.solver = solver
         self.options = solver.options
@@ -158,6 +167,8 @@ class BasisGrid(Grid):
         super().__init__(solver)
         #: the particles' side of the step: basis, kinematics, motion, checks, relocation
         self.particle_stages = ParticleStages(solver)
+        #: the step's particle basis (set when the grid opens a step)
+        self.basis: ParticleBasis | None = None
 
     def open_basis(self) -> ParticleBasis:
         """:meth:`ParticleStages.open_basis`."""
@@ -165,7 +176,7 @@ class BasisGrid(Grid):
 
     def update_kinematics(self, L: npt.NDArray, dt: float, averaged: bool = True) -> None:
         """:meth:`ParticleStages.update_kinematics` (F-bar over the step's basis)."""
-        self.particle_stages.update_kinematics(L, dt, averaged, getattr(self, "basis", None))
+        self.particle_stages.update_kinematics(L, dt, averaged, self.basis)
 
     def move(self, at_grid: npt.NDArray, corner_velocity, dt: float) -> None:
         """:meth:`ParticleStages.move`."""

@@ -30,23 +30,17 @@ from fempm.stepping.grid import Grid, SingleFieldGrid
 from fempm.stepping.lumped import PointGrid
 from fempm.stepping.state import StepState
 
-__all__ = ["GRIDS", "GridEntry", "choose_grid", "refusals"]
+__all__ = ["GRIDS", "GridEntry", "choose_grid"]
 
 
 @dataclass(frozen=True)
 class GridEntry:
-    """A grid of the registry: its class, whether it runs compiled passes and whether it steps
-    contact (one velocity field per body)."""
+    """A grid of the registry: its class (which gives its ``refusal`` and what it ``takes``),
+    whether it runs compiled passes and whether it steps contact (one velocity field per body)."""
 
     grid: type[Grid]
     compiled: bool
     contact: bool
-
-    def refusal(self, solver: StepState) -> str | None:
-        """Why ``solver`` does not take this grid (None where it does); the generic grids take
-        every option of their kind."""
-        refuse = getattr(self.grid, "refusal", None)
-        return refuse(solver) if refuse is not None else None
 
 
 #: the grids, in the order they are tried
@@ -57,19 +51,6 @@ GRIDS = (
     GridEntry(DomainGrid, compiled=True, contact=False),
     GridEntry(SingleFieldGrid, compiled=False, contact=False),
 )
-
-
-def refusals(solver: StepState) -> dict[str, str]:
-    """Each compiled grid of ``solver``'s kind (one field or contact) that its options do not
-    take, by class name, with the reason."""
-    contact = solver.contact is not None
-    out = {}
-    for entry in GRIDS:
-        if entry.compiled and entry.contact == contact:
-            reason = entry.refusal(solver)
-            if reason is not None:
-                out[entry.grid.__name__] = reason
-    return out
 
 
 def choose_grid(solver: StepState) -> Grid:
@@ -84,17 +65,15 @@ def choose_grid(solver: StepState) -> Grid:
         raise ValueError("compiled=True with volumetric='fbar': F-bar runs on the numpy step (compiled=None)")
     compiled = solver.compiled is not False and not fbar
     contact = solver.contact is not None
+    refused = []  # (grid, reason) of the compiled grids passed over
     for entry in GRIDS:
         if entry.contact != contact or (entry.compiled and not compiled):
             continue
         if not entry.compiled and solver.compiled:
-            reasons = "; ".join(f"{name} ({entry_takes(name)}): {why}" for name, why in refusals(solver).items())
+            reasons = "; ".join(f"{grid.__name__} ({grid.takes}): {why}" for grid, why in refused)
             raise ValueError(f"compiled=True, but no compiled grid takes these options: {reasons}")
-        if entry.refusal(solver) is None:
+        reason = entry.grid.refusal(solver)
+        if reason is None:
             return entry.grid(solver)
+        refused.append((entry.grid, reason))
     raise AssertionError("the generic grids take every option")  # pragma: no cover
-
-
-def entry_takes(name: str) -> str:
-    """What the registered grid of class ``name`` takes."""
-    return next(e.grid.takes for e in GRIDS if e.grid.__name__ == name)

@@ -133,8 +133,8 @@ class HealthMonitor:
     def state_dict(self) -> dict:
         """What a continued run's checks need: the sums and references of :attr:`KEPT` (JSON
         values, the same on every rank)."""
-        return {k: (v.tolist() if isinstance(v, np.ndarray) else v) for k, v in ((k, getattr(self, k))
-                                                                                for k in self.KEPT)}
+        values = {k: getattr(self, k) for k in self.KEPT}
+        return {k: v.tolist() if isinstance(v, np.ndarray) else v for k, v in values.items()}
 
     def load_state_dict(self, state: dict) -> None:
         """Restore :meth:`state_dict` (lists back to arrays).
