@@ -37,6 +37,10 @@ from fempm.scene import run, run_stats
 from fempm.scenes import cantilever, cantilever_reference, cantilever_tip
 
 
+#: the small run its page in the docs shows, executed when the site is built (docs/demo_runs.py)
+DOCS_RUN = ["--cells", "4", "--periods", "1"]
+
+
 def main(argv: list[str] | None = None) -> dict:
     ap = argparse.ArgumentParser(description="cantilever under self-weight")
     ap.add_argument("--cells", type=int, default=4, help="cells through the thickness")

@@ -45,6 +45,10 @@ from fempm.scenes.column import RUNOUT_LAWS, published_runout
 from fempm.studies.harness import Provenance
 
 
+#: the small run its page in the docs shows, executed when the site is built (docs/demo_runs.py)
+DOCS_RUN = ["--cells", "4", "--aspects", "0.5", "2"]
+
+
 def main(argv: list[str] | None = None) -> dict:
     ap = argparse.ArgumentParser(description="granular column collapse at several aspect ratios")
     ap.add_argument("--cells", type=int, default=16, help="cells across the column width")

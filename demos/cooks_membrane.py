@@ -41,6 +41,10 @@ from fempm.scenes.cook import cook_membrane, corner_displacement, fe_reference
 from fempm.studies.harness import Provenance
 
 
+#: the small run its page in the docs shows, executed when the site is built (docs/demo_runs.py)
+DOCS_RUN = ["--h", "6", "3", "--nu", "0.3333333333333333", "--fe-h", "1.0"]
+
+
 def main(argv: list[str] | None = None) -> dict:
     ap = argparse.ArgumentParser(description="Cook's membrane: MPM vs FE")
     ap.add_argument("--h", type=float, nargs="+", default=[6.0, 4.0, 3.0, 2.0, 1.5, 1.0], help="mesh sizes")

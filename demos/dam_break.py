@@ -32,6 +32,10 @@ from fempm.scene import run, run_stats
 from fempm.scenes import MARTIN_MOYCE, dam_break, surge_front
 
 
+#: the small run its page in the docs shows, executed when the site is built (docs/demo_runs.py)
+DOCS_RUN = ["--cells", "10"]
+
+
 def main(argv: list[str] | None = None) -> dict:
     ap = argparse.ArgumentParser(description="dam break with Tait water")
     ap.add_argument("--cells", type=int, default=20, help="cells across the column width")

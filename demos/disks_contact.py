@@ -34,6 +34,10 @@ from fempm.scene import run
 from fempm.scenes import two_disks
 
 
+#: the small run its page in the docs shows, executed when the site is built (docs/demo_runs.py)
+DOCS_RUN = ["--cells", "10"]
+
+
 def main(argv: list[str] | None = None) -> dict:
     ap = argparse.ArgumentParser(description="two colliding disks with and without contact")
     ap.add_argument("--cells", type=int, default=20)

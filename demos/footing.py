@@ -70,6 +70,10 @@ def figure(curves: dict, out: Path) -> None:
     plt.close(fig)
 
 
+#: the small run its page in the docs shows, executed when the site is built (docs/demo_runs.py)
+DOCS_RUN = ["--cells", "4", "--depth", "0.05", "--figure"]
+
+
 def main(argv: list[str] | None = None) -> list[dict]:
     ap = argparse.ArgumentParser(description="a strip footing against Prandtl's bearing capacity")
     ap.add_argument("--cells", type=int, nargs="+", default=[8, 16, 32])

@@ -74,6 +74,10 @@ def _gather(p) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
     return x, row, corners
 
 
+#: the small run its page in the docs shows, executed when the site is built (docs/demo_runs.py)
+DOCS_RUN = ["--t-end", "0.08"]
+
+
 def main(argv: list[str] | None = None) -> dict:
     ap = argparse.ArgumentParser(description="hanging block: point vs GIMP vs CPDI1 vs CPDI2")
     ap.add_argument("--cells", type=int, default=10, help="cells per unit length")

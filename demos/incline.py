@@ -76,6 +76,10 @@ def run_case(name: str, cells: int, t_end: float | None = None) -> dict:
             "energy_ratio": s["health"]["energy_ratio"], "steps": s["steps"], "wall_s": time.perf_counter() - t0}
 
 
+#: the small run its page in the docs shows, executed when the site is built (docs/demo_runs.py)
+DOCS_RUN = ["--cells", "4", "--cases", "block mu=0.2", "disk mu=0.3", "--t-end", "0.2"]
+
+
 def main(argv: list[str] | None = None) -> list[dict]:
     ap = argparse.ArgumentParser(description="the incline against the rigid-body accelerations")
     ap.add_argument("--cells", type=int, nargs="+", default=[8, 16])

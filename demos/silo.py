@@ -97,6 +97,10 @@ def figure(cases: dict, out: Path) -> None:
     plt.close(fig)
 
 
+#: the small run its page in the docs shows, executed when the site is built (docs/demo_runs.py)
+DOCS_RUN = ["--cells", "3", "--t-end", "0.5", "--figure"]
+
+
 def main(argv: list[str] | None = None) -> list[dict]:
     ap = argparse.ArgumentParser(description="granular discharge from a hopper")
     ap.add_argument("--cells", type=int, nargs="+", default=[5, 10])

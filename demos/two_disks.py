@@ -26,6 +26,10 @@ from fempm.scene import run
 from fempm.scenes import two_disks
 
 
+#: the small run its page in the docs shows, executed when the site is built (docs/demo_runs.py)
+DOCS_RUN = ["--mesh", "structured", "--t-end", "0.5"]
+
+
 def main(argv: list[str] | None = None) -> dict:
     ap = argparse.ArgumentParser(description="two colliding disks")
     ap.add_argument("--mesh", default="unstructured", choices=["structured", "unstructured"])

@@ -26,6 +26,10 @@ from fempm.scene import run
 from fempm.scenes import vibrating_bar
 
 
+#: the small run its page in the docs shows, executed when the site is built (docs/demo_runs.py)
+DOCS_RUN = ["--cells", "16"]
+
+
 def main(argv: list[str] | None = None) -> dict:
     ap = argparse.ArgumentParser(description="vibrating bar")
     ap.add_argument("--cells", type=int, default=16)

@@ -66,6 +66,10 @@ def figure(profiles: dict, out: Path) -> None:
     plt.close(fig)
 
 
+#: the small run its page in the docs shows, executed when the site is built (docs/demo_runs.py)
+DOCS_RUN = ["--cells", "32", "64", "--figure"]
+
+
 def main(argv: list[str] | None = None) -> list[dict]:
     ap = argparse.ArgumentParser(description="a pulse into an absorbing or a fixed end")
     ap.add_argument("--cells", type=int, nargs="+", default=[32, 64, 128, 256])

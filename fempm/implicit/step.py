@@ -30,12 +30,11 @@ A Newton solve that fails with the configured line search is taken once more wit
 steps (PETSc's ``basic`` line search). A step whose Newton iterations still do not converge is
 not accepted: it is taken again as two halves
 (each of which may be halved again, up to ``StepOptions.max_cuts`` times), and every cut is
-counted in :attr:`fempm.stepping.solver.StepRecord.cut_steps`.
+counted in :attr:`fempm.stepping.state.StepRecord.cut_steps`.
 """
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING
 
 import dolfinx.la
 import numpy as np
@@ -48,13 +47,12 @@ from fempm.implicit.fbar import FBarIncrementOperator, PatchCoupling
 from fempm.implicit.newton import Newton, null_pivots
 from fempm.implicit.operator import IncrementOperator
 from fempm.stepping.particle_stages import ParticleStages
+from fempm.stepping.state import StepState
 from fempm.stepping.loads import external_forces
 from fempm.transfer.basis import is_nonnegative
 from fempm.transfer.grid_solves import negative_basis_message
 from fempm.transfer.mapping import SUPPORT_TOL
 
-if TYPE_CHECKING:
-    from fempm.stepping.solver import ExplicitSolver
 
 #: the residual's round-off floor in machine epsilons of |J|_inf max(|du|_inf, |u|_inf) sqrt(N)
 #: (:meth:`ImplicitStep._round_off`)
@@ -64,7 +62,7 @@ __all__ = ["ImplicitStep"]
 
 
 class ImplicitStep:
-    """The implicit step of ``solver`` (see the module): it composes the particles' stages of a
+    """The implicit step of ``state`` (see the module): it composes the particles' stages of a
     step (:class:`~fempm.stepping.particle_stages.ParticleStages`: the basis, the kinematics and
     the laws, the motion, the checks, the relocation) with its own Newton solve of the grid.
 
@@ -74,27 +72,27 @@ class ImplicitStep:
         TypeError: A law without a tangent, unless ``StepOptions(tangent="finite-difference")``.
     """
 
-    def __init__(self, solver: ExplicitSolver):
-        self.solver = solver
-        self.options = opts = solver.options
-        self.particle_stages = ParticleStages(solver)
-        if solver.contact is not None:
+    def __init__(self, state: StepState):
+        self.state = state
+        self.options = opts = state.options
+        self.particle_stages = ParticleStages(state)
+        if state.contact is not None:
             raise ValueError("the implicit step does not take contact between bodies (contact=...) yet")
-        if not solver.conditions.zero_components:
+        if not state.conditions.zero_components:
             raise ValueError(f"the implicit step takes fixed dofs and slip walls normal to a coordinate axis, not "
-                             f"{' or '.join(solver.conditions.other_kinds)}: take the explicit step")
+                             f"{' or '.join(state.conditions.other_kinds)}: take the explicit step")
         if not opts.finite_difference_tangent:
-            for mat in solver.materials:
+            for mat in state.materials:
                 if not hasattr(mat, "tangent"):
                     raise TypeError(f"{type(mat).__name__} has no tangent(F, G, sigma, state), which the implicit step "
                                     "needs: give the law one, or take StepOptions(tangent='finite-difference') "
                                     "(on the command line --tangent finite-difference)")
         self.integration = opts.integration
         self.consistent = opts.mass_model.matrix
-        if self.integration.inertia and not self.consistent and not is_nonnegative(solver.V.element.basix_element):
+        if self.integration.inertia and not self.consistent and not is_nonnegative(state.V.element.basix_element):
             raise ValueError("Newmark's inertia: " + negative_basis_message(opts.mass_model.label,
-                                                                             solver.V.element.basix_element.degree))
-        self.newton = Newton(solver.particles.comm)
+                                                                             state.V.element.basix_element.degree))
+        self.newton = Newton(state.particles.comm)
         self.last = None  # the NewtonResult of the last accepted (sub)step
         self.last_failure = ""  # what the last failed Newton solve reported
 
@@ -107,15 +105,15 @@ class ImplicitStep:
         if dt is None or not dt > 0.0:
             raise ValueError(f"the implicit step needs a time step dt > 0 (got {dt}): it is not bound by the CFL "
                              "condition, so there is no stable step to default to")
-        record = self.solver.record
-        record.load_work, record.load_impulse = 0.0, np.zeros(self.solver.particles.gdim)
+        record = self.state.record
+        record.load_work, record.load_impulse = 0.0, np.zeros(self.state.particles.gdim)
         if self.integration.inertia:
-            record.reaction = np.zeros(self.solver.particles.gdim)
-        self._advance(self.solver.t, dt, 0)
+            record.reaction = np.zeros(self.state.particles.gdim)
+        self._advance(self.state.t, dt, 0)
         return dt
 
     def _advance(self, t: float, dt: float, cuts: int) -> None:
-        s = self.solver
+        s = self.state
         if self._try(t, dt):
             return
         if cuts == self.options.max_cuts:
@@ -127,7 +125,7 @@ class ImplicitStep:
 
     def _try(self, t: float, dt: float) -> bool:
         """One Newton solve over [t, t + dt]; the particles updated if it converged."""
-        s, p, integ = self.solver, self.solver.particles, self.integration
+        s, p, integ = self.state, self.state.particles, self.integration
         d = p.gdim
         basis = self.particle_stages.open_basis()
         fbar = self.options.volumetric_average is not None
@@ -205,7 +203,7 @@ class ImplicitStep:
     def _loads(self, op: IncrementOperator, t: float) -> npt.NDArray:
         """The nodal external forces at time ``t`` (owned + ghost dofs, d), quasi-static ones
         scaled by the load ramp."""
-        s = self.solver
+        s = self.state
         f = op.nodal(external_forces(s.loads, s.particles, t))
         if not self.integration.inertia and self.options.load_ramp is not None:
             f *= min(1.0, t / self.options.load_ramp)
@@ -227,7 +225,7 @@ class ImplicitStep:
         :math:`\tfrac12 \Delta t (F^n + F^{n+1})` over the accepted (sub)step ``[t, t + dt]`` to
         the record (``fext``: the nodal loads at its end, ``du``: its increment; owned dofs,
         summed over ranks)."""
-        record, comm = self.solver.record, self.solver.particles.comm
+        record, comm = self.state.record, self.state.particles.comm
         mean = 0.5 * (self._loads(op, t) + fext)[:owned]
         sums = comm.allreduce(np.concatenate([[float(np.einsum("nd,nd->", mean, du[:owned]))], mean.sum(axis=0)]))
         record.load_work += float(sums[0])
@@ -247,7 +245,7 @@ class ImplicitStep:
         :math:`(1-\alpha)(P^n - \sum_a m_a v_a)`. ``motion``: the converged increment and the
         projected :math:`v, a` (owned + ghost dofs, d); ``m``: the lumped masses; ``free``: the
         owned dofs' free components."""
-        s, integ = self.solver, self.integration
+        s, integ = self.state, self.integration
         p = s.particles
         du, v, a = motion
         owned = len(free)
@@ -266,7 +264,7 @@ class ImplicitStep:
         search then creeps); the :class:`~fempm.implicit.newton.NewtonResult` that converged,
         else None (:attr:`last_failure` says why). A singular quasi-static tangent stops the run.
         ``floor``: the residual's round-off floor at an iterate (:meth:`_round_off`)."""
-        s = self.solver
+        s = self.state
         failures = []
         for line_search in (None, "basic"):
             x.array[:] = guess
@@ -316,7 +314,7 @@ class ImplicitStep:
         projection of the momenta :math:`\sum_p M_p N_a [v_p, a_p]` with the step's mass, the
         lumped :math:`m_a` or the consistent matrix (a basis with negative values, P2
         Lagrange, needs the matrix: its lumped masses vanish at the vertices). Collective."""
-        p = self.solver.particles
+        p = self.state.particles
         f = p.fields
         mv = op.nodal(p.mass[:, None] * np.hstack([f["v"], f["a"]]))
         if not self.consistent:
@@ -331,7 +329,7 @@ class ImplicitStep:
         :data:`SUPPORT_TOL` of the largest). Not the lumped mass: the vertex functions of P2
         Lagrange on simplices integrate to zero, and their lumped masses vanish or turn negative
         where particles plainly reach them."""
-        s = self.solver
+        s = self.state
         d = s.particles.gdim
         free = np.ones((num_local, d), dtype=np.bool_)
         space = s.conditions.free(d)
@@ -342,7 +340,7 @@ class ImplicitStep:
 
     def _update(self, basis, op: IncrementOperator, du: npt.NDArray, v: npt.NDArray, a: npt.NDArray, dt: float) -> None:
         """The particles after the converged increment ``du`` (see the module)."""
-        s, p, integ = self.solver, self.solver.particles, self.integration
+        s, p, integ = self.state, self.state.particles, self.integration
         f = p.fields
         if integ.inertia:
             a_new = integ.acceleration(du, v, a, dt)

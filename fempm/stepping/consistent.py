@@ -28,9 +28,8 @@ import numpy.typing as npt
 
 from fempm.kernels import consistent as kc
 from fempm.kernels.shape import space_of
-from fempm.stepping.grid import Grid
 from fempm.stepping.mass_systems import ConsistentSystems
-from fempm.stepping.nodal import NodalMass, sum_ghosts
+from fempm.stepping.nodal import NodalLayout, NodalMass, sum_ghosts
 from fempm.transfer.mass_models import MASS_RATIO_ITERATIONS
 
 __all__ = ["RATIO_EVERY", "ConsistentNodalMass"]
@@ -44,30 +43,30 @@ class ConsistentNodalMass(NodalMass):
 
     fusable = False  # the grid update solves with the consistent matrix
 
-    def __init__(self, grid: Grid):
-        super().__init__(grid)
-        solver, opts = grid.solver, grid.options
+    def __init__(self, layout: NodalLayout):
+        super().__init__(layout)
+        state, opts = layout.state, layout.options
         # no row lumped on a basis with negative values (P2 Lagrange): it could make the matrix
         # indefinite (as fempm.transfer.Projector)
-        nonnegative = space_of(grid.cell) != (2, False)
-        self.systems = ConsistentSystems(solver.V, grid.cell_dofs, grid.free, grid.conditions.fixed_mask(),
+        nonnegative = space_of(layout.cell) != (2, False)
+        self.systems = ConsistentSystems(state.V, layout.cell_dofs, layout.free, layout.conditions.fixed_mask(),
                                          prefix=opts.petsc_options_prefix,
                                          lump_below=opts.lump_below if nonnegative else 0.0,
-                                         always_lumped=grid.conditions.friction_dofs if nonnegative else None,
+                                         always_lumped=layout.conditions.friction_dofs if nonnegative else None,
                                          nonnegative=nonnegative)
-        self.cell_mass = kc.cell_mass(grid.cell)
-        self._ghosted = grid.nodal_array(grid.d)
+        self.cell_mass = kc.cell_mass(layout.cell)
+        self._ghosted = layout.nodal_array(layout.d)
         self._signed: tuple | None = None  # a kept nodal array: degree-2 Lagrange's signed lumped masses
         self._accel: npt.NDArray | None = None  # the last acceleration, the warm start of its solve
         self._spare: npt.NDArray | None = None  # the array of the acceleration before it
         self.ratio_age = RATIO_EVERY  # steps since the stable-step estimate
         self._ratio_key = -1
 
-    def stable_factor(self, nodal, need: bool) -> float:
+    def stable_factor(self, nodal, need: bool, top: float) -> float:
         """The mass pass and the matrices' values; :math:`\\sqrt{0.8\\,\\lambda_{min}}` (1 with
         lumped forces)."""
-        g = self.grid
-        s = g.solver
+        g = self.layout
+        s = g.state
         p = s.particles
         sy = self.systems
         while True:
@@ -111,7 +110,7 @@ class ConsistentNodalMass(NodalMass):
         r"""The lumped masses :math:`\sum_p M_p N_{ip}`: the P2G mass column, or for a signed
         basis (degree-2 Lagrange, whose column holds :math:`\sum_p M_p |N_{ip}|`) :math:`M_C 1`,
         one more particle pass."""
-        g = self.grid
+        g = self.layout
         if space_of(g.cell) != (2, False):
             return nodal[:, 0]
         vec, out = self._signed = self._signed or g.nodal_array(1)
@@ -129,8 +128,9 @@ class ConsistentNodalMass(NodalMass):
             u[:] = arr
         return u
 
-    def velocity(self, mass, mom, cv: int, active_min: float, guess=None, centroids=None) -> npt.NDArray:
-        g = self.grid
+    def velocity(self, mass, mom, cv: int, active_min: float, guess=None, centroids=None,
+                 forces: int | None = None) -> npt.NDArray:
+        g = self.layout
         v = np.zeros((g.num_dofs, g.d))
         self.systems.solve(mom, cv, v, guess)
         g.conditions.apply(v, centroids)
@@ -138,7 +138,7 @@ class ConsistentNodalMass(NodalMass):
 
     def advance(self, mass, force, cf: int, active_min: float, weak_max: float, dt: float, v_old: npt.NDArray,
                 centroids=None) -> npt.NDArray:
-        g = self.grid
+        g = self.layout
         opts = g.options
         sy = self.systems
         a = self._spare if self._spare is not None else np.zeros((g.num_dofs, g.d))

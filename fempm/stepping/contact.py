@@ -175,22 +175,22 @@ def shared_cells(particles, field: str) -> int:
 
 
 class ContactGrid(BasisGrid):
-    """A velocity field per particle group of ``solver.contact``, corrected where groups meet
+    """A velocity field per particle group of ``state.contact``, corrected where groups meet
     (see the module); numpy stages on the particle basis, the schemes USL and MUSL."""
 
-    def __init__(self, solver: StepState):
-        super().__init__(solver)
+    def __init__(self, state: StepState):
+        super().__init__(state)
         if not self.options.stages.forces_with_map:
             raise ValueError(f"contact supports the schemes USL and MUSL (got {self.options.stages})")
-        self.contact = solver.contact
+        self.contact = state.contact
 
     def groups(self) -> npt.NDArray[np.int64]:
         """Each particle's group, checked (:func:`particle_groups`)."""
-        group, self.num_groups = particle_groups(self.contact, self.solver.particles)
+        group, self.num_groups = particle_groups(self.contact, self.state.particles)
         return group
 
     def open(self, dt: float | None) -> float:
-        s, opts, contact = self.solver, self.options, self.contact
+        s, opts, contact = self.state, self.options, self.contact
         p = s.particles
         self.basis = basis = self.open_basis()
         group = self.groups()
@@ -234,7 +234,7 @@ class ContactGrid(BasisGrid):
         the update ``v`` is, for the dashpots)."""
         for g in range(self.num_groups):
             if not self.rigid[g]:
-                self.solver.conditions.apply(v[g], self.centroids[g], dt)
+                self.state.conditions.apply(v[g], self.centroids[g], dt)
             v[g] = self.basis.update_ghosts(v[g])
         return v
 
@@ -243,7 +243,7 @@ class ContactGrid(BasisGrid):
         velocities are not corrected: the FLIP increment v_new - v_old then carries the whole
         contact impulse of the step to the particles (and MUSL's re-mapped ones are not
         corrected again)."""
-        p = self.solver.particles
+        p = self.state.particles
         self.momentum = mom = [p2g(self.basis, (p.mass * k)[:, None] * p.fields["v"]) for k in self.masks]
         return self.constrain(np.stack([self.ops[g].solve(mom[g]) if g in self.ops else mom[g] * self.inv[g]
                                         for g in range(self.num_groups)]))
@@ -266,7 +266,7 @@ class ContactGrid(BasisGrid):
                      kinematics: bool = False, move: bool = False, remap: bool = False) -> None:
         """Every particle takes its own group's field; rigid particles keep their velocity and
         deformation (L = 0) and move with that velocity."""
-        p = self.solver.particles
+        p = self.state.particles
         fld = p.fields
         d = p.gdim
         vp, at_grid, L = fld["v"].copy(), fld["v"].copy(), np.zeros((len(p), d, d))
@@ -295,7 +295,7 @@ class ContactGrid(BasisGrid):
 
     def corner_velocity(self, v_new: npt.NDArray) -> npt.NDArray:
         """Each body's corners move with its own field, rigid ones rigidly."""
-        fld = self.solver.particles.fields
+        fld = self.state.particles.fields
         corner_velocity = np.repeat(fld["v"][:, None, :], fld["corners"].shape[1], axis=1)
         for g in self.deformable:
             k = self.masks[g]

@@ -43,27 +43,27 @@ __all__ = ["ContactPointGrid"]
 
 
 class ContactPointGrid(PointGrid):
-    """A velocity field per particle group of ``solver.contact``, corrected where groups meet
+    """A velocity field per particle group of ``state.contact``, corrected where groups meet
     (:mod:`fempm.stepping.contact`), in the compiled passes (see the module)."""
 
     takes = "contact with point particles, lumped mass, USL or MUSL, on a space of the compiled passes"
 
     @classmethod
-    def refusal(cls, solver: StepState) -> str | None:
-        """Why ``solver``'s contact does not take this grid (None where it does): the options,
+    def refusal(cls, state: StepState) -> str | None:
+        """Why ``state``'s contact does not take this grid (None where it does): the options,
         space and mesh of a :class:`~fempm.stepping.lumped.PointGrid` with lumped mass, USL or MUSL."""
-        reason = PointGrid.refusal(solver)
+        reason = PointGrid.refusal(state)
         if reason is not None:
             return reason
-        if type(solver.options.mass_model) is not Lumped:
-            return f"mass {solver.options.mass_model.label} with contact: lumped"
-        if not solver.options.stages.forces_with_map:
-            return f"scheme {solver.options.stages.name} with contact: USL or MUSL"
+        if type(state.options.mass_model) is not Lumped:
+            return f"mass {state.options.mass_model.label} with contact: lumped"
+        if not state.options.stages.forces_with_map:
+            return f"scheme {state.options.stages.name} with contact: USL or MUSL"
         return None
 
-    def __init__(self, solver: StepState):
-        super().__init__(solver)
-        self.contact = solver.contact
+    def __init__(self, state: StepState):
+        super().__init__(state)
+        self.contact = state.contact
         self.num_groups = 0
         #: the number of contact nodes (two or more groups with mass) of the last grid update, on this rank
         self.contacts = 0
@@ -73,7 +73,7 @@ class ContactPointGrid(PointGrid):
         self.positions = self.conditions.needs_positions or self.contact.gap is not None
         self.all_free = np.ones_like(self.free)
         # with a gap, the nodes touching a rigid body share its impulse over their patches
-        self.patches = Patches.of_space(solver.V, index_map=self.index_map).sums if rigid else None
+        self.patches = Patches.of_space(state.V, index_map=self.index_map).sums if rigid else None
 
     def _layout(self, G: int) -> None:
         """The kept nodal arrays for ``G`` groups: [m | m v | f | grad m] (``stride`` columns)
@@ -93,7 +93,7 @@ class ContactPointGrid(PointGrid):
         return array.reshape(len(array), G, -1)[:, :, start:start + k].transpose(1, 0, 2)
 
     def open(self, dt: float | None) -> float:
-        s, opts, contact = self.solver, self.options, self.contact
+        s, opts, contact = self.state, self.options, self.contact
         p = s.particles
         d = self.d
         self.group, G = particle_groups(contact, p)
@@ -187,7 +187,7 @@ class ContactPointGrid(PointGrid):
     def gather_pass(self, v_new, v_old, flip: float, dt: float, blend: bool, kinematics: bool, move: bool,
                     state: tuple) -> tuple:
         """The G2P pass, each particle with its group's field."""
-        p = self.solver.particles
+        p = self.state.particles
         return self.kernels.g2p_update(p.cells, p.X, self.K, self.cell_dofs, v_new, v_old, flip, dt, blend,
                                        kinematics, move, *state, group=self.group, rigid=self.rigid)
 

@@ -66,22 +66,22 @@ class DomainGrid(PointGrid):
              "on degree 1 of the compiled passes, no wall that checks contact by position")
 
     @classmethod
-    def refusal(cls, solver: StepState) -> str | None:
-        """Why ``solver``'s domain, mass, conditions, space and mesh do not take this grid (None
+    def refusal(cls, state: StepState) -> str | None:
+        """Why ``state``'s domain, mass, conditions, space and mesh do not take this grid (None
         where they do)."""
-        dom = solver.options.particle_domain
-        cell = compiled_space(solver)
+        dom = state.options.particle_domain
+        cell = compiled_space(state)
         if cell is None:
-            return space_refusal(solver)
+            return space_refusal(state)
         if space_of(cell) != (1, False):
             return "the particle domains' compiled passes take degree 1 (P1 on affine or multilinear cells)"
-        if type(solver.options.mass_model) not in (Lumped, FMPM):
-            return f"mass {solver.options.mass_model.label} with particle domains: lumped or FMPM"
-        if solver.conditions.needs_positions:
+        if type(state.options.mass_model) not in (Lumped, FMPM):
+            return f"mass {state.options.mass_model.label} with particle domains: lumped or FMPM"
+        if state.conditions.needs_positions:
             return "a wall or collider that checks contact by position takes point particles"
         # these types themselves: a subclass may make or move its samples otherwise
         if type(dom) is GIMP and dom.exact:  # pieces averaged at their centroids: simplices and axis-aligned boxes
-            geo = solver.particles.locator.geometry
+            geo = state.particles.locator.geometry
             if not (cell in ("interval", "triangle", "tetrahedron")
                     or (cell in ("quadrilateral", "hexahedron") and geo.axis_aligned)):
                 return "exact GIMP takes simplices and axis-aligned boxes (a Gauss-rule GIMP takes any cell)"
@@ -90,8 +90,8 @@ class DomainGrid(PointGrid):
             return f"particle domain {dom.name}: CPDI1, CPDI2 or GIMP"
         return None
 
-    def __init__(self, solver: StepState):
-        super().__init__(solver)
+    def __init__(self, state: StepState):
+        super().__init__(state)
         dom = self.options.particle_domain
         self.cpdi1 = isinstance(dom, CPDI1)
         self.exact = isinstance(dom, GIMP) and dom.exact
@@ -100,12 +100,12 @@ class DomainGrid(PointGrid):
         self.no_weights = np.zeros((0, 2**self.d))  # CPDI1's (not read)
         self.no_corners = (np.zeros((0, self.d, self.d)), np.zeros((0, self.d)), np.zeros((0, self.d)))
         if self.exact:  # the cells' vertices and bounding boxes, the most pieces of a box so far
-            geo = solver.particles.locator.geometry
+            geo = state.particles.locator.geometry
             nodes = geo.x[geo.dofmap[:, : CELLS[self.cell][1]]]
             self.vertices = np.ascontiguousarray(nodes)
             self.bounds = np.ascontiguousarray(nodes.min(axis=1)), np.ascontiguousarray(nodes.max(axis=1))
             self.pieces = 2**self.d
-            self.frontier = frontier_cells(solver.particles.sample_locator)
+            self.frontier = frontier_cells(state.particles.sample_locator)
         self.signs = corner_signs(self.d)
         self.generic: SingleFieldGrid | None = None  # for steps with samples beyond the ghost cells
         self.stencil: tuple = (np.zeros((0, 0), dtype=np.int32),)  # the samples' cells, coordinates, weights
@@ -116,17 +116,17 @@ class DomainGrid(PointGrid):
     def for_step(self) -> Grid:
         super().for_step()
         missing = self._samples()
-        p = self.solver.particles
+        p = self.state.particles
         if p.comm.allreduce(missing) if p.comm.size > 1 else missing:
             if self.generic is None:
-                self.generic = SingleFieldGrid(self.solver)
+                self.generic = SingleFieldGrid(self.state)
             return self.generic
         return self
 
     def _samples(self) -> int:
         """Make this step's samples (cells, reference coordinates, weights); returns the number
         left on no local cell (0 on one rank)."""
-        p = self.solver.particles
+        p = self.state.particles
         dom = self.options.particle_domain
         d = self.d
         n, Q = len(p), len(self.signs)
@@ -166,7 +166,7 @@ class DomainGrid(PointGrid):
         their weights left to the passes (from F at the start of the step: a copy of it where the
         stress is updated before the forces are mapped, USF); returns the number left on no
         local cell."""
-        p = self.solver.particles
+        p = self.state.particles
         n, Q = len(p), len(self.signs)
         F, lp = p.fields["F"], np.ascontiguousarray(half_widths(p))
         if not self.options.stages.forces_with_map:
@@ -190,7 +190,7 @@ class DomainGrid(PointGrid):
         """Exact GIMP: the pieces of the particles' boxes in the cells as samples
         (:func:`fempm.kernels.boxes.box_samples`); returns the number of boxes that may reach
         cells this rank does not have (or meet more cells than the kernel searches)."""
-        p = self.solver.particles
+        p = self.state.particles
         ell = half_widths(p, self.options.particle_domain.deform)
         cell_type = CELLS[self.cell][0], CELLS[self.cell][2]
         while True:
@@ -223,7 +223,7 @@ class DomainGrid(PointGrid):
         """The samples the vertex-star search did not find: located through the tree; on one rank
         those beyond the mesh clamped or cut (as :class:`~fempm.transfer.basis.ParticleBasis`).
         Returns the number left on no local cell (several ranks)."""
-        p = self.solver.particles
+        p = self.state.particles
         loc = p.sample_locator
         Q = sc.shape[1]
         rows = np.flatnonzero(sc.ravel() < 0)
@@ -263,7 +263,7 @@ class DomainGrid(PointGrid):
         super().to_particles(v_new, v_old, dt, blend=blend, kinematics=kinematics, move=move, remap=remap)
         if not tracked:
             return
-        s = self.solver
+        s = self.state
         p = s.particles
         if self.moved is not None:  # moved and located in the pass
             corners, bad = self.moved
@@ -287,17 +287,17 @@ class DomainGrid(PointGrid):
         self._corner_weights = (corners, w, g, missing)  # the next step's, while the particles keep this array
 
     def scatter_pass(self, *args, bound: bool = False) -> float:
-        p = self.solver.particles
+        p = self.state.particles
         return self.passes.scatter(p.cells, *self.stencil, self.K, self.cell_dofs, *args, bound=bound)
 
     def mass_apply(self, y: npt.NDArray, lump: npt.NDArray, out: npt.NDArray) -> None:
         """FMPM's :math:`M_C y` with the averaged basis (the samples' ``mass_apply``)."""
-        p = self.solver.particles
+        p = self.state.particles
         self.passes.mass_apply(p.cells, *self.stencil, self.K, self.cell_dofs, p.mass, y, lump, out)
 
     def gather_pass(self, v_new, v_old, flip: float, dt: float, blend: bool, kinematics: bool, move: bool,
                     state: tuple) -> tuple:
-        p = self.solver.particles
+        p = self.state.particles
         corners = None
         if move and self.passes.tracks and self.options.particle_domain.tracks_corners:  # CPDI2: corners moved here
             yc = np.ascontiguousarray(p.fields["corners"], dtype=np.float64)

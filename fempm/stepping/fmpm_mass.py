@@ -24,8 +24,7 @@ import numpy.typing as npt
 
 from fempm.kernels import consistent as kc
 from fempm.kernels import fmpm as kf
-from fempm.stepping.grid import Grid
-from fempm.stepping.nodal import NodalMass, sum_ghosts
+from fempm.stepping.nodal import NodalLayout, NodalMass, sum_ghosts
 
 __all__ = ["FMPMNodalMass"]
 
@@ -37,20 +36,20 @@ class FMPMNodalMass(NodalMass):
 
     fusable = False  # the grid update takes particle passes
 
-    def __init__(self, grid: Grid):
-        super().__init__(grid)
-        self.order = grid.options.mass_model.order
+    def __init__(self, layout: NodalLayout):
+        super().__init__(layout)
+        self.order = layout.options.mass_model.order
         self._work: dict = {}  # (columns, lumping) -> kept nodal array of M_C y (and M_C 1_l)
         self._acceleration: tuple | None = None  # (force array, column, a): solved with the velocity
-        self._free = {1: grid.free}  # fields side by side -> their free components (grid.free is the run's)
-        self.friction = grid.conditions.friction_dofs
+        self._free = {1: layout.free}  # fields side by side -> their free components (layout.free is the run's)
+        self.friction = layout.conditions.friction_dofs
         self.lump = np.zeros(0, dtype=np.bool_)
 
-    def stable_factor(self, nodal, need: bool) -> float:
+    def stable_factor(self, nodal, need: bool, top: float) -> float:
         r"""The lumped rows of this step; :math:`1/\sqrt{k}` (1 with lumped forces)."""
-        g = self.grid
+        g = self.layout
         m = nodal[:, 0]
-        lump = m < g.options.lump_below * g.top if g.options.lump_below > 0.0 else np.zeros(len(m), dtype=np.bool_)
+        lump = m < g.options.lump_below * top if g.options.lump_below > 0.0 else np.zeros(len(m), dtype=np.bool_)
         if self.friction is not None:
             lump[: len(self.friction)] |= self.friction[: len(lump)]
         self.lump = lump if lump.any() else np.zeros(0, dtype=np.bool_)
@@ -62,7 +61,7 @@ class FMPMNodalMass(NodalMass):
         """The kept nodal arrays (vector, array) of :meth:`mc` for ``columns`` columns."""
         key = (columns, len(self.lump) > 0)
         if key not in self._work:
-            self._work[key] = self.grid.nodal_array(key[0] + key[1])
+            self._work[key] = self.layout.nodal_array(key[0] + key[1])
             self._work[key][1].fill(0.0)  # rows without mass are never cleared (nor read)
         return self._work[key]
 
@@ -72,7 +71,7 @@ class FMPMNodalMass(NodalMass):
         :meth:`work` (its rows with mass cleared by the pass over the dofs before: the lumped
         solve or the last Richardson step)."""
         vec, out = self.work(y.shape[1])
-        self.grid.mass_apply(y, self.lump, out)
+        self.layout.mass_apply(y, self.lump, out)
         sum_ghosts(vec)
         return out
 
@@ -83,7 +82,7 @@ class FMPMNodalMass(NodalMass):
         (``b[:, cb:cb+fields*d]``), each column solved as on its own, in one particle pass a
         step. Returns the fields' solutions, each a contiguous (dofs, d) array; the passes over
         the dofs also clear the next :meth:`mc`'s output."""
-        g = self.grid
+        g = self.layout
         d = g.d
         if fields not in self._free:
             self._free[fields] = np.ascontiguousarray(np.tile(g.free, (1, fields)))
@@ -100,16 +99,17 @@ class FMPMNodalMass(NodalMass):
             x = out[0]
         return out[:fields]  # (fields = 1: the second is empty)
 
-    def velocity(self, mass, mom, cv: int, active_min: float, guess=None, centroids=None) -> npt.NDArray:
+    def velocity(self, mass, mom, cv: int, active_min: float, guess=None, centroids=None,
+                 forces: int | None = None) -> npt.NDArray:
         """The velocity solve; where the forces of the step sit next to the momenta in ``mom``
         (USL and MUSL: one P2G pass maps both) the acceleration is solved with it, its
         Richardson steps sharing the velocity's particle passes, and kept for :meth:`advance`."""
-        g = self.grid
+        g = self.layout
         opts = g.options
         d = g.d
-        if opts.stages.forces_with_map and not opts.lumped_forces and g.force is mom and g.cf == cv + d:
+        if forces == cv + d and not opts.lumped_forces:
             v, a = self.solve(mass, mom, cv, active_min, fields=2)
-            self._acceleration = (mom, g.cf, a)
+            self._acceleration = (mom, forces, a)
         else:
             v = self.solve(mass, mom, cv, active_min)[0]
         g.conditions.apply(v, centroids)
@@ -117,7 +117,7 @@ class FMPMNodalMass(NodalMass):
 
     def advance(self, mass, force, cf: int, active_min: float, weak_max: float, dt: float, v_old: npt.NDArray,
                 centroids=None) -> npt.NDArray:
-        g = self.grid
+        g = self.layout
         if g.options.lumped_forces:
             m = mass[:, 0]
             active = (m > active_min)[:, None]

@@ -42,10 +42,10 @@ __all__ = ["BasisGrid", "Grid", "SingleFieldGrid"]
 
 
 class Grid:
-    """The stages of an explicit step on the background grid of ``solver``.
+    """The stages of an explicit step on the background grid of ``state``.
 
     Velocities are (owned + ghost dofs, d) arrays. A grid reads the solver's particles,
-    options, loads and conditions, and reports to its :class:`~fempm.stepping.solver.StepRecord`;
+    options, loads and conditions, and reports to its :class:`~fempm.stepping.state.StepRecord`;
     the solver alone advances its time and step count.
     """
 
@@ -53,14 +53,14 @@ class Grid:
     takes = "every option of its kind"
 
     @classmethod
-    def refusal(cls, solver: StepState) -> str | None:
-        """Why ``solver``'s options, space and mesh do not take this grid (None where they do;
+    def refusal(cls, state: StepState) -> str | None:
+        """Why ``state``'s options, space and mesh do not take this grid (None where they do;
         the numpy grids take every option of their kind)."""
         return None
 
-    def __init__(self, solver: StepState):
-        self.solver = solver
-        self.options = solver.options
+    def __init__(self, state: StepState):
+        self.state = state
+        self.options = state.options
         #: whether this step's passes also sum the new state's energies (:meth:`state_sums`)
         self.totals = False
         self._reaction_rows: npt.NDArray | None = None
@@ -118,7 +118,7 @@ class Grid:
         to ``v_new``, and the impulse of the damping (:mod:`fempm.stepping.reactions`), on this
         rank, into the step record's ``reaction`` and ``damping_impulse`` (nothing without
         conditions on given nodes, or without damping). Called by the blend."""
-        s, opts = self.solver, self.options
+        s, opts = self.state, self.options
         held = s.conditions.held_dofs
         damping = float(opts.damping)
         if held is None and damping == 0.0:
@@ -163,10 +163,10 @@ class BasisGrid(Grid):
     """The numpy stages on a :class:`~fempm.transfer.basis.ParticleBasis` (every particle domain,
     mass model and space): the reference of the compiled passes."""
 
-    def __init__(self, solver: StepState):
-        super().__init__(solver)
+    def __init__(self, state: StepState):
+        super().__init__(state)
         #: the particles' side of the step: basis, kinematics, motion, checks, relocation
-        self.particle_stages = ParticleStages(solver)
+        self.particle_stages = ParticleStages(state)
         #: the step's particle basis (set when the grid opens a step)
         self.basis: ParticleBasis | None = None
 
@@ -193,7 +193,7 @@ class BasisGrid(Grid):
         """The step's mass with its constraints on ``basis``; ``weights``: per-particle masses in
         place of the particles' (one body's mass); ``lump_dofs``: further dofs (owned + ghost)
         whose rows are lumped, besides the frictional walls'."""
-        s, opts = self.solver, self.options
+        s, opts = self.state, self.options
         cond = s.conditions
         lumped = cond.friction_dofs
         if lump_dofs is not None:
@@ -206,7 +206,7 @@ class BasisGrid(Grid):
     def stable_with(self, mass_ops) -> float:
         """The CFL stable step of the state with these mass operators (the smallest factor of the
         mass model over them; the lumped step with ``lumped_forces``)."""
-        s, opts = self.solver, self.options
+        s, opts = self.state, self.options
         stable = s.stable_dt()
         if opts.lumped_forces:
             return stable
@@ -227,7 +227,7 @@ class BasisGrid(Grid):
 
     def external(self) -> npt.NDArray:
         """The external forces on the particles now (:func:`fempm.stepping.loads.external_forces`)."""
-        s = self.solver
+        s = self.state
         return external_forces(s.loads, s.particles, s.t)
 
     def internal_and_external(self, basis: ParticleBasis, fext: npt.NDArray,
@@ -236,7 +236,7 @@ class BasisGrid(Grid):
         with the particles' external forces ``fext`` (:meth:`external`), summed over ranks
         (``weights``: a 0/1 factor per particle, one body's forces); point particles in one
         compiled scatter (:mod:`fempm.kernels`)."""
-        s = self.solver
+        s = self.state
         p = s.particles
         volume = p.volume if weights is None else p.volume * weights
         if weights is not None:
@@ -258,7 +258,7 @@ class SingleFieldGrid(BasisGrid):
     """One velocity field for every particle, numpy stages (see :class:`BasisGrid`)."""
 
     def open(self, dt: float | None) -> float:
-        s, opts = self.solver, self.options
+        s, opts = self.state, self.options
         p = s.particles
         self.use_basis(self.open_basis())
         stable = self.stable_with([self.mass_op])
@@ -271,26 +271,26 @@ class SingleFieldGrid(BasisGrid):
     def use_basis(self, basis: ParticleBasis) -> None:
         """Map with ``basis``: its nodal centres of mass where a condition needs them, and the
         step's mass on it (collective)."""
-        p = self.solver.particles
+        p = self.state.particles
         self.basis = basis
-        self.centroids = nodal_centroids(basis, p.mass, p.x) if self.solver.conditions.needs_positions else None
+        self.centroids = nodal_centroids(basis, p.mass, p.x) if self.state.conditions.needs_positions else None
         self.mass_op = self.mass_operator(basis)
 
     def map_velocity(self, guess: npt.NDArray | None) -> npt.NDArray:
         """Grid velocity from the particle momenta (P2G + mass solve), constrained."""
-        p = self.solver.particles
+        p = self.state.particles
         self.momentum = p2g(self.basis, p.mass[:, None] * p.fields["v"])
         v = self.mass_op.solve(self.momentum, guess=guess)
-        self.solver.conditions.apply(v, self.centroids)
+        self.state.conditions.apply(v, self.centroids)
         return self.basis.update_ghosts(v)  # extra ghosts (remote domain samples) take their owners' values
 
     def velocity(self, remapped: bool = False) -> npt.NDArray:
-        return self.map_velocity(None if remapped else self.solver.grid_velocity)
+        return self.map_velocity(None if remapped else self.state.grid_velocity)
 
     def initial_velocity(self) -> npt.NDArray:
         """The grid velocity of the present state (P2G of the momenta, the mass solve and the
         conditions) on the space's dofs, nothing advanced or recorded. Collective."""
-        s = self.solver
+        s = self.state
         self.use_basis(ParticleBasis(s.V, s.particles, gradients=False, domain=self.options.particle_domain))
         return self.map_velocity(None)[: self.basis.num_dofs_space]
 
@@ -306,12 +306,12 @@ class SingleFieldGrid(BasisGrid):
             a -= opts.damping * v_old[: len(a)]
         a[self.weak] = 0.0  # nodes with a tiny share of mass keep their mapped velocity, no force update
         v_new = v_old + dt * a
-        self.solver.conditions.apply(v_new, self.centroids, dt)
+        self.state.conditions.apply(v_new, self.centroids, dt)
         return self.basis.update_ghosts(v_new)
 
     def to_particles(self, v_new: npt.NDArray, v_old: npt.NDArray, dt: float, *, blend: bool = False,
                      kinematics: bool = False, move: bool = False, remap: bool = False) -> None:
-        fld = self.solver.particles.fields
+        fld = self.state.particles.fields
         basis = self.basis
         if blend:
             self.record_reaction(v_new, v_old, dt)

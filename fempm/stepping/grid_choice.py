@@ -1,6 +1,6 @@
-"""Which grid steps a solver's options: one registry of the grids, tried in order.
+"""Which grid steps a step state's options: one registry of the grids, tried in order.
 
-Each grid class says why a solver's options, space and mesh do not take it (its ``refusal``
+Each grid class says why a state's options, space and mesh do not take it (its ``refusal``
 classmethod, None where they do) and what it takes (``takes``, for messages). The first grid of
 :data:`GRIDS` that the options take, among those for one field or for contact, steps them:
 
@@ -53,27 +53,27 @@ GRIDS = (
 )
 
 
-def choose_grid(solver: StepState) -> Grid:
-    """The grid for ``solver``'s options (see the module), made.
+def choose_grid(state: StepState) -> Grid:
+    """The grid for ``state``'s options (see the module), made.
 
     Raises:
         ValueError: ``compiled=True`` with F-bar, or where no compiled grid takes the options
             (each one's reason given).
     """
-    fbar = solver.options.volumetric_average is not None
-    if solver.compiled and fbar:
+    fbar = state.options.volumetric_average is not None
+    if state.compiled and fbar:
         raise ValueError("compiled=True with volumetric='fbar': F-bar runs on the numpy step (compiled=None)")
-    compiled = solver.compiled is not False and not fbar
-    contact = solver.contact is not None
+    compiled = state.compiled is not False and not fbar
+    contact = state.contact is not None
     refused = []  # (grid, reason) of the compiled grids passed over
     for entry in GRIDS:
         if entry.contact != contact or (entry.compiled and not compiled):
             continue
-        if not entry.compiled and solver.compiled:
+        if not entry.compiled and state.compiled:
             reasons = "; ".join(f"{grid.__name__} ({grid.takes}): {why}" for grid, why in refused)
             raise ValueError(f"compiled=True, but no compiled grid takes these options: {reasons}")
-        reason = entry.grid.refusal(solver)
+        reason = entry.grid.refusal(state)
         if reason is None:
-            return entry.grid(solver)
+            return entry.grid(state)
         refused.append((entry.grid, reason))
     raise AssertionError("the generic grids take every option")  # pragma: no cover

@@ -43,7 +43,7 @@ from fempm.stepping.grid import Grid
 from fempm.stepping.laws import material_groups, stresses_of
 from fempm.stepping.loads import external_forces
 from fempm.stepping.lumped_mass import NODAL_MASSES, LumpedNodalMass
-from fempm.stepping.nodal import kept_nodal_array, sum_ghosts
+from fempm.stepping.nodal import NodalLayout, kept_nodal_array, sum_ghosts
 from fempm.stepping.spaces import compiled_space, space_refusal
 from fempm.stepping.state import StepState
 from fempm.transfer.centres import NodalCentres
@@ -81,12 +81,12 @@ class PointGrid(Grid):
     takes = "point particles with lumped, consistent or FMPM mass on a space of the compiled passes"
 
     @classmethod
-    def refusal(cls, solver: StepState) -> str | None:
-        """Why ``solver``'s options, space and mesh do not take this grid (None where they do):
+    def refusal(cls, state: StepState) -> str | None:
+        """Why ``state``'s options, space and mesh do not take this grid (None where they do):
         point particles, lumped, consistent (:mod:`fempm.stepping.consistent`) or FMPM
         (:mod:`fempm.stepping.fmpm_mass`) mass, a space of :func:`~fempm.stepping.spaces.compiled_space`."""
-        opts = solver.options
-        space = space_refusal(solver)
+        opts = state.options
+        space = space_refusal(state)
         if space is not None:
             return space
         if type(opts.mass_model) not in NODAL_MASSES:
@@ -95,11 +95,11 @@ class PointGrid(Grid):
             return f"particle domain {opts.particle_domain.name}: point particles"
         return None
 
-    def __init__(self, solver: StepState):
-        super().__init__(solver)
-        p, V = solver.particles, solver.V
+    def __init__(self, state: StepState):
+        super().__init__(state)
+        p, V = state.particles, state.V
         geo = p.locator.geometry
-        self.cell = compiled_space(solver)  # the kernels' cell type
+        self.cell = compiled_space(state)  # the kernels' cell type
         self.x0, self.K = geo.kernel_geometry
         self.kernels = kl.kernels_for(self.cell)
         self.cell_dofs = np.ascontiguousarray(V.dofmap.list, dtype=np.int32)
@@ -107,9 +107,9 @@ class PointGrid(Grid):
         self.num_owned = self.index_map.size_local
         self.num_dofs = self.num_owned + self.index_map.num_ghosts
         d = self.d = p.gdim
-        self.conditions = solver.conditions
+        self.conditions = state.conditions
         self.free = self.conditions.free(d)  # (dof, component) solved for
-        laws = [_law(m) for m in solver.materials]
+        laws = [_law(m) for m in state.materials]
         self.law = np.array([a[0] for a in laws], dtype=np.int64)
         self.lam = np.array([a[1] for a in laws])
         self.mu = np.array([a[2] for a in laws])
@@ -126,7 +126,8 @@ class PointGrid(Grid):
         self._summed = False  # whether they are the last step's
         if space_of(self.cell) == (2, False) and type(self.options.mass_model) is not Consistent:
             raise ValueError(negative_basis_message(self.options.mass_model.label, 2))  # as the numpy step
-        self.mass = NODAL_MASSES[type(self.options.mass_model)](self)
+        layout = NodalLayout(state, self.cell, self.K, self.cell_dofs, self.index_map, self.free, self.mass_apply)
+        self.mass = NODAL_MASSES[type(self.options.mass_model)](layout)
         # every boundary condition a zero component, held by `free`, and a lumped mass: one fused grid pass
         self.fused = self.conditions.zero_components and self.mass.fusable
 
@@ -137,7 +138,7 @@ class PointGrid(Grid):
 
     def _wave_speeds(self) -> npt.NDArray:
         """Wave speeds of the particles whose law has no P-wave modulus (empty if none has)."""
-        s = self.solver
+        s = self.state
         p = s.particles
         if self.all_modulus:
             return np.zeros(0)
@@ -150,7 +151,7 @@ class PointGrid(Grid):
 
     def _external(self, t: float) -> tuple[npt.NDArray, npt.NDArray]:
         """(constant body force g (d,), per-particle external forces (n or 0, d))."""
-        s = self.solver
+        s = self.state
         loads = s.loads
         s.count_terms()
         if not loads.per_particle:
@@ -166,7 +167,7 @@ class PointGrid(Grid):
         or a lower bound of it (:func:`fempm.kernels.lumped._scatter_kernel`; else inf);
         ``velocity``: the vectors the momentum column maps in the place of the particles'
         velocities; ``groups``: the passes' ``group``, ``stride`` and ``cg`` (multi-field contact)."""
-        s = self.solver
+        s = self.state
         p = s.particles
         f = p.fields
         vec, out = nodal
@@ -180,18 +181,18 @@ class PointGrid(Grid):
     def mass_apply(self, y: npt.NDArray, lump: npt.NDArray, out: npt.NDArray) -> None:
         """``out`` += FMPM's :math:`M_C y` on this rank's particles (ghost entries partial sums;
         :func:`fempm.kernels.fmpm.mass_apply`)."""
-        p = self.solver.particles
+        p = self.state.particles
         kf.mass_apply(self.cell)(p.cells, p.X, self.K, self.cell_dofs, p.mass, y, lump, out)
 
     def scatter_pass(self, *args, bound: bool = False, **groups) -> float:
         """The P2G pass (:func:`fempm.kernels.lumped.kernels_for`) with the particles' basis."""
-        p = self.solver.particles
+        p = self.state.particles
         return self.kernels.scatter(p.cells, p.X, self.K, self.cell_dofs, *args, bound=bound, **groups)
 
     def gather_pass(self, v_new, v_old, flip: float, dt: float, blend: bool, kinematics: bool, move: bool,
                     state: tuple) -> tuple:
         """The G2P pass (:func:`fempm.kernels.lumped.kernels_for`) with the particles' basis."""
-        p = self.solver.particles
+        p = self.state.particles
         return self.kernels.g2p_update(p.cells, p.X, self.K, self.cell_dofs, v_new, v_old, flip, dt, blend,
                                        kinematics, move, *state)
 
@@ -205,13 +206,13 @@ class PointGrid(Grid):
     def mass_moments(self, **groups) -> npt.NDArray:
         r"""The first mass moments :math:`\sum_p M_p N_{ip} x_p` into the kept ``_moments``
         array, summed over ranks (``groups``: as for :meth:`_scatter`)."""
-        p = self.solver.particles
+        p = self.state.particles
         return self._scatter(self._moments, np.zeros(self.d), np.zeros((0, self.d)), -1, 0, -1, velocity=p.x,
                              **groups)[0]
 
     def _stable_time(self) -> float:
         r"""The stable time of the state, :math:`\min_p h_{c(p)} / (c_p + |v_p|)` over all ranks."""
-        s = self.solver
+        s = self.state
         p = s.particles
         f = p.fields
         local = self.kernels.scatter(p.cells, p.X, self.K, self.cell_dofs, p.mass, f["v"], p.volume, f["sigma"],
@@ -224,7 +225,7 @@ class PointGrid(Grid):
         after a kinematics pass; returns (#non-finite particles, which left their cells and
         are not in an owned neighbour (a moving pass; else an empty mask))."""
 
-        s = self.solver
+        s = self.state
         p = s.particles
         f = p.fields
         opts = s.options
@@ -255,7 +256,7 @@ class PointGrid(Grid):
 
     def _state(self) -> tuple:
         """Identities of the particle arrays the passes read and check."""
-        p = self.solver.particles
+        p = self.state.particles
         f = p.fields
         return id(p.x), id(f["v"]), id(f["sigma"]), id(f["F"]), id(f["body"])
 
@@ -263,7 +264,7 @@ class PointGrid(Grid):
     def for_step(self) -> Grid:
         """The checks of a state set from outside the passes and, every :data:`SORT_EVERY`
         steps, the sort of the particles by cell; this grid takes the step."""
-        s = self.solver
+        s = self.state
         p = s.particles
         if p.comm.allreduce(self._state() != self._checked, op=MPI.LOR):  # arrays set from outside (any rank)
             s.check_state()  # collective; the passes check their own results
@@ -275,7 +276,7 @@ class PointGrid(Grid):
         return self
 
     def open(self, dt: float | None) -> float:
-        s = self.solver
+        s = self.state
         opts = self.options
         p = s.particles
         d = self.d
@@ -288,7 +289,7 @@ class PointGrid(Grid):
         p.comm.Allreduce(MPI.IN_PLACE, top, op=MPI.MAX)  # one collective: the largest mass and the stable time
         top, state = float(top[0]), -float(top[1])
         self.top, self.active_min, self.weak_max = top, SUPPORT_TOL * top, opts.mass_cutoff * top
-        factor = self.mass.stable_factor(nodal, dt is None)
+        factor = self.mass.stable_factor(nodal, dt is None, top)
         if dt is not None and not dt <= state * BOUND_SAFETY * factor:
             state = self._stable_time()
         self.centroids = self._centroids(nodal)
@@ -308,7 +309,10 @@ class PointGrid(Grid):
         nodal = self._nodal[1]
         if remapped:
             return self.mass.velocity(nodal[:, :1], self._nodal_d[1], 0, self.active_min, None, self.centroids)
-        return self.mass.velocity(nodal[:, :1], nodal, 1, self.active_min, self.solver.grid_velocity, self.centroids)
+        mapped = self.options.stages.forces_with_map and self.force is nodal  # forces mapped with momenta (USL, MUSL)
+        forces = self.cf if mapped else None
+        return self.mass.velocity(nodal[:, :1], nodal, 1, self.active_min, self.state.grid_velocity, self.centroids,
+                                  forces)
 
     def forces(self) -> None:
         self.force, self.cf = self._scatter(self._nodal_d, self.g, self.fext, -1, -1, 0)[0], 0
@@ -339,11 +343,11 @@ class PointGrid(Grid):
         return [(self.mass.lumped(nodal), nodal[:, 1:1 + d], self.force[:, self.cf:self.cf + d], v_old, v_new, moving)]
 
     def close(self) -> None:
-        if self.solver.particles.comm.allreduce(self.nonfinite):
-            self.solver.check_finite()  # names the particles
+        if self.state.particles.comm.allreduce(self.nonfinite):
+            self.state.check_finite()  # names the particles
 
     def relocate(self) -> None:
-        self.solver.relocate_particles(left=self.left)
+        self.state.relocate_particles(left=self.left)
         self._checked = self._state()
 
     def nodal(self, v: npt.NDArray) -> npt.NDArray:
@@ -354,7 +358,7 @@ class PointGrid(Grid):
         strain energy of the laws without a compiled kernel added from the state."""
         if not self._summed:
             return None
-        s = self.solver
+        s = self.state
         sums = self._sums.copy()
         if self.any_external:
             sums[1] += diagnostics.strain_energy(s.particles, s.materials, self.law == 0)

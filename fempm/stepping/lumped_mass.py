@@ -22,13 +22,16 @@ class LumpedNodalMass(NodalMass):
 
     fusable = True
 
-    def stable_factor(self, nodal, need: bool) -> float:
-        """Called after P2G: the factor on the stable time of the state."""
+    def stable_factor(self, nodal, need: bool, top: float) -> float:
+        """Called after P2G (``nodal`` its array, ``top`` the largest nodal mass, ``need``: the
+        step is the stable one): the factor on the stable time of the state."""
         return 1.0
 
-    def velocity(self, mass, mom, cv: int, active_min: float, guess=None, centroids=None) -> npt.NDArray:
-        """Grid velocity from the nodal momenta ``mom[:, cv:cv+d]``, constrained."""
-        g = self.grid
+    def velocity(self, mass, mom, cv: int, active_min: float, guess=None, centroids=None,
+                 forces: int | None = None) -> npt.NDArray:
+        """Grid velocity from the nodal momenta ``mom[:, cv:cv+d]``, constrained (``forces``: the
+        column of the step's forces where P2G mapped them into ``mom`` too, else None)."""
+        g = self.layout
         v = np.empty((g.num_dofs, g.d))
         kl.grid_velocity(mass, mom, cv, g.free, active_min, v)
         g.conditions.apply(v, centroids)
@@ -37,7 +40,7 @@ class LumpedNodalMass(NodalMass):
     def advance(self, mass, force, cf: int, active_min: float, weak_max: float, dt: float, v_old: npt.NDArray,
                 centroids=None) -> npt.NDArray:
         r""":math:`v^+ = v + \Delta t\, a` from the nodal forces ``force[:, cf:cf+d]``, constrained."""
-        g = self.grid
+        g = self.layout
         v_new = np.empty((g.num_dofs, g.d))
         kl.grid_advance(mass, force[:, cf:cf + g.d], g.free, active_min, weak_max, float(dt),
                         float(g.options.damping), v_old, v_new)

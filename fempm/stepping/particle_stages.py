@@ -19,15 +19,15 @@ __all__ = ["ParticleStages"]
 
 
 class ParticleStages:
-    """The particle stages of a step of ``solver`` (see the module)."""
+    """The particle stages of a step of ``state`` (see the module)."""
 
-    def __init__(self, solver: StepState):
-        self.solver = solver
-        self.options = solver.options
+    def __init__(self, state: StepState):
+        self.state = state
+        self.options = state.options
 
     def open_basis(self) -> ParticleBasis:
         """The checks that open a step and its particle basis (values and gradients). Collective."""
-        s = self.solver
+        s = self.state
         s.check_state()
         basis = ParticleBasis(s.V, s.particles, gradients=True, domain=self.options.particle_domain)
         s.record.extended_steps += basis.extended
@@ -39,7 +39,7 @@ class ParticleStages:
         with the checks of J (one collective); with F-bar :math:`L_p` is first replaced by
         :math:`\bar L_p` (:meth:`fempm.stepping.fbar.FBar.rate`, over the step's ``basis``)
         unless ``averaged`` is False (the implicit step's :math:`L_p` are averaged already)."""
-        s = self.solver
+        s = self.state
         p = s.particles
         f = p.fields
         average = self.options.volumetric_average
@@ -66,7 +66,7 @@ class ParticleStages:
     def move(self, at_grid: npt.NDArray, corner_velocity, dt: float) -> None:
         """The particle domain's motion (:meth:`fempm.transfer.domains.Domain.move`) with the grid
         velocity at the particles ``at_grid`` and at the corners ``corner_velocity()``."""
-        s = self.solver
+        s = self.state
         try:
             self.options.particle_domain.move(s.particles, at_grid, corner_velocity, dt,
                                               self.options.particle_position)
@@ -74,7 +74,7 @@ class ParticleStages:
             s.fail(f"inverted particle domain: {e}")
 
     def close(self) -> None:
-        self.solver.check_finite()
+        self.state.check_finite()
 
     def relocate(self) -> None:
-        self.solver.relocate_particles()
+        self.state.relocate_particles()

@@ -10,7 +10,6 @@ advances the time. The equations are in :mod:`fempm.stepping.grid`.
 from __future__ import annotations
 
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass, field
 from typing import Literal
 
 import dolfinx.fem
@@ -28,11 +27,11 @@ from fempm.stepping.contact import Contact
 from fempm.stepping.fbar import check_laws
 from fempm.stepping.grid import Grid, SingleFieldGrid
 from fempm.stepping.grid_choice import choose_grid
-from fempm.stepping.laws import material_groups
 from fempm.stepping.loads import Loads
-from fempm.stepping.options import SimulationError, StepOptions
+from fempm.stepping.options import StepOptions
 from fempm.stepping.outside import Outside, Removed
 from fempm.stepping.record import StepRecord
+from fempm.stepping.state import StepState
 
 __all__ = ["ExplicitSolver", "Solver", "StepRecord", "register_implicit_step"]
 
@@ -41,15 +40,20 @@ __all__ = ["ExplicitSolver", "Solver", "StepRecord", "register_implicit_step"]
 _IMPLICIT_STEP: list[Callable] = []
 
 
+def _state_member(name: str, doc: str) -> property:
+    """The solver's attribute ``name``: its :class:`StepState`'s, read and set."""
+    return property(lambda self: getattr(self.state, name), lambda self, value: setattr(self.state, name, value),
+                    doc=doc)
+
+
 def register_implicit_step(maker: Callable) -> None:
-    """Make the implicit step of a solver with ``maker(solver)``, an object whose
+    """Make the implicit step of a solver with ``maker(state)`` (its :class:`StepState`), an object whose
     ``step(dt) -> dt`` advances the particles (:class:`fempm.implicit.step.ImplicitStep`;
     :mod:`fempm.implicit` registers it when imported, and ``import fempm`` imports that), so
     that the explicit step's package does not import the implicit one."""
     _IMPLICIT_STEP[:] = [maker]
 
 
-@dataclass
 class Solver:
     """MPM on a vector Lagrange space (degree 1 or 2, or Bernstein) of the particles' mesh: it
     owns the state and steps it explicitly or, with ``StepOptions(integrator="implicit")``,
@@ -66,8 +70,8 @@ class Solver:
         particles: The particles.
         materials: The laws (:mod:`fempm.materials`), one per value of ``fields["body"]``.
         bcs: The grid conditions (:mod:`fempm.boundary`).
-        loads: Body forces and tractions.
-        options: The step's options (scheme, mass model, particle domain, FLIP blend, CFL).
+        loads: Body forces and tractions (keyword, as every argument after ``bcs``; None: none).
+        options: The step's options (scheme, mass model, particle domain, FLIP blend, CFL; None: the defaults).
         t: The start time.
         step_count: The steps taken before (a continued run).
         compiled: Take the compiled passes where they apply (None, the default: a degree-1
@@ -91,27 +95,19 @@ class Solver:
         Construction and :meth:`step` are collective.
     """
 
-    V: dolfinx.fem.FunctionSpace
-    particles: Particles
-    materials: Sequence
-    bcs: Sequence = ()
-    loads: Loads = field(default_factory=Loads)
-    options: StepOptions = field(default_factory=StepOptions)
-    t: float = 0.0
-    step_count: int = 0
-    compiled: bool | None = None
-    contact: Contact | None = None
-    outside: str = "raise"
-    colliders: Sequence = ()
-
-    def __post_init__(self):
-        p = self.particles
-        if self.V.mesh is not p.mesh:
+    def __init__(self, V: dolfinx.fem.FunctionSpace, particles: Particles, materials: Sequence, bcs: Sequence = (),
+                 *, loads: Loads | None = None, options: StepOptions | None = None, t: float = 0.0, step_count: int = 0,
+                 compiled: bool | None = None, contact: Contact | None = None, outside: str = "raise",
+                 colliders: Sequence = ()):
+        p = particles
+        if V.mesh is not p.mesh:
             raise ValueError("the particles were made on another mesh than the velocity space's: make them on V.mesh "
                              "(fempm.create_particles(V.mesh, ...) or fempm.Particles(V.mesh, ...))")
-        check_materials(self.materials)
-        if self.options.volumetric_average is not None:
-            check_laws(self.materials)
+        loads = Loads() if loads is None else loads
+        options = StepOptions() if options is None else options
+        check_materials(materials)
+        if options.volumetric_average is not None:
+            check_laws(materials)
         d = p.gdim
         n = len(p)
         f = p.fields
@@ -121,25 +117,43 @@ class Solver:
         f.setdefault("volume0", p.volume.copy())
         f.setdefault("body", np.zeros(n, dtype=np.int32))
         f.setdefault("X0", p.x.copy())  # reference positions (body forces b(X, t), error norms)
-        for mat in self.materials:  # the laws' internal variables (fempm.materials.base.Internal)
+        for mat in materials:  # the laws' internal variables (fempm.materials.base.Internal)
             for h in mat.history:
                 expected = (n, *h.shape_for(d))
                 if np.shape(f.setdefault(h.name, h.allocate(n, d))) != expected:
                     raise ValueError(f"internal variable {h.name!r} of {type(mat).__name__} has shape "
                                      f"{np.shape(f[h.name])}; expected {expected}")
-        checks.check_fields(p, self.materials)
-        self.h_cell = cell_sizes(p.mesh)
-        self.collisions = ColliderContact(self.V, self.colliders, self.h_cell, self.t)
-        self.conditions = GridConditions(self.V, [*self.bcs, *([self.collisions] if self.colliders else [])])
-        self.record = StepRecord()
-        self.removal = Outside(self.outside)
-        self.grid_velocity: npt.NDArray | None = None  # last step's, also the CG warm start
+        checks.check_fields(p, materials)
+        self.bcs, self.outside, self.colliders = bcs, outside, colliders
+        h_cell = cell_sizes(p.mesh)
+        collisions = ColliderContact(V, colliders, h_cell, t)
+        conditions = GridConditions(V, [*bcs, *([collisions] if colliders else [])])
+        #: what the step's parts read and update (:class:`fempm.stepping.state.StepState`)
+        self.state = StepState(V, p, materials, loads, options, conditions, collisions, contact, compiled, h_cell,
+                               Outside(outside), StepRecord(), t=t, step_count=step_count)
         self._stress_space: dolfinx.fem.FunctionSpace | None = None  # tensor space of grid_stress, on first use
         self._grid: Grid | None = None
         self._grid_key: tuple | None = None
         self._implicit: tuple | None = None  # (id of the options, ImplicitStep)
-        if self.options.integration is not None:
+        if options.integration is not None:
             self.implicit  # noqa: B018 - made now: what the implicit step cannot take is an error before any step
+
+    # the state's members, read and set as the solver's
+    V = _state_member("V", "The velocity space.")
+    particles = _state_member("particles", "The particles.")
+    materials = _state_member("materials", "The laws, one per body.")
+    loads = _state_member("loads", "Body forces and tractions.")
+    options = _state_member("options", "The step's options (setting them remakes the grid at the next step).")
+    compiled = _state_member("compiled", "Whether the compiled passes are asked for (None: where they apply).")
+    contact = _state_member("contact", "Multi-field contact (None: one field).")
+    conditions = _state_member("conditions", "The grid conditions (the colliders among them).")
+    collisions = _state_member("collisions", "The colliders' contact and reactions.")
+    h_cell = _state_member("h_cell", "The cells' sizes (the CFL lengths).")
+    removal = _state_member("removal", "The policy for particles that leave the mesh, and what they took.")
+    record = _state_member("record", "What the steps report (:class:`StepRecord`).")
+    t = _state_member("t", "The time.")
+    step_count = _state_member("step_count", "The steps taken.")
+    grid_velocity = _state_member("grid_velocity", "The last step's grid velocity (owned + ghost dofs, d), None before.")
 
     # the record's entries, read as the solver's
     terms = property(lambda self: self.record.terms)
@@ -147,51 +161,28 @@ class Solver:
     mass_ratio = property(lambda self: self.record.mass_ratio)
     extended_steps = property(lambda self: self.record.extended_steps)
 
-    # -- the state's checks -------------------------------------------------------------------
+    # -- the state's checks (StepState's) ---------------------------------------------------------
     def particle_ids(self, mask: npt.NDArray[np.bool_]) -> list[int]:
         """The ids of the first (up to 5) particles of ``mask`` over all ranks (collective)."""
-        ids = np.concatenate(self.particles.comm.allgather(self.particles.ids[mask][:5]))
-        return ids[:5].tolist()
+        return self.state.particle_ids(mask)
 
     def fail(self, what: str):
-        """Raise a :class:`SimulationError` naming this step and time."""
-        raise SimulationError(f"step {self.step_count}, t = {self.t:.6g}: {what}")
+        """Raise a :class:`~fempm.stepping.SimulationError` naming this step and time."""
+        self.state.fail(what)
 
     def check_state(self) -> None:
         """The particle fields' shapes, a finite state and every body index a material (collective)."""
-        checks.check_fields(self.particles, self.materials)
-        self.check_finite()
-        checks.check_bodies(self.particles, self.materials, self.particle_ids)
+        self.state.check_state()
 
     def check_finite(self) -> None:
-        """Positions, stresses and the kinetic energy density :math:`v_p \\cdot v_p` (hence the
-        velocities) finite at every particle, else a :class:`SimulationError` (collective)."""
-        bad = checks.nonfinite_particles(self.particles)
-        if self.particles.comm.allreduce(int(bad.sum())):
-            self.fail(f"non-finite state at particle(s) {self.particle_ids(bad)}")
-
-    def count_terms(self) -> None:
-        """Count the force terms assembled this step (:attr:`terms`)."""
-        self.record.terms["internal"] += 1
-        self.record.terms.update(k for k in ("body_force", "traction") if getattr(self.loads, k) is not None)
-        if self.loads.surface:
-            self.record.terms["surface"] += 1
+        """A finite state at every particle, else a :class:`~fempm.stepping.SimulationError` (collective,
+        :meth:`StepState.check_finite`)."""
+        self.state.check_finite()
 
     # -- the step -----------------------------------------------------------------------------
     def stable_dt(self) -> float:
-        r""":math:`\Delta t = \mathrm{CFL}\, \min_p h_{c(p)} / (c_p + |v_p|)` over all ranks: the
-        lumped-mass step. The grid multiplies it by its mass model's factor
-        (:meth:`fempm.transfer.mass_models.MassModel.stable_factor`). Collective."""
-        p = self.particles
-        f = p.fields
-        rho = p.mass / p.volume
-        c = np.zeros(len(p))
-        for mat, idx in material_groups(f, self.materials):
-            c[idx] = mat.wave_speed(f["F"][idx], rho[idx])
-        speed = c + np.linalg.norm(f["v"], axis=1)
-        moving = ~(speed <= 0)  # particles at rest with no wave speed set no limit (NaN stays)
-        local = np.min(self.h_cell[p.cells][moving] / speed[moving], initial=np.inf)
-        return self.options.cfl * p.comm.allreduce(local, op=MPI.MIN)
+        """The stable lumped-mass time step of the state now (:meth:`StepState.stable_dt`). Collective."""
+        return self.state.stable_dt()
 
     @property
     def grid(self) -> Grid:
@@ -203,7 +194,7 @@ class Solver:
         ``compiled=False``), else a :class:`~fempm.stepping.grid.SingleFieldGrid`."""
         key = (id(self.options), self.compiled, id(self.contact))
         if self._grid is None or self._grid_key != key:
-            self._grid, self._grid_key = choose_grid(self), key
+            self._grid, self._grid_key = choose_grid(self.state), key
         return self._grid
 
     @property
@@ -214,7 +205,7 @@ class Solver:
         if self._implicit is None or self._implicit[0] != id(self.options):
             if not _IMPLICIT_STEP:
                 raise RuntimeError("the implicit step is not registered: import fempm (it imports fempm.implicit)")
-            self._implicit = (id(self.options), _IMPLICIT_STEP[0](self))
+            self._implicit = (id(self.options), _IMPLICIT_STEP[0](self.state))
         return self._implicit[1]
 
     def step(self, dt: float | None = None, *, dt_max: float = np.inf, totals: bool = False) -> float:
@@ -242,10 +233,10 @@ class Solver:
         v_new = self.options.stages.update(grid, dt)
         grid.close()
         self.collisions.end(dt)
-        self.t += dt
-        self.step_count += 1
+        self.state.t += dt
+        self.state.step_count += 1
         grid.relocate()
-        self.grid_velocity = grid.nodal(v_new)
+        self.state.grid_velocity = grid.nodal(v_new)
         return dt
 
     def _time_step(self, stable: float, dt: float | None, dt_max: float) -> float:
@@ -273,7 +264,7 @@ class Solver:
         """The grid velocity of the present particle state, (owned + ghost dofs, d): P2G of the
         momenta and the step's mass solve and constraints (the first stage of a step), nothing
         advanced. The grid frame at t = 0 of :func:`fempm.scene.run`. Collective."""
-        return SingleFieldGrid(self).initial_velocity()
+        return SingleFieldGrid(self.state).initial_velocity()
 
     def state_dict(self) -> dict:
         """What a continued run needs to repeat the next steps bit for bit: the time, the step
@@ -324,9 +315,8 @@ class Solver:
         return self.removal.removed
 
     def relocate_particles(self, left: npt.NDArray[np.bool_] | None = None) -> None:
-        """Locate the moved particles (``left``: the only ones that may have left their cells),
-        under the ``outside`` policy (:class:`fempm.stepping.outside.Outside`). Collective."""
-        self.removal.relocate(self.particles, self.materials, left)
+        """Locate the moved particles under the ``outside`` policy (:meth:`StepState.relocate_particles`). Collective."""
+        self.state.relocate_particles(left)
 
     def energies(self) -> dict[str, float]:
         """Kinetic, strain and total energy and linear momentum (:func:`fempm.stepping.diagnostics.energies`),

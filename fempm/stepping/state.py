@@ -1,34 +1,40 @@
-"""What the parts of a step read and update of the solver's state: :class:`StepState`.
+r"""What the parts of a step read and update: :class:`StepState`.
 
 The grids (:mod:`fempm.stepping.grid` and the compiled ones), the particle stages, the choice of
-grid and the implicit step take the solver as a :class:`StepState`: its space, particles, laws,
-loads, options and conditions, the step's record and time, and the checks and hooks they call
-(failing collectively, relocating the particles). This module imports none of them, so that
-their annotations close no import cycle (``tests/architecture/test_imports.py``).
+grid, the nodal masses (through their grid) and the implicit step take a :class:`StepState`:
+the space, particles, laws, loads, options and conditions, the step's record and time, and the
+checks and hooks they call (failing collectively, relocating the particles). The solver
+(:class:`fempm.stepping.Solver`) owns one and reads its time and record from it; none of the
+parts holds the solver.
 """
 
 from __future__ import annotations
 
 from collections.abc import Sequence
-from typing import Protocol
+from dataclasses import dataclass
 
 import dolfinx.fem
+import numpy as np
 import numpy.typing as npt
+from mpi4py import MPI
 
 from fempm.boundary.conditions import GridConditions
 from fempm.colliders.grid import ColliderContact
 from fempm.particles.particle_set import Particles
+from fempm.stepping import checks
 from fempm.stepping.contact_options import Contact
+from fempm.stepping.laws import material_groups
 from fempm.stepping.loads import Loads
-from fempm.stepping.options import StepOptions
+from fempm.stepping.options import SimulationError, StepOptions
 from fempm.stepping.outside import Outside
 from fempm.stepping.record import StepRecord
 
 __all__ = ["StepState"]
 
 
-class StepState(Protocol):
-    """The solver as a step's parts see it (:class:`fempm.stepping.ExplicitSolver` is one).
+@dataclass(eq=False)
+class StepState:
+    """The state a step reads and updates, and the checks and hooks its parts call.
 
     Attributes:
         V: The velocity space.
@@ -44,6 +50,7 @@ class StepState(Protocol):
         removal: The policy for particles that leave the mesh, and what they took.
         record: What the steps report.
         t: The time.
+        step_count: The steps taken.
         grid_velocity: The last step's grid velocity (owned + ghost dofs, d), None before.
     """
 
@@ -59,26 +66,57 @@ class StepState(Protocol):
     h_cell: npt.NDArray
     removal: Outside
     record: StepRecord
-    t: float
-    grid_velocity: npt.NDArray | None
+    t: float = 0.0
+    step_count: int = 0
+    grid_velocity: npt.NDArray | None = None
 
-    def fail(self, what: str) -> None:
-        """Stop the step on every rank with ``what`` (a :class:`~fempm.stepping.SimulationError`)."""
+    def particle_ids(self, mask: npt.NDArray[np.bool_]) -> list[int]:
+        """The ids of the first (up to 5) particles of ``mask`` over all ranks (collective)."""
+        ids = np.concatenate(self.particles.comm.allgather(self.particles.ids[mask][:5]))
+        return ids[:5].tolist()
+
+    def fail(self, what: str):
+        """Raise a :class:`~fempm.stepping.SimulationError` naming this step and time (call it on
+        every rank: the checks that lead to it are collective)."""
+        raise SimulationError(f"step {self.step_count}, t = {self.t:.6g}: {what}")
 
     def check_state(self) -> None:
-        """The particles' state checks that open a step (collective)."""
+        """The particle fields' shapes, a finite state and every body index a material (collective)."""
+        checks.check_fields(self.particles, self.materials)
+        self.check_finite()
+        checks.check_bodies(self.particles, self.materials, self.particle_ids)
 
     def check_finite(self) -> None:
-        """The finite-state check that closes a step (collective)."""
+        r"""Positions, stresses and the kinetic energy density :math:`v_p \cdot v_p` (hence the
+        velocities) finite at every particle, else a :class:`~fempm.stepping.SimulationError`
+        (collective)."""
+        bad = checks.nonfinite_particles(self.particles)
+        if self.particles.comm.allreduce(int(bad.sum())):
+            self.fail(f"non-finite state at particle(s) {self.particle_ids(bad)}")
 
     def count_terms(self) -> None:
-        """Count the force terms the step assembles (the record's ``terms``)."""
-
-    def relocate_particles(self) -> None:
-        """Locate and migrate the moved particles, removing or refusing those outside (collective)."""
-
-    def particle_ids(self, mask: npt.NDArray) -> str:
-        """The ids of the particles of ``mask`` (a few, over every rank), for messages."""
+        """Count the force terms assembled this step (the record's ``terms``)."""
+        self.record.terms["internal"] += 1
+        self.record.terms.update(k for k in ("body_force", "traction") if getattr(self.loads, k) is not None)
+        if self.loads.surface:
+            self.record.terms["surface"] += 1
 
     def stable_dt(self) -> float:
-        """The stable time step of the state now (collective)."""
+        r""":math:`\Delta t = \mathrm{CFL}\, \min_p h_{c(p)} / (c_p + |v_p|)` over all ranks: the
+        lumped-mass step. The grid multiplies it by its mass model's factor
+        (:meth:`fempm.transfer.mass_models.MassModel.stable_factor`). Collective."""
+        p = self.particles
+        f = p.fields
+        rho = p.mass / p.volume
+        c = np.zeros(len(p))
+        for mat, idx in material_groups(f, self.materials):
+            c[idx] = mat.wave_speed(f["F"][idx], rho[idx])
+        speed = c + np.linalg.norm(f["v"], axis=1)
+        moving = ~(speed <= 0)  # particles at rest with no wave speed set no limit (NaN stays)
+        local = np.min(self.h_cell[p.cells][moving] / speed[moving], initial=np.inf)
+        return self.options.cfl * p.comm.allreduce(local, op=MPI.MIN)
+
+    def relocate_particles(self, left: npt.NDArray[np.bool_] | None = None) -> None:
+        """Locate the moved particles (``left``: the only ones that may have left their cells),
+        under the ``outside`` policy (:class:`fempm.stepping.outside.Outside`). Collective."""
+        self.removal.relocate(self.particles, self.materials, left)

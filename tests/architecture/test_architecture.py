@@ -3,6 +3,7 @@ particle domain, a scheme and a grid condition, each defined outside the package
 the one step skeleton as given."""
 
 import re
+import types
 from pathlib import Path
 
 import dolfinx.fem as fem
@@ -15,6 +16,7 @@ import fempm
 from fempm.boundary import fixed
 from fempm.materials import LinearElastic
 from fempm.stepping import ExplicitSolver, StepOptions
+from fempm.stepping.state import StepState
 
 pytestmark = pytest.mark.xdist_group("test_architecture")  # one worker computes its module fixtures
 
@@ -114,3 +116,52 @@ def test_a_collider_shape_plugs_in(examples):
     with pytest.raises(TypeError, match="lacks normal_at"):
         Collider(type("Blob", (), {"dim": 2, "distance": lambda self, x: x[:, 0]})())
 
+
+
+def held_by(root) -> list:
+    """The fempm objects, containers and closures reachable from ``root`` through what they hold
+    (instances' attributes, containers' items, bound methods, closures' cells), not through
+    classes or modules."""
+    seen, todo, out = {id(root)}, [root], []
+    while todo:
+        obj = todo.pop()
+        out.append(obj)
+        if isinstance(obj, types.FunctionType):
+            refs = [c.cell_contents for c in obj.__closure__ or ()] + list(obj.__defaults__ or ())
+        elif isinstance(obj, types.MethodType):
+            refs = [obj.__self__, obj.__func__]
+        elif isinstance(obj, dict):
+            refs = [*obj.keys(), *obj.values()]
+        elif isinstance(obj, (list, tuple, set)):
+            refs = list(obj)
+        else:
+            refs = list(getattr(obj, "__dict__", {}).values())
+            refs += [getattr(obj, k) for k in getattr(type(obj), "__slots__", ()) if hasattr(obj, k)]
+        for ref in refs:
+            kept = (isinstance(ref, (dict, list, tuple, set, types.MethodType, types.FunctionType))
+                    or type(ref).__module__.startswith("fempm"))
+            if kept and not isinstance(ref, type) and id(ref) not in seen:
+                seen.add(id(ref))
+                todo.append(ref)
+    return out
+
+
+@pytest.mark.parametrize("case", ["point", "consistent", "fmpm", "cpdi", "numpy", "contact", "implicit"])
+def test_the_steps_parts_do_not_hold_the_solver(case):
+    """The grids, their nodal masses and the implicit step read a StepState: none of them holds
+    the solver (nor reaches it through what it holds)."""
+    options = {"consistent": StepOptions(mass="consistent"), "fmpm": StepOptions(mass="fmpm2"),
+               "cpdi": StepOptions(domain="cpdi1"), "implicit": StepOptions(integrator="implicit")}
+    s = solver(options.get(case))
+    if case == "numpy":
+        s.compiled = False
+    if case == "contact":
+        s.contact = fempm.Contact()
+    s.step(1e-3)
+    part = s.implicit if case == "implicit" else s.grid
+    expected = {"point": "PointGrid", "consistent": "PointGrid", "fmpm": "PointGrid", "cpdi": "DomainGrid",
+                "numpy": "SingleFieldGrid", "contact": "ContactPointGrid", "implicit": "ImplicitStep"}[case]
+    assert type(part).__name__ == expected
+    objects = held_by(part)
+    assert any(isinstance(o, StepState) for o in objects)
+    assert not [o for o in objects if isinstance(o, ExplicitSolver)]
