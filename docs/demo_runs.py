@@ -65,7 +65,8 @@ def run_demo(path: Path, args: list[str], out: Path, library: str) -> dict:
         shutil.rmtree(out, ignore_errors=True)
         out.mkdir(parents=True)
         start = time.perf_counter()
-        proc = subprocess.run([sys.executable, str(path), *args, "--out", str(out / "files")], cwd=ROOT,
+        env = {**os.environ, "MPLBACKEND": "Agg", "PYVISTA_OFF_SCREEN": "true", "OMP_NUM_THREADS": "1"}
+        proc = subprocess.run([sys.executable, str(path), *args, "--out", str(out / "files")], cwd=ROOT, env=env,
                               capture_output=True, text=True, timeout=TIMEOUT)
         seconds = time.perf_counter() - start
         if proc.returncode != 0:

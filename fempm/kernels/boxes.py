@@ -35,6 +35,7 @@ import functools
 
 import numpy as np
 
+from fempm.kernels.bundles import Star
 from fempm.kernels.shape import AVAILABLE
 
 __all__ = ["box_samples"]
@@ -158,8 +159,10 @@ def _kernel(d: int, simplex: bool):
     TETRAHEDRON = simplex and d == 3
 
     @njit(cache=True, error_model="numpy")
-    def kernel(x, ell, cells, verts, blo, bhi, c2v, v_offsets, v_cells, num_cells, frontier, x0, K, guessed, sc, Y,
-               w):  # pragma: no cover - compiled
+    def kernel(x, ell, cells, verts, bounds, star, frontier, x0, K, guessed, out):  # pragma: no cover - compiled
+        blo, bhi = bounds
+        c2v, v_offsets, v_cells, num_cells = star
+        sc, Y, w = out
         n = len(cells)
         Q = sc.shape[1]
         lo, hi, cen = np.empty(d), np.empty(d), np.empty(d)
@@ -217,7 +220,7 @@ def _kernel(d: int, simplex: bool):
     return kernel
 
 
-def box_samples(x, ell, cells, cell_type: tuple[int, bool], verts, blo, bhi, star: tuple, frontier, x0, K,
+def box_samples(x, ell, cells, cell_type: tuple[int, bool], verts, bounds: tuple, star: tuple, frontier, x0, K,
                 out, guessed: bool = False):
     r"""The exact GIMP samples of boxes ``[x - ell, x + ell]`` (n, d) of particles in ``cells``
     (see the module).
@@ -229,7 +232,7 @@ def box_samples(x, ell, cells, cell_type: tuple[int, bool], verts, blo, bhi, sta
         cell_type: (dimension, simplex) of the cells; intervals and non-simplices are taken as
             axis-aligned boxes.
         verts: The simplices' vertices (cells, d + 1, d) (unused for boxes).
-        blo, bhi: The cells' bounding boxes (cells, d).
+        bounds: (lower, upper): the cells' bounding boxes (cells, d) each.
         star: Cell -> vertices, vertex -> cells offsets and cells, and the number of cells
             searched (:meth:`fempm.particles.location.CellLocator.vertex_star`).
         frontier: Per cell (bool), whether it has a vertex that another rank's cells share (an
@@ -251,6 +254,6 @@ def box_samples(x, ell, cells, cell_type: tuple[int, bool], verts, blo, bhi, sta
     """
     d, simplex = cell_type
     sc, Y, w = out
-    needed, reaching, failed = _kernel(d, simplex)(x, np.ascontiguousarray(ell), cells, verts, blo, bhi, *star,
-                                                    frontier, x0, K, bool(guessed), sc, Y, w)
+    needed, reaching, failed = _kernel(d, simplex)(x, np.ascontiguousarray(ell), cells, verts, tuple(bounds),
+                                                    Star(*star), frontier, x0, K, bool(guessed), (sc, Y, w))
     return int(needed), int(reaching), int(failed)

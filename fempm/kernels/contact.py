@@ -28,9 +28,14 @@ if AVAILABLE:
     from numba import njit
 
     @njit(inline="always")
-    def _correct_group(nodal, stride, i, g, d, active_min, total, vcm, all_grad, moment_sum, normal, w, friction, gap,
-                       dt, moments, tiny, v_new):  # pragma: no cover - compiled
-        """Group g's correction at contact node i (:func:`fempm.stepping.contact.correct`)."""
+    def _correct_group(nodal, stride, i, g, d, active_min, node, scratch, law, moments, tiny,
+                       v_new):  # pragma: no cover - compiled
+        """Group g's correction at contact node i (:func:`fempm.stepping.contact.correct`):
+        ``node`` = the node's (total mass, centre-of-mass velocity, mass gradient, moment sums),
+        ``scratch`` = (normal, w) arrays, ``law`` = (friction, gap, dt)."""
+        total, vcm, all_grad, moment_sum = node
+        normal, w = scratch
+        friction, gap, dt = law
         o = g * stride
         m = nodal[i, o]
         if not m > active_min:
@@ -120,8 +125,8 @@ def _grid_update(d: int, G: int):
                 for j in range(d):
                     vcm[j] /= total
                 for g in range(G):
-                    _correct_group(nodal, stride, i, g, d, active_min, total, vcm, all_grad, moment_sum, normal, w,
-                                   friction, gap, dt, moments, tiny, v_new)
+                    _correct_group(nodal, stride, i, g, d, active_min, (total, vcm, all_grad, moment_sum),
+                                   (normal, w), (friction, gap, dt), moments, tiny, v_new)
             for g in range(G):
                 for j in range(d):
                     if not free[i, j]:

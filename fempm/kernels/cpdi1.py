@@ -23,6 +23,7 @@ import functools
 
 import numpy as np
 
+from fempm.kernels.bundles import Star
 from fempm.kernels.shape import AVAILABLE, CELLS, is_affine
 
 __all__ = ["corner_frame", "corner_gradient", "cpdi1_samples", "locate_corners"]
@@ -98,8 +99,7 @@ def _locate_kernel(cell: str):
     AFFINE = is_affine(cell)
 
     @njit(cache=True, error_model="numpy")
-    def locate(x, F, lp, signs, cells, x0, K, c2v, v_offsets, v_cells, num_cells, tol, guess, sc,
-               Y):  # pragma: no cover - compiled
+    def locate(x, F, lp, signs, cells, x0, K, star, tol, guess, sc, Y):  # pragma: no cover - compiled
         Q = signs.shape[0]
         R, Ri = np.empty((T, T)), np.empty((T, T))
         y, X = np.empty((1, T)), np.empty((1, T))
@@ -116,12 +116,12 @@ def _locate_kernel(cell: str):
                         s += R[i, j] * signs[q, j]
                     y[0, i] = s
                     X[0, i] = Y[r, i]  # Newton's first guess on multilinear cells
-                e = guess[p, q] if guessed else -1  # as fempm.kernels.samples.locate_samples
+                e = guess[p, q] if guessed else -1  # as fempm.kernels.sample_location.locate_samples
                 if not (e >= 0 and e != c and inside_after_pull_back(y, 0, x0, K, e, SIMPLEX, T, tol, X, AFFINE)):
                     if inside_after_pull_back(y, 0, x0, K, c, SIMPLEX, T, tol, X, AFFINE):
                         e = c
                     else:
-                        e = star_search(y, 0, x0, K, c, c2v, v_offsets, v_cells, num_cells, SIMPLEX, T, tol, X, AFFINE)
+                        e = star_search(y, 0, x0, K, c, star, SIMPLEX, T, tol, X, AFFINE)
                 sc[p, q] = e
                 for i in range(T):
                     Y[r, i] = X[0, i]
@@ -139,8 +139,7 @@ def _planar_locate_kernel(simplex: bool):
     the compiler must take as aliasing the outputs."""
 
     @njit(cache=True, error_model="numpy")
-    def locate(x, F, lp, signs, cells, x0, K, c2v, v_offsets, v_cells, num_cells, tol, guess, sc,
-               Y):  # pragma: no cover - compiled
+    def locate(x, F, lp, signs, cells, x0, K, star, tol, guess, sc, Y):  # pragma: no cover - compiled
         Q = signs.shape[0]
         y, X = np.empty((1, 2)), np.empty((1, 2))  # for the vertex-star search
         missing = 0
@@ -162,7 +161,7 @@ def _planar_locate_kernel(simplex: bool):
                     found, X0, X1 = pull(y0, y1, x0, K, c, tol, simplex)
                 if not found:
                     y[0, 0], y[0, 1] = y0, y1
-                    e = star_search(y, 0, x0, K, c, c2v, v_offsets, v_cells, num_cells, simplex, 2, tol, X, True)
+                    e = star_search(y, 0, x0, K, c, star, simplex, 2, tol, X, True)
                     X0, X1 = X[0, 0], X[0, 1]
                     if e < 0:
                         missing += 1
@@ -175,12 +174,12 @@ def _planar_locate_kernel(simplex: bool):
 
 def locate_corners(x, F, lp, signs, cells, x0, K, star: tuple, cell: str, tol: float, guess=None, out=None):
     """Cells (n, Q) and reference coordinates (n Q, t) of the CPDI1 corners of particles at
-    ``x`` in ``cells`` (:func:`fempm.kernels.samples.locate_samples` with the corners made in the
+    ``x`` in ``cells`` (:func:`fempm.kernels.sample_location.locate_samples` with the corners made in the
     pass), and the number of corners on no cell of the search (cell -1)."""
     n = len(cells)
     Q, t = len(signs), CELLS[cell][0]
     sc, Y = out if out is not None else (np.full((n, Q), -1, dtype=np.int32), np.zeros((n * Q, t)))
     guess = np.zeros((0, Q), dtype=np.int32) if guess is None else guess
     kernel = _planar_locate_kernel(cell == "triangle") if cell in ("triangle", "quadrilateral") else _locate_kernel(cell)
-    missing = kernel(x, F, lp, signs, cells, x0, K, *star, float(tol), guess, sc, Y)
+    missing = kernel(x, F, lp, signs, cells, x0, K, Star(*star), float(tol), guess, sc, Y)
     return sc, Y, int(missing)

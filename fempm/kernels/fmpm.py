@@ -139,7 +139,7 @@ def planar_mass_apply(simplex: bool):
                 if QUAD:
                     u0 += e3 * y[i3, j]
                     u1 += e3 * y[i3, j + 1]
-                add_pair(out, j, i0, i1, i2, i3, N0, N1, N2, N3, m * u0, m * u1, QUAD)
+                add_pair(out, j, (i0, i1, i2, i3), (N0, N1, N2, N3), m * u0, m * u1, QUAD)
             if lumping:
                 ul = m * ((N0 - e0) + (N1 - e1) + (N2 - e2) + ((N3 - e3) if QUAD else 0.0))
                 add_column(out, k, i0, i1, i2, i3, N0, N1, N2, N3, ul, QUAD)

@@ -40,6 +40,7 @@ from types import SimpleNamespace
 import numpy as np
 
 from fempm.kernels import planar, solid
+from fempm.kernels.bundles import NO_GROUPS, Basis, Forces, GridStep, Groups, Laws, Moves, Outputs, Stable, State
 from fempm.kernels.particle_checks import (
     LINEAR_ELASTIC,
     NEO_HOOKEAN,
@@ -48,12 +49,10 @@ from fempm.kernels.particle_checks import (
 )
 from fempm.kernels.shape import AVAILABLE, CELLS, MULTILINEAR, is_affine, space_of
 
-__all__ = ["NO_GROUPS", "NO_RIGID", "kernels_for"]
+__all__ = ["NO_GROUPS", "NO_STABLE", "kernels_for"]
 
-#: no particle groups: one velocity field (the ``group`` argument of the passes)
-NO_GROUPS = np.zeros(0, dtype=np.int64)
-#: no rigid group (the ``rigid`` argument of the G2P pass)
-NO_RIGID = np.zeros(1, dtype=np.bool_)
+#: no stable time asked of a P2G pass
+NO_STABLE = Stable(np.zeros(0), np.zeros(0))
 
 if AVAILABLE:
     from numba import njit
@@ -107,10 +106,11 @@ if AVAILABLE:
                 v_new[i, j] = vo + dt * a
 
     @njit(inline="always")
-    def gather(N, G, cell_dofs, c, o, v_new, v_old, blend, kinematics, D, NK, vg, dv, Lp):  # pragma: no cover
-        r"""The sums over the dofs of cell ``c`` (columns from ``o``), each loaded once: :math:`\sum_a N_a v_a^+` into
-        ``vg``, with ``blend`` :math:`\sum_a N_a (v_a^+ - v_a)` into ``dv``, with ``kinematics``
+    def gather(N, G, cell_dofs, c, o, v_new, v_old, blend, kinematics, D, NK, sums):  # pragma: no cover
+        r"""The sums over the dofs of cell ``c`` (columns from ``o``), each loaded once, into
+        ``sums`` = (vg, dv, Lp): :math:`\sum_a N_a v_a^+` into ``vg``, with ``blend`` :math:`\sum_a N_a (v_a^+ - v_a)` into ``dv``, with ``kinematics``
         :math:`L_p = \sum_a v_a^+ \otimes \nabla N_a` into ``Lp``."""
+        vg, dv, Lp = sums
         for j in range(D):
             vg[j] = 0.0
             dv[j] = 0.0
@@ -166,29 +166,28 @@ def kernels_for(cell: str) -> SimpleNamespace:
         scatter_kernel = functools.partial(_solid, solid.scatter_kernel, cell == "hexahedron")
         g2p_kernel = functools.partial(_solid, solid.g2p_kernel, cell == "hexahedron")
 
-    def scatter(cells, X, K, cell_dofs, mass, v, volume, sigma, g, fext, out, cm, cv, cf, h, body, modulus, c,
-                bound=False, group=NO_GROUPS, stride=0, cg=-1):
-        """See :func:`_scatter_kernel`; the columns (negative: skipped) choose the compiled
-        variant; with cell sizes ``h`` the stable time (a lower bound of it with ``bound``);
-        with a ``group`` per particle the columns of group k start at ``k * stride``; ``cg`` >= 0:
-        also the mass gradients."""
-        kernel = scatter_kernel(cell, cm >= 0, cv >= 0, cf >= 0, h.shape[0] > 0, fext.shape[0] > 0, bool(bound),
-                                group.shape[0] > 0, cg >= 0)
-        return kernel(cells, X, K, cell_dofs, mass, v, volume, sigma, g, fext, out, h, body, modulus, c, group,
-                      stride)
+    def scatter(where: Basis, state: State, laws: Laws, forces: Forces, out, cm: int, cv: int, cf: int,
+                stable: Stable = NO_STABLE, bound: bool = False, groups: Groups = NO_GROUPS, cg: int = -1) -> float:
+        """See :func:`_scatter_kernel` (the bundles: :mod:`fempm.kernels.bundles`); the columns
+        (negative: skipped) choose the compiled variant; with cell sizes ``stable.h`` the stable
+        time (a lower bound of it with ``bound``); with a ``groups.group`` per particle the columns
+        of group k start at ``k * groups.stride``; ``cg`` >= 0: also the mass gradients."""
+        kernel = scatter_kernel(cell, cm >= 0, cv >= 0, cf >= 0, stable.h.shape[0] > 0, forces.fext.shape[0] > 0,
+                                bool(bound), groups.group.shape[0] > 0, cg >= 0)
+        return kernel(where, state, laws, forces, out, stable, groups)
 
-    def g2p_update(cells, X, K, cell_dofs, v_new, v_old, flip, dt, blend, kinematics, move, *rest, group=NO_GROUPS,
-                   rigid=NO_RIGID):
-        """See :func:`_g2p_kernel`; the flags choose the compiled variant (a momentum array
-        ``rest[-2]`` with a row per dof: the blend pass also re-maps the momenta, MUSL; a sums
-        array ``rest[-1]`` of 3 + d entries: the moving pass also sums the state's energies; a
-        ``group`` per particle: each takes its group's field, columns ``k d`` to ``(k + 1) d``;
-        the particles of a group k with ``rigid[k]`` keep their velocity and F (L = 0) and move
-        with their velocity)."""
-        remap = blend and rest[-2].shape[0] > 0
-        totals = move and rest[-1].shape[0] > 0
-        return g2p_kernel(cell, bool(blend), bool(kinematics), bool(move), remap, totals, group.shape[0] > 0)(
-            cells, X, K, cell_dofs, v_new, v_old, flip, dt, *rest, group, rigid)
+    def g2p_update(where: Basis, grid: GridStep, state: State, laws: Laws, moves: Moves, outputs: Outputs,
+                   groups: Groups = NO_GROUPS, *, blend: bool, kinematics: bool, move: bool) -> tuple:
+        """See :func:`_g2p_kernel` (the bundles: :mod:`fempm.kernels.bundles`); the flags choose
+        the compiled variant (``outputs.mom`` with a row per dof: the blend pass also re-maps the
+        momenta, MUSL; ``outputs.sums`` of 3 + d entries: the moving pass also sums the state's
+        energies; a ``groups.group`` per particle: each takes its group's field, columns ``k d`` to
+        ``(k + 1) d``; the particles of a group k with ``groups.rigid[k]`` keep their velocity and
+        F (L = 0) and move with their velocity)."""
+        remap = blend and outputs.mom.shape[0] > 0
+        totals = move and outputs.sums.shape[0] > 0
+        return g2p_kernel(cell, bool(blend), bool(kinematics), bool(move), remap, totals, groups.group.shape[0] > 0)(
+            where, grid, state, laws, moves, outputs, groups)
 
     return SimpleNamespace(scatter=scatter, g2p_update=g2p_update)
 
@@ -229,10 +228,13 @@ def _scatter_kernel(cell: str, with_mass: bool, with_momentum: bool, with_force:
     CG = CF + (D if with_force else 0)
 
     @njit(cache=True, error_model="numpy")
-    def scatter(cells, X, K, cell_dofs, mass, v, volume, sigma, g, fext, out, h, body, modulus, c, group,
-                stride):  # pragma: no cover
+    def scatter(where, state, laws, forces, out, stable, groups):  # pragma: no cover
         """Add the particles' mass, momentum and force to ``out`` (ndofs, ncols). Returns the
         stable time of the particles' state (inf without ``with_dt``)."""
+        cells, X, K, cell_dofs = where
+        mass, v, volume, sigma, body = state.mass, state.v, state.volume, state.sigma, state.body
+        modulus, g, fext, h, c = laws.modulus, forces.g, forces.fext, stable.h, stable.c
+        group, stride = groups.group, groups.stride
         N = np.empty(NK)
         G = np.empty((NK, D))
         mv = np.empty(D)
@@ -300,9 +302,15 @@ def _g2p_kernel(cell: str, blend: bool, kinematics: bool, move: bool, remap: boo
     DEGREE, BERNSTEIN = space_of(cell)
 
     @njit(cache=True, error_model="numpy")
-    def g2p_update(cells, X, K, cell_dofs, v_new, v_old, flip, dt, by_particle,
-                   x, v, F, volume0, volume, sigma, body, law, lam, mu, L, x0, tol, left, c2v, v_offsets, v_cells,
-                   num_cells, mass, mom, sums, group, rigid):  # pragma: no cover
+    def g2p_update(where, grid, state, laws, moves, outputs, groups):  # pragma: no cover
+        cells, X, K, cell_dofs = where
+        v_new, v_old, flip, dt, by_particle = grid
+        x, v, F, volume0, volume, sigma, body, mass = state
+        law, lam, mu = laws.law, laws.lam, laws.mu
+        x0, tol, left = moves.x0, moves.tol, moves.left
+        c2v, v_offsets, v_cells, num_cells = moves.star
+        L, mom, sums = outputs
+        group, rigid = groups.group, groups.rigid
         n = len(cells)
         N = np.empty(NK)
         G = np.empty((NK, D))
@@ -322,7 +330,7 @@ def _g2p_kernel(cell: str, blend: bool, kinematics: bool, move: bool, remap: boo
             shape(X, p, K, c, SIMPLEX, AFFINE, D, NK, N, G, DEGREE, BERNSTEIN)
             o = group[p] * D if grouped else 0
             still = grouped and rigid[group[p]]  # a rigid body's particle: its own velocity, L = 0
-            gather(N, G, cell_dofs, c, o, v_new, v_old, blend, kinematics and not still, D, NK, vg, dv, Lp)
+            gather(N, G, cell_dofs, c, o, v_new, v_old, blend, kinematics and not still, D, NK, (vg, dv, Lp))
             if blend and not still:
                 for j in range(D):
                     v[p, j] = flip * (v[p, j] + dv[j]) + (1.0 - flip) * vg[j]
@@ -352,7 +360,7 @@ def _g2p_kernel(cell: str, blend: bool, kinematics: bool, move: bool, remap: boo
                     nonfinite += 1
                 out = not inside_after_pull_back(x, p, x0, K, c, SIMPLEX, D, tol, X, AFFINE)
                 if out:  # the neighbours, while their geometry is in cache
-                    e = star_search(x, p, x0, K, c, c2v, v_offsets, v_cells, num_cells, SIMPLEX, D, tol, X, AFFINE)
+                    e = star_search(x, p, x0, K, c, (c2v, v_offsets, v_cells, num_cells), SIMPLEX, D, tol, X, AFFINE)
                     if e >= 0:
                         cells[p] = e
                         out = False

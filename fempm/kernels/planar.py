@@ -64,9 +64,11 @@ if AVAILABLE:
                 X1 * k00 + X0 * k10, X1 * k01 + X0 * k11)
 
     @njit(inline="always")
-    def add_pair(out, col, i0, i1, i2, i3, N0, N1, N2, N3, q0, q1, quad):  # pragma: no cover - compiled
-        """``out[i_a, col:col+2] += N_a (q0, q1)`` over the cell's dofs (the fourth on a
-        quadrilateral only)."""
+    def add_pair(out, col, dofs, values, q0, q1, quad):  # pragma: no cover - compiled
+        """``out[i_a, col:col+2] += N_a (q0, q1)`` over the cell's ``dofs`` (i0, i1, i2, i3) with
+        the basis ``values`` (N0, N1, N2, N3) (the fourth on a quadrilateral only)."""
+        i0, i1, i2, i3 = dofs
+        N0, N1, N2, N3 = values
         out[i0, col] += N0 * q0
         out[i0, col + 1] += N0 * q1
         out[i1, col] += N1 * q0
@@ -121,8 +123,11 @@ def scatter_kernel(simplex: bool, affine: bool, with_mass: bool, with_momentum: 
     QUAD = not simplex
 
     @njit(cache=True, error_model="numpy")
-    def scatter(cells, X, K, cell_dofs, mass, v, volume, sigma, g, fext, out, h, body, modulus, c, group,
-                stride):  # pragma: no cover
+    def scatter(where, state, laws, forces, out, stable, groups):  # pragma: no cover
+        cells, X, K, cell_dofs = where
+        mass, v, volume, sigma, body = state.mass, state.v, state.volume, state.sigma, state.body
+        modulus, g, fext, h, c = laws.modulus, forces.g, forces.fext, stable.h, stable.c
+        group, stride = groups.group, groups.stride
         best = 0.0 if bound else np.inf
         for p in range(len(cells)):
             cp = cells[p]
@@ -145,7 +150,7 @@ def scatter_kernel(simplex: bool, affine: bool, with_mass: bool, with_momentum: 
                 if QUAD:
                     out[i3, o] += N3 * m
             if with_momentum:
-                add_pair(out, o + CV, i0, i1, i2, i3, N0, N1, N2, N3, m * v0, m * v1, QUAD)
+                add_pair(out, o + CV, (i0, i1, i2, i3), (N0, N1, N2, N3), m * v0, m * v1, QUAD)
             if with_force:
                 fe0, fe1 = m * g[0], m * g[1]
                 if has_fext:
@@ -186,21 +191,21 @@ def g2p_kernel(simplex: bool, affine: bool, blend: bool, kinematics: bool, move:
     QUAD = not simplex
 
     @njit(cache=True, error_model="numpy")
-    def g2p_update(cells, X, K, cell_dofs, v_new, v_old, flip, dt, by_particle,
-                   x, v, F, volume0, volume, sigma, body, law, lam, mu, L, x0, tol, left, c2v, v_offsets, v_cells,
-                   num_cells, mass, mom, sums, group, rigid):  # pragma: no cover
+    def g2p_update(where, grid, state, laws, moves, outputs, groups):  # pragma: no cover
+        cells, X, K, cell_dofs = where
+        v_new, v_old, flip, dt, by_particle = grid
+        x, v, F, volume0, volume, sigma, body, mass = state
+        law, lam, mu, x0, tol, left, star = laws.law, laws.lam, laws.mu, moves.x0, moves.tol, moves.left, moves.star
+        L, mom, sums, group, rigid = outputs.L, outputs.mom, outputs.sums, groups.group, groups.rigid
         n, keep_L = len(cells), L.shape[0] == len(cells)
-        nonfinite_j, inverted, jmin, jmax, nonfinite = 0, 0, np.inf, -np.inf, 0  # the pass's checks
-        acc = np.zeros(5)  # the state's sums (totals)
+        nonfinite_j, inverted, jmin, jmax, nonfinite, acc = 0, 0, np.inf, -np.inf, 0, np.zeros(5)  # checks, sums
         for p in range(n):
             c = cells[p]
             X0, X1 = X[p, 0], X[p, 1]
             k00, k01, k10, k11 = inverse_jacobian(X0, X1, K, c, affine)
             N0, N1, N2, N3, g0x, g0y, g1x, g1y, g2x, g2y, g3x, g3y = basis(X0, X1, k00, k01, k10, k11, simplex)
-            i0, i1, i2 = cell_dofs[c, 0], cell_dofs[c, 1], cell_dofs[c, 2]
-            i3 = cell_dofs[c, 3] if QUAD else i0
-            o = group[p] * 2 if grouped else 0
-            o1 = o + 1
+            i0, i1, i2, i3 = cell_dofs[c, 0], cell_dofs[c, 1], cell_dofs[c, 2], cell_dofs[c, 3 if QUAD else 0]
+            o, o1 = (group[p] * 2, group[p] * 2 + 1) if grouped else (0, 1)
             still = grouped and rigid[group[p]]  # a rigid body's particle: its own velocity, L = 0
             a0, b0, a1, b1, a2, b2 = v_new[i0, o], v_new[i0, o1], v_new[i1, o], v_new[i1, o1], v_new[i2, o], v_new[i2, o1]
             vg0 = N0 * a0 + N1 * a1 + N2 * a2
@@ -218,7 +223,7 @@ def g2p_kernel(simplex: bool, affine: bool, blend: bool, kinematics: bool, move:
                 v[p, 0] = flip * (v[p, 0] + dv0) + (1.0 - flip) * vg0
                 v[p, 1] = flip * (v[p, 1] + dv1) + (1.0 - flip) * vg1
             if remap:  # MUSL: the blended momenta back to the grid, in the same pass
-                add_pair(mom, o, i0, i1, i2, i3, N0, N1, N2, N3, mass[p] * v[p, 0], mass[p] * v[p, 1], QUAD)
+                add_pair(mom, o, (i0, i1, i2, i3), (N0, N1, N2, N3), mass[p] * v[p, 0], mass[p] * v[p, 1], QUAD)
             if kinematics:
                 L00 = a0 * g0x + a1 * g1x + a2 * g2x
                 L01 = a0 * g0y + a1 * g1y + a2 * g2y
@@ -249,10 +254,10 @@ def g2p_kernel(simplex: bool, affine: bool, blend: bool, kinematics: bool, move:
                     X[p, 0], X[p, 1] = X0 + k00 * u0 + k01 * u1, X1 + k10 * u0 + k11 * u1
                 out = not (inside_after_pull_back(x, p, x0, K, c, simplex, 2, tol, X, affine) if affine else
                            quad_pull_back(x, p, K, c, tol, X, max(abs(X[p, 0] - X0), abs(X[p, 1] - X1))))
-                if out:  # the neighbours, while in cache (written out: through a helper the pass took 1.8x as long)
-                    e = star_search(x, p, x0, K, c, c2v, v_offsets, v_cells, num_cells, simplex, 2, tol, X, affine)
-                    out = e < 0
-                    cells[p] = c if out else e
+                # the neighbours, while in cache (written out: through a helper the pass took 1.8x as long)
+                e = star_search(x, p, x0, K, c, star, simplex, 2, tol, X, affine) if out else c
+                out = e < 0
+                cells[p] = c if out else e
                 left[p] = out
             if totals:
                 add_totals(acc, p, mass, v, F, volume0, law[body[p]], lam[body[p]], mu[body[p]], 2)

@@ -66,7 +66,7 @@ if AVAILABLE:
             N0, N1, N2, N3 = basis(Y[r, 0], Y[r, 1], 0.0, 0.0, 0.0, 0.0, simplex)[:4]
             i0, i1, i2 = cell_dofs[cq, 0], cell_dofs[cq, 1], cell_dofs[cq, 2]
             i3 = cell_dofs[cq, 3] if QUAD else i0
-            add_pair(mom, 0, i0, i1, i2, i3, N0, N1, N2, N3, wq * m0, wq * m1, QUAD)
+            add_pair(mom, 0, (i0, i1, i2, i3), (N0, N1, N2, N3), wq * m0, wq * m1, QUAD)
 
     @njit(inline="always")
     def sample(p, q, Q, sc, Y, w, cell_dofs, simplex, corners):  # pragma: no cover - compiled
@@ -78,12 +78,13 @@ if AVAILABLE:
         return wq, N0, N1, N2, N3, i0, i1, i2, cell_dofs[cq, 3] if not simplex else i0
 
     @njit(inline="always")
-    def gather(p, sc, Y, w, gw, Fw, lp, signs, K, cell_dofs, v_new, v_old, at, simplex, affine, grad_from_values,
-               corners, blend, kinematics, track):  # pragma: no cover - compiled
+    def gather(p, samples, v_new, v_old, at, simplex, affine, grad_from_values, corners, blend, kinematics,
+               track):  # pragma: no cover - compiled
         """Particle ``p``'s grid velocity, FLIP increment and velocity gradient summed over its
         samples, (vg0, vg1, dv0, dv1, L00, L01, L10, L11) (inlined into the G2P pass, where the
         flags are the pass's constants); with ``track`` the grid velocity at each sample into
-        ``at[p, q]``."""
+        ``at[p, q]`` (``samples``: :class:`~fempm.kernels.bundles.Samples`)."""
+        sc, Y, w, gw, Fw, lp, signs, K, cell_dofs = samples
         QUAD = not simplex
         Q = sc.shape[1]
         share = 1.0 / Q
@@ -158,8 +159,11 @@ def scatter_kernel(simplex: bool, affine: bool, grad_from_values: bool, corners:
     QUAD = not simplex
 
     @njit(cache=True, error_model="numpy")
-    def scatter(cells, sc, Y, w, gw, Fw, lp, signs, K, cell_dofs, mass, v, volume, sigma, g, fext, out, h, body,
-                modulus, c):  # pragma: no cover
+    def scatter(where, samples, state, laws, forces, out, stable):  # pragma: no cover
+        cells = where.cells
+        sc, Y, w, gw, Fw, lp, signs, K, cell_dofs = samples
+        mass, v, volume, sigma, body = state.mass, state.v, state.volume, state.sigma, state.body
+        modulus, g, fext, h, c = laws.modulus, forces.g, forces.fext, stable.h, stable.c
         Q = sc.shape[1]
         share = 1.0 / Q
         best = 0.0 if bound else np.inf
@@ -194,7 +198,7 @@ def scatter_kernel(simplex: bool, affine: bool, grad_from_values: bool, corners:
                     if QUAD:
                         out[i3, 0] += N3 * (wq * m)
                 if with_momentum:
-                    add_pair(out, CV, i0, i1, i2, i3, N0, N1, N2, N3, wq * m * v0, wq * m * v1, QUAD)
+                    add_pair(out, CV, (i0, i1, i2, i3), (N0, N1, N2, N3), wq * m * v0, wq * m * v1, QUAD)
                 if with_force and grad_from_values:  # w_q (N_a f - V sigma grad N_a)
                     a0, a1 = wq * fe0, wq * fe1
                     b00, b01, b10, b11 = wq * V * s00, wq * V * s01, wq * V * s10, wq * V * s11
@@ -214,7 +218,7 @@ def scatter_kernel(simplex: bool, affine: bool, grad_from_values: bool, corners:
                         t0, t1 = gw[p, q, 0], gw[p, q, 1]
                     f0 = wq * fe0 - V * (s00 * t0 + s01 * t1)
                     f1 = wq * fe1 - V * (s10 * t0 + s11 * t1)
-                    add_pair(out, CF, i0, i1, i2, i3, N0, N1, N2, N3, f0, f1, QUAD)
+                    add_pair(out, CF, (i0, i1, i2, i3), (N0, N1, N2, N3), f0, f1, QUAD)
         return 1.0 / np.sqrt(2.0 * best) if bound else best
 
     return scatter
@@ -229,22 +233,28 @@ def g2p_kernel(simplex: bool, affine: bool, grad_from_values: bool, corners: boo
     ``moved``, puts their weights (:func:`fempm.kernels.corners.corner_geometry`) into ``w``
     and ``gw`` (each particle's, once the pass has read them), moves each particle to its domain's centroid
     with the domain's volume, locates the moved corners in ``sc`` and ``Y`` (as
-    :func:`fempm.kernels.samples.locate_samples`, over the first ``sample_cells`` cells; -1
+    :func:`fempm.kernels.sample_location.locate_samples`, over the first ``sample_cells`` cells; -1
     where the search fails), and counts the twisted domains in ``bad[0]`` and the corners not
     found in ``bad[1]``."""
     @njit(cache=True, error_model="numpy")
-    def g2p_update(cells, sc, Y, w, gw, Fw, lp, signs, K, cell_dofs, v_new, v_old, flip, dt, by_particle, X, x, v,
-                   F, volume0, volume, sigma, body, law, lam, mu, L, x0, tol, left, c2v, v_offsets, v_cells, num_cells,
-                   mass, mom, sums, yc, moved, bad, sample_cells):  # pragma: no cover
+    def g2p_update(where, samples, grid, state, laws, moves, outputs, tracked):  # pragma: no cover
+        cells, X = where.cells, where.X
+        sc, Y, w, gw, Fw, lp, signs, K, cell_dofs = samples
+        v_new, v_old, flip, dt, by_particle = grid
+        x, v, F, volume0, volume, sigma, body, mass = state
+        law, lam, mu = laws.law, laws.lam, laws.mu
+        x0, tol, left = moves.x0, moves.tol, moves.left
+        c2v, v_offsets, v_cells, num_cells = moves.star
+        L, mom, sums = outputs
+        yc, moved, bad, sample_cells = tracked
         n, keep_L = len(cells), L.shape[0] == len(cells)
         Q = sc.shape[1]
         ys = moved.reshape((moved.shape[0] * moved.shape[1], 2))  # the moved corners, one a row
         nonfinite_j, inverted, jmin, jmax, nonfinite = 0, 0, np.inf, -np.inf, 0  # the pass's checks
         acc = np.zeros(5)  # the state's sums (totals)
         for p in range(n):
-            vg0, vg1, dv0, dv1, L00, L01, L10, L11 = gather(p, sc, Y, w, gw, Fw, lp, signs, K, cell_dofs, v_new, v_old,
-                                                            moved, simplex, affine, grad_from_values, corners, blend,
-                                                            kinematics, track)
+            vg0, vg1, dv0, dv1, L00, L01, L10, L11 = gather(p, samples, v_new, v_old, moved, simplex, affine,
+                                                            grad_from_values, corners, blend, kinematics, track)
             if blend:
                 v[p, 0] = flip * (v[p, 0] + dv0) + (1.0 - flip) * vg0
                 v[p, 1] = flip * (v[p, 1] + dv1) + (1.0 - flip) * vg1
@@ -277,7 +287,7 @@ def g2p_kernel(simplex: bool, affine: bool, grad_from_values: bool, corners: boo
                 c = cells[p]
                 out = not inside_after_pull_back(x, p, x0, K, c, simplex, 2, tol, X, affine)
                 if out:
-                    e = star_search(x, p, x0, K, c, c2v, v_offsets, v_cells, num_cells, simplex, 2, tol, X, affine)
+                    e = star_search(x, p, x0, K, c, (c2v, v_offsets, v_cells, num_cells), simplex, 2, tol, X, affine)
                     out = e < 0
                     cells[p] = c if out else e
                 left[p] = out
@@ -290,7 +300,7 @@ def g2p_kernel(simplex: bool, affine: bool, grad_from_values: bool, corners: boo
                     if e != c and inside_after_pull_back(ys, r, x0, K, c, simplex, 2, tol, Y, affine):
                         sc[p, q] = c
                     else:
-                        e = star_search(ys, r, x0, K, c, c2v, v_offsets, v_cells, sample_cells, simplex, 2, tol, Y,
+                        e = star_search(ys, r, x0, K, c, (c2v, v_offsets, v_cells, sample_cells), simplex, 2, tol, Y,
                                         affine)
                         sc[p, q] = e
                         if e < 0:
@@ -317,7 +327,9 @@ def mass_apply_kernel(simplex: bool, grad_from_values: bool, corners: bool):
     QUAD = not simplex
 
     @njit(cache=True, error_model="numpy")
-    def mass_apply(cells, sc, Y, w, gw, Fw, lp, signs, K, cell_dofs, mass, y, lump, out):  # pragma: no cover
+    def mass_apply(where, samples, mass, y, lump, out):  # pragma: no cover
+        cells = where.cells
+        sc, Y, w, cell_dofs = samples.sc, samples.Y, samples.w, samples.cell_dofs
         Q = sc.shape[1]
         k = y.shape[1]
         lumping = lump.shape[0] > 0
@@ -342,7 +354,7 @@ def mass_apply_kernel(simplex: bool, grad_from_values: bool, corners: bool):
                     continue
                 s = wq * m
                 for j in range(0, k, 2):
-                    add_pair(out, j, i0, i1, i2, i3, N0, N1, N2, N3, s * u[j], s * u[j + 1], QUAD)
+                    add_pair(out, j, (i0, i1, i2, i3), (N0, N1, N2, N3), s * u[j], s * u[j + 1], QUAD)
                 if lumping:
                     add_column(out, k, i0, i1, i2, i3, N0, N1, N2, N3, s * u[k], QUAD)
 

@@ -17,8 +17,8 @@ samples reach gets each share (the sums are the same as over distinct nodes).
 
 * :func:`cpdi1_samples`: the corners :math:`y_{pq} = x_p + R_p s_q`, :math:`R_p = F_p
   \operatorname{diag}(\ell_p)`, :math:`w = 2^{-d}`, :math:`g_{pq} = 2^{-d} R_p^{-T} s_q`.
-* :func:`locate_samples`: each sample's cell, the particle's own or one of its vertex star
-  (:func:`fempm.kernels.shape.star_search`), -1 where neither holds it.
+* :func:`fempm.kernels.sample_location.locate_samples`: each sample's cell, the particle's own
+  or one of its vertex star (:func:`fempm.kernels.shape.star_search`), -1 where neither holds it.
 * :func:`kernels_for`: ``scatter`` and ``g2p_update``, the passes of
   :mod:`fempm.kernels.lumped` (same arguments, plus the samples) summing over the samples
   instead of the particle's cell, and ``mass_apply``, FMPM's :math:`M_C y` of
@@ -33,9 +33,10 @@ from types import SimpleNamespace
 import numpy as np
 
 from fempm.kernels import planar_samples
+from fempm.kernels.bundles import Basis, Corners, Forces, GridStep, Laws, Moves, Outputs, Samples, Stable, State
 from fempm.kernels.shape import AVAILABLE, CELLS, MULTILINEAR, is_affine
 
-__all__ = ["at_samples", "kernels_for", "locate_samples"]
+__all__ = ["kernels_for"]
 
 if AVAILABLE:
     from numba import njit
@@ -45,81 +46,6 @@ if AVAILABLE:
     from fempm.kernels.lumped import deform_at, law_at
     from fempm.kernels.particle_checks import count_j, stable_time
     from fempm.kernels.shape import inside_after_pull_back, shape, shape_values, star_search
-
-
-@functools.cache
-def _locate_kernel(cell: str):
-    T, _, SIMPLEX = CELLS[cell]
-    AFFINE = is_affine(cell)
-
-    @njit(cache=True)
-    def locate(y, cells, Q, x0, K, c2v, v_offsets, v_cells, num_cells, tol, guess, sc, Y):  # pragma: no cover
-        missing = 0
-        guessed = guess.shape[0] == len(cells)
-        for p in range(len(cells)):
-            c = cells[p]
-            for q in range(Q):
-                r = p * Q + q
-                e = guess[p, q] if guessed else -1
-                if e >= 0 and e != c and inside_after_pull_back(y, r, x0, K, e, SIMPLEX, T, tol, Y, AFFINE):
-                    sc[p, q] = e
-                elif inside_after_pull_back(y, r, x0, K, c, SIMPLEX, T, tol, Y, AFFINE):
-                    sc[p, q] = c
-                else:
-                    e = star_search(y, r, x0, K, c, c2v, v_offsets, v_cells, num_cells, SIMPLEX, T, tol, Y, AFFINE)
-                    sc[p, q] = e
-                    if e < 0:
-                        missing += 1
-        return missing
-
-    return locate
-
-
-def locate_samples(y, cells, Q: int, x0, K, star: tuple, cell: str, tol: float, guess=None, out=None):
-    """Cells (n, Q) and reference coordinates (n Q, t) of samples ``y`` (n Q, d) of particles in
-    ``cells`` of the kernel cell type ``cell`` (geometry ``x0``, ``K``:
-    :attr:`fempm.meshes.geometry.CellGeometry.kernel_geometry`): the sample's cell in ``guess``
-    (n, Q; e.g. the last step's), else the particle's cell or the first of its vertex star
-    (``star``: cell -> vertices, vertex -> cells offsets and cells, the cells searched) that
-    holds it, -1 where none does; and the number of such samples. ``out``: the arrays (cells,
-    coordinates) to fill (the cells may be ``guess``; on multilinear cells the coordinates are
-    Newton's first guess)."""
-    n = len(cells)
-    t = CELLS[cell][0]
-    sc, Y = out if out is not None else (np.empty((n, Q), dtype=np.int32), np.zeros((n * Q, t)))
-    guess = np.zeros((0, Q), dtype=np.int32) if guess is None else guess
-    missing = _locate_kernel(cell)(y, cells, Q, x0, K, *star, float(tol), guess, sc, Y)
-    return sc, Y, int(missing)
-
-
-@functools.cache
-def _at_samples_kernel(cell: str):
-    D, NK, SIMPLEX = CELLS[cell]
-
-    @njit(cache=True, error_model="numpy")
-    def kernel(sc, Y, K, cell_dofs, u, out):  # pragma: no cover - compiled
-        N = np.empty(NK)
-        Q = sc.shape[1]
-        for p in range(sc.shape[0]):
-            for q in range(Q):
-                r = p * Q + q
-                c = sc[p, q]
-                shape_values(Y, r, SIMPLEX, D, NK, N)
-                for j in range(u.shape[1]):
-                    s = 0.0
-                    for a in range(NK):
-                        s += N[a] * u[cell_dofs[c, a], j]
-                    out[p, q, j] = s
-
-    return kernel
-
-
-def at_samples(cell: str, sc, Y, K, cell_dofs, u):
-    r"""Nodal values ``u`` (dofs, k) at the samples, :math:`u(y_{pq}) = \sum_a N_a(y_{pq})
-    u_{d(pq, a)}`, shape (n, Q, k) (e.g. the grid velocity at CPDI2 corners)."""
-    out = np.empty((sc.shape[0], sc.shape[1], u.shape[1]))
-    _at_samples_kernel(cell)(sc, Y, K, cell_dofs, np.ascontiguousarray(u), out)
-    return out
 
 
 @functools.cache
@@ -137,35 +63,36 @@ def kernels_for(cell: str, grad_from_values: bool, planar: bool = True) -> Simpl
         scatter_kernel = functools.partial(_planar, planar_samples.scatter_kernel)
         g2p_kernel = functools.partial(_planar, planar_samples.g2p_kernel)
 
-    def scatter(cells, sc, Y, w, gw, Fw, lp, signs, K, cell_dofs, mass, v, volume, sigma, g, fext, out, cm, cv, cf,
-                h, body, modulus, c, bound=False):
-        kernel = scatter_kernel(cell, grad_from_values, Fw.shape[0] > 0, cm >= 0, cv >= 0, cf >= 0, h.shape[0] > 0,
-                                fext.shape[0] > 0, bool(bound))
-        return kernel(cells, sc, Y, w, gw, Fw, lp, signs, K, cell_dofs, mass, v, volume, sigma, g, fext, out, h,
-                      body, modulus, c)
+    def scatter(where: Basis, samples: Samples, state: State, laws: Laws, forces: Forces, out, cm: int, cv: int,
+                cf: int, stable: Stable, bound: bool = False) -> float:
+        kernel = scatter_kernel(cell, grad_from_values, samples.Fw.shape[0] > 0, cm >= 0, cv >= 0, cf >= 0,
+                                stable.h.shape[0] > 0, forces.fext.shape[0] > 0, bool(bound))
+        return kernel(where, samples, state, laws, forces, out, stable)
 
-    def g2p_update(cells, sc, Y, w, gw, Fw, lp, signs, K, cell_dofs, v_new, v_old, flip, dt, blend, kinematics,
-                   move, *rest, corners=None):
-        remap = blend and rest[-2].shape[0] > 0
-        totals = move and rest[-1].shape[0] > 0
-        flags = (cell, grad_from_values, Fw.shape[0] > 0, bool(blend), bool(kinematics), bool(move), remap, totals)
-        args = (cells, sc, Y, w, gw, Fw, lp, signs, K, cell_dofs, v_new, v_old, flip, dt, *rest)
+    def g2p_update(where: Basis, samples: Samples, grid: GridStep, state: State, laws: Laws, moves: Moves,
+                   outputs: Outputs, *, blend: bool, kinematics: bool, move: bool, corners: Corners | None = None):
+        remap = blend and outputs.mom.shape[0] > 0
+        totals = move and outputs.sums.shape[0] > 0
+        flags = (cell, grad_from_values, samples.Fw.shape[0] > 0, bool(blend), bool(kinematics), bool(move), remap,
+                 totals)
+        args = (where, samples, grid, state, laws, moves, outputs)
         if not tracks:
             return g2p_kernel(*flags)(*args)
-        return g2p_kernel(*flags, corners is not None)(*args, *(corners if corners is not None else NOT_TRACKED))
+        return g2p_kernel(*flags, corners is not None)(*args, corners if corners is not None else NOT_TRACKED)
 
-    def mass_apply(cells, sc, Y, w, gw, Fw, lp, signs, K, cell_dofs, mass, y, lump, out):
+    def mass_apply(where: Basis, samples: Samples, mass, y, lump, out) -> None:
         """:func:`fempm.kernels.fmpm.mass_apply` with the averaged basis,
         :math:`(M_C y)_i = \\sum_p M_p \\langle N_i \\rangle_p \\sum_j \\langle N_j \\rangle_p y_j`."""
-        kernel = (planar_samples.mass_apply_kernel(cell == "triangle", grad_from_values, Fw.shape[0] > 0)
-                  if tracks and y.shape[1] % 2 == 0 else _mass_apply_kernel(cell, grad_from_values, Fw.shape[0] > 0))
-        kernel(cells, sc, Y, w, gw, Fw, lp, signs, K, cell_dofs, mass, y, lump, out)
+        kernel = (planar_samples.mass_apply_kernel(cell == "triangle", grad_from_values, samples.Fw.shape[0] > 0)
+                  if tracks and y.shape[1] % 2 == 0 else _mass_apply_kernel(cell, grad_from_values,
+                                                                            samples.Fw.shape[0] > 0))
+        kernel(where, samples, mass, y, lump, out)
 
     return SimpleNamespace(scatter=scatter, g2p_update=g2p_update, mass_apply=mass_apply, tracks=tracks)
 
 
 #: the corner arrays of a G2P pass that does not move CPDI2 corners (:func:`kernels_for`)
-NOT_TRACKED = (np.zeros((0, 0, 2)), np.zeros((0, 0, 2)), np.zeros(2, dtype=np.int64), 0)
+NOT_TRACKED = Corners(np.zeros((0, 0, 2)), np.zeros((0, 0, 2)), np.zeros(2, dtype=np.int64), 0)
 
 
 def _planar(make, cell: str, *flags):
@@ -175,13 +102,16 @@ def _planar(make, cell: str, *flags):
 
 if AVAILABLE:
     @njit(inline="always")
-    def _particle_basis(p, sc, Y, w, gw, Fw, lp, signs, K, simplex, affine, D, NK, grad_from_values, corners, N,
-                        G, cells, W, GW, R, Ri):  # pragma: no cover
+    def _particle_basis(p, samples, simplex, affine, D, NK, grad_from_values, corners, scratch):  # pragma: no cover
         r"""The averaged basis of particle ``p`` by cell: the distinct cells its samples lie in
         (``cells``, returned their number) and in row ``k`` the weighted values ``W[k]`` (NK,)
         and gradients ``GW[k]`` (NK, D) of the samples in ``cells[k]`` summed (samples sharing a
         cell share its nodes: one scatter or gather per cell instead of per sample). With
-        ``corners`` the weights are CPDI1's of ``Fw[p]`` and ``lp[p]`` (:mod:`fempm.kernels.cpdi1`)."""
+        ``corners`` the weights are CPDI1's of ``Fw[p]`` and ``lp[p]`` (:mod:`fempm.kernels.cpdi1`).
+        ``samples``: :class:`~fempm.kernels.bundles.Samples`; ``scratch``: (N, G, cells, W, GW,
+        R, Ri), the arrays it writes."""
+        sc, Y, w, gw, Fw, lp, signs, K, _ = samples
+        N, G, cells, W, GW, R, Ri = scratch
         Q = sc.shape[1]
         share = 1.0 / Q
         if corners:
@@ -226,8 +156,11 @@ def _scatter_kernel(cell: str, grad_from_values: bool, corners: bool, with_mass:
     CF = CV + (D if with_momentum else 0)
 
     @njit(cache=True, error_model="numpy")
-    def scatter(cells, sc, Y, w, gw, Fw, lp, signs, K, cell_dofs, mass, v, volume, sigma, g, fext, out, h, body,
-                modulus, c):  # pragma: no cover
+    def scatter(where, samples, state, laws, forces, out, stable):  # pragma: no cover
+        cells = where.cells
+        sc, cell_dofs = samples.sc, samples.cell_dofs
+        mass, v, volume, sigma, body = state.mass, state.v, state.volume, state.sigma, state.body
+        modulus, g, fext, h, c = laws.modulus, forces.g, forces.fext, stable.h, stable.c
         Q = sc.shape[1]
         N, G, cs = np.empty(NK), np.empty((NK, D)), np.empty(Q, np.int32)
         W, GW, R, Ri = np.empty((Q, NK)), np.empty((Q, NK, D)), np.empty((D, D)), np.empty((D, D))
@@ -246,8 +179,8 @@ def _scatter_kernel(cell: str, grad_from_values: bool, corners: bool, with_mass:
                         sg[j, e] = sigma[p, j, e]
             if with_dt:
                 best = stable_time(best, bound, m, V, speed, modulus[body[p]], c, p, h[cells[p]])
-            ncell = _particle_basis(p, sc, Y, w, gw, Fw, lp, signs, K, SIMPLEX, AFFINE, D, NK, grad_from_values,
-                                    corners, N, G, cs, W, GW, R, Ri)
+            ncell = _particle_basis(p, samples, SIMPLEX, AFFINE, D, NK, grad_from_values, corners,
+                                    (N, G, cs, W, GW, R, Ri))
             for k in range(ncell):
                 cq = cs[k]
                 for a in range(NK):
@@ -278,23 +211,24 @@ def _g2p_kernel(cell: str, grad_from_values: bool, corners: bool, blend: bool, k
     AFFINE = is_affine(cell)
 
     @njit(cache=True, error_model="numpy")
-    def g2p_update(cells, sc, Y, w, gw, Fw, lp, signs, K, cell_dofs, v_new, v_old, flip, dt, by_particle, X, x, v,
-                   F, volume0, volume, sigma, body, law, lam, mu, L, x0, tol, left, c2v, v_offsets, v_cells, num_cells,
-                   mass, mom, sums):  # pragma: no cover
-        n = len(cells)
-        Q = sc.shape[1]
+    def g2p_update(where, samples, grid, state, laws, moves, outputs):  # pragma: no cover
+        cells, X, K, cell_dofs, sc = where.cells, where.X, samples.K, samples.cell_dofs, samples.sc
+        v_new, v_old, flip, dt, by_particle = grid
+        x, v, F, volume0, volume, sigma, body, mass = state
+        law, lam, mu, x0, tol, left, star = laws.law, laws.lam, laws.mu, moves.x0, moves.tol, moves.left, moves.star
+        L, mom, sums = outputs
+        n, Q = len(cells), sc.shape[1]
         N, G, cs = np.empty(NK), np.empty((NK, D)), np.empty(Q, np.int32)
         W, GW, R, Ri = np.empty((Q, NK)), np.empty((Q, NK, D)), np.empty((D, D)), np.empty((D, D))
         vg, dv, Lp, Fn = np.empty(D), np.empty(D), np.empty((D, D)), np.empty((D, D))
         keep_L = L.shape[0] == n
-        nonfinite_j, inverted, jmin, jmax, nonfinite = 0, 0, np.inf, -np.inf, 0
-        acc = np.zeros(3 + D)  # the state's sums (totals)
+        nonfinite_j, inverted, jmin, jmax, nonfinite, acc = 0, 0, np.inf, -np.inf, 0, np.zeros(3 + D)  # checks, sums
         for p in range(n):
             vg[:] = 0.0
             dv[:] = 0.0
             Lp[:] = 0.0
-            ncell = _particle_basis(p, sc, Y, w, gw, Fw, lp, signs, K, SIMPLEX, AFFINE, D, NK, grad_from_values,
-                                    corners, N, G, cs, W, GW, R, Ri)
+            ncell = _particle_basis(p, samples, SIMPLEX, AFFINE, D, NK, grad_from_values, corners,
+                                    (N, G, cs, W, GW, R, Ri))
             for k in range(ncell):
                 cq = cs[k]
                 for a in range(NK):
@@ -339,11 +273,9 @@ def _g2p_kernel(cell: str, grad_from_values: bool, corners: bool, blend: bool, k
                     nonfinite += 1
                 c = cells[p]
                 out = not inside_after_pull_back(x, p, x0, K, c, SIMPLEX, D, tol, X, AFFINE)
-                if out:
-                    e = star_search(x, p, x0, K, c, c2v, v_offsets, v_cells, num_cells, SIMPLEX, D, tol, X, AFFINE)
-                    if e >= 0:
-                        cells[p] = e
-                        out = False
+                e = star_search(x, p, x0, K, c, star, SIMPLEX, D, tol, X, AFFINE) if out else c
+                cells[p] = e if e >= 0 else c
+                out = e < 0
                 left[p] = out
             if totals:
                 add_totals(acc, p, mass, v, F, volume0, law[body[p]], lam[body[p]], mu[body[p]], D)
@@ -361,7 +293,9 @@ def _mass_apply_kernel(cell: str, grad_from_values: bool, corners: bool):
     AFFINE = is_affine(cell)
 
     @njit(cache=True, error_model="numpy")
-    def kernel(cells, sc, Y, w, gw, Fw, lp, signs, K, cell_dofs, mass, y, lump, out):  # pragma: no cover - compiled
+    def kernel(where, samples, mass, y, lump, out):  # pragma: no cover - compiled
+        cells = where.cells
+        sc, cell_dofs = samples.sc, samples.cell_dofs
         Q = sc.shape[1]
         N, G, cs = np.empty(NK), np.empty((NK, D)), np.empty(Q, np.int32)
         W, GW, R, Ri = np.empty((Q, NK)), np.empty((Q, NK, D)), np.empty((D, D)), np.empty((D, D))
@@ -369,8 +303,8 @@ def _mass_apply_kernel(cell: str, grad_from_values: bool, corners: bool):
         u = np.empty(k)
         lumping = lump.shape[0] > 0
         for p in range(len(cells)):
-            ncell = _particle_basis(p, sc, Y, w, gw, Fw, lp, signs, K, SIMPLEX, AFFINE, D, NK, grad_from_values,
-                                    corners, N, G, cs, W, GW, R, Ri)
+            ncell = _particle_basis(p, samples, SIMPLEX, AFFINE, D, NK, grad_from_values, corners,
+                                    (N, G, cs, W, GW, R, Ri))
             for j in range(k):
                 u[j] = 0.0
             ul = 0.0

@@ -131,12 +131,14 @@ if njit is not None:
         return ok
 
     @njit(inline="always")
-    def star_search(x, p, x0, K, c0, c2v, v_offsets, v_cells, num_cells, simplex, t, tol, X,
-                    affine=True):  # pragma: no cover - compiled
+    def star_search(x, p, x0, K, c0, star, simplex, t, tol, X, affine=True):  # pragma: no cover - compiled
         """The lowest-numbered cell below ``num_cells`` other than ``c0`` sharing a vertex with
-        it (cell -> vertices ``c2v``, vertex -> cells ``v_offsets``/``v_cells``) that contains
-        point ``x[p]`` within ``tol``, and ``X[p]`` its reference coordinates there; -1 (and
-        ``X[p]`` undefined) if none does (``affine``: see :func:`inside_after_pull_back`)."""
+        it (``star`` = (``c2v``, ``v_offsets``, ``v_cells``, ``num_cells``),
+        :class:`fempm.kernels.bundles.Star`: cell -> vertices ``c2v``, vertex -> cells
+        ``v_offsets``/``v_cells``) that contains point ``x[p]`` within ``tol``, and ``X[p]`` its
+        reference coordinates there; -1 (and ``X[p]`` undefined) if none does (``affine``: see
+        :func:`inside_after_pull_back`)."""
+        c2v, v_offsets, v_cells, num_cells = star
         best = -1
         for a in range(c2v.shape[1]):
             v = c2v[c0, a]
@@ -240,7 +242,7 @@ def _pull_back_kernels(cell: str) -> SimpleNamespace:
     @njit(cache=True)
     def near_kernel(previous, x, x0, K, c2v, v_offsets, v_cells, num_cells, tol, cells, X):  # pragma: no cover
         for p in range(len(previous)):
-            cells[p] = star_search(x, p, x0, K, previous[p], c2v, v_offsets, v_cells, num_cells, SIMPLEX, D, tol, X,
+            cells[p] = star_search(x, p, x0, K, previous[p], (c2v, v_offsets, v_cells, num_cells), SIMPLEX, D, tol, X,
                                    AFFINE)
 
     return SimpleNamespace(cell=cell_kernel, near=near_kernel, star=star_kernel)

@@ -60,10 +60,11 @@ if AVAILABLE:
                 d0 * k[2] + d1 * k[5] + d2 * k[8])
 
     @njit(inline="always")
-    def gather(c, o, X0, X1, X2, k, cell_dofs, v_new, v_old, blend, kinematics, NK, hexa):  # pragma: no cover
+    def gather(c, o, X, k, cell_dofs, v_new, v_old, blend, kinematics, NK, hexa):  # pragma: no cover
         r"""(:math:`\sum_a N_a v_a^+` (3), with ``blend`` :math:`\sum_a N_a (v_a^+ - v_a)` (3),
         with ``kinematics`` :math:`L = \sum_a v_a^+ \otimes \nabla N_a` (9, row by row)), over
-        the dofs of cell ``c`` (columns from ``o``)."""
+        the dofs of cell ``c`` (columns from ``o``), at reference coordinates ``X`` = (X0, X1, X2)."""
+        X0, X1, X2 = X
         vg0 = vg1 = vg2 = dv0 = dv1 = dv2 = 0.0
         L00 = L01 = L02 = L10 = L11 = L12 = L20 = L21 = L22 = 0.0
         for a in range(NK):
@@ -152,8 +153,11 @@ def scatter_kernel(hexa: bool, with_mass: bool, with_momentum: bool, with_force:
     CG = CF + (3 if with_force else 0)
 
     @njit(cache=True, error_model="numpy")
-    def scatter(cells, X, K, cell_dofs, mass, v, volume, sigma, g, fext, out, h, body, modulus, c, group,
-                stride):  # pragma: no cover
+    def scatter(where, state, laws, forces, out, stable, groups):  # pragma: no cover
+        cells, X, K, cell_dofs = where
+        mass, v, volume, sigma, body = state.mass, state.v, state.volume, state.sigma, state.body
+        modulus, g, fext, h, c = laws.modulus, forces.g, forces.fext, stable.h, stable.c
+        group, stride = groups.group, groups.stride
         best = 0.0 if bound else np.inf
         fe0 = fe1 = fe2 = s00 = s01 = s02 = s10 = s11 = s12 = s20 = s21 = s22 = 0.0
         for p in range(len(cells)):
@@ -203,9 +207,15 @@ def g2p_kernel(hexa: bool, blend: bool, kinematics: bool, move: bool, remap: boo
     NK = 8 if hexa else 4
 
     @njit(cache=True, error_model="numpy")
-    def g2p_update(cells, X, K, cell_dofs, v_new, v_old, flip, dt, by_particle,
-                   x, v, F, volume0, volume, sigma, body, law, lam, mu, L, x0, tol, left, c2v, v_offsets, v_cells,
-                   num_cells, mass, mom, sums, group, rigid):  # pragma: no cover
+    def g2p_update(where, grid, state, laws, moves, outputs, groups):  # pragma: no cover
+        cells, X, K, cell_dofs = where
+        v_new, v_old, flip, dt, by_particle = grid
+        x, v, F, volume0, volume, sigma, body, mass = state
+        law, lam, mu = laws.law, laws.lam, laws.mu
+        x0, tol, left = moves.x0, moves.tol, moves.left
+        c2v, v_offsets, v_cells, num_cells = moves.star
+        L, mom, sums = outputs
+        group, rigid = groups.group, groups.rigid
         n, keep_L = len(cells), L.shape[0] == len(cells)
         nonfinite_j, inverted, jmin, jmax, nonfinite = 0, 0, np.inf, -np.inf, 0  # the pass's checks
         acc = np.zeros(6)  # the state's sums (totals)
@@ -215,7 +225,7 @@ def g2p_kernel(hexa: bool, blend: bool, kinematics: bool, move: bool, remap: boo
             k = inverse_jacobian(K, c)
             o = group[p] * 3 if grouped else 0
             still = grouped and rigid[group[p]]  # a rigid body's particle: its own velocity, L = 0
-            vg0, vg1, vg2, dv0, dv1, dv2, Lp = gather(c, o, X0, X1, X2, k, cell_dofs, v_new, v_old, blend,
+            vg0, vg1, vg2, dv0, dv1, dv2, Lp = gather(c, o, (X0, X1, X2), k, cell_dofs, v_new, v_old, blend,
                                                       kinematics and not still, NK, hexa)
             if blend and not still:
                 v[p, 0] = flip * (v[p, 0] + dv0) + (1.0 - flip) * vg0
@@ -242,7 +252,7 @@ def g2p_kernel(hexa: bool, blend: bool, kinematics: bool, move: bool, remap: boo
                     nonfinite += 1  # x or v (v.v: the kinetic energy); the compiled laws' stress is finite where J is
                 out = not inside_after_pull_back(x, p, x0, K, c, not hexa, 3, tol, X, True)
                 if out:  # the neighbours, while their geometry is in cache
-                    e = star_search(x, p, x0, K, c, c2v, v_offsets, v_cells, num_cells, not hexa, 3, tol, X, True)
+                    e = star_search(x, p, x0, K, c, (c2v, v_offsets, v_cells, num_cells), not hexa, 3, tol, X, True)
                     out = e < 0
                     cells[p] = c if out else e
                 left[p] = out

@@ -32,6 +32,7 @@ from mpi4py import MPI
 
 from fempm.boundary.patches import Patches
 from fempm.kernels import contact as kc
+from fempm.kernels.bundles import Basis, GridStep, Groups, Moves, Outputs, State
 from fempm.stepping.contact import correct, particle_groups
 from fempm.stepping.lumped import BOUND_SAFETY, PointGrid
 from fempm.stepping.state import StepState
@@ -98,9 +99,9 @@ class ContactPointGrid(PointGrid):
         d = self.d
         self.group, G = particle_groups(contact, p)
         self._layout(G)
-        self.g, self.fext = self._external(s.t)
-        out, local = self._scatter(self._nodal, self.g, self.fext, 0, 1, 1 + d, stable="exact" if dt is None else "bound",
-                                   group=self.group, stride=self.stride, cg=1 + 2 * d)
+        self.external = self._external(s.t)
+        out, local = self._scatter(self._nodal, self.external, 0, 1, 1 + d, stable="exact" if dt is None else "bound",
+                                   groups=Groups(self.group, self.stride, self.rigid), cg=1 + 2 * d)
         top = np.array([kc.largest_total(out, self.stride, G, self.num_owned), -local])
         p.comm.Allreduce(MPI.IN_PLACE, top, op=MPI.MAX)  # one collective: the largest mass and the stable time
         top, state = float(top[0]), -float(top[1])
@@ -126,7 +127,7 @@ class ContactPointGrid(PointGrid):
         such a wall."""
         if self._moments is None:
             return None, [None] * self.num_groups
-        moments = self._by_group(self.mass_moments(group=self.group, stride=self.d), 0, self.d)
+        moments = self._by_group(self.mass_moments(Groups(self.group, self.d, self.rigid)), 0, self.d)
         centroids = [None] * self.num_groups
         if self.conditions.needs_positions:
             centroids = [NodalCentres(c, mg) for c, mg in zip(mass_centres(m, moments), m)]
@@ -184,12 +185,13 @@ class ContactPointGrid(PointGrid):
     def forces(self) -> None:  # pragma: no cover - the schemes with contact map the forces with the mass
         raise ValueError(f"contact supports the schemes USL and MUSL (got {self.options.stages})")
 
-    def gather_pass(self, v_new, v_old, flip: float, dt: float, blend: bool, kinematics: bool, move: bool,
-                    state: tuple) -> tuple:
+    def gather_pass(self, grid: GridStep, state: State, moves: Moves, outputs: Outputs, *, blend: bool,
+                    kinematics: bool, move: bool) -> tuple:
         """The G2P pass, each particle with its group's field."""
         p = self.state.particles
-        return self.kernels.g2p_update(p.cells, p.X, self.K, self.cell_dofs, v_new, v_old, flip, dt, blend,
-                                       kinematics, move, *state, group=self.group, rigid=self.rigid)
+        return self.kernels.g2p_update(Basis(p.cells, p.X, self.K, self.cell_dofs), grid, state, self.laws, moves,
+                                       outputs, Groups(self.group, self.d, self.rigid), blend=blend,
+                                       kinematics=kinematics, move=move)
 
     def reaction_fields(self, v_new: npt.NDArray, v_old: npt.NDArray) -> list[tuple]:
         """The deformable groups' fields (rigid ones take no conditions)."""

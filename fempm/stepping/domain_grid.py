@@ -28,7 +28,21 @@ import numpy.typing as npt
 
 from fempm.kernels import samples as ks
 from fempm.kernels.boxes import box_samples
+from fempm.kernels.bundles import (
+    NO_GROUPS,
+    Basis,
+    Corners,
+    Forces,
+    GridStep,
+    Groups,
+    Moves,
+    Outputs,
+    Samples,
+    Stable,
+    State,
+)
 from fempm.kernels.cpdi1 import cpdi1_samples, locate_corners
+from fempm.kernels.sample_location import at_samples, locate_samples
 from fempm.kernels.shape import CELLS, space_of
 from fempm.particles.corners import corner_signs, domain_geometry
 from fempm.stepping.grid import Grid, SingleFieldGrid
@@ -154,7 +168,7 @@ class DomainGrid(PointGrid):
         # the last step's sample cells are the first guess (a guess only: after the particles were
         # sorted or migrated a wrong one costs a search)
         guess = self.stencil[0] if self.stencil[0].shape == (n, Q) else None
-        sc, Y, missing = ks.locate_samples(y, p.cells, Q, self.x0, self.K, loc.vertex_star(), self.cell, loc.tol,
+        sc, Y, missing = locate_samples(y, p.cells, Q, self.x0, self.K, loc.vertex_star(), self.cell, loc.tol,
                                            guess, self._kept("located", n, Q))
         if missing:
             missing = self._place(y, sc, Y, w, beyond)
@@ -196,7 +210,7 @@ class DomainGrid(PointGrid):
         while True:
             guessed = ("boxes", len(p), self.pieces) in self._arrays  # the last step's samples
             out = self._kept("boxes", len(p), self.pieces)
-            needed, reaching, failed = box_samples(p.x, ell, p.cells, cell_type, self.vertices, *self.bounds,
+            needed, reaching, failed = box_samples(p.x, ell, p.cells, cell_type, self.vertices, self.bounds,
                                                    p.sample_locator.vertex_star(), self.frontier, self.x0,
                                                    self.K, out, guessed)
             if needed <= self.pieces:
@@ -257,7 +271,7 @@ class DomainGrid(PointGrid):
         corners (CPDI2) the moving pass also moves the corners with the grid velocity at them and
         each particle to its domain's centroid with its volume (the scalar 2D passes,
         ``corners=`` of :func:`fempm.kernels.samples.kernels_for`), or a pass after it does
-        (:func:`fempm.kernels.samples.at_samples`, :meth:`fempm.transfer.domains.CPDI2.move`)."""
+        (:func:`fempm.kernels.sample_location.at_samples`, :meth:`fempm.transfer.domains.CPDI2.move`)."""
         tracked = move and self.options.particle_domain.tracks_corners
         self.moved = None
         super().to_particles(v_new, v_old, dt, blend=blend, kinematics=kinematics, move=move, remap=remap)
@@ -274,7 +288,7 @@ class DomainGrid(PointGrid):
                        "twisted (corner Jacobian zero or changing sign)")
         else:
             sc, Y = self.stencil[:2]
-            at = ks.at_samples(self.cell, sc, Y, self.K, self.cell_dofs, v_new)
+            at = at_samples(self.cell, sc, Y, self.K, self.cell_dofs, v_new)
             corners = p.fields["corners"] + dt * at
             try:
                 w, g, volume, centroid = domain_geometry(corners, p.comm)
@@ -286,22 +300,29 @@ class DomainGrid(PointGrid):
         p.fields["corners"] = corners
         self._corner_weights = (corners, w, g, missing)  # the next step's, while the particles keep this array
 
-    def scatter_pass(self, *args, bound: bool = False) -> float:
+    def samples(self) -> Samples:
+        """The averaged basis of the step: the samples (``stencil``) and the space's cells."""
+        return Samples(*self.stencil, self.K, self.cell_dofs)
+
+    def scatter_pass(self, state: State, forces: Forces, out, cm: int, cv: int, cf: int, stable: Stable,
+                     bound: bool = False, groups: Groups = NO_GROUPS, cg: int = -1) -> float:
         p = self.state.particles
-        return self.passes.scatter(p.cells, *self.stencil, self.K, self.cell_dofs, *args, bound=bound)
+        return self.passes.scatter(Basis(p.cells, p.X, self.K, self.cell_dofs), self.samples(), state, self.laws,
+                                   forces, out, cm, cv, cf, stable, bound)
 
     def mass_apply(self, y: npt.NDArray, lump: npt.NDArray, out: npt.NDArray) -> None:
         """FMPM's :math:`M_C y` with the averaged basis (the samples' ``mass_apply``)."""
         p = self.state.particles
-        self.passes.mass_apply(p.cells, *self.stencil, self.K, self.cell_dofs, p.mass, y, lump, out)
+        self.passes.mass_apply(Basis(p.cells, p.X, self.K, self.cell_dofs), self.samples(), p.mass, y, lump, out)
 
-    def gather_pass(self, v_new, v_old, flip: float, dt: float, blend: bool, kinematics: bool, move: bool,
-                    state: tuple) -> tuple:
+    def gather_pass(self, grid: GridStep, state: State, moves: Moves, outputs: Outputs, *, blend: bool,
+                    kinematics: bool, move: bool) -> tuple:
         p = self.state.particles
         corners = None
         if move and self.passes.tracks and self.options.particle_domain.tracks_corners:  # CPDI2: corners moved here
             yc = np.ascontiguousarray(p.fields["corners"], dtype=np.float64)
-            corners = (yc, np.empty_like(yc), np.zeros(2, dtype=np.int64), p.sample_locator.vertex_star()[3])
-            self.moved = corners[1:3]
-        return self.passes.g2p_update(p.cells, *self.stencil, self.K, self.cell_dofs, v_new, v_old, flip, dt, blend,
-                                      kinematics, move, state[0], p.X, *state[1:], corners=corners)
+            corners = Corners(yc, np.empty_like(yc), np.zeros(2, dtype=np.int64), p.sample_locator.vertex_star()[3])
+            self.moved = (corners.moved, corners.bad)
+        return self.passes.g2p_update(Basis(p.cells, p.X, self.K, self.cell_dofs), self.samples(), grid, state,
+                                      self.laws, moves, outputs, blend=blend, kinematics=kinematics, move=move,
+                                      corners=corners)

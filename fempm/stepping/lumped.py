@@ -34,6 +34,8 @@ from mpi4py import MPI
 
 from fempm.kernels import fmpm as kf
 from fempm.kernels import lumped as kl
+from fempm.kernels.bundles import NO_GROUPS, Basis, Forces, GridStep, Groups, Laws, Moves, Outputs, Stable, Star, State
+from fempm.kernels.lumped import NO_STABLE
 from fempm.kernels.shape import space_of
 from fempm.materials.base import IsotropicElastic
 from fempm.materials.linear_elastic import LinearElastic
@@ -114,6 +116,7 @@ class PointGrid(Grid):
         self.lam = np.array([a[1] for a in laws])
         self.mu = np.array([a[2] for a in laws])
         self.modulus = np.array([a[3] for a in laws])
+        self.laws = Laws(self.law, self.lam, self.mu, self.modulus)  # the passes' bundle
         self.all_modulus = bool(np.all(self.modulus > 0))
         self.any_external = bool(np.any(self.law == 0))
         self.since_sort = SORT_EVERY  # steps since the particles were sorted by cell (sort on the first step)
@@ -149,8 +152,9 @@ class PointGrid(Grid):
                 c[idx] = mat.wave_speed(p.fields["F"][idx], rho[idx])
         return c
 
-    def _external(self, t: float) -> tuple[npt.NDArray, npt.NDArray]:
-        """(constant body force g (d,), per-particle external forces (n or 0, d))."""
+    def _external(self, t: float) -> Forces:
+        """The external forces of the P2G pass: a constant body force g (d,), or per-particle
+        forces (n or 0, d)."""
         s = self.state
         loads = s.loads
         s.count_terms()
@@ -158,23 +162,30 @@ class PointGrid(Grid):
             g = np.zeros(self.d) if loads.body_force is None else np.asarray(loads.body_force, dtype=np.float64)
             if g.shape != (self.d,):
                 raise ValueError(f"the body force has shape {g.shape}, expected ({self.d},)")
-            return g, np.zeros((0, self.d))
-        return np.zeros(self.d), np.ascontiguousarray(external_forces(loads, s.particles, t))
+            return Forces(g, np.zeros((0, self.d)))
+        return Forces(np.zeros(self.d), np.ascontiguousarray(external_forces(loads, s.particles, t)))
 
-    def _scatter(self, nodal, g, fext, cm: int, cv: int, cf: int, stable: str = "", velocity=None, **groups):
+    def particle_state(self, velocity: npt.NDArray | None = None) -> State:
+        """The particle state the passes read and update (``velocity``: the vectors a P2G pass
+        maps in the place of the particles' velocities)."""
+        p = self.state.particles
+        f = p.fields
+        return State(p.x, f["v"] if velocity is None else velocity, f["F"], f["volume0"], p.volume, f["sigma"],
+                     f["body"], p.mass)
+
+    def _scatter(self, nodal, forces: Forces, cm: int, cv: int, cf: int, stable: str = "", velocity=None,
+                 groups: Groups = NO_GROUPS, cg: int = -1):
         """P2G of the chosen columns into the kept ``nodal`` (vector, array), summed over
         ranks; with ``stable`` ("exact" or "bound") also this rank's stable time of the state
         or a lower bound of it (:func:`fempm.kernels.lumped._scatter_kernel`; else inf);
         ``velocity``: the vectors the momentum column maps in the place of the particles'
-        velocities; ``groups``: the passes' ``group``, ``stride`` and ``cg`` (multi-field contact)."""
+        velocities; ``groups`` and ``cg``: multi-field contact's groups and mass-gradient column."""
         s = self.state
-        p = s.particles
-        f = p.fields
         vec, out = nodal
         out.fill(0.0)
-        h, c = (s.h_cell, self._wave_speeds()) if stable else (np.zeros(0), np.zeros(0))
-        local = self.scatter_pass(p.mass, f["v"] if velocity is None else velocity, p.volume, f["sigma"], g, fext, out, cm, cv, cf, h, f["body"],
-                                  self.modulus, c, bound=stable == "bound", **groups)
+        times = Stable(s.h_cell, self._wave_speeds()) if stable else NO_STABLE
+        local = self.scatter_pass(self.particle_state(velocity), forces, out, cm, cv, cf, times, stable == "bound",
+                                  groups, cg)
         sum_ghosts(vec)
         return out, local
 
@@ -184,17 +195,19 @@ class PointGrid(Grid):
         p = self.state.particles
         kf.mass_apply(self.cell)(p.cells, p.X, self.K, self.cell_dofs, p.mass, y, lump, out)
 
-    def scatter_pass(self, *args, bound: bool = False, **groups) -> float:
+    def scatter_pass(self, state: State, forces: Forces, out, cm: int, cv: int, cf: int, stable: Stable,
+                     bound: bool = False, groups: Groups = NO_GROUPS, cg: int = -1) -> float:
         """The P2G pass (:func:`fempm.kernels.lumped.kernels_for`) with the particles' basis."""
         p = self.state.particles
-        return self.kernels.scatter(p.cells, p.X, self.K, self.cell_dofs, *args, bound=bound, **groups)
+        where = Basis(p.cells, p.X, self.K, self.cell_dofs)
+        return self.kernels.scatter(where, state, self.laws, forces, out, cm, cv, cf, stable, bound, groups, cg)
 
-    def gather_pass(self, v_new, v_old, flip: float, dt: float, blend: bool, kinematics: bool, move: bool,
-                    state: tuple) -> tuple:
+    def gather_pass(self, grid: GridStep, state: State, moves: Moves, outputs: Outputs, *, blend: bool,
+                    kinematics: bool, move: bool) -> tuple:
         """The G2P pass (:func:`fempm.kernels.lumped.kernels_for`) with the particles' basis."""
         p = self.state.particles
-        return self.kernels.g2p_update(p.cells, p.X, self.K, self.cell_dofs, v_new, v_old, flip, dt, blend,
-                                       kinematics, move, *state)
+        return self.kernels.g2p_update(Basis(p.cells, p.X, self.K, self.cell_dofs), grid, state, self.laws, moves,
+                                       outputs, blend=blend, kinematics=kinematics, move=move)
 
     def _centroids(self, nodal) -> NodalCentres | None:
         r"""The nodal centres of mass :math:`\sum_p M_p N_{ip} x_p / m_i` (one more particle
@@ -203,21 +216,19 @@ class PointGrid(Grid):
             return None
         return NodalCentres(mass_centres(nodal[:, 0], self.mass_moments()), nodal[:, 0])
 
-    def mass_moments(self, **groups) -> npt.NDArray:
+    def mass_moments(self, groups: Groups = NO_GROUPS) -> npt.NDArray:
         r"""The first mass moments :math:`\sum_p M_p N_{ip} x_p` into the kept ``_moments``
         array, summed over ranks (``groups``: as for :meth:`_scatter`)."""
         p = self.state.particles
-        return self._scatter(self._moments, np.zeros(self.d), np.zeros((0, self.d)), -1, 0, -1, velocity=p.x,
-                             **groups)[0]
+        return self._scatter(self._moments, Forces(np.zeros(self.d), np.zeros((0, self.d))), -1, 0, -1,
+                             velocity=p.x, groups=groups)[0]
 
     def _stable_time(self) -> float:
         r"""The stable time of the state, :math:`\min_p h_{c(p)} / (c_p + |v_p|)` over all ranks."""
         s = self.state
         p = s.particles
-        f = p.fields
-        local = self.kernels.scatter(p.cells, p.X, self.K, self.cell_dofs, p.mass, f["v"], p.volume, f["sigma"],
-                                     np.zeros(self.d), np.zeros((0, self.d)), np.zeros((0, 0)), -1, -1, -1, s.h_cell,
-                                     f["body"], self.modulus, self._wave_speeds())
+        local = self.scatter_pass(self.particle_state(), Forces(np.zeros(self.d), np.zeros((0, self.d))),
+                                  np.zeros((0, 0)), -1, -1, -1, Stable(s.h_cell, self._wave_speeds()))
         return -p.comm.allreduce(-local, op=MPI.MAX)
 
     def _g2p(self, v_new, v_old, dt, *, blend: bool, kinematics: bool, move: bool, remap=None):
@@ -232,11 +243,12 @@ class PointGrid(Grid):
         external = kinematics and self.any_external
         L = np.empty((len(p) if external else 0, self.d, self.d))
         left = np.empty(len(p) if move else 0, dtype=np.bool_)
-        state = (opts.particle_position, p.x, f["v"], f["F"], f["volume0"], p.volume, f["sigma"], f["body"],
-                 self.law, self.lam, self.mu, L, self.x0, p.locator.tol, left, *p.locator.vertex_star(), p.mass,
-                 remap if remap is not None else np.zeros((0, self.d)),
-                 self._sums if move and self.totals else np.zeros(0))
-        counts = self.gather_pass(v_new, v_old, float(opts.flip), float(dt), blend, kinematics, move, state)
+        grid = GridStep(v_new, v_old, float(opts.flip), float(dt), opts.particle_position)
+        moves = Moves(self.x0, p.locator.tol, left, Star(*p.locator.vertex_star()))
+        outputs = Outputs(L, remap if remap is not None else np.zeros((0, self.d)),
+                          self._sums if move and self.totals else np.zeros(0))
+        counts = self.gather_pass(grid, self.particle_state(), moves, outputs, blend=blend, kinematics=kinematics,
+                                  move=move)
         nonfinite_j, inverted, jmin, jmax, nonfinite = counts
         if kinematics:
             flags = np.array([nonfinite_j, inverted, -jmin, jmax], dtype=float)
@@ -280,10 +292,10 @@ class PointGrid(Grid):
         opts = self.options
         p = s.particles
         d = self.d
-        self.g, self.fext = self._external(s.t)
+        self.external = self._external(s.t)
         # a given dt is checked against a lower bound of the stable time, and against the time
         # itself only where the bound does not show it stable
-        nodal, local = self._scatter(self._nodal, self.g, self.fext, 0, 1, 1 + d if opts.stages.forces_with_map else -1,
+        nodal, local = self._scatter(self._nodal, self.external, 0, 1, 1 + d if opts.stages.forces_with_map else -1,
                                      stable="exact" if dt is None else "bound")
         top = np.array([nodal[: self.num_owned, 0].max(initial=0.0), -local])
         p.comm.Allreduce(MPI.IN_PLACE, top, op=MPI.MAX)  # one collective: the largest mass and the stable time
@@ -315,7 +327,7 @@ class PointGrid(Grid):
                                   forces)
 
     def forces(self) -> None:
-        self.force, self.cf = self._scatter(self._nodal_d, self.g, self.fext, -1, -1, 0)[0], 0
+        self.force, self.cf = self._scatter(self._nodal_d, self.external, -1, -1, 0)[0], 0
 
     def advance(self, v_old: npt.NDArray, dt: float) -> npt.NDArray:
         return self.mass.advance(self._nodal[1][:, :1], self.force, self.cf, self.active_min, self.weak_max, dt,

@@ -73,7 +73,7 @@ def test_box_samples_equal_the_box_integrals(name):
     Q = 1
     while True:
         out = (np.empty((n, Q), np.int32), np.empty((n * Q, d)), np.empty((n, Q)))
-        needed, reaching, failed = box_samples(x, ell, cells, (d, simplex), verts, blo, bhi, loc.vertex_star(),
+        needed, reaching, failed = box_samples(x, ell, cells, (d, simplex), verts, (blo, bhi), loc.vertex_star(),
                                                np.zeros(len(all_cells), bool), geo.x0, geo.K, out)
         if needed <= Q:
             break
@@ -94,7 +94,7 @@ def test_box_samples_equal_the_box_integrals(name):
     for guessed in (True, False):
         arrays = tuple(a[keep].copy() if a.ndim == 2 and len(a) == n else a.reshape(n, Q, d)[keep].reshape(-1, d).copy()
                        for a in out)
-        needed, _, _ = box_samples(x_moved[keep], ell[keep], moved_cells[keep], (d, simplex), verts, blo, bhi,
+        needed, _, _ = box_samples(x_moved[keep], ell[keep], moved_cells[keep], (d, simplex), verts, (blo, bhi),
                                    loc.vertex_star(), np.zeros(len(all_cells), bool), geo.x0, geo.K, arrays, guessed)
         assert needed <= Q
         got.append(arrays)

@@ -4,6 +4,7 @@ import numpy as np
 import pytest
 
 from fempm.kernels import g2p
+from fempm.kernels.bundles import Basis, Forces, GridStep, Groups, Laws, Moves, Outputs, Stable, Star, State
 
 
 @pytest.fixture(params=[(1, 2), (2, 4), (2, 6), (3, 8)], ids=["interval", "quad", "P2-triangle", "hex"])
@@ -158,6 +159,25 @@ def _pass_state(simplex: bool, seed: int, multilinear: bool = False, d: int = 2)
                 h=rng.random(ncell) + 0.1, g=np.array([0.3, -9.8, 0.2][:d]), fext=rng.standard_normal((n, d)))
 
 
+def call_p2g(kernel, cells, X, K, cell_dofs, mass, v, volume, sigma, g, fext, out, h, body, modulus, c, group, stride):
+    """A P2G kernel called with the arrays of a flat argument list, in the bundles it takes
+    (fempm.kernels.bundles; the arrays the pass does not read empty)."""
+    d = X.shape[1]
+    state = State(np.zeros((0, d)), v, np.zeros((0, d, d)), np.zeros(0), volume, sigma, body, mass)
+    laws = Laws(np.zeros(0, dtype=np.int64), np.zeros(0), np.zeros(0), modulus)
+    return kernel(Basis(cells, X, K, cell_dofs), state, laws, Forces(g, fext), out, Stable(h, c),
+                  Groups(group, stride, np.zeros(1, dtype=np.bool_)))
+
+
+def call_g2p(kernel, cells, X, K, cell_dofs, v_new, v_old, flip, dt, by_particle, x, v, F, volume0, volume, sigma, body,
+        law, lam, mu, L, x0, tol, left, c2v, v_offsets, v_cells, num_cells, mass, mom, sums, group, rigid):
+    """A G2P kernel called with the arrays of a flat argument list, in the bundles it takes."""
+    return kernel(Basis(cells, X, K, cell_dofs), GridStep(v_new, v_old, flip, dt, by_particle),
+                  State(x, v, F, volume0, volume, sigma, body, mass), Laws(law, lam, mu, np.zeros(len(law))),
+                  Moves(x0, tol, left, Star(c2v, v_offsets, v_cells, num_cells)), Outputs(L, mom, sums),
+                  Groups(group, 0, rigid))
+
+
 # affine quads: the Q1 basis of the one, the pull-back of the other; the default run checks the
 # triangle's (the compiled step of every cell against the numpy step: tests/stepping/test_compiled_step.py)
 @pytest.mark.parametrize("cell", ["triangle", pytest.param("quadrilateral", marks=pytest.mark.slow),
@@ -190,7 +210,7 @@ def test_planar_kernels_equal_the_generic_ones_bit_for_bit(cell):
         for kernel in (lumped._scatter_kernel(cell, *flags), planar.scatter_kernel(simplex, affine, *flags)):
             s = _pass_state_(simplex, 1)
             out = np.zeros((90, 5))
-            t = kernel(s["cells"], s["X"], s["K"], s["cell_dofs"], s["mass"], s["v"], s["volume"], s["sigma"], s["g"],
+            t = call_p2g(kernel, s["cells"], s["X"], s["K"], s["cell_dofs"], s["mass"], s["v"], s["volume"], s["sigma"], s["g"],
                        s["fext"] if has_fext else np.zeros((0, 2)), out, s["h"] if with_dt else np.zeros(0),
                        s["body"], s["modulus"], s["c"], np.zeros(0, dtype=np.int64), 0)
             results.append((out, t))
@@ -208,7 +228,7 @@ def test_planar_kernels_equal_the_generic_ones_bit_for_bit(cell):
             L = np.zeros((n if keep_L else 0, 2, 2))
             left, mom = np.zeros(n, dtype=np.bool_), np.zeros((90 if remap else 0, 2))
             sums = np.full(5 if totals else 0, np.nan)
-            counts = kernel(s["cells"], s["X"], s["K"], s["cell_dofs"], s["v_new"], s["v_old"], 0.9, 1e-2,
+            counts = call_g2p(kernel, s["cells"], s["X"], s["K"], s["cell_dofs"], s["v_new"], s["v_old"], 0.9, 1e-2,
                             by_particle, s["x"], s["v"], s["F"], s["volume0"], s["volume"], s["sigma"], s["body"],
                             s["law"], s["lam"], s["mu"], L, s["x0"], 1e-10, left, *s["star"], s["mass"], mom, sums,
                             np.zeros(0, dtype=np.int64), np.zeros(1, dtype=np.bool_))
@@ -249,7 +269,7 @@ def test_solid_kernels_equal_the_generic_ones(cell):
                        solid.scatter_kernel(hexa, *flags, grouped, grouped)):
             s = _pass_state(True, 1, d=3) if not hexa else _pass_state(False, 1, d=3)
             out = np.zeros((90, 20 if grouped else 7))
-            t = kernel(s["cells"], s["X"], s["K"], s["cell_dofs"], s["mass"], s["v"], s["volume"], s["sigma"], s["g"],
+            t = call_p2g(kernel, s["cells"], s["X"], s["K"], s["cell_dofs"], s["mass"], s["v"], s["volume"], s["sigma"], s["g"],
                        s["fext"] if flags[4] else np.zeros((0, 3)), out, s["h"] if flags[3] else np.zeros(0),
                        s["body"], s["modulus"], s["c"], group if grouped else none, 10)
             results.append((out, t))
@@ -267,7 +287,7 @@ def test_solid_kernels_equal_the_generic_ones(cell):
             left, mom = np.zeros(n, dtype=np.bool_), np.zeros((90 if remap else 0, 3 * G))
             sums = np.full(6 if totals else 0, np.nan)
             vn, vo = (np.hstack([s[k], -s[k]]) if grouped else s[k] for k in ("v_new", "v_old"))
-            counts = kernel(s["cells"], s["X"], s["K"], s["cell_dofs"], vn, vo, 0.9, 1e-2, by_particle, s["x"], s["v"],
+            counts = call_g2p(kernel, s["cells"], s["X"], s["K"], s["cell_dofs"], vn, vo, 0.9, 1e-2, by_particle, s["x"], s["v"],
                             s["F"], s["volume0"], s["volume"], s["sigma"], s["body"], s["law"], s["lam"], s["mu"], L,
                             s["x0"], 1e-10, left, *s["star"], s["mass"], mom, sums, group if grouped else none,
                             np.array([False, True]) if grouped else np.zeros(1, dtype=np.bool_))
@@ -302,17 +322,17 @@ def test_grouped_passes_are_the_one_field_passes_of_each_group(cell):
                          (planar.scatter_kernel(simplex, affine, True, True, True, True, True, False, True, True),
                           planar.scatter_kernel(simplex, affine, True, True, True, True, True, False))):
         out = np.zeros((nd, G * S))
-        grouped(s["cells"], s["X"], s["K"], s["cell_dofs"], *[s[k] for k in args], out, s["h"], s["body"],
+        call_p2g(grouped, s["cells"], s["X"], s["K"], s["cell_dofs"], *[s[k] for k in args], out, s["h"], s["body"],
                 s["modulus"], s["c"], group, S)
         for g in range(G):
             k = group == g
             sub = [s[a][k] if a not in ("g",) else s[a] for a in args]
             ref = np.zeros((nd, 5))
-            one(s["cells"][k], s["X"][k], s["K"], s["cell_dofs"], *sub, ref, s["h"], s["body"][k], s["modulus"],
+            call_p2g(one, s["cells"][k], s["X"][k], s["K"], s["cell_dofs"], *sub, ref, s["h"], s["body"][k], s["modulus"],
                 s["c"][k], none, 0)
             assert np.allclose(out[:, g * S:g * S + 5], ref, rtol=0, atol=1e-12 * np.abs(ref).max())
             grad = np.zeros((nd, 5))
-            one(s["cells"][k], s["X"][k], s["K"], s["cell_dofs"], s["mass"][k], s["v"][k], s["mass"][k],
+            call_p2g(one, s["cells"][k], s["X"][k], s["K"], s["cell_dofs"], s["mass"][k], s["v"][k], s["mass"][k],
                 np.broadcast_to(-np.eye(2), (k.sum(), 2, 2)).copy(), 0.0 * s["g"], np.zeros((k.sum(), 2)), grad,
                 s["h"], s["body"][k], s["modulus"], s["c"][k], none, 0)
             assert np.abs(out[:, g * S + 5:g * S + 7]).max() > 1.0
@@ -338,7 +358,7 @@ def test_grouped_passes_are_the_one_field_passes_of_each_group(cell):
             if g is not None and rigid[g]:  # the reference: no grid increment, L = 0, moved by its own velocity
                 vn, vo, flip, by_particle = 0.0 * vn, 0.0 * vo, 1.0, True
             kernel, last = (grouped, (group, rigid)) if g is None else (one, (none, np.zeros(1, dtype=np.bool_)))
-            kernel(t["cells"], t["X"], t["K"], t["cell_dofs"], vn, vo, flip, 1e-2, by_particle, t["x"], t["v"], t["F"],
+            call_g2p(kernel, t["cells"], t["X"], t["K"], t["cell_dofs"], vn, vo, flip, 1e-2, by_particle, t["x"], t["v"], t["F"],
                    t["volume0"], t["volume"], t["sigma"], t["body"], t["law"], t["lam"], t["mu"], np.zeros((0, 2, 2)),
                    t["x0"], 1e-10, left, *t["star"], t["mass"], mom, np.zeros(0), *last)
             results.append((k, [t[a] for a in ("X", "x", "v", "F", "volume", "sigma", "cells")], mom, left))
@@ -481,7 +501,7 @@ def test_planar_corner_location_equals_the_generic_one_bit_for_bit(cell):
         got = []
         for kernel in (cpdi1._planar_locate_kernel(cell == "triangle"), cpdi1._locate_kernel(cell)):
             sc, Y = np.full((n, 4), -7, dtype=np.int32), np.zeros((4 * n, 2))
-            missing = kernel(s["x"], s["F"], lp, signs, s["cells"], s["x0"], s["K"], *s["star"], 1e-10, guess, sc, Y)
+            missing = kernel(s["x"], s["F"], lp, signs, s["cells"], s["x0"], s["K"], Star(*s["star"]), 1e-10, guess, sc, Y)
             got.append((missing, sc, Y))
         (m0, sc0, Y0), (m1, sc1, Y1) = got
         found = sc0 >= 0
