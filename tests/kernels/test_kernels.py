@@ -300,7 +300,10 @@ def test_solid_kernels_equal_the_generic_ones(cell):
             assert np.abs(L0).max() > 1.0
 
 
-@pytest.mark.parametrize("cell", ["triangle", pytest.param("quadrilateral-multilinear", marks=pytest.mark.slow)])
+# 20 s of kernels: make test-all (the grouped compiled step against the numpy contact grid:
+# tests/stepping/test_contact_compiled.py)
+@pytest.mark.slow
+@pytest.mark.parametrize("cell", ["triangle", "quadrilateral-multilinear"])
 def test_grouped_passes_are_the_one_field_passes_of_each_group(cell):
     """Multi-field contact's passes (a group per particle, fempm.stepping.contact_points): the
     grouped P2G into G = 3 blocks of columns [m | m v | f | grad m] equals the one-field P2G of

@@ -12,7 +12,8 @@ from mpi4py import MPI
 
 from fempm.studies import error_vs_time as evt
 
-pytestmark = pytest.mark.xdist_group("test_error_vs_time_study")  # one worker computes its module fixtures
+# one worker computes its module fixtures; the whole quick study takes 30 s: make test-all
+pytestmark = [pytest.mark.xdist_group("test_error_vs_time_study"), pytest.mark.slow]
 
 
 @pytest.fixture(scope="module")
