@@ -6,7 +6,7 @@ markdown table of new/old time ratios (medians over the rounds).
     .venv/bin/python benchmarks/compare_trees.py --old ref_old_*.json --new ref_new_*.json
 
 Rows of ``bench_configurations``: (configuration, mesh, ranks) with the configuration's and its
-base's step times; of ``bench_reference``: (implementation, ranks) with fempm's step time and its
+base's step times and their ratio (timed in alternating batches of one process); of ``bench_reference``: (implementation, ranks) with fempm's step time and its
 ratio to the numba kernel timed in the same run (which takes out the machine's drift).
 """
 
@@ -25,7 +25,8 @@ def figures(paths: list[Path]) -> dict[tuple, dict[str, list[float]]]:
         for row in json.loads(path.read_text())["rows"]:
             if "config" in row:
                 key = (row["config"], row["mesh"], row["ranks"])
-                values = {"step [ms]": 1e3 * row["t_s"], "base step [ms]": 1e3 * row["t_base_s"]}
+                values = {"step [ms]": 1e3 * row["t_s"], "base step [ms]": 1e3 * row["t_base_s"],
+                          "time / base's": row["ratio"]}
             elif row["impl"].startswith("fempm"):
                 key = (row["impl"], "", row["ranks"])
                 values = {"step [ms]": 1e3 * row["t_step_s"], "time / numba's": 1.0 / row["vs"]["numba"]}

@@ -22,7 +22,7 @@ the tip has moved about three cells (t = 0.09 s, at CFL 0.4 and 0.05 alike, so i
 time-step instability); 5 % PIC damps it while leaving the bending mode nearly undamped
 (pure PIC, $\alpha = 0$, damps the beam to a slow creep instead).
 
-Run: `python demos/cantilever.py [--cells 4] [--periods 2] [--out output/cantilever]`
+Run: `.venv/bin/python demos/cantilever.py [--cells 4] [--periods 2] [--out output/cantilever]`
 """
 
 from __future__ import annotations

@@ -27,7 +27,7 @@ prints the table with both laws (a range where $a$ lies between a law's two bran
 exponent of the runout between consecutive aspect ratios, and draws the deposits and the
 runout against $a$ with the laws.
 
-Run: `python demos/column_collapse.py [--cells 16] [--aspects 0.5 1 2 4] [--out output/column_collapse]`
+Run: `.venv/bin/python demos/column_collapse.py [--cells 16] [--aspects 0.5 1 2 4] [--out output/column_collapse]`
 """
 
 from __future__ import annotations

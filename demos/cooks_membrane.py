@@ -23,7 +23,7 @@ displacement-pressure elements on gmsh triangles of size 0.5 (locking-free): $u_
 for $\nu = 1/3$ (CoFEA's quadratic 3D results, 32.27 mm at $E = 70$, $F = 100$, scale to the
 same 22.59) and $19.41$ for $\nu = 0.4999$.
 
-Run: `python demos/cooks_membrane.py [--h 6 4 3 2 1.5 1] [--nu 0.3333333 0.4999] [--out output/cook]`
+Run: `.venv/bin/python demos/cooks_membrane.py [--h 6 4 3 2 1.5 1] [--nu 0.3333333 0.4999] [--out output/cook]`
 """
 
 from __future__ import annotations

@@ -17,7 +17,7 @@ has friction); the simulated front converges under refinement (10, 20, 40 cells 
 column agree to about 1 %) to a curve ahead of the measurements, by 8-10 % in Z once
 $T > 2$. The demo prints the comparison table and draws it.
 
-Run: `python demos/dam_break.py [--cells 10] [--out output/dam_break]`
+Run: `.venv/bin/python demos/dam_break.py [--cells 10] [--out output/dam_break]`
 """
 
 from __future__ import annotations

@@ -17,7 +17,7 @@ disks at t = 3) with the momentum zero to 1e-14 (one field) and 2.5e-13 (contact
 ends with 0.866 of the initial energy, one field with 0.948: the correction removes the normal
 relative velocity at the contact nodes, an inelastic impulse at each of them.
 
-Run: `python demos/disks_contact.py [--cells 20] [--cfl 0.2] [--t-end 3] [--out output/disks_contact]`
+Run: `.venv/bin/python demos/disks_contact.py [--cells 20] [--cfl 0.2] [--t-end 3] [--out output/disks_contact]`
 """
 
 from __future__ import annotations

@@ -1,6 +1,6 @@
 r"""# A rigid strip footing pushed into a von Mises layer: Prandtl's bearing capacity
 
-The footing scene (`python -m fempm run footing --cells N --depth D`, `fempm.scenes.footing`):
+The footing scene (`.venv/bin/python -m fempm run footing --cells N --depth D`, `fempm.scenes.footing`):
 a smooth rigid footing of width B (a box collider, `fempm.colliders`) pushed at a slow speed
 into a weightless elastic-perfectly plastic von Mises layer 5B wide and 2B deep, plane strain.
 Its mean contact pressure tends to Prandtl's limit $(2 + \pi) c$, $c = \sigma_y / \sqrt 3$.
@@ -10,7 +10,7 @@ The demo runs each resolution (cells across the footing) and writes `footing.csv
 the last tenth of the penetration) over Prandtl's, and with `--figure` the pressure against the
 penetration (`footing.png`).
 
-Run: `python demos/footing.py [--cells 8 16 32] [--volumetric standard fbar] [--out docs/footing] [--figure]`
+Run: `.venv/bin/python demos/footing.py [--cells 8 16 32] [--volumetric standard fbar] [--out docs/footing] [--figure]`
 """
 
 from __future__ import annotations

@@ -24,7 +24,7 @@ The measure of continuity is the largest distance between lattice neighbours, in
 (``fempm.scenes.largest_neighbour_gap``). A run stops early, and says so, when particles leave
 the mesh (the separated part falls out of it).
 
-Run: `python demos/hanging_block.py [--cells 10] [--t-end 0.15] [--out output/hanging_block]`
+Run: `.venv/bin/python demos/hanging_block.py [--cells 10] [--t-end 0.15] [--out output/hanging_block]`
 (also under `mpiexec -n 2`).
 """
 

@@ -1,6 +1,6 @@
 r"""# A block and a disk on a frictional incline, against the rigid-body accelerations
 
-The incline scene (`python -m fempm run incline --body block|disk --angle DEG --friction MU`,
+The incline scene (`.venv/bin/python -m fempm run incline --body block|disk --angle DEG --friction MU`,
 `fempm.scenes.incline`) at 30 degrees: the plane is the grid boundary $y = 0$ with Coulomb
 friction, or a rigid body in frictional contact (`--plane rigid`), gravity rotated by the
 slope; or (`--plane tagged`, the block) the tagged floor of a gmsh triangle mesh turned by the
@@ -23,7 +23,7 @@ and shares the normal impulse it takes over them by depth; the block has 30 % of
 in (the scene's default FLIP 0.7: with pure FLIP the frictional sliding of the elastic block
 goes unstable and it slides up to twice too fast, and creeps where it should stick).
 
-Run: `python demos/incline.py [--cells 8 16] [--cases NAME ...] [--out docs/incline]`
+Run: `.venv/bin/python demos/incline.py [--cells 8 16] [--cases NAME ...] [--out docs/incline]`
 """
 
 from __future__ import annotations

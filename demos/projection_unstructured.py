@@ -15,7 +15,7 @@ We compare their $L^2$ errors for P1 and P2 (P2 only consistent: its Lagrange ve
 functions integrate to zero, so lumped vertex masses are not positive), check that mass and
 momentum are carried to the grid exactly, and write the fields for ParaView (VTX) and a PNG.
 
-Run: `python demos/projection_unstructured.py [--ppc 4] [--out output/projection]`
+Run: `.venv/bin/python demos/projection_unstructured.py [--ppc 4] [--out output/projection]`
 """
 
 from __future__ import annotations

@@ -1,6 +1,6 @@
 r"""# Granular flow out of a hopper onto a floor
 
-The silo scene (`python -m fempm run silo --cells N`, `fempm.scenes.silo`): a wedge hopper with
+The silo scene (`.venv/bin/python -m fempm run silo --cells N`, `fempm.scenes.silo`): a wedge hopper with
 gmsh-tagged frictional walls (`fempm.boundary.tagged`) drains a cohesionless granular fill (the
 mu(I) rheology, or Drucker-Prager with `--law dp`) through its outlet onto a floor, from whose
 edges the material spills out of the mesh and is removed (`outside="remove"`). The demo runs
@@ -11,7 +11,7 @@ of the discharge in the outlet width, fitted at each number of cells across the 
 one cell size, `--h`; Beverloo: 3/2); with
 `--figure` the flow at three times and the hopper's mass against time (`silo.png`).
 
-Run: `python demos/silo.py [--cells 5 10] [--outlets 0.1] [--h H] [--fill 0.3] [--width 0.5] [--no-floor]
+Run: `.venv/bin/python demos/silo.py [--cells 5 10] [--outlets 0.1] [--h H] [--fill 0.3] [--width 0.5] [--no-floor]
 [--law mu-i|dp] [--t-end 1.0 ...] [--out docs/silo] [--figure]`
 """
 

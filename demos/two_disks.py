@@ -10,7 +10,7 @@ The default runs on the unstructured triangle mesh `meshes/unit_square_tri.msh` 
 (`particles.pvd` for ParaView and pyvista, `frames/*.png`), the grid velocity (`grid_velocity.pvd`), `energies.png`,
 `disks.png` and `summary.json`.
 
-Run: `python demos/two_disks.py [--mesh structured] [--mass consistent] [--out output/disks]`
+Run: `.venv/bin/python demos/two_disks.py [--mesh structured] [--mass consistent] [--out output/disks]`
 """
 
 from __future__ import annotations

@@ -10,7 +10,7 @@ $$ v_{cm}(t) = \frac{v_0}{\beta L} \cos(\omega t), \qquad \omega = \beta \sqrt{E
 per cell, lumped and consistent mass, and report the largest $|v_{cm} - v_{cm}^{exact}|$ relative
 to the amplitude up to $t = 40$, and the total-energy error.
 
-Run: `python demos/vibrating_bar.py [--cells 16] [--mass consistent] [--out output/bar]`
+Run: `.venv/bin/python demos/vibrating_bar.py [--cells 16] [--mass consistent] [--out output/bar]`
 """
 
 from __future__ import annotations

@@ -1,6 +1,6 @@
 r"""# A pressure pulse leaving through an absorbing boundary
 
-The wave scene (`python -m fempm run wave --boundary absorbing|fixed --cells N`,
+The wave scene (`.venv/bin/python -m fempm run wave --boundary absorbing|fixed --cells N`,
 `fempm.scenes.wave`): a cos^2 pulse of particle velocity with the stress of a wave running to
 the right, in an elastic strip between frictionless walls (uniaxial strain: P wave), meets the
 strip's end at x = L. The end is an absorbing boundary (`fempm.boundary.absorbing`: viscous
@@ -12,7 +12,7 @@ The demo runs both ends at each resolution and writes `wave.csv` and `wave.md` (
 command, commit and date), and with `--figure` the velocity along the strip at the end of
 each run.
 
-Run: `python demos/wave.py [--cells 32 64 128 256] [--out docs/wave] [--figure]`
+Run: `.venv/bin/python demos/wave.py [--cells 32 64 128 256] [--out docs/wave] [--figure]`
 """
 
 from __future__ import annotations
