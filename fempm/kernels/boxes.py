@@ -220,7 +220,7 @@ def _kernel(d: int, simplex: bool):
     return kernel
 
 
-def box_samples(x, ell, cells, cell_type: tuple[int, bool], verts, bounds: tuple, star: tuple, frontier, x0, K,
+def box_samples(x, ell, cells, cell_type: tuple[int, bool], verts, bounds: tuple, star: Star, frontier, x0, K,
                 out, guessed: bool = False):
     r"""The exact GIMP samples of boxes ``[x - ell, x + ell]`` (n, d) of particles in ``cells``
     (see the module).
@@ -255,5 +255,5 @@ def box_samples(x, ell, cells, cell_type: tuple[int, bool], verts, bounds: tuple
     d, simplex = cell_type
     sc, Y, w = out
     needed, reaching, failed = _kernel(d, simplex)(x, np.ascontiguousarray(ell), cells, verts, tuple(bounds),
-                                                    Star(*star), frontier, x0, K, bool(guessed), (sc, Y, w))
+                                                    star, frontier, x0, K, bool(guessed), (sc, Y, w))
     return int(needed), int(reaching), int(failed)

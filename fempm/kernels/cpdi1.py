@@ -172,7 +172,7 @@ def _planar_locate_kernel(simplex: bool):
     return locate
 
 
-def locate_corners(x, F, lp, signs, cells, x0, K, star: tuple, cell: str, tol: float, guess=None, out=None):
+def locate_corners(x, F, lp, signs, cells, x0, K, star: Star, cell: str, tol: float, guess=None, out=None):
     """Cells (n, Q) and reference coordinates (n Q, t) of the CPDI1 corners of particles at
     ``x`` in ``cells`` (:func:`fempm.kernels.sample_location.locate_samples` with the corners made in the
     pass), and the number of corners on no cell of the search (cell -1)."""
@@ -181,5 +181,5 @@ def locate_corners(x, F, lp, signs, cells, x0, K, star: tuple, cell: str, tol: f
     sc, Y = out if out is not None else (np.full((n, Q), -1, dtype=np.int32), np.zeros((n * Q, t)))
     guess = np.zeros((0, Q), dtype=np.int32) if guess is None else guess
     kernel = _planar_locate_kernel(cell == "triangle") if cell in ("triangle", "quadrilateral") else _locate_kernel(cell)
-    missing = kernel(x, F, lp, signs, cells, x0, K, Star(*star), float(tol), guess, sc, Y)
+    missing = kernel(x, F, lp, signs, cells, x0, K, star, float(tol), guess, sc, Y)
     return sc, Y, int(missing)

@@ -307,8 +307,7 @@ def _g2p_kernel(cell: str, blend: bool, kinematics: bool, move: bool, remap: boo
         v_new, v_old, flip, dt, by_particle = grid
         x, v, F, volume0, volume, sigma, body, mass = state
         law, lam, mu = laws.law, laws.lam, laws.mu
-        x0, tol, left = moves.x0, moves.tol, moves.left
-        c2v, v_offsets, v_cells, num_cells = moves.star
+        x0, tol, left, star = moves
         L, mom, sums = outputs
         group, rigid = groups.group, groups.rigid
         n = len(cells)
@@ -360,7 +359,7 @@ def _g2p_kernel(cell: str, blend: bool, kinematics: bool, move: bool, remap: boo
                     nonfinite += 1
                 out = not inside_after_pull_back(x, p, x0, K, c, SIMPLEX, D, tol, X, AFFINE)
                 if out:  # the neighbours, while their geometry is in cache
-                    e = star_search(x, p, x0, K, c, (c2v, v_offsets, v_cells, num_cells), SIMPLEX, D, tol, X, AFFINE)
+                    e = star_search(x, p, x0, K, c, star, SIMPLEX, D, tol, X, AFFINE)
                     if e >= 0:
                         cells[p] = e
                         out = False

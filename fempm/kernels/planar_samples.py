@@ -243,8 +243,8 @@ def g2p_kernel(simplex: bool, affine: bool, grad_from_values: bool, corners: boo
         v_new, v_old, flip, dt, by_particle = grid
         x, v, F, volume0, volume, sigma, body, mass = state
         law, lam, mu = laws.law, laws.lam, laws.mu
-        x0, tol, left = moves.x0, moves.tol, moves.left
-        c2v, v_offsets, v_cells, num_cells = moves.star
+        x0, tol, left, star = moves
+        c2v, v_offsets, v_cells = star.c2v, star.v_offsets, star.v_cells  # (the corners search sample_cells)
         L, mom, sums = outputs
         yc, moved, bad, sample_cells = tracked
         n, keep_L = len(cells), L.shape[0] == len(cells)
@@ -287,7 +287,7 @@ def g2p_kernel(simplex: bool, affine: bool, grad_from_values: bool, corners: boo
                 c = cells[p]
                 out = not inside_after_pull_back(x, p, x0, K, c, simplex, 2, tol, X, affine)
                 if out:
-                    e = star_search(x, p, x0, K, c, (c2v, v_offsets, v_cells, num_cells), simplex, 2, tol, X, affine)
+                    e = star_search(x, p, x0, K, c, star, simplex, 2, tol, X, affine)
                     out = e < 0
                     cells[p] = c if out else e
                 left[p] = out

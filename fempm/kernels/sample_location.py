@@ -47,7 +47,7 @@ def _locate_kernel(cell: str):
     return locate
 
 
-def locate_samples(y, cells, Q: int, x0, K, star: tuple, cell: str, tol: float, guess=None, out=None):
+def locate_samples(y, cells, Q: int, x0, K, star: Star, cell: str, tol: float, guess=None, out=None):
     """Cells (n, Q) and reference coordinates (n Q, t) of samples ``y`` (n Q, d) of particles in
     ``cells`` of the kernel cell type ``cell`` (geometry ``x0``, ``K``:
     :attr:`fempm.meshes.geometry.CellGeometry.kernel_geometry`): the sample's cell in ``guess``
@@ -60,7 +60,7 @@ def locate_samples(y, cells, Q: int, x0, K, star: tuple, cell: str, tol: float, 
     t = CELLS[cell][0]
     sc, Y = out if out is not None else (np.empty((n, Q), dtype=np.int32), np.zeros((n * Q, t)))
     guess = np.zeros((0, Q), dtype=np.int32) if guess is None else guess
-    missing = _locate_kernel(cell)(y, cells, Q, x0, K, Star(*star), float(tol), guess, sc, Y)
+    missing = _locate_kernel(cell)(y, cells, Q, x0, K, star, float(tol), guess, sc, Y)
     return sc, Y, int(missing)
 
 

@@ -212,8 +212,7 @@ def g2p_kernel(hexa: bool, blend: bool, kinematics: bool, move: bool, remap: boo
         v_new, v_old, flip, dt, by_particle = grid
         x, v, F, volume0, volume, sigma, body, mass = state
         law, lam, mu = laws.law, laws.lam, laws.mu
-        x0, tol, left = moves.x0, moves.tol, moves.left
-        c2v, v_offsets, v_cells, num_cells = moves.star
+        x0, tol, left, star = moves
         L, mom, sums = outputs
         group, rigid = groups.group, groups.rigid
         n, keep_L = len(cells), L.shape[0] == len(cells)
@@ -252,7 +251,7 @@ def g2p_kernel(hexa: bool, blend: bool, kinematics: bool, move: bool, remap: boo
                     nonfinite += 1  # x or v (v.v: the kinetic energy); the compiled laws' stress is finite where J is
                 out = not inside_after_pull_back(x, p, x0, K, c, not hexa, 3, tol, X, True)
                 if out:  # the neighbours, while their geometry is in cache
-                    e = star_search(x, p, x0, K, c, (c2v, v_offsets, v_cells, num_cells), not hexa, 3, tol, X, True)
+                    e = star_search(x, p, x0, K, c, star, not hexa, 3, tol, X, True)
                     out = e < 0
                     cells[p] = c if out else e
                 left[p] = out

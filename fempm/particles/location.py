@@ -16,6 +16,7 @@ import numpy as np
 import numpy.typing as npt
 
 from fempm.kernels import shape as shape_kernels
+from fempm.kernels.bundles import Star
 from fempm.meshes.geometry import CellGeometry
 from fempm.particles.cell_bins import CellBins
 
@@ -199,17 +200,18 @@ class CellLocator:
         X[hit_p] = Xc[hits]
         return cells, X
 
-    def vertex_star(self) -> tuple:
+    def vertex_star(self) -> Star:
         """(cell -> vertices (cells, vertices per cell), vertex -> cells offsets and cells, the
-        number of owned cells): what :meth:`locate_near` searches, built once."""
+        number of owned cells) as the kernels take it (:class:`fempm.kernels.bundles.Star`): what
+        :meth:`locate_near` searches, built once."""
         if self._star is None:
             geo = self.geometry
             top = self.mesh.topology
             top.create_connectivity(geo.tdim, 0)
             top.create_connectivity(0, geo.tdim)
             c2v, v2c = top.connectivity(geo.tdim, 0), top.connectivity(0, geo.tdim)
-            self._star = (np.ascontiguousarray(c2v.array.reshape(-1, len(c2v.links(0)))), v2c.offsets, v2c.array,
-                          len(self._entities))
+            self._star = Star(np.ascontiguousarray(c2v.array.reshape(-1, len(c2v.links(0)))), v2c.offsets,
+                              v2c.array, len(self._entities))
         return self._star
 
     def vertex_ranks(self) -> tuple[npt.NDArray[np.int64], npt.NDArray[np.int32]]:

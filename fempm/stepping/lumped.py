@@ -34,7 +34,7 @@ from mpi4py import MPI
 
 from fempm.kernels import fmpm as kf
 from fempm.kernels import lumped as kl
-from fempm.kernels.bundles import NO_GROUPS, Basis, Forces, GridStep, Groups, Laws, Moves, Outputs, Stable, Star, State
+from fempm.kernels.bundles import NO_GROUPS, Basis, Forces, GridStep, Groups, Laws, Moves, Outputs, Stable, State
 from fempm.kernels.lumped import NO_STABLE
 from fempm.kernels.shape import space_of
 from fempm.materials.base import IsotropicElastic
@@ -117,6 +117,7 @@ class PointGrid(Grid):
         self.mu = np.array([a[2] for a in laws])
         self.modulus = np.array([a[3] for a in laws])
         self.laws = Laws(self.law, self.lam, self.mu, self.modulus)  # the passes' bundle
+        self.no_forces = Forces(np.zeros(d), np.zeros((0, d)))  # the passes that map no force
         self.all_modulus = bool(np.all(self.modulus > 0))
         self.any_external = bool(np.any(self.law == 0))
         self.since_sort = SORT_EVERY  # steps since the particles were sorted by cell (sort on the first step)
@@ -220,15 +221,14 @@ class PointGrid(Grid):
         r"""The first mass moments :math:`\sum_p M_p N_{ip} x_p` into the kept ``_moments``
         array, summed over ranks (``groups``: as for :meth:`_scatter`)."""
         p = self.state.particles
-        return self._scatter(self._moments, Forces(np.zeros(self.d), np.zeros((0, self.d))), -1, 0, -1,
-                             velocity=p.x, groups=groups)[0]
+        return self._scatter(self._moments, self.no_forces, -1, 0, -1, velocity=p.x, groups=groups)[0]
 
     def _stable_time(self) -> float:
         r"""The stable time of the state, :math:`\min_p h_{c(p)} / (c_p + |v_p|)` over all ranks."""
         s = self.state
         p = s.particles
-        local = self.scatter_pass(self.particle_state(), Forces(np.zeros(self.d), np.zeros((0, self.d))),
-                                  np.zeros((0, 0)), -1, -1, -1, Stable(s.h_cell, self._wave_speeds()))
+        local = self.scatter_pass(self.particle_state(), self.no_forces, np.zeros((0, 0)), -1, -1, -1,
+                                  Stable(s.h_cell, self._wave_speeds()))
         return -p.comm.allreduce(-local, op=MPI.MAX)
 
     def _g2p(self, v_new, v_old, dt, *, blend: bool, kinematics: bool, move: bool, remap=None):
@@ -244,7 +244,7 @@ class PointGrid(Grid):
         L = np.empty((len(p) if external else 0, self.d, self.d))
         left = np.empty(len(p) if move else 0, dtype=np.bool_)
         grid = GridStep(v_new, v_old, float(opts.flip), float(dt), opts.particle_position)
-        moves = Moves(self.x0, p.locator.tol, left, Star(*p.locator.vertex_star()))
+        moves = Moves(self.x0, p.locator.tol, left, p.locator.vertex_star())
         outputs = Outputs(L, remap if remap is not None else np.zeros((0, self.d)),
                           self._sums if move and self.totals else np.zeros(0))
         counts = self.gather_pass(grid, self.particle_state(), moves, outputs, blend=blend, kinematics=kinematics,

@@ -149,7 +149,7 @@ def _pass_state(simplex: bool, seed: int, multilinear: bool = False, d: int = 2)
     c2v = rng.integers(0, 40, (ncell, k)).astype(np.int32)  # a random vertex star
     order = np.argsort(c2v.ravel(), kind="stable")
     v_offsets = np.searchsorted(c2v.ravel()[order], np.arange(41)).astype(np.int32)
-    star = (c2v, v_offsets, (order // k).astype(np.int32), ncell - 5)
+    star = Star(c2v, v_offsets, (order // k).astype(np.int32), ncell - 5)
     return dict(star=star, cells=cells, X=X, K=K, x0=x0, cell_dofs=cell_dofs, F=F, v=rng.standard_normal((n, d)),
                 x=corner[cells] + rng.random((n, d)) * 0.1, v_new=rng.standard_normal((nd, d)),
                 v_old=rng.standard_normal((nd, d)), mass=rng.random(n) + 0.5, volume=rng.random(n) + 0.5,
@@ -504,7 +504,7 @@ def test_planar_corner_location_equals_the_generic_one_bit_for_bit(cell):
         got = []
         for kernel in (cpdi1._planar_locate_kernel(cell == "triangle"), cpdi1._locate_kernel(cell)):
             sc, Y = np.full((n, 4), -7, dtype=np.int32), np.zeros((4 * n, 2))
-            missing = kernel(s["x"], s["F"], lp, signs, s["cells"], s["x0"], s["K"], Star(*s["star"]), 1e-10, guess, sc, Y)
+            missing = kernel(s["x"], s["F"], lp, signs, s["cells"], s["x0"], s["K"], s["star"], 1e-10, guess, sc, Y)
             got.append((missing, sc, Y))
         (m0, sc0, Y0), (m1, sc1, Y1) = got
         found = sc0 >= 0
