@@ -210,7 +210,8 @@ def _run(args, rest: list[str]) -> int:
         print("stepping (every scene): --integrator explicit|implicit, --dynamics newmark|quasi-static (implicit), "
               "--steps N (fixed steps to t_end; implicit runs need it), --tangent analytic|finite-difference "
               "(implicit: the laws' own tangents or central differences), --volumetric standard|fbar, "
-              "--outside raise|remove (particles that leave the mesh)")
+              "--outside raise|remove (particles that leave the mesh), --transfer flip|pic|apic|tpic|xpic (the velocity "
+              "transfer; flip takes the scene's --flip blend), --xpic-order M (XPIC's series terms, default 2)")
         print("run health (fempm.stepping.health.Health; a crossed limit stops the run with exit code 3):")
         limits = health_descriptions()
         for k, v in Health().asdict().items():

@@ -11,6 +11,7 @@ from fempm.docstrings import arguments, first_sentence, plain
 from fempm.scene.definition import Scene
 from fempm.stepping.health import Health
 from fempm.stepping.options import StepOptions
+from fempm.transfer.transfers import TRANSFERS
 
 __all__ = ["STEPPING_FLAGS", "UsageError", "boolean", "health_descriptions", "health_options", "one_line",
            "option_descriptions", "scene_options", "split_flags", "stepping_options", "with_stepping"]
@@ -126,20 +127,22 @@ def health_options(rest: list[str]) -> tuple[dict, list[str]]:
 #: the stepping options every scene takes on the command line, with the values they accept
 STEPPING_FLAGS = {"integrator": ("explicit", "implicit"), "dynamics": ("newmark", "quasi-static"), "steps": None,
                   "volumetric": ("standard", "fbar"), "outside": ("raise", "remove"),
-                  "tangent": ("analytic", "finite-difference")}
+                  "tangent": ("analytic", "finite-difference"), "transfer": tuple(TRANSFERS), "xpic_order": None}
 
 
 def stepping_options(rest: list[str]) -> tuple[dict, list[str]]:
     """Split the stepping options every scene takes (``--integrator explicit|implicit``,
     ``--dynamics newmark|quasi-static``, ``--steps N``, ``--volumetric standard|fbar``,
-    ``--outside raise|remove``, ``--tangent analytic|finite-difference``) from the scene options."""
+    ``--outside raise|remove``, ``--tangent analytic|finite-difference``, ``--transfer
+    flip|pic|apic|tpic|xpic``, ``--xpic-order M``) from the scene options."""
     chosen, others = split_flags(rest, STEPPING_FLAGS)
     stepping = {}
     for name, (flag, value) in chosen.items():
         choices = STEPPING_FLAGS[name]
-        if choices is None:  # --steps
+        if choices is None:  # --steps, --xpic-order
             if not (value.isdigit() and int(value) >= 1):
-                raise UsageError(f"fempm run: option {flag} expects a positive number of steps, got {value!r}")
+                what = "steps" if name == "steps" else "series terms (XPIC(1) is PIC)"
+                raise UsageError(f"fempm run: option {flag} expects a positive number of {what}, got {value!r}")
             stepping[name] = int(value)
         elif value not in choices:
             raise UsageError(f"fempm run: option {flag} expects one of {', '.join(choices)}, got {value!r}")
@@ -148,6 +151,8 @@ def stepping_options(rest: list[str]) -> tuple[dict, list[str]]:
     for name in ("dynamics", "tangent"):
         if stepping.get("integrator") != "implicit" and name in stepping:
             raise UsageError(f"fempm run: option --{name} applies to --integrator implicit")
+    if "xpic_order" in stepping and stepping.get("transfer") != "xpic":
+        raise UsageError("fempm run: option --xpic-order applies to --transfer xpic")
     return stepping, others
 
 
@@ -158,7 +163,8 @@ def with_stepping(scene, stepping: dict):
         return scene
     if "outside" in stepping:
         scene.outside = stepping["outside"]
-    changes = {k: stepping[k] for k in ("integrator", "dynamics", "volumetric", "tangent") if k in stepping}
+    changes = {k: stepping[k] for k in ("integrator", "dynamics", "volumetric", "tangent", "transfer", "xpic_order")
+               if k in stepping}
     if stepping.get("integrator") == "implicit" and stepping.get("dynamics") == "quasi-static":
         changes["load_ramp"] = scene.t_end
     if changes:

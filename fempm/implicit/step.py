@@ -254,7 +254,7 @@ class ImplicitStep:
         held = np.where(free, 0.0, R[:owned]).sum(axis=0)
         mo = m[:owned]
         old = self._loads(op, t)[:owned].sum(axis=0) - mo @ a[:owned]
-        pic = (1.0 - self.options.flip) * (p.mass @ p.fields["v"] - mo @ v[:owned])
+        pic = (1.0 - self.options.velocity_transfer.blend) * (p.mass @ p.fields["v"] - mo @ v[:owned])
         s.record.reaction = s.record.reaction + dt * ((1.0 - integ.gamma) * old + integ.gamma * held) + pic
 
     def _solve(self, residual, jacobian, J: PETSc.Mat, x: PETSc.Vec, guess: npt.NDArray, scale: float, floor=None):
@@ -345,7 +345,7 @@ class ImplicitStep:
         if integ.inertia:
             a_new = integ.acceleration(du, v, a, dt)
             v_new = integ.velocity(v, a, a_new, dt)
-            flip = self.options.flip
+            flip = self.options.velocity_transfer.blend
             f["v"] = flip * (f["v"] + basis.gather(v_new - v)) + (1.0 - flip) * basis.gather(v_new)
             f["a"] = basis.gather(a_new)
             s.grid_velocity = v_new[: basis.num_dofs_space]

@@ -13,6 +13,7 @@ import basix.ufl
 import dolfinx.fem
 import dolfinx.mesh
 import numpy as np
+import numpy.typing as npt
 from mpi4py import MPI
 
 from fempm.particles.particle_set import Particles
@@ -22,6 +23,7 @@ from fempm.stepping.loads import Loads
 from fempm.stepping.options import StepOptions
 from fempm.stepping.outside import outside_policy
 from fempm.stepping.solver import ExplicitSolver
+from fempm.transfer.transfers import AFFINE_FIELD
 
 __all__ = [
     "MAX_STEPS", "OUTPUTS", "VARIANTS", "Scene", "check_counts", "check_finite", "checked", "dofs_per_cell",
@@ -133,6 +135,10 @@ class Scene:
         colliders: Rigid obstacles given as shapes (:class:`fempm.colliders.Collider`); their
             forces go to ``energies.csv`` (``collider_force_<k>_x``, ...) and ``summary.json``
             (``colliders``).
+        velocity_gradient: The particles' initial velocity gradient, (d, d) or (n, d, d), from
+            which APIC and TPIC start their affine matrices
+            (:meth:`fempm.stepping.Solver.set_velocity_gradient`; None: from 0); a resumed run
+            keeps its checkpoint's.
     """
 
     name: str
@@ -155,6 +161,7 @@ class Scene:
     watch: Callable[[ExplicitSolver], None] | None = None
     outside: str = "raise"
     colliders: Sequence = ()
+    velocity_gradient: npt.ArrayLike | None = None
 
     def __post_init__(self):
         outside_policy(self.outside)
@@ -187,5 +194,8 @@ class Scene:
     def solver(self) -> ExplicitSolver:
         V = self.space()
         bcs = list(self.bcs(V)) if self.bcs is not None else []
-        return ExplicitSolver(V, self.particles, self.materials, bcs=bcs, loads=self.loads, options=self.options,
-                              contact=self.contact, outside=self.outside, colliders=self.colliders)
+        solver = ExplicitSolver(V, self.particles, self.materials, bcs=bcs, loads=self.loads, options=self.options,
+                                contact=self.contact, outside=self.outside, colliders=self.colliders)
+        if self.velocity_gradient is not None and AFFINE_FIELD not in self.particles.fields:  # (not a resumed run's)
+            solver.set_velocity_gradient(self.velocity_gradient)
+        return solver

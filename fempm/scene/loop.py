@@ -165,6 +165,8 @@ class Run:
         self.monitor = HealthMonitor(solver, scene.health)
         self.history = [solver.energies()]
         self.frames = Frames(scene.t_end / max(scene.frames, 1))
+        if saved is None and callable(getattr(scene.watch, "start", None)):
+            scene.watch.start(solver)
         if saved is not None:
             checkpoint.restore_solver(solver, self.monitor, saved, arrays)
             checkpoint.restore_watch(scene.watch, saved)

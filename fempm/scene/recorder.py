@@ -40,6 +40,10 @@ class Recorder:
     def __call__(self, solver) -> None:
         raise NotImplementedError
 
+    def start(self, solver) -> None:
+        """Called once with the solver before the first step of a run (not of a resumed one,
+        which restores the state instead); the default does nothing. Collective."""
+
     def state_dict(self) -> dict:
         """The state as JSON-ready values (lists of plain numbers)."""
         return {k: _plain(getattr(self, k)) for k in self.state_keys}

@@ -15,11 +15,12 @@ from fempm.scenes.impact import disk_impact
 from fempm.scenes.incline import incline
 from fempm.scenes.manufactured import manufactured_scene
 from fempm.scenes.silo import silo
+from fempm.scenes.spin import spin
 from fempm.scenes.wave import wave
 
 SCENES = {"bar": vibrating_bar, "disks": two_disks, "cantilever": cantilever, "dam": dam_break, "block": hanging_block,
           "cook": cook_membrane, "column": column_collapse, "incline": incline, "impact": disk_impact,
-          "compaction": compaction, "wave": wave, "footing": footing, "silo": silo, "bowl": bowl}
+          "compaction": compaction, "wave": wave, "footing": footing, "silo": silo, "bowl": bowl, "spin": spin}
 
 __all__ = [
     "MARTIN_MOYCE", "SCENES", "bowl", "cantilever", "cantilever_reference", "cantilever_tip", "column_collapse", "compaction",
@@ -27,5 +28,5 @@ __all__ = [
     "dam_break", "deposit", "disk_impact", "footing",
     "hanging_block", "incline",
     "largest_neighbour_gap", "manufactured_scene",
-    "silo", "stress_error", "surge_front", "two_disks", "vibrating_bar", "wave",
+    "silo", "spin", "stress_error", "surge_front", "two_disks", "vibrating_bar", "wave",
 ]

@@ -275,7 +275,7 @@ class ContactGrid(BasisGrid):
         for g in self.deformable:
             k = self.masks[g][:, None]
             if blend:
-                blended, grid_v, grads = g2p.blend(self.basis, v_new[g], v_old[g], fld["v"], self.options.flip)
+                blended, grid_v, grads = g2p.blend(self.basis, v_new[g], v_old[g], fld["v"], self.options.velocity_transfer.blend)
                 np.copyto(vp, blended, where=k)  # the group's rows (no fancy-indexed copies)
             else:
                 grid_v, grads = g2p.velocity_and_gradient(self.basis, v_new[g])

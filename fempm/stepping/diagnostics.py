@@ -16,10 +16,11 @@ from fempm.materials.linear_elastic import LinearElastic
 from fempm.particles.particle_set import Particles
 from fempm.stepping.laws import law_state, material_groups
 from fempm.stepping.options import StepOptions
+from fempm.transfer import affine
 from fempm.transfer.basis import is_nonnegative
 from fempm.transfer.projection import Projector
 
-__all__ = ["energies", "energy_row", "grid_stress", "momentum_scale", "small_strain_rotation", "strain_energy",
+__all__ = ["angular_columns", "energies", "energy_row", "grid_stress", "momentum_scale", "small_strain_rotation", "strain_energy",
            "stress_space"]
 
 
@@ -105,6 +106,24 @@ def energies(particles: Particles, materials: Sequence, t: float) -> dict[str, f
     """
     s = totals(particles, materials)
     return energy_row(t, s[1], s[2], s[3:])
+
+
+def angular_columns(particles: Particles, spin: npt.NDArray | None = None) -> dict[str, float]:
+    r"""The angular momentum about the origin, :math:`\sum_p M_p (x_p \times v_p + s_p)` over
+    all ranks, with ``spin`` the particles' :math:`s_p` (the affine part the map carries,
+    :func:`fempm.transfer.affine.angular_momentum`; None: the orbital part alone): the column
+    ``angular_momentum`` in 2D, ``angular_momentum_x``, ``_y``, ``_z`` in 3D, none in 1D.
+
+    Note:
+        Collective.
+    """
+    p = particles
+    if p.gdim == 1:
+        return {}
+    total = p.comm.allreduce(affine.angular_momentum(p.x, p.fields["v"], p.mass, spin))
+    if p.gdim == 2:
+        return {"angular_momentum": float(total[0])}
+    return {f"angular_momentum_{c}": float(m) for c, m in zip("xyz", total)}
 
 
 def momentum_scale(particles: Particles) -> float:

@@ -93,6 +93,8 @@ class DomainGrid(PointGrid):
             return f"mass {state.options.mass_model.label} with particle domains: lumped or FMPM"
         if state.conditions.needs_positions:
             return "a wall or collider that checks contact by position takes point particles"
+        if state.options.velocity_transfer.name not in cls.transfers:
+            return f"transfer {state.options.velocity_transfer.name}: {', '.join(cls.transfers)}"
         # these types themselves: a subclass may make or move its samples otherwise
         if type(dom) is GIMP and dom.exact:  # pieces averaged at their centroids: simplices and axis-aligned boxes
             geo = state.particles.locator.geometry

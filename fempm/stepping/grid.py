@@ -32,10 +32,11 @@ from fempm.stepping.loads import external_forces
 from fempm.stepping.particle_stages import ParticleStages
 from fempm.stepping.reactions import damping_impulse, nodal_reaction
 from fempm.stepping.state import StepState
-from fempm.transfer import g2p
+from fempm.transfer import affine, g2p
 from fempm.transfer.basis import ParticleBasis
 from fempm.transfer.mapping import nodal_centroids, p2g, p2g_gradients, sum_over_ranks
-from fempm.transfer.mass_models import MASS_RATIO_ITERATIONS
+from fempm.transfer.mass_models import FMPM, MASS_RATIO_ITERATIONS, MassModel
+from fempm.transfer.transfers import AFFINE_FIELD, SPIN_FIELD
 from fempm.transfer.projection import Projector
 
 __all__ = ["BasisGrid", "Grid", "SingleFieldGrid"]
@@ -136,7 +137,7 @@ class Grid:
         rows = self._reaction_rows
         total = np.zeros(s.particles.gdim)
         for field in fields:
-            total += nodal_reaction(*field, dt, float(opts.flip), damping, rows)
+            total += nodal_reaction(*field, dt, float(opts.velocity_transfer.blend), damping, rows)
         if len(s.collisions):  # theirs, counted as the colliders' impulses
             total -= s.collisions.nodal_impulse[rows].sum(axis=0)
         s.record.reaction = total
@@ -189,16 +190,17 @@ class BasisGrid(Grid):
         self.particle_stages.relocate()
 
     def mass_operator(self, basis: ParticleBasis, weights: npt.NDArray | None = None,
-                      lump_dofs: npt.NDArray[np.bool_] | None = None) -> Projector:
+                      lump_dofs: npt.NDArray[np.bool_] | None = None, mass: MassModel | None = None) -> Projector:
         """The step's mass with its constraints on ``basis``; ``weights``: per-particle masses in
         place of the particles' (one body's mass); ``lump_dofs``: further dofs (owned + ghost)
-        whose rows are lumped, besides the frictional walls'."""
+        whose rows are lumped, besides the frictional walls'; ``mass``: another mass model than
+        the options' (XPIC's series)."""
         s, opts = self.state, self.options
         cond = s.conditions
         lumped = cond.friction_dofs
         if lump_dofs is not None:
             lumped = lump_dofs if lumped is None else lumped | lump_dofs[: len(lumped)]
-        return Projector(s.V, s.particles, mass=opts.mass_model, basis=basis,
+        return Projector(s.V, s.particles, mass=opts.mass_model if mass is None else mass, basis=basis,
                          petsc_options_prefix=opts.petsc_options_prefix, exclude=cond.fixed_dofs,
                          exclude_components=cond.slip_components, lump_below=opts.lump_below, weights=weights,
                          lump_dofs=lumped)
@@ -277,12 +279,34 @@ class SingleFieldGrid(BasisGrid):
         self.mass_op = self.mass_operator(basis)
 
     def map_velocity(self, guess: npt.NDArray | None) -> npt.NDArray:
-        """Grid velocity from the particle momenta (P2G + mass solve), constrained."""
-        p = self.state.particles
+        """Grid velocity from the particle momenta (P2G + mass solve), constrained; with APIC
+        or TPIC the affine part of the momenta in the lumped first solve
+        (:mod:`fempm.transfer.transfers`)."""
+        s = self.state
+        p = s.particles
         self.momentum = p2g(self.basis, p.mass[:, None] * p.fields["v"])
-        v = self.mass_op.solve(self.momentum, guess=guess)
-        self.state.conditions.apply(v, self.centroids)
+        self.pic_momentum = self.momentum
+        carried = s.affine()
+        start = None
+        if carried is not None and not self.options.mass_model.matrix:  # the exact projection leaves it out
+            start = affine.affine_momentum(self.options.velocity_transfer.kind, *carried, self.basis,
+                                           s.dof_coordinates(), p.x, p.mass)
+            self.momentum = self.momentum + start  # (the lumped rows' momenta, for the reactions)
+        v = self.mass_op.solve(self.pic_momentum, guess=guess, start=start)
+        s.conditions.apply(v, self.centroids)
         return self.basis.update_ghosts(v)  # extra ghosts (remote domain samples) take their owners' values
+
+    def extrapolated(self, v_old: npt.NDArray) -> npt.NDArray:
+        r"""XPIC(m)'s :math:`v^*`: the series of FMPM(m) on the mapped momenta from the lumped
+        solve, constrained (with the consistent mass the exact projection ``v_old`` itself;
+        :mod:`fempm.transfer.transfers`)."""
+        opts = self.options
+        if opts.mass_model.matrix:
+            return v_old
+        op = self.mass_operator(self.basis, mass=FMPM(opts.velocity_transfer.order))
+        v = op.solve(self.pic_momentum)
+        self.state.conditions.apply(v, self.centroids)
+        return self.basis.update_ghosts(v)
 
     def velocity(self, remapped: bool = False) -> npt.NDArray:
         return self.map_velocity(None if remapped else self.state.grid_velocity)
@@ -311,11 +335,23 @@ class SingleFieldGrid(BasisGrid):
 
     def to_particles(self, v_new: npt.NDArray, v_old: npt.NDArray, dt: float, *, blend: bool = False,
                      kinematics: bool = False, move: bool = False, remap: bool = False) -> None:
-        fld = self.state.particles.fields
+        s = self.state
+        p = s.particles
+        fld = p.fields
         basis = self.basis
+        transfer = self.options.velocity_transfer
+        if blend and transfer.extrapolates:  # XPIC(m): the particles take the extrapolated field
+            self.record_reaction(v_new, v_old, dt)
+            fld["v"] = basis.gather(self.extrapolated(v_old) + v_new - v_old)
+            blend = False
         if blend:
             self.record_reaction(v_new, v_old, dt)
-            fld["v"], at_grid, L = g2p.blend(basis, v_new, v_old, fld["v"], self.options.flip)
+            fld["v"], at_grid, L = g2p.blend(basis, v_new, v_old, fld["v"], transfer.blend)
+            if transfer.affine:
+                C, spin = affine.grid_affine(transfer.kind, basis, v_new, s.dof_coordinates(), p.x, L)
+                fld[AFFINE_FIELD] = C
+                if spin is not None and spin.shape[1]:
+                    fld[SPIN_FIELD] = spin
         elif kinematics or move:
             at_grid, L = g2p.velocity_and_gradient(basis, v_new)
         if kinematics:

@@ -249,7 +249,7 @@ class HealthMonitor:
         message = (f"energy growth: the total energy {e:.6g}{held} exceeds its budget {budget:.6g} = "
                    f"{' + '.join(terms)} by {100 * (e - budget) / scale:.3g} % (tolerance "
                    f"{100 * self.health.energy_tolerance:g} %): the run is unstable")
-        if s.options.flip == 1.0 and (s.conditions.frictional or s.conditions.curved):
+        if s.options.velocity_transfer.blend == 1.0 and (s.conditions.frictional or s.conditions.curved):
             message += ("; pure FLIP (flip = 1) gains energy where a body rolls or slides along a curved wall, "
                         "frictional or not (docs/boundaries.md, 'Friction on a curved wall'): take a blend, e.g. "
                         "flip = 0.99")

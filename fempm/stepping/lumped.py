@@ -81,6 +81,8 @@ class PointGrid(Grid):
 
     #: the options this grid takes, in messages (:mod:`fempm.stepping.grid_choice`)
     takes = "point particles with lumped, consistent or FMPM mass on a space of the compiled passes"
+    #: the velocity transfers its passes take
+    transfers = ("flip", "pic")
 
     @classmethod
     def refusal(cls, state: StepState) -> str | None:
@@ -95,6 +97,8 @@ class PointGrid(Grid):
             return f"mass {opts.mass_model.label}: lumped, consistent or FMPM"
         if not isinstance(opts.particle_domain, Point):
             return f"particle domain {opts.particle_domain.name}: point particles"
+        if opts.velocity_transfer.name not in cls.transfers:
+            return f"transfer {opts.velocity_transfer.name}: {', '.join(cls.transfers)}"
         return None
 
     def __init__(self, state: StepState):
@@ -243,7 +247,7 @@ class PointGrid(Grid):
         external = kinematics and self.any_external
         L = np.empty((len(p) if external else 0, self.d, self.d))
         left = np.empty(len(p) if move else 0, dtype=np.bool_)
-        grid = GridStep(v_new, v_old, float(opts.flip), float(dt), opts.particle_position)
+        grid = GridStep(v_new, v_old, float(opts.velocity_transfer.blend), float(dt), opts.particle_position)
         moves = Moves(self.x0, p.locator.tol, left, p.locator.vertex_star())
         outputs = Outputs(L, remap if remap is not None else np.zeros((0, self.d)),
                           self._sums if move and self.totals else np.zeros(0))

@@ -11,6 +11,7 @@ from fempm.stepping.fbar import volumetric
 from fempm.stepping.schemes import Scheme, scheme
 from fempm.transfer.domains import step_domain
 from fempm.transfer.mass_models import FMPM, mass_model
+from fempm.transfer.transfers import velocity_transfer
 
 __all__ = ["SchemeName", "SimulationError", "StepOptions"]
 
@@ -35,7 +36,14 @@ class StepOptions:
             study stability``) found MUSL with lumped mass stable in 9 of its 13 hard cases and
             at every CFL number up to 1 on the colliding disks, USL in 3 and up to CFL 0.25
             (docs/error-vs-time-and-stability.md).
-        flip: The PIC/FLIP blend alpha in [0, 1] (1: FLIP, 0: PIC).
+        flip: The PIC/FLIP blend alpha in [0, 1] (1: FLIP, 0: PIC) of ``transfer="flip"``
+            (the other transfers take no blend and leave it unread).
+        transfer: The velocity transfer (:mod:`fempm.transfer.transfers`): flip (the blend
+            ``flip``), pic (``flip=0``), apic (affine PIC: the particles carry :math:`B_p`,
+            angular momentum kept), tpic (the particles carry their velocity gradient) or xpic
+            (extended PIC of order ``xpic_order``: the lumped velocities extrapolated by the
+            series FMPM sums before G2P). APIC and TPIC keep a particle field ``affine`` (n, d, d).
+        xpic_order: XPIC's m, an integer in [1, 10] (XPIC(1) is PIC).
         mass: The grid mass: lumped, consistent, or FMPM(k) as fmpmK (or ``fmpm`` with
             ``fmpm_order`` k). FMPM(k) (:mod:`fempm.transfer.fmpm`) takes k - 1 extra G2P/P2G
             sweeps, and a step :math:`1/\sqrt{k}` of the lumped one unless ``lumped_forces``.
@@ -84,6 +92,8 @@ class StepOptions:
 
     scheme: SchemeName | Scheme = "MUSL"
     flip: float = 1.0
+    transfer: Literal["flip", "pic", "apic", "tpic", "xpic"] = "flip"
+    xpic_order: int = 2
     mass: str = "lumped"
     cfl: float = 0.4
     mass_cutoff: float = 1e-9
@@ -116,6 +126,8 @@ class StepOptions:
         self.particle_position = self.position == "particle"
         if not 0.0 <= self.flip <= 1.0:
             raise ValueError(f"flip={self.flip} must lie in [0, 1]")
+        #: the velocity transfer (:mod:`fempm.transfer.transfers`)
+        self.velocity_transfer = velocity_transfer(self.transfer, self.flip, self.xpic_order)
         self.particle_domain = step_domain(self.domain, self.gimp_order, self.gimp_deform)
         if self.integrator not in ("explicit", "implicit"):
             raise ValueError(f"unknown option integrator={self.integrator!r}; expected explicit or implicit")
@@ -125,6 +137,8 @@ class StepOptions:
         if self.integration is not None and isinstance(self.mass_model, FMPM):
             raise ValueError("the implicit step takes lumped or consistent mass, not FMPM (an explicit step's "
                              "approximation of the consistent mass): give mass='consistent'")
+        if self.integration is not None and self.velocity_transfer.name not in ("flip", "pic", "apic"):
+            raise ValueError(f"the implicit step takes transfer='flip', 'pic' or 'apic', not {self.transfer!r}")
         if self.integration is not None and self.particle_position:
             raise ValueError("the implicit step moves the particles with the grid's displacement: position='particle' "
                              "does not apply")

@@ -32,6 +32,9 @@ from fempm.stepping.options import StepOptions
 from fempm.stepping.outside import Outside, Removed
 from fempm.stepping.record import StepRecord
 from fempm.stepping.state import StepState
+from fempm.transfer import affine
+from fempm.transfer.basis import ParticleBasis
+from fempm.transfer.transfers import AFFINE_FIELD, SPIN_FIELD
 
 __all__ = ["ExplicitSolver", "Solver", "StepRecord", "register_implicit_step"]
 
@@ -326,8 +329,46 @@ class Solver:
         Note:
             Collective.
         """
-        return {**diagnostics.energies(self.particles, self.materials, self.t), **self.removal.columns(),
-                **self.collisions.columns()}
+        return {**diagnostics.energies(self.particles, self.materials, self.t), **self.angular_momentum(),
+                **self.removal.columns(), **self.collisions.columns()}
+
+    def set_velocity_gradient(self, gradient: npt.ArrayLike) -> None:
+        r"""Start the particles' affine state from their velocity gradient :math:`\nabla v`
+        (one (d, d) or one per particle, (n, d, d)): :math:`C_p = \nabla v` and, for APIC, the
+        spin :math:`\epsilon : (\nabla v\, D_p)^T` at the particles' positions; nothing for the
+        transfers without (:mod:`fempm.transfer.transfers`). Without it the state starts at 0
+        (the first P2G is PIC's).
+
+        Raises:
+            ValueError: A gradient of another shape.
+
+        Note:
+            Collective.
+        """
+        s = self.state
+        p = s.particles
+        d = p.gdim
+        grad = np.asarray(gradient, dtype=np.float64)
+        if grad.shape not in ((d, d), (len(p), d, d)):
+            raise ValueError(f"the velocity gradient has shape {grad.shape}; expected ({d}, {d}) or ({len(p)}, {d}, {d})")
+        state = s.affine()
+        if state is None:
+            return
+        grad = np.ascontiguousarray(np.broadcast_to(grad, (len(p), d, d)))
+        p.fields[AFFINE_FIELD] = grad
+        if state[1] is not None:
+            basis = ParticleBasis(s.V, p, domain=s.options.particle_domain)
+            p.fields[SPIN_FIELD] = affine.spin_of(grad @ affine.second_moments(basis, s.dof_coordinates(), p.x))
+
+    def angular_momentum(self) -> dict[str, float]:
+        r"""The particles' angular momentum about the origin with the affine part the grid map
+        carries (APIC, TPIC: :meth:`fempm.stepping.state.StepState.affine_spin`), as the
+        columns of :func:`fempm.stepping.diagnostics.angular_columns` (none in 1D).
+
+        Note:
+            Collective.
+        """
+        return diagnostics.angular_columns(self.particles, self.state.affine_spin())
 
     def step_energies(self) -> tuple[dict[str, float], float]:
         r"""(:meth:`energies`, the momentum scale :math:`\sum_p M_p |v_p|`) of the state the last
@@ -345,7 +386,7 @@ class Solver:
             return self.energies(), diagnostics.momentum_scale(p)
         p.comm.Allreduce(MPI.IN_PLACE, sums, op=MPI.SUM)
         row = diagnostics.energy_row(self.t, sums[0], sums[1], sums[3:])
-        return {**row, **self.removal.columns(), **self.collisions.columns()}, float(sums[2])
+        return {**row, **self.angular_momentum(), **self.removal.columns(), **self.collisions.columns()}, float(sums[2])
 
 
 #: the solver's name in existing code (the same class)

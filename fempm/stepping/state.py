@@ -11,7 +11,7 @@ parts holds the solver.
 from __future__ import annotations
 
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import dolfinx.fem
 import numpy as np
@@ -28,6 +28,9 @@ from fempm.stepping.loads import Loads
 from fempm.stepping.options import SimulationError, StepOptions
 from fempm.stepping.outside import Outside
 from fempm.stepping.record import StepRecord
+from fempm.transfer import affine
+from fempm.transfer.basis import ParticleBasis
+from fempm.transfer.transfers import AFFINE_FIELD, SPIN_FIELD
 
 __all__ = ["StepState"]
 
@@ -69,6 +72,7 @@ class StepState:
     t: float = 0.0
     step_count: int = 0
     grid_velocity: npt.NDArray | None = None
+    _dof_coordinates: npt.NDArray | None = field(default=None, repr=False)
 
     def particle_ids(self, mask: npt.NDArray[np.bool_]) -> list[int]:
         """The ids of the first (up to 5) particles of ``mask`` over all ranks (collective)."""
@@ -115,6 +119,52 @@ class StepState:
         moving = ~(speed <= 0)  # particles at rest with no wave speed set no limit (NaN stays)
         local = np.min(self.h_cell[p.cells][moving] / speed[moving], initial=np.inf)
         return self.options.cfl * p.comm.allreduce(local, op=MPI.MIN)
+
+    def affine(self) -> tuple[npt.NDArray, npt.NDArray | None] | None:
+        """The particles' affine matrices (the field ``affine``, (n, d, d)) and APIC's spins (the
+        field ``affine_spin``, (n, 1) in 2D, (n, 3) in 3D; None for TPIC and in 1D), zeros where
+        the fields are new, where the transfer carries them; else None. Collective.
+
+        Raises:
+            ValueError: A given field of another shape (on every rank).
+        """
+        transfer = self.options.velocity_transfer
+        if not transfer.affine:
+            return None
+        p = self.particles
+        d, n = p.gdim, len(p)
+        k = affine.spin_width(d) if transfer.kind == 1 else 0
+        C = p.fields.setdefault(AFFINE_FIELD, np.zeros((n, d, d)))
+        spin = p.fields.setdefault(SPIN_FIELD, np.zeros((n, k))) if k else None
+        bad = [f"{name!r} has shape {np.shape(a)}; expected {shape}"
+               for name, a, shape in ((AFFINE_FIELD, C, (n, d, d)), (SPIN_FIELD, spin, (n, k)))
+               if a is not None and np.shape(a) != shape]
+        bad = p.comm.allgather(bad)
+        if any(bad):
+            raise ValueError(f"the particle field {next(b for b in bad if b)[0]} (the transfer's affine state)")
+        return C, spin
+
+    def dof_coordinates(self) -> npt.NDArray:
+        """The coordinates of the space's (block) dofs, owned and ghost, made once
+        (:func:`fempm.transfer.affine.dof_coordinates`). Collective the first time."""
+        if self._dof_coordinates is None:
+            self._dof_coordinates = affine.dof_coordinates(self.V)
+        return self._dof_coordinates
+
+    def affine_spin(self) -> npt.NDArray | None:
+        r"""The particles' spins :math:`s_p` the grid map carries (the angular momentum's affine
+        part, :func:`fempm.transfer.affine.angular_momentum`): APIC's stored ones, TPIC's
+        :math:`\epsilon : (C_p D_p)^T`; None for the other transfers and for the consistent mass,
+        whose exact projection leaves the affine part out. Collective."""
+        state = self.affine()
+        if state is None or self.options.mass_model.matrix or self.particles.gdim == 1:
+            return None
+        C, spin = state
+        if spin is not None:
+            return spin
+        p = self.particles
+        basis = ParticleBasis(self.V, p, domain=self.options.particle_domain)
+        return affine.spin_of(C @ affine.second_moments(basis, self.dof_coordinates(), p.x))
 
     def relocate_particles(self, left: npt.NDArray[np.bool_] | None = None) -> None:
         """Locate the moved particles (``left``: the only ones that may have left their cells),

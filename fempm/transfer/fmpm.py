@@ -34,14 +34,17 @@ __all__ = ["fmpm_solve"]
 
 
 def fmpm_solve(basis, weights: npt.NDArray, lumped: npt.NDArray, b: npt.NDArray, free: npt.NDArray[np.bool_],
-               order: int, full, lump: npt.NDArray[np.bool_] | None = None) -> npt.NDArray:
+               order: int, full, lump: npt.NDArray[np.bool_] | None = None,
+               start: npt.NDArray | None = None) -> npt.NDArray:
     r""":math:`x_k = M_k^{-1} b` on the owned dofs: ``b`` (owned + ghost dofs, k) summed over
     ranks, ``lumped`` the lumped masses, ``free`` (owned dofs, k) where a component is solved
     for (others stay 0), ``full`` a callable that turns owned values into owned + ghost values
     (ghosts updated). ``lump`` (owned dofs): rows and columns lumped as in
     :func:`fempm.transfer.consistent_mass_matrix` (their couplings moved to the diagonal):
     those dofs keep the lumped value, the others see
-    :math:`M_C' x = M_C x_{\bar l} + (M_C 1_l) \odot x`. Returns (owned dofs, k). Collective."""
+    :math:`M_C' x = M_C x_{\bar l} + (M_C 1_l) \odot x`. ``start`` (like ``b``): added to
+    ``b`` in the first, lumped solve alone, :math:`x_1 = m^{-1}(b + s)` (the affine part of
+    APIC/TPIC). Returns (owned dofs, k). Collective."""
 
     n = free.shape[0]
 
@@ -49,7 +52,7 @@ def fmpm_solve(basis, weights: npt.NDArray, lumped: npt.NDArray, b: npt.NDArray,
         return p2g(basis, weights[:, None] * basis.gather(full(y)))[:n]
 
     inv = np.where(free, 1.0 / np.where(lumped[:n] > 0, lumped[:n], 1.0)[:, None], 0.0)
-    x = inv * b[:n]
+    x = inv * (b[:n] if start is None else b[:n] + start[:n])
     if order > 1 and lump is not None:
         coupled = ~lump[:, None]
         to_lumped = mc(np.repeat(lump[:, None].astype(np.float64), b.shape[1], axis=1))  # M_C 1_l

@@ -68,10 +68,14 @@ class GridSolve:
         raise NotImplementedError
 
     def solve(self, b: npt.NDArray, guess: npt.NDArray | None,
-              ghosted: Callable[[npt.NDArray], npt.NDArray]) -> npt.NDArray:
+              ghosted: Callable[[npt.NDArray], npt.NDArray], start: npt.NDArray | None = None) -> npt.NDArray:
         """F on the owned dofs, (owned dofs, k), for the right-hand sides ``b`` (owned + ghost
         dofs, k); 0 on inactive dofs. ``guess`` may warm-start an iterative solve; ``ghosted``
-        updates ghosts of owned values (FMPM needs them between its steps). Collective."""
+        updates ghosts of owned values (FMPM needs them between its steps); ``start`` (like
+        ``b``): a term of the first, lumped solve alone, :math:`m^{-1}(b + s)`, which the
+        lumped mass solves with ``b``, FMPM corrects with the residual of ``b`` and the exact
+        projection leaves out (the affine part of APIC/TPIC: :mod:`fempm.transfer.transfers`).
+        Collective."""
         raise NotImplementedError
 
     def mass_ratio_min(self, iterations: int) -> float:
@@ -109,11 +113,12 @@ class LumpedSolve(GridSolve):
             free[dofs[dofs < n], c] = False
         return free
 
-    def solve(self, b, guess, ghosted):
+    def solve(self, b, guess, ghosted, start=None):
         n = self.num_owned
         free = self.free(b.shape[1])
         F = np.zeros((n, b.shape[1]))
-        F[free] = (b[:n] / np.where(self.active, self.lumped[:n], 1.0)[:, None])[free]
+        rhs = b[:n] if start is None else b[:n] + start[:n]
+        F[free] = (rhs / np.where(self.active, self.lumped[:n], 1.0)[:, None])[free]
         return F
 
 
@@ -124,9 +129,9 @@ class FMPMSolve(LumpedSolve):
         super().__init__(basis, weights, label)
         self.order = order
 
-    def solve(self, b, guess, ghosted):
+    def solve(self, b, guess, ghosted, start=None):
         return fmpm_solve(self.basis, self.weights, self.lumped, b, self.free(b.shape[1]), self.order, ghosted,
-                          lump=self.lump)
+                          lump=self.lump, start=start)
 
 
 class MatrixSolve(GridSolve):
@@ -176,7 +181,7 @@ class MatrixSolve(GridSolve):
         self.row_mass = np.zeros(n)
         self.row_mass[self.active] = rows.array
 
-    def solve(self, b, guess, ghosted):
+    def solve(self, b, guess, ghosted, start=None):  # the exact projection: no lumped first solve
         n, k = self.num_owned, b.shape[1]
         F = np.zeros((n, k))
         self.iterations = []

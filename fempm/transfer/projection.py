@@ -249,15 +249,16 @@ class Projector:
         u.x.array[:] = self.solve(b)[: self.basis.num_dofs_space].ravel()
         return u
 
-    def solve(self, b: npt.NDArray, guess: npt.NDArray | None = None) -> npt.NDArray:
+    def solve(self, b: npt.NDArray, guess: npt.NDArray | None = None, start: npt.NDArray | None = None) -> npt.NDArray:
         """Solve ``m F = b`` on the active dofs for (owned + ghost dofs, k) right-hand sides;
         returns (owned + ghost dofs, k) with ghosts updated and 0 on inactive dofs.
-        ``guess`` (same shape) warm-starts the KSP.
+        ``guess`` (same shape) warm-starts the KSP; ``start`` (same shape) is a term of the
+        lumped first solve alone (:meth:`fempm.transfer.grid_solves.GridSolve.solve`).
 
         Note:
             Collective.
         """
-        return self._ghosted(self.grid_solve.solve(b, guess, self._ghosted))
+        return self._ghosted(self.grid_solve.solve(b, guess, self._ghosted, start))
 
     def _ghosted(self, F: npt.NDArray) -> npt.NDArray:
         """Owned values (owned dofs, k) -> (owned + ghost dofs, k), ghosts from their owners."""
