@@ -33,6 +33,8 @@ bundle         members
                number of cells searched ``sample_cells``
 ``Groups``     multi-field contact: ``group`` per particle (or empty), column ``stride``,
                ``rigid`` per group
+``Affine``     APIC/TPIC (:mod:`fempm.kernels.affine`): the particles' affine matrices ``C``
+               (n, d, d), APIC's spins ``spin`` (n, 1 or 3), the dofs' coordinates ``xi``
 =============  ===================================================================================
 """
 
@@ -42,7 +44,7 @@ from collections import namedtuple
 
 import numpy as np
 
-__all__ = ["NO_GROUPS", "Basis", "Corners", "Forces", "GridStep", "Groups", "Laws", "Moves", "Outputs", "Samples", "Stable",
+__all__ = ["NO_AFFINE", "NO_GROUPS", "Affine", "Basis", "Corners", "Forces", "GridStep", "Groups", "Laws", "Moves", "Outputs", "Samples", "Stable",
            "Star", "State"]
 
 Basis = namedtuple("Basis", "cells X K cell_dofs")
@@ -57,6 +59,9 @@ Forces = namedtuple("Forces", "g fext")
 Stable = namedtuple("Stable", "h c")
 Groups = namedtuple("Groups", "group stride rigid")
 Corners = namedtuple("Corners", "yc moved bad sample_cells")
+Affine = namedtuple("Affine", "C spin xi")
 
 #: one velocity field: no group per particle, no rigid group
 NO_GROUPS = Groups(np.zeros(0, dtype=np.int64), 0, np.zeros(1, dtype=np.bool_))
+#: no affine transfer
+NO_AFFINE = Affine(np.zeros((0, 1, 1)), np.zeros((0, 1)), np.zeros((0, 1)))

@@ -40,7 +40,20 @@ from types import SimpleNamespace
 import numpy as np
 
 from fempm.kernels import planar, solid
-from fempm.kernels.bundles import NO_GROUPS, Basis, Forces, GridStep, Groups, Laws, Moves, Outputs, Stable, State
+from fempm.kernels.bundles import (
+    NO_AFFINE,
+    NO_GROUPS,
+    Affine,
+    Basis,
+    Forces,
+    GridStep,
+    Groups,
+    Laws,
+    Moves,
+    Outputs,
+    Stable,
+    State,
+)
 from fempm.kernels.particle_checks import (
     LINEAR_ELASTIC,
     NEO_HOOKEAN,
@@ -57,6 +70,7 @@ NO_STABLE = Stable(np.zeros(0), np.zeros(0))
 if AVAILABLE:
     from numba import njit
 
+    from fempm.kernels.affine import carried, g2p_affine, second_moment
     from fempm.kernels.kinematics import _det, add_totals, linear_elastic_at, neo_hookean_at
     from fempm.kernels.shape import inside_after_pull_back, shape, star_search
 
@@ -167,27 +181,39 @@ def kernels_for(cell: str) -> SimpleNamespace:
         g2p_kernel = functools.partial(_solid, solid.g2p_kernel, cell == "hexahedron")
 
     def scatter(where: Basis, state: State, laws: Laws, forces: Forces, out, cm: int, cv: int, cf: int,
-                stable: Stable = NO_STABLE, bound: bool = False, groups: Groups = NO_GROUPS, cg: int = -1) -> float:
+                stable: Stable = NO_STABLE, bound: bool = False, groups: Groups = NO_GROUPS, cg: int = -1,
+                affine: Affine = NO_AFFINE, kind: int = 0) -> float:
         """See :func:`_scatter_kernel` (the bundles: :mod:`fempm.kernels.bundles`); the columns
         (negative: skipped) choose the compiled variant; with cell sizes ``stable.h`` the stable
         time (a lower bound of it with ``bound``); with a ``groups.group`` per particle the columns
-        of group k start at ``k * groups.stride``; ``cg`` >= 0: also the mass gradients."""
-        kernel = scatter_kernel(cell, cm >= 0, cv >= 0, cf >= 0, stable.h.shape[0] > 0, forces.fext.shape[0] > 0,
-                                bool(bound), groups.group.shape[0] > 0, cg >= 0)
-        return kernel(where, state, laws, forces, out, stable, groups)
+        of group k start at ``k * groups.stride``; ``cg`` >= 0: also the mass gradients; ``kind``
+        (1 APIC, 2 TPIC: :mod:`fempm.kernels.affine`): the momenta with the particles' affine
+        part (the generic kernel)."""
+        flags = (cm >= 0, cv >= 0, cf >= 0, stable.h.shape[0] > 0, forces.fext.shape[0] > 0, bool(bound),
+                 groups.group.shape[0] > 0, cg >= 0)
+        if kind and cv >= 0:
+            return _scatter_kernel(cell, *flags, kind)(where, state, laws, forces, out, stable, groups, affine)
+        return scatter_kernel(cell, *flags)(where, state, laws, forces, out, stable, groups)
 
     def g2p_update(where: Basis, grid: GridStep, state: State, laws: Laws, moves: Moves, outputs: Outputs,
-                   groups: Groups = NO_GROUPS, *, blend: bool, kinematics: bool, move: bool) -> tuple:
+                   groups: Groups = NO_GROUPS, *, blend: bool, kinematics: bool, move: bool,
+                   affine: Affine = NO_AFFINE, kind: int = 0, remap_affine: bool = True) -> tuple:
         """See :func:`_g2p_kernel` (the bundles: :mod:`fempm.kernels.bundles`); the flags choose
         the compiled variant (``outputs.mom`` with a row per dof: the blend pass also re-maps the
         momenta, MUSL; ``outputs.sums`` of 3 + d entries: the moving pass also sums the state's
         energies; a ``groups.group`` per particle: each takes its group's field, columns ``k d`` to
         ``(k + 1) d``; the particles of a group k with ``groups.rigid[k]`` keep their velocity and
-        F (L = 0) and move with their velocity)."""
+        F (L = 0) and move with their velocity); ``kind`` (1 APIC, 2 TPIC): the blend stores the
+        particles' affine matrices (and APIC's spins) into ``affine`` and, with ``remap_affine``,
+        re-maps with them (the lumped mass; the consistent mass re-maps the velocities alone: the
+        generic kernel)."""
         remap = blend and outputs.mom.shape[0] > 0
         totals = move and outputs.sums.shape[0] > 0
-        return g2p_kernel(cell, bool(blend), bool(kinematics), bool(move), remap, totals, groups.group.shape[0] > 0)(
-            where, grid, state, laws, moves, outputs, groups)
+        flags = (bool(blend), bool(kinematics), bool(move), remap, totals, groups.group.shape[0] > 0)
+        if kind and blend:
+            return _g2p_kernel(cell, *flags, kind, remap and remap_affine)(where, grid, state, laws, moves, outputs,
+                                                                            groups, affine)
+        return g2p_kernel(cell, *flags)(where, grid, state, laws, moves, outputs, groups)
 
     return SimpleNamespace(scatter=scatter, g2p_update=g2p_update)
 
@@ -204,7 +230,7 @@ def _solid(make, hexa: bool, cell: str, *flags):
 
 @functools.cache
 def _scatter_kernel(cell: str, with_mass: bool, with_momentum: bool, with_force: bool, with_dt: bool, has_fext: bool,
-                    bound: bool = False, grouped: bool = False, with_gradient: bool = False):
+                    bound: bool = False, grouped: bool = False, with_gradient: bool = False, kind: int = 0):
     r"""The P2G pass of :func:`kernels_for` with its terms fixed at compile time: the columns of
     ``out`` are [mass | momentum (d) | force (d)], of the terms present. On a basis with
     negative values (P2 Lagrange) the mass column is :math:`\sum_p M_p |N_{ip}|`, the measure
@@ -218,8 +244,11 @@ def _scatter_kernel(cell: str, with_mass: bool, with_momentum: bool, with_force:
 
     ``grouped`` (multi-field contact, :mod:`fempm.stepping.contact_points`): particle p adds to
     the columns of its group, shifted by ``group[p] * stride``. ``with_gradient``: d more
-    columns, the mass gradients :math:`\sum_p M_p \nabla N_{ip}`."""
+    columns, the mass gradients :math:`\sum_p M_p \nabla N_{ip}`. ``kind`` (1 APIC, 2 TPIC) adds
+    the affine part to the momenta, :math:`M_p N_{ip} C_p (x_i - x_p)` of the carried matrix
+    (:func:`fempm.kernels.affine.carried`; the kernel then takes the ``affine`` bundle)."""
     D, NK, SIMPLEX = CELLS[cell]
+    KIND = kind
     AFFINE = is_affine(cell)
     DEGREE, BERNSTEIN = space_of(cell)
     SIGNED = DEGREE == 2 and not BERNSTEIN  # a basis with negative values: the mass column is its support measure
@@ -228,11 +257,11 @@ def _scatter_kernel(cell: str, with_mass: bool, with_momentum: bool, with_force:
     CG = CF + (D if with_force else 0)
 
     @njit(cache=True, error_model="numpy")
-    def scatter(where, state, laws, forces, out, stable, groups):  # pragma: no cover
+    def scatter(where, state, laws, forces, out, stable, groups, affine=None):  # pragma: no cover
         """Add the particles' mass, momentum and force to ``out`` (ndofs, ncols). Returns the
         stable time of the particles' state (inf without ``with_dt``)."""
         cells, X, K, cell_dofs = where
-        mass, v, volume, sigma, body = state.mass, state.v, state.volume, state.sigma, state.body
+        x, mass, v, volume, sigma, body = state.x, state.mass, state.v, state.volume, state.sigma, state.body
         modulus, g, fext, h, c = laws.modulus, forces.g, forces.fext, stable.h, stable.c
         group, stride = groups.group, groups.stride
         N = np.empty(NK)
@@ -240,6 +269,11 @@ def _scatter_kernel(cell: str, with_mass: bool, with_momentum: bool, with_force:
         mv = np.empty(D)
         fe = np.empty(D)
         sg = np.empty((D, D))
+        Dm = np.empty((D, D))
+        work = (np.empty((D, D)), np.empty((D, D)), np.empty((3, 3)), np.empty((3, 3)), np.empty(3), np.empty(3))
+        Cu = work[0]
+        if KIND:
+            C, spin, xi = affine
         best = 0.0 if bound else np.inf
         for p in range(len(cells)):
             cp = cells[p]
@@ -256,6 +290,9 @@ def _scatter_kernel(cell: str, with_mass: bool, with_momentum: bool, with_force:
                         fe[j] += fext[p, j]
                     for e in range(D):
                         sg[j, e] = sigma[p, j, e]
+            if KIND:
+                tr, top = second_moment(N, cell_dofs, cp, xi, x, p, D, NK, Dm) if KIND == 1 else (0.0, 0.0)
+                carried(C, spin, p, Dm, tr, top, D, KIND, work)
             if with_dt:
                 best = stable_time(best, bound, m, V, speed, modulus[body[p]], c, p, h[cp])
             o = group[p] * stride if grouped else 0
@@ -266,7 +303,11 @@ def _scatter_kernel(cell: str, with_mass: bool, with_momentum: bool, with_force:
                     out[i, o] += (abs(w) if SIGNED else w) * m
                 if with_momentum:
                     for j in range(D):
-                        out[i, o + CV + j] += w * mv[j]
+                        t = mv[j]
+                        if KIND:
+                            for k in range(D):
+                                t += m * Cu[j, k] * (xi[i, k] - x[p, k])
+                        out[i, o + CV + j] += w * t
                 if with_force:
                     for j in range(D):
                         s = 0.0
@@ -283,7 +324,7 @@ def _scatter_kernel(cell: str, with_mass: bool, with_momentum: bool, with_force:
 
 @functools.cache
 def _g2p_kernel(cell: str, blend: bool, kinematics: bool, move: bool, remap: bool, totals: bool = False,
-                grouped: bool = False):
+                grouped: bool = False, kind: int = 0, remap_affine: bool = False):
     r"""The G2P pass of :func:`kernels_for` with its parts (flags) fixed at compile time,
     one pass over the particles, in place. ``blend``: ``v`` <- the FLIP/PIC blend of ``v_new``
     against ``v_old``. ``kinematics``: ``F``, ``volume`` and the compiled laws' ``sigma`` from
@@ -296,13 +337,18 @@ def _g2p_kernel(cell: str, blend: bool, kinematics: bool, move: bool, remap: boo
     the state the pass leaves, :math:`[\sum_p \tfrac12 M_p |v_p|^2,\ \sum_p V^0_p W(F_p),\ \sum_p
     M_p |v_p|,\ \sum_p M_p v_p]` (W of the compiled laws; 0 for the others). Returns (#non-finite J,
     #J <= 0, min J, max J, #non-finite x or v). ``grouped``: particle p reads (and re-maps into) the columns ``group[p] d`` to
-    ``(group[p] + 1) d`` of the nodal arrays."""
+    ``(group[p] + 1) d`` of the nodal arrays. ``kind`` (1 APIC, 2 TPIC; a blend pass, PIC's
+    velocity): the particles' affine matrices (and APIC's spins) of ``v_new`` into the
+    ``affine`` bundle (:func:`fempm.kernels.affine.g2p_affine`); ``remap_affine``: the re-map
+    maps them too (the lumped mass)."""
     D, NK, SIMPLEX = CELLS[cell]
+    KIND = kind
     AFFINE = is_affine(cell)
     DEGREE, BERNSTEIN = space_of(cell)
+    CLOSED = DEGREE == 1 and AFFINE  # C_p = L_p (fempm.transfer.affine.closed_form)
 
     @njit(cache=True, error_model="numpy")
-    def g2p_update(where, grid, state, laws, moves, outputs, groups):  # pragma: no cover
+    def g2p_update(where, grid, state, laws, moves, outputs, groups, affine=None):  # pragma: no cover
         cells, X, K, cell_dofs = where
         v_new, v_old, flip, dt, by_particle = grid
         x, v, F, volume0, volume, sigma, body, mass = state
@@ -324,20 +370,36 @@ def _g2p_kernel(cell: str, blend: bool, kinematics: bool, move: bool, remap: boo
         nonfinite = 0
         dv = np.empty(D)
         acc = np.zeros(3 + D)  # the state's sums (totals)
+        Dm = np.empty((D, D))
+        gwork = (np.empty((D, D)), np.empty((D, D)), np.empty((D, D)), np.empty((D, D)), np.empty(3))
+        cwork = (np.empty((D, D)), np.empty((D, D)), np.empty((3, 3)), np.empty((3, 3)), np.empty(3), np.empty(3))
+        Cu = cwork[0]
+        if KIND:
+            C, spin, xi = affine
         for p in range(n):
             c = cells[p]
             shape(X, p, K, c, SIMPLEX, AFFINE, D, NK, N, G, DEGREE, BERNSTEIN)
             o = group[p] * D if grouped else 0
             still = grouped and rigid[group[p]]  # a rigid body's particle: its own velocity, L = 0
-            gather(N, G, cell_dofs, c, o, v_new, v_old, blend, kinematics and not still, D, NK, (vg, dv, Lp))
+            gather(N, G, cell_dofs, c, o, v_new, v_old, blend, (kinematics or KIND > 0) and not still, D, NK,
+                   (vg, dv, Lp))
             if blend and not still:
                 for j in range(D):
                     v[p, j] = flip * (v[p, j] + dv[j]) + (1.0 - flip) * vg[j]
+            if KIND:
+                g2p_affine(N, cell_dofs, c, o, v_new, xi, x, p, Lp, D, NK, KIND, CLOSED, C, spin, gwork)
             if remap:  # MUSL: the blended momenta back to the grid, in the same pass
+                if remap_affine:
+                    tr, top = second_moment(N, cell_dofs, c, xi, x, p, D, NK, Dm) if KIND == 1 else (0.0, 0.0)
+                    carried(C, spin, p, Dm, tr, top, D, KIND, cwork)
                 for a in range(NK):
                     i = cell_dofs[c, a]
                     for j in range(D):
-                        mom[i, o + j] += N[a] * (mass[p] * v[p, j])
+                        t = v[p, j]
+                        if remap_affine:
+                            for k in range(D):
+                                t += Cu[j, k] * (xi[i, k] - x[p, k])
+                        mom[i, o + j] += N[a] * (mass[p] * t)
             if kinematics:
                 J = deform_at(F, p, dt, Lp, D, Fn)
                 if keep_L:

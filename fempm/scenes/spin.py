@@ -12,9 +12,13 @@ affine part the map carries: :meth:`fempm.stepping.Solver.angular_momentum`) and
 
 The step keeps every conservation the transfers can give: the particles move with their own
 velocity (``position="particle"``: with MUSL the re-mapped grid velocity would move them
-otherwise than their momenta say), every node with mass takes its force (``mass_cutoff=0``)
-and the consistent mass lumps no row (``lump_below=0``), so APIC keeps the angular momentum to
-round-off with the lumped and the consistent mass.
+otherwise than their momenta say), every node with mass takes its force (``mass_cutoff=0`` by
+default) and the consistent mass lumps no row (``lump_below=0``), so APIC keeps the angular
+momentum to round-off with the lumped and the consistent mass. What that costs (docs/transfers.md):
+beyond 20 cells a node at the rim, supported by one particle with a tiny share of its mass,
+takes an acceleration that the velocity gradient, hence APIC's and TPIC's affine matrices,
+carry back (``mass_cutoff`` about 1e-2 holds them); the consistent mass without lumped rows
+grows unstable at the rim within a few hundred steps.
 """
 
 from __future__ import annotations
@@ -62,7 +66,8 @@ class SpinHistory(Recorder):
 def spin(
     *, mesh: str = "quadrilateral", cells: int = 20, ppc: int = 4, scheme: str = "MUSL", flip: float = 1.0,
     mass: str = "lumped", cfl: float = 0.4, t_end: float = 1.0, omega: float = 2 * np.pi, radius: float = 0.3,
-    E: float = 1000.0, nu: float = 0.3, rho: float = 1.0, frames: int = 10, comm: MPI.Comm = MPI.COMM_WORLD,
+    E: float = 1000.0, nu: float = 0.3, rho: float = 1.0, mass_cutoff: float = 0.0, frames: int = 10,
+    comm: MPI.Comm = MPI.COMM_WORLD,
 ) -> Scene:
     """A neo-Hookean disk spinning at ``omega`` about the centre of the unit square, plane strain.
 
@@ -77,6 +82,10 @@ def spin(
         E: Young's modulus.
         nu: Poisson's ratio.
         rho: The density.
+        mass_cutoff: Nodes whose mass is below this share of the largest take no force update
+            (:class:`fempm.stepping.StepOptions`; 0: every node takes its force, the angular
+            momentum kept to round-off; APIC and TPIC beyond 20 cells need about 1e-2,
+            docs/transfers.md).
     """
     check_counts(cells=cells, ppc=ppc)
     if not radius <= 0.45:
@@ -92,7 +101,7 @@ def spin(
     p.fields["v"] = (p.x - CENTRE) @ W.T
     history = SpinHistory()
     params = dict(mesh=mesh, cells=cells, ppc=ppc, scheme=scheme, flip=flip, mass=mass, cfl=cfl, omega=omega,
-                  radius=radius, E=E, nu=nu, rho=rho)
+                  radius=radius, E=E, nu=nu, rho=rho, mass_cutoff=mass_cutoff)
 
     def results(scene, solver) -> dict:
         t, L, K = np.array(history.points).T
@@ -101,7 +110,7 @@ def spin(
 
     return Scene(
         name="spin", mesh=m, particles=p, materials=[NeoHookean(E, nu)], t_end=t_end, frames=frames,
-        options=StepOptions(scheme=scheme, flip=flip, mass=mass, cfl=cfl, position="particle", mass_cutoff=0.0,
-                            lump_below=0.0), params=params, watch=history,
+        options=StepOptions(scheme=scheme, flip=flip, mass=mass, cfl=cfl, position="particle",
+                            mass_cutoff=mass_cutoff, lump_below=0.0), params=params, watch=history,
         results=results, velocity_gradient=W,
     )

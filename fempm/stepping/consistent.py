@@ -129,8 +129,8 @@ class ConsistentNodalMass(NodalMass):
         return u
 
     def velocity(self, mass, mom, cv: int, active_min: float, guess=None, centroids=None,
-                 forces: int | None = None) -> npt.NDArray:
-        g = self.layout
+                 forces: int | None = None, start: npt.NDArray | None = None) -> npt.NDArray:
+        g = self.layout  # (the exact projection leaves a lumped first solve's ``start`` out)
         v = np.zeros((g.num_dofs, g.d))
         self.systems.solve(mom, cv, v, guess)
         g.conditions.apply(v, centroids)

@@ -79,6 +79,9 @@ class DomainGrid(PointGrid):
     takes = ("CPDI1, CPDI2 or GIMP domains (exact GIMP on simplices and axis-aligned boxes) with lumped or FMPM mass "
              "on degree 1 of the compiled passes, no wall that checks contact by position")
 
+    #: the velocity transfers its passes take
+    transfers = ("flip", "pic", "xpic")
+
     @classmethod
     def refusal(cls, state: StepState) -> str | None:
         """Why ``state``'s domain, mass, conditions, space and mesh do not take this grid (None
@@ -307,8 +310,8 @@ class DomainGrid(PointGrid):
         return Samples(*self.stencil, self.K, self.cell_dofs)
 
     def scatter_pass(self, state: State, forces: Forces, out, cm: int, cv: int, cf: int, stable: Stable,
-                     bound: bool = False, groups: Groups = NO_GROUPS, cg: int = -1) -> float:
-        p = self.state.particles
+                     bound: bool = False, groups: Groups = NO_GROUPS, cg: int = -1, affine=None, kind: int = 0) -> float:
+        p = self.state.particles  # (no affine transfer: see transfers)
         return self.passes.scatter(Basis(p.cells, p.X, self.K, self.cell_dofs), self.samples(), state, self.laws,
                                    forces, out, cm, cv, cf, stable, bound)
 

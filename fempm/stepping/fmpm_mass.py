@@ -36,9 +36,10 @@ class FMPMNodalMass(NodalMass):
 
     fusable = False  # the grid update takes particle passes
 
-    def __init__(self, layout: NodalLayout):
+    def __init__(self, layout: NodalLayout, order: int | None = None):
         super().__init__(layout)
-        self.order = layout.options.mass_model.order
+        #: the k of FMPM(k) (the mass model's, or another: XPIC's m)
+        self.order = layout.options.mass_model.order if order is None else order
         self._work: dict = {}  # (columns, lumping) -> kept nodal array of M_C y (and M_C 1_l)
         self._acceleration: tuple | None = None  # (force array, column, a): solved with the velocity
         self._free = {1: layout.free}  # fields side by side -> their free components (layout.free is the run's)
@@ -75,13 +76,16 @@ class FMPMNodalMass(NodalMass):
         sum_ghosts(vec)
         return out
 
-    def solve(self, mass: npt.NDArray, b: npt.NDArray, cb: int, active_min: float, fields: int = 1) -> list:
+    def solve(self, mass: npt.NDArray, b: npt.NDArray, cb: int, active_min: float, fields: int = 1,
+              start: npt.NDArray | None = None) -> list:
         r"""k Richardson steps :math:`x \leftarrow x + m^{-1}(b - M_C x)` from :math:`x = m^{-1} b`
         (``b[:, cb:cb+d]``, ``m = mass[:, 0]``) on the free components of the supported dofs
         (lumped rows keep :math:`m^{-1} b`); ``fields`` vector fields side by side
         (``b[:, cb:cb+fields*d]``), each column solved as on its own, in one particle pass a
-        step. Returns the fields' solutions, each a contiguous (dofs, d) array; the passes over
-        the dofs also clear the next :meth:`mc`'s output."""
+        step. ``start`` (dofs, d): a term of the first field's lumped solve alone,
+        :math:`x = m^{-1}(b + s)` (the affine part of APIC/TPIC, :mod:`fempm.transfer.transfers`).
+        Returns the fields' solutions, each a contiguous (dofs, d) array; the passes over the dofs
+        also clear the next :meth:`mc`'s output."""
         g = self.layout
         d = g.d
         if fields not in self._free:
@@ -89,7 +93,12 @@ class FMPMNodalMass(NodalMass):
         free = self._free[fields]
         k = free.shape[1]
         x = np.zeros((g.num_dofs, k))  # (the kernels write the rows with mass alone)
-        kf.lumped_solve(b, cb, mass, free, active_min, x, self.work(k)[1] if self.order > 1 else NO_ROWS)
+        first, c0 = b, cb
+        if start is not None:
+            first = np.array(b[:, cb:cb + k])
+            first[:, :d] += start
+            c0 = 0
+        kf.lumped_solve(first, c0, mass, free, active_min, x, self.work(k)[1] if self.order > 1 else NO_ROWS)
         if self.order == 1:
             return [np.ascontiguousarray(x[:, f * d:(f + 1) * d]) for f in range(fields)]
         for step in range(1, self.order):
@@ -100,18 +109,19 @@ class FMPMNodalMass(NodalMass):
         return out[:fields]  # (fields = 1: the second is empty)
 
     def velocity(self, mass, mom, cv: int, active_min: float, guess=None, centroids=None,
-                 forces: int | None = None) -> npt.NDArray:
+                 forces: int | None = None, start: npt.NDArray | None = None) -> npt.NDArray:
         """The velocity solve; where the forces of the step sit next to the momenta in ``mom``
         (USL and MUSL: one P2G pass maps both) the acceleration is solved with it, its
-        Richardson steps sharing the velocity's particle passes, and kept for :meth:`advance`."""
+        Richardson steps sharing the velocity's particle passes, and kept for :meth:`advance`;
+        ``start``: the affine part of the momenta, in the first, lumped solve alone."""
         g = self.layout
         opts = g.options
         d = g.d
         if forces == cv + d and not opts.lumped_forces:
-            v, a = self.solve(mass, mom, cv, active_min, fields=2)
+            v, a = self.solve(mass, mom, cv, active_min, fields=2, start=start)
             self._acceleration = (mom, forces, a)
         else:
-            v = self.solve(mass, mom, cv, active_min)[0]
+            v = self.solve(mass, mom, cv, active_min, start=start)[0]
         g.conditions.apply(v, centroids)
         return v
 

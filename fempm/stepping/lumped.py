@@ -34,7 +34,20 @@ from mpi4py import MPI
 
 from fempm.kernels import fmpm as kf
 from fempm.kernels import lumped as kl
-from fempm.kernels.bundles import NO_GROUPS, Basis, Forces, GridStep, Groups, Laws, Moves, Outputs, Stable, State
+from fempm.kernels.bundles import (
+    NO_AFFINE,
+    NO_GROUPS,
+    Affine,
+    Basis,
+    Forces,
+    GridStep,
+    Groups,
+    Laws,
+    Moves,
+    Outputs,
+    Stable,
+    State,
+)
 from fempm.kernels.lumped import NO_STABLE
 from fempm.kernels.shape import space_of
 from fempm.materials.base import IsotropicElastic
@@ -44,6 +57,7 @@ from fempm.stepping import diagnostics
 from fempm.stepping.grid import Grid
 from fempm.stepping.laws import material_groups, stresses_of
 from fempm.stepping.loads import external_forces
+from fempm.stepping.fmpm_mass import FMPMNodalMass
 from fempm.stepping.lumped_mass import NODAL_MASSES, LumpedNodalMass
 from fempm.stepping.nodal import NodalLayout, kept_nodal_array, sum_ghosts
 from fempm.stepping.spaces import compiled_space, space_refusal
@@ -52,7 +66,8 @@ from fempm.transfer.centres import NodalCentres
 from fempm.transfer.domains import Point
 from fempm.transfer.grid_solves import negative_basis_message
 from fempm.transfer.mapping import SUPPORT_TOL, mass_centres
-from fempm.transfer.mass_models import Consistent
+from fempm.transfer.mass_models import FMPM, Consistent, Lumped
+from fempm.transfer.transfers import AFFINE_FIELD, SPIN_FIELD
 
 __all__ = ["BOUND_SAFETY", "NODAL_MASSES", "SORT_EVERY", "LumpedNodalMass", "PointGrid"]
 
@@ -82,7 +97,7 @@ class PointGrid(Grid):
     #: the options this grid takes, in messages (:mod:`fempm.stepping.grid_choice`)
     takes = "point particles with lumped, consistent or FMPM mass on a space of the compiled passes"
     #: the velocity transfers its passes take
-    transfers = ("flip", "pic")
+    transfers = ("flip", "pic", "apic", "tpic", "xpic")
 
     @classmethod
     def refusal(cls, state: StepState) -> str | None:
@@ -130,12 +145,22 @@ class PointGrid(Grid):
         # walls that check contact by position: the first mass moments sum_p M_p N_ip x_p
         self._moments = self.nodal_array(d) if self.conditions.needs_positions else None
         self._checked: tuple | None = None  # identities of the state arrays checked finite
+        # APIC/TPIC: the lumped mass maps the affine part with the momenta, FMPM apart (its
+        # lumped first solve alone, into a kept array), the consistent mass not at all
+        self.affine_with_momenta = state.options.velocity_transfer.affine and type(state.options.mass_model) is Lumped
+        self.affine_apart = state.options.velocity_transfer.affine and type(state.options.mass_model) is FMPM
+        self._start = self.nodal_array(d) if self.affine_apart else None
+        self.start: npt.NDArray | None = None
         self._sums = np.zeros(3 + d)  # the moving pass's sums of the state (state_sums)
         self._summed = False  # whether they are the last step's
         if space_of(self.cell) == (2, False) and type(self.options.mass_model) is not Consistent:
             raise ValueError(negative_basis_message(self.options.mass_model.label, 2))  # as the numpy step
         layout = NodalLayout(state, self.cell, self.K, self.cell_dofs, self.index_map, self.free, self.mass_apply)
         self.mass = NODAL_MASSES[type(self.options.mass_model)](layout)
+        transfer = self.options.velocity_transfer
+        #: XPIC(m)'s series (none for the consistent mass, whose projection is exact: XPIC(inf))
+        self.xpic = (FMPMNodalMass(layout, transfer.order)
+                     if transfer.extrapolates and type(self.options.mass_model) is not Consistent else None)
         # every boundary condition a zero component, held by `free`, and a lumped mass: one fused grid pass
         self.fused = self.conditions.zero_components and self.mass.fusable
 
@@ -178,21 +203,44 @@ class PointGrid(Grid):
         return State(p.x, f["v"] if velocity is None else velocity, f["F"], f["volume0"], p.volume, f["sigma"],
                      f["body"], p.mass)
 
+    def affine_state(self) -> tuple[Affine, int]:
+        """The passes' affine bundle (the particles' ``affine`` and ``affine_spin`` fields and the
+        dofs' coordinates) and the transfer's code (0: none; :mod:`fempm.kernels.affine`)."""
+        s = self.state
+        kind = self.options.velocity_transfer.kind
+        if not kind:
+            return NO_AFFINE, 0
+        f = s.particles.fields
+        s.affine()
+        spin = f.get(SPIN_FIELD)
+        if spin is None:
+            spin = np.zeros((len(s.particles), 0))
+        return Affine(f[AFFINE_FIELD], spin, s.dof_coordinates()), kind
+
     def _scatter(self, nodal, forces: Forces, cm: int, cv: int, cf: int, stable: str = "", velocity=None,
-                 groups: Groups = NO_GROUPS, cg: int = -1):
+                 groups: Groups = NO_GROUPS, cg: int = -1, affine: bool = False):
         """P2G of the chosen columns into the kept ``nodal`` (vector, array), summed over
         ranks; with ``stable`` ("exact" or "bound") also this rank's stable time of the state
         or a lower bound of it (:func:`fempm.kernels.lumped._scatter_kernel`; else inf);
         ``velocity``: the vectors the momentum column maps in the place of the particles'
-        velocities; ``groups`` and ``cg``: multi-field contact's groups and mass-gradient column."""
+        velocities; ``groups`` and ``cg``: multi-field contact's groups and mass-gradient column;
+        ``affine``: the momenta with the particles' affine part (APIC, TPIC with the lumped mass)."""
         s = self.state
         vec, out = nodal
         out.fill(0.0)
         times = Stable(s.h_cell, self._wave_speeds()) if stable else NO_STABLE
+        carried, kind = self.affine_state() if affine else (NO_AFFINE, 0)
         local = self.scatter_pass(self.particle_state(velocity), forces, out, cm, cv, cf, times, stable == "bound",
-                                  groups, cg)
+                                  groups, cg, carried, kind)
         sum_ghosts(vec)
         return out, local
+
+    def affine_momenta(self) -> npt.NDArray:
+        r"""The affine part of P2G alone, :math:`\sum_p M_p N_{ip} C_p (x_i - x_p)`, into the kept
+        array, summed over ranks (FMPM's lumped first solve takes it: :mod:`fempm.transfer.transfers`)."""
+        p = self.state.particles
+        return self._scatter(self._start, self.no_forces, -1, 0, -1, velocity=np.zeros((len(p), self.d)),
+                             affine=True)[0]
 
     def mass_apply(self, y: npt.NDArray, lump: npt.NDArray, out: npt.NDArray) -> None:
         """``out`` += FMPM's :math:`M_C y` on this rank's particles (ghost entries partial sums;
@@ -201,18 +249,24 @@ class PointGrid(Grid):
         kf.mass_apply(self.cell)(p.cells, p.X, self.K, self.cell_dofs, p.mass, y, lump, out)
 
     def scatter_pass(self, state: State, forces: Forces, out, cm: int, cv: int, cf: int, stable: Stable,
-                     bound: bool = False, groups: Groups = NO_GROUPS, cg: int = -1) -> float:
+                     bound: bool = False, groups: Groups = NO_GROUPS, cg: int = -1, affine: Affine = NO_AFFINE,
+                     kind: int = 0) -> float:
         """The P2G pass (:func:`fempm.kernels.lumped.kernels_for`) with the particles' basis."""
         p = self.state.particles
         where = Basis(p.cells, p.X, self.K, self.cell_dofs)
-        return self.kernels.scatter(where, state, self.laws, forces, out, cm, cv, cf, stable, bound, groups, cg)
+        return self.kernels.scatter(where, state, self.laws, forces, out, cm, cv, cf, stable, bound, groups, cg,
+                                    affine, kind)
 
     def gather_pass(self, grid: GridStep, state: State, moves: Moves, outputs: Outputs, *, blend: bool,
                     kinematics: bool, move: bool) -> tuple:
-        """The G2P pass (:func:`fempm.kernels.lumped.kernels_for`) with the particles' basis."""
+        """The G2P pass (:func:`fempm.kernels.lumped.kernels_for`) with the particles' basis; a
+        blend pass of APIC or TPIC also stores the affine matrices (and re-maps with them with
+        the lumped mass)."""
         p = self.state.particles
+        affine, kind = self.affine_state() if blend else (NO_AFFINE, 0)
         return self.kernels.g2p_update(Basis(p.cells, p.X, self.K, self.cell_dofs), grid, state, self.laws, moves,
-                                       outputs, blend=blend, kinematics=kinematics, move=move)
+                                       outputs, blend=blend, kinematics=kinematics, move=move, affine=affine,
+                                       kind=kind, remap_affine=self.affine_with_momenta)
 
     def _centroids(self, nodal) -> NodalCentres | None:
         r"""The nodal centres of mass :math:`\sum_p M_p N_{ip} x_p / m_i` (one more particle
@@ -300,12 +354,15 @@ class PointGrid(Grid):
         # a given dt is checked against a lower bound of the stable time, and against the time
         # itself only where the bound does not show it stable
         nodal, local = self._scatter(self._nodal, self.external, 0, 1, 1 + d if opts.stages.forces_with_map else -1,
-                                     stable="exact" if dt is None else "bound")
+                                     stable="exact" if dt is None else "bound", affine=self.affine_with_momenta)
+        self.start = self.affine_momenta() if self.affine_apart else None
         top = np.array([nodal[: self.num_owned, 0].max(initial=0.0), -local])
         p.comm.Allreduce(MPI.IN_PLACE, top, op=MPI.MAX)  # one collective: the largest mass and the stable time
         top, state = float(top[0]), -float(top[1])
         self.top, self.active_min, self.weak_max = top, SUPPORT_TOL * top, opts.mass_cutoff * top
         factor = self.mass.stable_factor(nodal, dt is None, top)
+        if self.xpic is not None:
+            self.xpic.stable_factor(nodal, dt is None, top)  # (its lumped rows)
         if dt is not None and not dt <= state * BOUND_SAFETY * factor:
             state = self._stable_time()
         self.centroids = self._centroids(nodal)
@@ -324,11 +381,13 @@ class PointGrid(Grid):
     def velocity(self, remapped: bool = False) -> npt.NDArray:
         nodal = self._nodal[1]
         if remapped:
-            return self.mass.velocity(nodal[:, :1], self._nodal_d[1], 0, self.active_min, None, self.centroids)
+            start = self.affine_momenta() if self.affine_apart else None
+            return self.mass.velocity(nodal[:, :1], self._nodal_d[1], 0, self.active_min, None, self.centroids,
+                                      start=start)
         mapped = self.options.stages.forces_with_map and self.force is nodal  # forces mapped with momenta (USL, MUSL)
         forces = self.cf if mapped else None
         return self.mass.velocity(nodal[:, :1], nodal, 1, self.active_min, self.state.grid_velocity, self.centroids,
-                                  forces)
+                                  forces, start=self.start)
 
     def forces(self) -> None:
         self.force, self.cf = self._scatter(self._nodal_d, self.external, -1, -1, 0)[0], 0
@@ -337,21 +396,43 @@ class PointGrid(Grid):
         return self.mass.advance(self._nodal[1][:, :1], self.force, self.cf, self.active_min, self.weak_max, dt,
                                  v_old, self.centroids)
 
+    def extrapolated(self, v_old: npt.NDArray) -> npt.NDArray:
+        r"""XPIC(m)'s :math:`v^*`: the series of FMPM(m) on the step's mapped momenta (the consistent
+        mass: ``v_old``, its exact projection), constrained (:mod:`fempm.transfer.transfers`)."""
+        if self.xpic is None:
+            return v_old
+        nodal = self._nodal[1]
+        return self.xpic.velocity(nodal[:, :1], nodal, 1, self.active_min, None, self.centroids)
+
     def to_particles(self, v_new: npt.NDArray, v_old: npt.NDArray, dt: float, *, blend: bool = False,
                      kinematics: bool = False, move: bool = False, remap: bool = False) -> None:
+        if blend and self.options.velocity_transfer.extrapolates:  # XPIC(m): a blend pass of its own field
+            self.record_reaction(v_new, v_old, dt)
+            self._blend(self.extrapolated(v_old) + v_new - v_old, v_old, dt, remap)
+            if kinematics or move:
+                self.to_particles(v_new, v_new, dt, kinematics=kinematics, move=move)
+            return
         if blend:
             self.record_reaction(v_new, v_old, dt)
         if remap:  # the blended particle momenta into the kept nodal array, for velocity(remapped=True)
-            vec, mom = self._nodal_d
-            mom.fill(0.0)
-            self._g2p(v_new, v_old, dt, blend=blend, kinematics=kinematics, move=move, remap=mom)
-            sum_ghosts(vec)
+            self._blend(v_new, v_old, dt, remap)
             return
         nonfinite, left = self._g2p(v_new, v_old, dt, blend=blend, kinematics=kinematics, move=move)
         self.nonfinite += nonfinite
         if move:
             self.left = left
             self._summed = self.totals
+
+    def _blend(self, v_new: npt.NDArray, v_old: npt.NDArray, dt: float, remap: bool) -> None:
+        """A blend pass alone (with ``remap``: the blended momenta into the kept nodal array, for
+        :meth:`velocity` with ``remapped``)."""
+        if not remap:
+            self.nonfinite += self._g2p(v_new, v_old, dt, blend=True, kinematics=False, move=False)[0]
+            return
+        vec, mom = self._nodal_d
+        mom.fill(0.0)
+        self._g2p(v_new, v_old, dt, blend=True, kinematics=False, move=False, remap=mom)
+        sum_ghosts(vec)
 
     def reaction_fields(self, v_new: npt.NDArray, v_old: npt.NDArray) -> list[tuple]:
         nodal, d = self._nodal[1], self.d

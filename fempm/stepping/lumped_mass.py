@@ -28,11 +28,14 @@ class LumpedNodalMass(NodalMass):
         return 1.0
 
     def velocity(self, mass, mom, cv: int, active_min: float, guess=None, centroids=None,
-                 forces: int | None = None) -> npt.NDArray:
+                 forces: int | None = None, start: npt.NDArray | None = None) -> npt.NDArray:
         """Grid velocity from the nodal momenta ``mom[:, cv:cv+d]``, constrained (``forces``: the
-        column of the step's forces where P2G mapped them into ``mom`` too, else None)."""
+        column of the step's forces where P2G mapped them into ``mom`` too, else None;
+        ``start``: momenta added, the affine part of APIC/TPIC where P2G mapped it apart)."""
         g = self.layout
         v = np.empty((g.num_dofs, g.d))
+        if start is not None:
+            mom, cv = mom[:, cv:cv + g.d] + start, 0
         kl.grid_velocity(mass, mom, cv, g.free, active_min, v)
         g.conditions.apply(v, centroids)
         return v

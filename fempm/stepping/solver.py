@@ -354,7 +354,7 @@ class Solver:
         state = s.affine()
         if state is None:
             return
-        grad = np.ascontiguousarray(np.broadcast_to(grad, (len(p), d, d)))
+        grad = np.array(np.broadcast_to(grad, (len(p), d, d)), order="C")  # (writable: the passes update it)
         p.fields[AFFINE_FIELD] = grad
         if state[1] is not None:
             basis = ParticleBasis(s.V, p, domain=s.options.particle_domain)

@@ -74,12 +74,24 @@ class Config:
     integrator: str = "explicit"
     courant: float = 4.0
     steps: int = 1
+    #: the velocity transfer: flip (the scene's blend), pic, apic, tpic or xpicM (XPIC of order M)
+    transfer: str = "flip"
+
+    @property
+    def transfer_options(self) -> dict:
+        """The :class:`~fempm.stepping.StepOptions` of :attr:`transfer` (none for the scene's own)."""
+        if self.transfer == "flip":
+            return {}
+        if self.transfer.startswith("xpic"):
+            return {"transfer": "xpic", "xpic_order": int(self.transfer[4:] or 2)}
+        return {"transfer": self.transfer}
 
     @property
     def label(self) -> str:
         space = f"P{self.degree}" + ("B" if self.variant == "bernstein" else "")
         return f"{self.mesh} {space} {self.mass} {self.domain} {self.scheme}" + (
-            "" if self.integrator == "explicit" else f" {self.integration}")
+            "" if self.integrator == "explicit" else f" {self.integration}") + (
+            "" if self.transfer == "flip" else f" {self.transfer}")
 
     @property
     def integration(self) -> str:
@@ -181,7 +193,7 @@ def run_case(name: str, config: Config, cells: int, comm: MPI.Comm = MPI.COMM_WO
     problem = spec.make()
     row = {"problem": name, "mesh": config.mesh if problem.dim > 1 else "interval", "degree": config.degree,
            "variant": config.variant, "mass": config.mass, "domain": config.domain, "scheme": config.scheme,
-           "cells": cells, "steps": 0, "status": "ok", "reason": ""}
+           "cells": cells, "steps": 0, "status": "ok", "reason": "", "transfer": config.transfer}
     t0 = time.perf_counter()
     history = None
     try:
@@ -189,6 +201,8 @@ def run_case(name: str, config: Config, cells: int, comm: MPI.Comm = MPI.COMM_WO
                                    variant=None if config.variant == "default" else config.variant, mass=config.mass,
                                    domain=config.domain, scheme=config.scheme, comm=comm)
         h = scene.params["h"]
+        if config.transfer_options:
+            scene.options = dataclasses.replace(scene.options, **config.transfer_options)
         cfl = spec.consistent_cfl if mass_model(config.mass).matrix and spec.consistent_cfl else spec.cfl
         if config.integrator == "newmark":  # Newmark's implicit step at a Courant number
             scene.options = dataclasses.replace(scene.options, integrator="implicit", dynamics="newmark")

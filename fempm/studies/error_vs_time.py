@@ -49,7 +49,9 @@ __all__ = [
 ]
 
 COLUMNS = ["problem", "mesh", "degree", "mass", "domain", "scheme", "cells", "ppc", "error", "wall_s", "repeats",
-           "threads", "pareto", "integration"]
+           "threads", "pareto", "integration", "transfer"]
+#: the columns that name a run in the failures' CSV
+FAILURE_KEY = [*COLUMNS[:8], "transfer"]
 #: runs faster than this are repeated (3 times) and their median time kept
 REPEAT_BELOW_S = 2.0
 
@@ -95,14 +97,27 @@ COOK = tuple(Config("unstructured", scheme="MUSL", ppc=4, integrator=i, steps=n)
              for i, n in (("explicit", 1), ("quasi-static", 1), ("quasi-static", 10)))
 #: the compaction column: point particles, cpGIMP and CPDI1, 5 quasi-static load steps
 COMPACTION = tuple(Config(domain=d, ppc=4, integrator="quasi-static", steps=5) for d in ("point", "cpgimp", "cpdi1"))
+#: the velocity transfers beside the scenes' FLIP (:mod:`fempm.transfer.transfers`)
+TRANSFERS = ("pic", "apic", "tpic", "xpic2")
+#: the bar with every transfer, lumped, FMPM(5) and consistent mass (MUSL, 2 particles per cell)
+BAR_TRANSFERS = tuple(Config(mass=m, scheme="MUSL", ppc=2, transfer=t) for t in TRANSFERS
+                      for m in ("lumped", "fmpm5", "consistent"))
+#: the vortex (rotation) with every transfer, lumped, FMPM(5) and consistent mass (MUSL, 4 per cell)
+VORTEX_TRANSFERS = tuple(Config("structured", mass=m, scheme="MUSL", ppc=4, transfer=t) for t in TRANSFERS
+                         for m in ("lumped", "fmpm5", "consistent"))
 
 
 SWEEPS: dict[str, Sweep] = {
-    "vibrating_bar": Sweep(_sweep_1d("MUSL") + NEWMARK_BAR, (8, 16, 32, 64),
-                           _quick("lumped", "fmpm3", "consistent", scheme="MUSL") + NEWMARK_BAR[1:2], (8, 16)),
+    "vibrating_bar": Sweep(_sweep_1d("MUSL") + NEWMARK_BAR + BAR_TRANSFERS, (8, 16, 32, 64),
+                           _quick("lumped", "fmpm3", "consistent", scheme="MUSL") + NEWMARK_BAR[1:2]
+                           + tuple(Config(mass=m, scheme="MUSL", ppc=2, transfer=t) for t in ("pic", "apic", "tpic", "xpic2")
+                                   for m in ("lumped", "consistent")), (8, 16)),
     "axis_aligned_1d_G0.05": Sweep(_sweep_1d("USL"), (16, 32, 64, 128), _quick("lumped", "consistent"), (16, 32)),
     "axis_aligned_2d": Sweep(_sweep_2d("USL"), (8, 16, 32), _quick("lumped", "consistent", ppc=4), (8,)),
-    "vortex_A0.01": Sweep(_sweep_2d("MUSL"), (24, 48), _quick("lumped", scheme="MUSL", ppc=4), (24,)),
+    "vortex_A0.01": Sweep(_sweep_2d("MUSL") + VORTEX_TRANSFERS, (24, 48),
+                          _quick("lumped", scheme="MUSL", ppc=4)
+                          + tuple(Config("structured", mass=m, scheme="MUSL", ppc=4, transfer=t)
+                                  for t in ("apic", "xpic2") for m in ("lumped", "consistent")), (24,)),
     "mapping": Sweep(
         tuple(Config(mesh, degree=k, mass=m, domain=d, ppc=ppc) for mesh in ("structured", "unstructured")
               for k, masses in ((1, ("lumped", "fmpm2", "fmpm5", "consistent")), (2, ("consistent",)))
@@ -140,7 +155,7 @@ def run_case(problem: str, config: Config, cells: int, comm: MPI.Comm = MPI.COMM
             or (lambda c, n, cm: _loop_case(problem, c, n, cm)))
     row = {"problem": problem, "degree": f"{config.degree}{'B' if config.variant == 'bernstein' else ''}", "mass": config.mass,
            "domain": config.domain, "scheme": "-" if problem == "mapping" else config.scheme, "cells": cells,
-           "ppc": config.ppc, "threads": threads(), "integration": config.integration}
+           "ppc": config.ppc, "threads": threads(), "integration": config.integration, "transfer": config.transfer}
     try:
         first = case(config, cells, comm)
     except Exception as e:  # noqa: BLE001 - a failed configuration is a row (SingularMassError, unsupported options)
@@ -203,8 +218,8 @@ def run_study(out: Path = Path("output/study-error-vs-time"), *, quick: bool = F
 
     def describe(row: dict) -> str:
         return (f"{row['problem']:22s} {row['mesh']:12s} P{row['degree']:2s} {row['mass']:10s} {row['domain']:6s} "
-                f"{row['scheme']:4s} cells={row['cells']:4d} ppc={row['ppc']} error={row['error']:.3e} "
-                f"t={row['wall_s']:.3f}s x{row['repeats']} {row['status']}")
+                f"{row['scheme']:4s} {row['transfer']:5s} cells={row['cells']:4d} ppc={row['ppc']} "
+                f"error={row['error']:.3e} t={row['wall_s']:.3f}s x{row['repeats']} {row['status']}")
 
     def save(rows: list[dict]) -> None:
         pareto(rows)
@@ -224,7 +239,7 @@ def write_csv(rows: list[dict], path: Path) -> None:
         w.writerows(rows)
     failed = [r for r in rows if r.get("status", "ok") != "ok"]
     with open(Path(path).with_name("error_vs_time_failures.csv"), "w", newline="") as f:
-        w = csv.DictWriter(f, fieldnames=COLUMNS[:8] + ["status", "reason"], extrasaction="ignore")
+        w = csv.DictWriter(f, fieldnames=FAILURE_KEY + ["status", "reason"], extrasaction="ignore")
         w.writeheader()
         w.writerows(failed)
 
@@ -233,18 +248,48 @@ def read_csv(path: Path) -> list[dict]:
     """Rows of an ``error_vs_time.csv`` with their numbers typed, and the status and reason of
     failed runs from ``error_vs_time_failures.csv`` beside it (to write the report again)."""
     rows = []
-    for r, f in read_rows(path, "error_vs_time_failures.csv", COLUMNS[:8]):
+    for r, f in read_rows(path, "error_vs_time_failures.csv", FAILURE_KEY):
         r.update(status=f.get("status", "ok"), reason=f.get("reason", ""))
         r.update(error=float(r["error"]), wall_s=float(r["wall_s"]), cells=int(r["cells"]), ppc=int(r["ppc"]),
-                 repeats=int(r["repeats"]), threads=int(r["threads"]), pareto=r["pareto"] == "True")
+                 repeats=int(r["repeats"]), threads=int(r["threads"]), pareto=r["pareto"] == "True",
+                 transfer=r.get("transfer") or "flip")
         rows.append(r)
     return rows
 
 
 def _name(r: dict) -> str:
     integration = r.get("integration", "explicit") or "explicit"
+    transfer = r.get("transfer", "flip") or "flip"
     return (f"{r['mesh']} P{r['degree']} {r['mass']} {r['domain']} {r['scheme']} ppc={r['ppc']} n={r['cells']}"
-            + ("" if integration == "explicit" else f" {integration}"))
+            + ("" if integration == "explicit" else f" {integration}") + ("" if transfer == "flip" else f" {transfer}"))
+
+
+def _transfer_table(rs: list[dict]) -> list[str]:
+    """Where a problem ran several transfers: per transfer and mass (the explicit runs of the
+    transfer sweeps' scheme and particles per cell), the error at each size, the wall time, and
+    the error times the time (the lower, the cheaper a given error)."""
+    transfers = list(dict.fromkeys(r.get("transfer", "flip") or "flip" for r in rs))
+    if len(transfers) < 2:
+        return []
+    swept = [r for r in rs if (r.get("transfer") or "flip") != "flip"]
+    keys = {(r["scheme"], r["ppc"], r["mesh"], r["domain"], r["degree"]) for r in swept}
+    sizes = sorted({r["cells"] for r in swept})
+    lines = ["", "Per transfer and mass (the transfer sweep's " + ", ".join(
+        f"{m} {s} ppc={p}" for s, p, m, _, _ in sorted(keys)) + "; error (wall s) at each size; "
+             "the last column the error times the time of the finest run):", "",
+             "| transfer | mass | " + " | ".join(f"n={n}" for n in sizes) + " | error x s |",
+             "|---|---|" + "---|" * (len(sizes) + 1)]
+    for t in transfers:
+        for m in dict.fromkeys(r["mass"] for r in swept):
+            hit = {r["cells"]: r for r in rs if (r.get("transfer") or "flip") == t and r["mass"] == m
+                   and (r["scheme"], r["ppc"], r["mesh"], r["domain"], r["degree"]) in keys
+                   and (r.get("integration") or "explicit") == "explicit"}
+            if not hit:
+                continue
+            cells = [f"{hit[n]['error']:.3e} ({hit[n]['wall_s']:.3g})" if n in hit else "-" for n in sizes]
+            last = hit[max(hit)]
+            lines.append(f"| {t} | {m} | " + " | ".join(cells) + f" | {last['error'] * last['wall_s']:.3e} |")
+    return lines
 
 
 def write_report(rows: list[dict], out: Path, *, quick: bool = False, wall: float | None = None,
@@ -283,6 +328,7 @@ def write_report(rows: list[dict], out: Path, *, quick: bool = False, wall: floa
                     hit = [r for r in ok if r["mass"] == m and r["error"] <= e]
                     cells.append(f"{min(r['wall_s'] for r in hit):.3g}" if hit else "-")
                 lines.append(f"| {e:.1e} | " + " | ".join(cells) + " |")
+        lines += _transfer_table(rs)
         failed = [r for r in rs if r.get("status", "ok") != "ok"]
         if failed:
             lines += ["", f"{len(failed)} run(s) failed (reasons in error_vs_time_failures.csv)."]

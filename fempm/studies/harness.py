@@ -157,12 +157,13 @@ def sweep(cases: Iterable, run: Callable[..., dict], describe: Callable[[dict], 
 def read_rows(path: Path, failures: str, key: Sequence[str]) -> list[tuple[dict, dict]]:
     """The rows of a study's CSV as text, each with the row of the failures CSV ``failures``
     beside it that has the same ``key`` columns ({} for a run that did not fail, or without
-    that file): to merge studies run in parts and write their reports again."""
+    that file): to merge studies run in parts and write their reports again (a key column
+    missing from older files reads as empty)."""
     with open(path, newline="") as f:
         rows = list(csv.DictReader(f))
     failed = {}
     beside = Path(path).with_name(failures)
     if beside.exists():
         with open(beside, newline="") as f:
-            failed = {tuple(r[c] for c in key): r for r in csv.DictReader(f)}
-    return [(r, failed.get(tuple(r[c] for c in key), {})) for r in rows]
+            failed = {tuple(r.get(c) or "" for c in key): r for r in csv.DictReader(f)}
+    return [(r, failed.get(tuple(r.get(c) or "" for c in key), {})) for r in rows]

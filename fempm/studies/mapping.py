@@ -17,7 +17,9 @@ sub-cells (``create_particles(..., corners=True)``); the other domains use jitte
 with boxes of half-width :math:`\tfrac12 V_p^{1/d}` shrunk where they would reach past the
 unit square (they stay centred at the particle).
 
-For each case the table holds :math:`\|F - f\|_{L^2}`, the wall time of the projection (basis
+With point particles the study also maps a velocity field to the grid and back with each
+velocity transfer and mass (:mod:`fempm.studies.velocity_mapping`: ``mapping_velocity.csv``
+and its section of the summary). For each case the table holds :math:`\|F - f\|_{L^2}`, the wall time of the projection (basis
 tabulation, mass assembly, right-hand side and solve; maximum over ranks) and the KSP
 iterations. Fitted convergence rates :math:`\|F - f\| \sim h^r` (``numpy.polyfit``) of the
 smooth field are in the Markdown summary.
@@ -40,6 +42,7 @@ from mpi4py import MPI
 from fempm.io.plot import plot_error_vs_time
 from fempm.meshes.generators import unstructured_rectangle
 from fempm.particles.seeding import create_particles
+from fempm.studies import velocity_mapping
 from fempm.studies.harness import Provenance
 from fempm.transfer.basis import ParticleBasis
 from fempm.transfer.domains import half_widths, make_domain, step_domain
@@ -168,8 +171,9 @@ def run(
                 if comm.rank == 0:
                     log(f"{kind:17s} n={n:4d} ppc={ppc:2d} {domain:5s} {field:6s} P{degree} {mass:10s} "
                         f"L2={r['l2_error']:.3e}  t={r['time_s']:.4f}s  its={r['ksp_its']}")
+    velocity_rows = velocity_mapping.run(make_mesh, kinds, sizes, ppcs, comm, log) if "point" in domains else []
     if comm.rank == 0:
-        write(rows, out, provenance)
+        write(rows, out, provenance, velocity_rows)
     return rows
 
 
@@ -189,9 +193,10 @@ def convergence_rates(rows: list[dict]) -> list[dict]:
 COLUMNS = ["mesh", "n", "cells", "ppc", "domain", "particles", "field", "space", "mass", "l2_error", "time_s", "ksp_its", "dofs", "inactive"]
 
 
-def write(rows: list[dict], out: Path, provenance: Provenance | None = None) -> None:
-    """``mapping.csv``, ``mapping.md`` (the rows and the fitted rates), ``mapping.png`` and
-    ``provenance.json`` into ``out``."""
+def write(rows: list[dict], out: Path, provenance: Provenance | None = None, velocity_rows=()) -> None:
+    """``mapping.csv``, ``mapping.md`` (the rows and the fitted rates, and the velocity round
+    trips ``velocity_rows``: :mod:`fempm.studies.velocity_mapping`), ``mapping.png``,
+    ``mapping_velocity.csv`` and ``provenance.json`` into ``out``."""
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     provenance = provenance or Provenance.now(comm=MPI.COMM_SELF)
@@ -211,5 +216,6 @@ def write(rows: list[dict], out: Path, provenance: Provenance | None = None) -> 
                   "| mesh | space | mass | ppc | domain | rate |", "|---|---|---|---|---|---|"]
         lines += [f"| {r['mesh']} | {r['space']} | {r['mass']} | {r['ppc']} | {r['domain']} | {r['rate']:.2f} |"
                   for r in rates]
+    lines += velocity_mapping.write(list(velocity_rows), out)
     (out / "mapping.md").write_text("\n".join(lines) + "\n")
     plot_error_vs_time(rows, out / "mapping.png", title="fempm mapping study: error vs projection time")

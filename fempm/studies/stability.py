@@ -2,8 +2,9 @@ r"""The stability catalogue: ``python -m fempm study stability [--quick] [--out 
 
 Each case of :data:`fempm.studies.stability_cases.CASES` (a small scene that stresses one
 thing) runs with every option of :func:`options_for` (scheme, mass matrix, particle domain,
-mass cut-off, CFL number; one factor at a time from USL lumped point, plus MUSL crossed with
-consistent mass, FMPM(5) and CPDI1, F-bar, and Newmark's implicit step), with the default run-health limits (:class:`fempm.stepping.health.Health`:
+mass cut-off, CFL number, velocity transfer APIC, TPIC and XPIC(2) with USL and MUSL; one
+factor at a time from USL lumped point FLIP, plus MUSL crossed with consistent mass, FMPM(5)
+and CPDI1, F-bar, and Newmark's implicit step), with the default run-health limits (:class:`fempm.stepping.health.Health`:
 20 % energy growth beyond the work of the loads, :math:`10^{-2} \le J \le 10^2`, time-step
 floor). The outcome of a run is
 
@@ -41,7 +42,7 @@ from fempm.studies.stability_cases import CASES
 from fempm.transfer.mapping import SingularMassError
 
 __all__ = [
-    "BASE", "CFLS", "COLUMNS", "MUSL_VARIATIONS", "VARIATIONS", "label", "options_for", "read_csv", "run_one",
+    "BASE", "CFLS", "COLUMNS", "MUSL_VARIATIONS", "TRANSFERS", "VARIATIONS", "label", "options_for", "read_csv", "run_one",
     "run_study", "write_csv", "write_markdown", "write_report",
 ]
 
@@ -51,22 +52,27 @@ COLUMNS = ["case", "option", "outcome", "reason", "energy_ratio", "momentum_drif
 
 #: the transfer options every case runs with: one factor at a time from the default
 #: (USL, lumped, point particles, mass cut-off 1e-9, CFL 0.4)
-BASE = {"scheme": "USL", "mass": "lumped", "domain": "point", "mass_cutoff": 1e-9, "cfl": 0.4}
+BASE = {"scheme": "USL", "mass": "lumped", "domain": "point", "mass_cutoff": 1e-9, "cfl": 0.4, "transfer": "flip"}
+#: the velocity transfers beyond the FLIP blend of the scenes (:mod:`fempm.transfer.transfers`)
+TRANSFERS = ({"transfer": "apic"}, {"transfer": "tpic"}, {"transfer": "xpic", "xpic_order": 2})
 VARIATIONS = ({}, {"scheme": "MUSL"}, {"scheme": "USF"}, {"mass": "consistent"}, {"mass": "fmpm5"},
-              {"domain": "gimp"}, {"domain": "cpdi1"}, {"mass_cutoff": 1e-3})
+              {"domain": "gimp"}, {"domain": "cpdi1"}, {"mass_cutoff": 1e-3}, *TRANSFERS,
+              *({"scheme": "MUSL", **t} for t in TRANSFERS))
 CFLS = (0.1, 0.25, 0.5, 0.75, 0.9, 1.0)
 
 
 def label(opts: dict) -> str:
     """An option's name: scheme, mass, domain, cut-off and CFL, e.g. ``USL lumped point cut=1e-09 cfl=0.4``;
-    ``fbar`` appended with F-bar, and an implicit run named by its dynamics and Courant number
+    ``fbar`` appended with F-bar, the transfer where it is not the scene's FLIP blend (``apic``,
+    ``tpic``, ``xpic2``), and an implicit run named by its dynamics and Courant number
     (``implicit newmark lumped point courant=4``)."""
     o = {**BASE, **opts}
     if o.get("integrator") == "implicit":
         name = f"implicit {o.get('dynamics', 'newmark')} {o['mass']} {o['domain']} courant={o['courant']:g}"
     else:
         name = f"{o['scheme']} {o['mass']} {o['domain']} cut={o['mass_cutoff']:g} cfl={o['cfl']:g}"
-    return name + (" fbar" if o.get("volumetric") == "fbar" else "")
+    transfer = o["transfer"] + (str(o.get("xpic_order", 2)) if o["transfer"] == "xpic" else "")
+    return name + (" fbar" if o.get("volumetric") == "fbar" else "") + ("" if transfer == "flip" else f" {transfer}")
 
 
 #: the full catalogue also crosses MUSL with the other mass matrices and with CPDI1, and runs
@@ -82,9 +88,11 @@ MUSL_VARIATIONS = ({"scheme": "MUSL", "mass": "consistent"}, {"scheme": "MUSL", 
 def options_for(case: str, quick: bool = False) -> list[dict]:
     """The options a case runs with: :data:`VARIATIONS` (and, unless ``quick``,
     :data:`MUSL_VARIATIONS`), or for ``cfl`` every CFL number of :data:`CFLS` with USL and MUSL
-    lumped and USL (and, unless ``quick``, MUSL) consistent mass."""
+    lumped and USL (and, unless ``quick``, MUSL) consistent mass, and MUSL lumped with each
+    transfer of :data:`TRANSFERS`."""
     if case == "cfl":
         variants = [{}, {"scheme": "MUSL"}, {"mass": "consistent"}] + ([] if quick else [{"scheme": "MUSL", "mass": "consistent"}])
+        variants += [{"scheme": "MUSL", **t} for t in TRANSFERS]
         return [{"cfl": c, **v} for v in variants for c in CFLS]
     return [dict(v) for v in VARIATIONS + (() if quick else MUSL_VARIATIONS)]
 

@@ -27,18 +27,13 @@ import dolfinx.fem
 import numpy as np
 import numpy.typing as npt
 
+from fempm.kernels.affine import THICK, THIN
 from fempm.transfer.basis import ParticleBasis
 from fempm.transfer.mapping import sum_over_ranks
 
 __all__ = ["affine_momentum", "angular_momentum", "carried_matrix", "closed_form", "dof_coordinates", "grid_affine",
            "second_moments", "spin_of", "spin_width"]
 
-#: a D_p whose trace (or 3D spin operator's determinant, relative to tr D^3) is below this share
-#: of the largest carries no spin
-THIN = 1e-12
-#: APIC's G2P takes C_p = L_p where D_p's smallest eigenvalue is at most this share of its
-#: largest (a particle on a node or near a cell's edge, where D_p cannot be inverted)
-THICK = 1e-6
 
 
 def dof_coordinates(V: dolfinx.fem.FunctionSpace) -> npt.NDArray:
@@ -105,15 +100,16 @@ def rotation(omega: npt.NDArray, d: int) -> npt.NDArray:
     return W
 
 
-def carried_matrix(kind: int, C: npt.NDArray, spin: npt.NDArray | None, D: npt.NDArray) -> npt.NDArray:
+def carried_matrix(kind: int, C: npt.NDArray, spin: npt.NDArray | None, D: npt.NDArray,
+                   scale: npt.NDArray) -> npt.NDArray:
     r"""The matrix P2G maps (see the module): ``C`` for TPIC (``kind`` 2); for APIC (1) ``C``
-    plus the rotation that gives it the stored ``spin`` at the present second moments ``D``."""
+    plus the rotation that gives it the stored ``spin`` at the present second moments ``D``
+    (none where they are too thin against ``scale``, each particle's largest :math:`|r_{ip}|^2`)."""
     d = C.shape[1]
     if kind == 2 or d == 1:
         return C
     miss = spin - spin_of(C @ D)
     tr = np.trace(D, axis1=1, axis2=2)
-    scale = np.max(tr, initial=0.0)
     if d == 2:
         ok = tr > THIN * scale
         omega = np.where(ok, miss[:, 0] / np.where(ok, tr, 1.0), 0.0)[:, None]
@@ -132,7 +128,8 @@ def affine_momentum(kind: int, C: npt.NDArray, spin: npt.NDArray | None, basis: 
     matrices (:func:`carried_matrix`), summed over ranks, (owned + ghost dofs, d). Collective."""
     r = _offsets(basis, xi, x)
     if kind == 1:
-        C = carried_matrix(kind, C, spin, np.einsum("pa,paj,pak->pjk", basis.values, r, r))
+        C = carried_matrix(kind, C, spin, np.einsum("pa,paj,pak->pjk", basis.values, r, r),
+                           np.einsum("paj,paj->pa", r, r).max(axis=1, initial=0.0))
     vals = (mass[:, None] * basis.values)[:, :, None] * np.einsum("pjk,pak->paj", C, r)
     d = x.shape[1]
     n = basis.num_dofs_local
@@ -155,8 +152,8 @@ def grid_affine(kind: int, basis: ParticleBasis, v: npt.NDArray, xi: npt.NDArray
     C = np.array(L, copy=True)
     if basis.nonnegative and not closed_form(basis):  # C = L + (B - L D) D^-1 (L for an affine field)
         D = np.einsum("pa,paj,pak->pjk", basis.values, r, r)
-        lam = np.linalg.eigvalsh(D)
-        ok = lam[:, 0] > THICK * lam[:, -1]  # else D too thin to invert: L
+        d = D.shape[1]
+        ok = np.linalg.det(D) > THICK * (np.trace(D, axis1=1, axis2=2) / d) ** d  # else D too thin to invert: L
         D[~ok] = np.eye(D.shape[1])
         R = np.swapaxes(np.linalg.solve(D, np.swapaxes(B - L @ D, 1, 2)), 1, 2)
         C[ok] += R[ok]
