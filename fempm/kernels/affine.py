@@ -32,6 +32,7 @@ THIN = 1e-12
 THICK = 1e-6
 
 if AVAILABLE:
+    import numpy as np
     from numba import njit
 
     @njit(inline="always")
@@ -134,9 +135,49 @@ if AVAILABLE:
         Cu[2, 1] += om[0]
 
     @njit(inline="always")
-    def g2p_affine(N, cell_dofs, c, o, v_new, xi, x, p, Lp, D, NK, KIND, CLOSED, out, spin, work):  # pragma: no cover
-        r"""What G2P stores of ``v_new`` (columns from ``o``) at particle p into ``out[p]`` (and
-        APIC's spin into ``spin[p]``), given its velocity gradient ``Lp``."""
+    def affine_work(D):  # pragma: no cover - compiled
+        """Scratch arrays of a pass: :math:`D_p`, :func:`g2p_affine`'s and :func:`carried`'s."""
+        return (np.empty((D, D)), (np.empty((D, D)), np.empty((D, D)), np.empty((D, D)), np.empty((D, D)), np.empty(3)),
+                (np.empty((D, D)), np.empty((D, D)), np.empty((3, 3)), np.empty((3, 3)), np.empty(3), np.empty(3)))
+
+    @njit(inline="always")
+    def carried_at(at, state, p, sizes, Dm, work):  # pragma: no cover - compiled
+        """:func:`carried` of particle p at its present :math:`D_p` (``at`` = (N, cell_dofs, c),
+        ``state`` = (C, spin, xi, x), ``sizes`` = (D, NK, KIND)) into ``work[0]``."""
+        N, cell_dofs, c = at
+        C, spin, xi, x = state
+        D, NK, KIND = sizes
+        tr, top = second_moment(N, cell_dofs, c, xi, x, p, D, NK, Dm) if KIND == APIC else (0.0, 0.0)
+        carried(C, spin, p, Dm, tr, top, D, KIND, work)
+
+    @njit(inline="always")
+    def add_momentum(at, mom, particle, sizes, affine):  # pragma: no cover - compiled
+        r"""``mom[i, o + j]`` += :math:`N_a M_p (v_p + C (x_a - x_p))_j` over the particle's dofs
+        (``at`` = (N, cell_dofs, c, o), ``particle`` = (v, p, M_p), ``sizes`` = (D, NK),
+        ``affine`` = (C, xi, x, with it or not))."""
+        N, cell_dofs, c, o = at
+        v, p, m = particle
+        D, NK = sizes
+        Cu, xi, x, with_affine = affine
+        for a in range(NK):
+            i = cell_dofs[c, a]
+            for j in range(D):
+                t = v[p, j]
+                if with_affine:
+                    for k in range(D):
+                        t += Cu[j, k] * (xi[i, k] - x[p, k])
+                mom[i, o + j] += N[a] * (m * t)
+
+    @njit(inline="always")
+    def g2p_affine(at, fields, p, Lp, sizes, outputs, work):  # pragma: no cover - compiled
+        r"""What G2P stores of ``v_new`` at particle p (``at`` = (N, cell_dofs, c, o): its basis,
+        its cell and the nodal columns from ``o``; ``fields`` = (v_new, xi, x); ``sizes`` = (D, NK,
+        KIND, CLOSED)) into ``out[p]`` and APIC's spin into ``spin[p]`` (``outputs`` = (out,
+        spin)), given its velocity gradient ``Lp``."""
+        N, cell_dofs, c, o = at
+        v_new, xi, x = fields
+        D, NK, KIND, CLOSED = sizes
+        out, spin = outputs
         B, Dm, R, Di, s = work
         for j in range(D):
             for k in range(D):

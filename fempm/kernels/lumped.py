@@ -9,7 +9,8 @@ fly (:func:`fempm.kernels.shape.shape`), never stored.
     m_i = \sum_p M_p N_{ip}, \qquad (m v)_i = \sum_p M_p v_p N_{ip}, \qquad
     f_i = \sum_p \big(N_{ip} (M_p g + f^{ext}_p) - V_p \sigma_p \nabla N_{ip}\big).
 
-:func:`grid_velocity` and :func:`grid_advance` (the grid update, on owned and ghost dofs):
+:func:`fempm.kernels.grid_update.grid_velocity` and :func:`~fempm.kernels.grid_update.grid_advance`
+(the grid update, on owned and ghost dofs):
 :math:`v_i = (m v)_i / m_i` on free dofs with :math:`m_i > \epsilon_a`, 0 elsewhere;
 :math:`a_i = f_i / m_i - c\, v_i` (0 on constrained dofs and where :math:`m_i \le \epsilon_w`),
 :math:`v_i^+ = v_i + \Delta t\, a_i`.
@@ -70,54 +71,9 @@ NO_STABLE = Stable(np.zeros(0), np.zeros(0))
 if AVAILABLE:
     from numba import njit
 
-    from fempm.kernels.affine import carried, g2p_affine, second_moment
+    from fempm.kernels.affine import add_momentum, affine_work, carried_at, g2p_affine
     from fempm.kernels.kinematics import _det, add_totals, linear_elastic_at, neo_hookean_at
     from fempm.kernels.shape import inside_after_pull_back, shape, star_search
-
-    @njit(cache=True, error_model="numpy")
-    def grid_velocity(mass, mom, cv, free, active_min, v):  # pragma: no cover
-        """``v`` (ndofs, d) = momentum ``mom[:, cv:cv+d]`` / ``mass[:, 0]`` on free dofs with
-        mass above ``active_min``, else 0."""
-        nd, d = v.shape
-        for i in range(nd):
-            m = mass[i, 0]
-            for j in range(d):
-                v[i, j] = mom[i, cv + j] / m if (m > active_min and free[i, j]) else 0.0
-
-    @njit(cache=True, error_model="numpy")
-    def grid_advance(mass, force, free, active_min, weak_max, dt, damping, v_old, v_new):  # pragma: no cover
-        """``v_new = v_old + dt a`` with ``a = force / mass - damping v_old`` (0 on constrained or
-        inactive dofs and where the mass is at most ``weak_max``)."""
-        nd, d = v_old.shape
-        for i in range(nd):
-            m = mass[i, 0]
-            for j in range(d):
-                a = force[i, j] / m if (m > active_min and free[i, j]) else 0.0
-                a -= damping * v_old[i, j]
-                if m <= weak_max:
-                    a = 0.0
-                v_new[i, j] = v_old[i, j] + dt * a
-
-    @njit(cache=True, error_model="numpy")
-    def grid_update(nodal, cv, cf, free, active_min, weak_max, dt, damping, v_old, v_new):  # pragma: no cover
-        """:func:`grid_velocity` then :func:`grid_advance` in one pass over the dofs, from one
-        nodal array with the mass in column 0, the momenta from column ``cv``, the forces from
-        ``cf`` (one division per dof: the momenta and forces are multiplied by :math:`1/m_i`)."""
-        nd, d = v_old.shape
-        for i in range(nd):
-            m = nodal[i, 0]
-            active = m > active_min
-            inv = 1.0 / m if active else 0.0
-            weak = m <= weak_max
-            for j in range(d):
-                on = active and free[i, j]
-                vo = nodal[i, cv + j] * inv if on else 0.0
-                a = nodal[i, cf + j] * inv if on else 0.0
-                a -= damping * vo
-                if weak:
-                    a = 0.0
-                v_old[i, j] = vo
-                v_new[i, j] = vo + dt * a
 
     @njit(inline="always")
     def gather(N, G, cell_dofs, c, o, v_new, v_old, blend, kinematics, D, NK, sums):  # pragma: no cover
@@ -181,7 +137,7 @@ def kernels_for(cell: str) -> SimpleNamespace:
         g2p_kernel = functools.partial(_solid, solid.g2p_kernel, cell == "hexahedron")
 
     def scatter(where: Basis, state: State, laws: Laws, forces: Forces, out, cm: int, cv: int, cf: int,
-                stable: Stable = NO_STABLE, bound: bool = False, groups: Groups = NO_GROUPS, cg: int = -1,
+                stable: Stable = NO_STABLE, *, bound: bool = False, groups: Groups = NO_GROUPS, cg: int = -1,
                 affine: Affine = NO_AFFINE, kind: int = 0) -> float:
         """See :func:`_scatter_kernel` (the bundles: :mod:`fempm.kernels.bundles`); the columns
         (negative: skipped) choose the compiled variant; with cell sizes ``stable.h`` the stable
@@ -269,8 +225,7 @@ def _scatter_kernel(cell: str, with_mass: bool, with_momentum: bool, with_force:
         mv = np.empty(D)
         fe = np.empty(D)
         sg = np.empty((D, D))
-        Dm = np.empty((D, D))
-        work = (np.empty((D, D)), np.empty((D, D)), np.empty((3, 3)), np.empty((3, 3)), np.empty(3), np.empty(3))
+        Dm, _, work = affine_work(D)
         Cu = work[0]
         if KIND:
             C, spin, xi = affine
@@ -291,8 +246,7 @@ def _scatter_kernel(cell: str, with_mass: bool, with_momentum: bool, with_force:
                     for e in range(D):
                         sg[j, e] = sigma[p, j, e]
             if KIND:
-                tr, top = second_moment(N, cell_dofs, cp, xi, x, p, D, NK, Dm) if KIND == 1 else (0.0, 0.0)
-                carried(C, spin, p, Dm, tr, top, D, KIND, work)
+                carried_at((N, cell_dofs, cp), (C, spin, xi, x), p, (D, NK, KIND), Dm, work)
             if with_dt:
                 best = stable_time(best, bound, m, V, speed, modulus[body[p]], c, p, h[cp])
             o = group[p] * stride if grouped else 0
@@ -363,16 +317,11 @@ def _g2p_kernel(cell: str, blend: bool, kinematics: bool, move: bool, remap: boo
         Lp = np.empty((D, D))
         Fn = np.empty((D, D))
         keep_L = L.shape[0] == n
-        nonfinite_j = 0
-        inverted = 0
-        jmin = np.inf
-        jmax = -np.inf
-        nonfinite = 0
+        nonfinite_j, inverted, nonfinite = 0, 0, 0
+        jmin, jmax = np.inf, -np.inf
         dv = np.empty(D)
         acc = np.zeros(3 + D)  # the state's sums (totals)
-        Dm = np.empty((D, D))
-        gwork = (np.empty((D, D)), np.empty((D, D)), np.empty((D, D)), np.empty((D, D)), np.empty(3))
-        cwork = (np.empty((D, D)), np.empty((D, D)), np.empty((3, 3)), np.empty((3, 3)), np.empty(3), np.empty(3))
+        Dm, gwork, cwork = affine_work(D)
         Cu = cwork[0]
         if KIND:
             C, spin, xi = affine
@@ -387,25 +336,15 @@ def _g2p_kernel(cell: str, blend: bool, kinematics: bool, move: bool, remap: boo
                 for j in range(D):
                     v[p, j] = flip * (v[p, j] + dv[j]) + (1.0 - flip) * vg[j]
             if KIND:
-                g2p_affine(N, cell_dofs, c, o, v_new, xi, x, p, Lp, D, NK, KIND, CLOSED, C, spin, gwork)
+                g2p_affine((N, cell_dofs, c, o), (v_new, xi, x), p, Lp, (D, NK, KIND, CLOSED), (C, spin), gwork)
             if remap:  # MUSL: the blended momenta back to the grid, in the same pass
                 if remap_affine:
-                    tr, top = second_moment(N, cell_dofs, c, xi, x, p, D, NK, Dm) if KIND == 1 else (0.0, 0.0)
-                    carried(C, spin, p, Dm, tr, top, D, KIND, cwork)
-                for a in range(NK):
-                    i = cell_dofs[c, a]
-                    for j in range(D):
-                        t = v[p, j]
-                        if remap_affine:
-                            for k in range(D):
-                                t += Cu[j, k] * (xi[i, k] - x[p, k])
-                        mom[i, o + j] += N[a] * (mass[p] * t)
+                    carried_at((N, cell_dofs, c), (C, spin, xi, x), p, (D, NK, KIND), Dm, cwork)
+                add_momentum((N, cell_dofs, c, o), mom, (v, p, mass[p]), (D, NK), (Cu, xi, x, remap_affine))
             if kinematics:
                 J = deform_at(F, p, dt, Lp, D, Fn)
                 if keep_L:
-                    for i in range(D):
-                        for j in range(D):
-                            L[p, i, j] = Lp[i, j]
+                    L[p, :, :] = Lp
                 volume[p] = J * volume0[p]
                 ok, nonfinite_j, inverted, jmin, jmax = count_j(J, nonfinite_j, inverted, jmin, jmax)
                 if ok:

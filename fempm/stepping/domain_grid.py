@@ -309,7 +309,7 @@ class DomainGrid(PointGrid):
         """The averaged basis of the step: the samples (``stencil``) and the space's cells."""
         return Samples(*self.stencil, self.K, self.cell_dofs)
 
-    def scatter_pass(self, state: State, forces: Forces, out, cm: int, cv: int, cf: int, stable: Stable,
+    def scatter_pass(self, state: State, forces: Forces, out, cm: int, cv: int, cf: int, stable: Stable, *,
                      bound: bool = False, groups: Groups = NO_GROUPS, cg: int = -1, affine=None, kind: int = 0) -> float:
         p = self.state.particles  # (no affine transfer: see transfers)
         return self.passes.scatter(Basis(p.cells, p.X, self.K, self.cell_dofs), self.samples(), state, self.laws,

@@ -6,7 +6,7 @@ from __future__ import annotations
 import numpy as np
 import numpy.typing as npt
 
-from fempm.kernels import lumped as kl
+from fempm.kernels.grid_update import grid_advance, grid_velocity
 from fempm.stepping.consistent import ConsistentNodalMass
 from fempm.stepping.fmpm_mass import FMPMNodalMass
 from fempm.stepping.nodal import NodalMass
@@ -36,7 +36,7 @@ class LumpedNodalMass(NodalMass):
         v = np.empty((g.num_dofs, g.d))
         if start is not None:
             mom, cv = mom[:, cv:cv + g.d] + start, 0
-        kl.grid_velocity(mass, mom, cv, g.free, active_min, v)
+        grid_velocity(mass, mom, cv, g.free, active_min, v)
         g.conditions.apply(v, centroids)
         return v
 
@@ -45,7 +45,7 @@ class LumpedNodalMass(NodalMass):
         r""":math:`v^+ = v + \Delta t\, a` from the nodal forces ``force[:, cf:cf+d]``, constrained."""
         g = self.layout
         v_new = np.empty((g.num_dofs, g.d))
-        kl.grid_advance(mass, force[:, cf:cf + g.d], g.free, active_min, weak_max, float(dt),
+        grid_advance(mass, force[:, cf:cf + g.d], g.free, active_min, weak_max, float(dt),
                         float(g.options.damping), v_old, v_new)
         g.conditions.apply(v_new, centroids, dt)
         return v_new
