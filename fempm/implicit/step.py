@@ -49,9 +49,11 @@ from fempm.implicit.operator import IncrementOperator
 from fempm.stepping.particle_stages import ParticleStages
 from fempm.stepping.state import StepState
 from fempm.stepping.loads import external_forces
+from fempm.transfer import affine, g2p
 from fempm.transfer.basis import is_nonnegative
 from fempm.transfer.grid_solves import negative_basis_message
 from fempm.transfer.mapping import SUPPORT_TOL
+from fempm.transfer.transfers import AFFINE_FIELD, SPIN_FIELD
 
 
 #: the residual's round-off floor in machine epsilons of |J|_inf max(|du|_inf, |u|_inf) sqrt(N)
@@ -313,11 +315,18 @@ class ImplicitStep:
         r"""The grid velocity and acceleration of the particles' (owned + ghost dofs, 2d): the
         projection of the momenta :math:`\sum_p M_p N_a [v_p, a_p]` with the step's mass, the
         lumped :math:`m_a` or the consistent matrix (a basis with negative values, P2
-        Lagrange, needs the matrix: its lumped masses vanish at the vertices). Collective."""
-        p = self.state.particles
+        Lagrange, needs the matrix: its lumped masses vanish at the vertices); with APIC and the
+        lumped mass the velocity's momenta with their affine part
+        (:mod:`fempm.transfer.transfers`). Collective."""
+        s = self.state
+        p = s.particles
         f = p.fields
         mv = op.nodal(p.mass[:, None] * np.hstack([f["v"], f["a"]]))
         if not self.consistent:
+            carried = s.affine()  # APIC: the velocity's affine part (the exact projection leaves it out)
+            if carried is not None:
+                mv[:, :p.gdim] += affine.affine_momentum(self.options.velocity_transfer.kind, *carried, basis,
+                                                         s.dof_coordinates(), p.x, p.mass)[: len(mv)]
             return mv / np.where(m > 0, m, 1.0)[:, None]
         solve = self.options.mass_model.grid_solve(basis, p.mass, p, "mass", False)
         solve.set_up(free.any(axis=1), None, [], lambda: m, "fempm_implicit_mass_", None)
@@ -345,8 +354,15 @@ class ImplicitStep:
         if integ.inertia:
             a_new = integ.acceleration(du, v, a, dt)
             v_new = integ.velocity(v, a, a_new, dt)
-            flip = self.options.velocity_transfer.blend
+            transfer = self.options.velocity_transfer
+            flip = transfer.blend
             f["v"] = flip * (f["v"] + basis.gather(v_new - v)) + (1.0 - flip) * basis.gather(v_new)
+            if transfer.affine:  # APIC: the affine state of the updated grid velocity
+                C, spin = affine.grid_affine(transfer.kind, basis, v_new, s.dof_coordinates(), p.x,
+                                             g2p.velocity_gradient(basis, v_new))
+                f[AFFINE_FIELD] = C
+                if spin is not None and spin.shape[1]:
+                    f[SPIN_FIELD] = spin
             f["a"] = basis.gather(a_new)
             s.grid_velocity = v_new[: basis.num_dofs_space]
         else:

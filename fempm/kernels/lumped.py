@@ -229,6 +229,8 @@ def _scatter_kernel(cell: str, with_mass: bool, with_momentum: bool, with_force:
         Cu = work[0]
         if KIND:
             C, spin, xi = affine
+        else:  # (typed, unused)
+            C, spin, xi = np.empty((0, D, D)), np.empty((0, 1)), np.empty((0, D))
         best = 0.0 if bound else np.inf
         for p in range(len(cells)):
             cp = cells[p]
@@ -299,7 +301,8 @@ def _g2p_kernel(cell: str, blend: bool, kinematics: bool, move: bool, remap: boo
     KIND = kind
     AFFINE = is_affine(cell)
     DEGREE, BERNSTEIN = space_of(cell)
-    CLOSED = DEGREE == 1 and AFFINE  # C_p = L_p (fempm.transfer.affine.closed_form)
+    # C_p = L_p: equal on degree-1 affine cells (fempm.transfer.affine.closed_form); P2 Lagrange's D_p is no moment
+    CLOSED = (DEGREE == 1 and AFFINE) or (DEGREE == 2 and not BERNSTEIN)
 
     @njit(cache=True, error_model="numpy")
     def g2p_update(where, grid, state, laws, moves, outputs, groups, affine=None):  # pragma: no cover
@@ -325,6 +328,8 @@ def _g2p_kernel(cell: str, blend: bool, kinematics: bool, move: bool, remap: boo
         Cu = cwork[0]
         if KIND:
             C, spin, xi = affine
+        else:  # (typed, unused)
+            C, spin, xi = np.empty((0, D, D)), np.empty((0, 1)), np.empty((0, D))
         for p in range(n):
             c = cells[p]
             shape(X, p, K, c, SIMPLEX, AFFINE, D, NK, N, G, DEGREE, BERNSTEIN)

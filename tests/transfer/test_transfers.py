@@ -28,7 +28,8 @@ CELLS = ("triangle", "quadrilateral", "tetrahedron", "hexahedron")
 
 
 def _affine_step(mesh_name: str, transfer: str, mass: str, *, degree: int = 1, variant: str | None = None,
-                 domain: str = "point", compiled: bool | None = False, scheme: str = "USL"):
+                 domain: str = "point", compiled: bool | None = False, scheme: str = "USL",
+                 integrator: str = "explicit"):
     """One step of a stress-free body whose particles carry v = a + C x (and C): the largest
     error of the particles' velocities against the field at their old positions, and of their
     affine matrices against C."""
@@ -45,7 +46,8 @@ def _affine_step(mesh_name: str, transfer: str, mass: str, *, degree: int = 1, v
     rng = np.random.default_rng(3)
     a, C = rng.normal(size=d), rng.normal(size=(d, d))
     p.fields["v"] = a + p.x @ C.T
-    opts = StepOptions(transfer=transfer, mass=mass, scheme=scheme, domain=domain, lump_below=0.0, mass_cutoff=0.0)
+    opts = StepOptions(transfer=transfer, mass=mass, scheme=scheme, domain=domain, lump_below=0.0, mass_cutoff=0.0,
+                       integrator=integrator)
     solver = fempm.Solver(V, p, [LinearElastic(1.0, 0.3)], options=opts, compiled=compiled)
     solver.set_velocity_gradient(C)
     x0 = p.x.copy()
@@ -56,11 +58,12 @@ def _affine_step(mesh_name: str, transfer: str, mass: str, *, degree: int = 1, v
     return err_v, err_C
 
 
+@pytest.mark.parametrize("compiled", [False, None], ids=["numpy", "compiled"])
 @pytest.mark.parametrize("mass", ["lumped", "consistent", "fmpm2"])
 @pytest.mark.parametrize("transfer", ["apic", "tpic"])
 @pytest.mark.parametrize("cell", CELLS)
-def test_an_affine_field_survives_p2g_then_g2p(cell, transfer, mass):
-    err_v, err_C = _affine_step(cell, transfer, mass)
+def test_an_affine_field_survives_p2g_then_g2p(cell, transfer, mass, compiled):
+    err_v, err_C = _affine_step(cell, transfer, mass, compiled=compiled)
     assert err_v < 1e-11 and err_C < 1e-10, (err_v, err_C)
 
 
@@ -75,8 +78,37 @@ def test_an_affine_field_survives_p2g_then_g2p(cell, transfer, mass):
 ])
 def test_an_affine_field_survives_on_degree_2_distorted_cells_and_particle_domains(case):
     cell, transfer, mass, degree, variant, domain = case
-    err_v, err_C = _affine_step(cell, transfer, mass, degree=degree, variant=variant, domain=domain)
-    assert err_v < 1e-11 and err_C < 1e-9, (err_v, err_C)
+    for compiled in (False, None):  # (domains take the numpy step with APIC and TPIC)
+        err_v, err_C = _affine_step(cell, transfer, mass, degree=degree, variant=variant, domain=domain,
+                                    compiled=compiled)
+        assert err_v < 1e-11 and err_C < 1e-9, (compiled, err_v, err_C)
+
+
+@pytest.mark.parametrize("mass", ["lumped", "consistent"])
+def test_the_implicit_step_maps_an_affine_field_with_apic(mass):
+    err_v, err_C = _affine_step("triangle", "apic", mass, integrator="implicit")
+    assert err_v < 1e-9 and err_C < 1e-8, (err_v, err_C)
+
+
+def test_xpic_1_and_2_map_like_the_numpy_step_in_1d_and_on_domains():
+    """The compiled XPIC passes (interval: the generic kernels; CPDI1: the domain grid) against
+    the numpy step."""
+    for mesh_name, domain in (("interval", "point"), ("quadrilateral", "cpdi1")):
+        runs = [_xpic_steps(mesh_name, domain, compiled) for compiled in (False, None)]
+        assert np.allclose(*runs, rtol=0, atol=1e-12)
+
+
+def _xpic_steps(mesh_name: str, domain: str, compiled):
+    mesh = make_mesh(mesh_name)
+    d = mesh.geometry.dim
+    V = dolfinx.fem.functionspace(mesh, ("Lagrange", 1, (d,)))
+    p = create_particles(mesh, 2 ** d, density=1.0, where=lambda x: np.all((x[:d] > 0.2) & (x[:d] < 0.8), axis=0))
+    p.fields["v"] = np.sin(3.0 * p.x)
+    opts = StepOptions(transfer="xpic", xpic_order=2, scheme="MUSL", domain=domain)
+    solver = fempm.Solver(V, p, [LinearElastic(10.0, 0.3)], options=opts, compiled=compiled)
+    for _ in range(3):
+        solver.step(1e-3)
+    return p.comm.allgather(p.fields["v"][np.argsort(p.ids)])[0]
 
 
 def test_pic_and_flip_lose_the_affine_part_that_apic_keeps():
