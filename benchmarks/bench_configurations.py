@@ -24,6 +24,9 @@ cpdi2         CPDI2 domains (the seeding sub-cells' corners)        the base ste
 cpdi1-fmpm2   CPDI1 domains, FMPM(2)                                the base step
 ugimp         exact uGIMP                                           the base step
 cpgimp        exact cpGIMP                                          the base step
+apic          APIC (fempm.transfer.transfers)                       the base step (FLIP)
+tpic          TPIC                                                  the base step (FLIP)
+xpic2         XPIC(2)                                               the base step (FLIP)
 bernstein2    Bernstein P2, lumped                                  the base step
 distorted     quadrilaterals that are not parallelograms (``quad``)  the base step (parallelograms)
 point3d       the base step in 3D (``tet``, ``hex``)                the base step on triangles
@@ -80,6 +83,9 @@ CASES = {
     "cpdi1-fmpm2": Case({"domain": "cpdi1", "mass": "fmpm", "fmpm_order": 2}),
     "ugimp": Case({"domain": "ugimp"}),
     "cpgimp": Case({"domain": "cpgimp"}),
+    "apic": Case({"transfer": "apic"}),
+    "tpic": Case({"transfer": "tpic"}),
+    "xpic2": Case({"transfer": "xpic", "xpic_order": 2}),
     "bernstein2": Case(degree=2, variant="bernstein", meshes=("tri", "tet")),  # basix: simplices only
     "distorted": Case(meshes=("quad",), kind="distorted"),
     "point3d": Case(meshes=("tet", "hex"), kind="point3d"),

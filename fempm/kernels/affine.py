@@ -9,7 +9,7 @@ With the particle's basis :math:`N_a`, its dofs' coordinates :math:`x_a` and off
   carries the stored spin at the present :math:`D_p`;
 * :func:`g2p_affine`: what G2P stores, APIC's :math:`C_p = L_p + (B_p - L_p D_p) D_p^{-1}`
   (:math:`L_p` on degree-1 affine cells and where :math:`D_p` is too thin) and its spin
-  :math:`\epsilon : B_p^T`, TPIC's :math:`L_p`.
+  :math:`\epsilon : B_p^T`, TPIC's :math:`L_p`, of the updated grid velocity.
 
 Codes of the affine transfers (:attr:`fempm.transfer.transfers.Transfer.kind`): :data:`APIC` 1,
 :data:`TPIC` 2.
@@ -170,19 +170,21 @@ if AVAILABLE:
 
     @njit(inline="always")
     def g2p_affine(at, fields, p, Lp, sizes, outputs, work):  # pragma: no cover - compiled
-        r"""What G2P stores of ``v_new`` at particle p (``at`` = (N, cell_dofs, c, o): its basis,
-        its cell and the nodal columns from ``o``; ``fields`` = (v_new, xi, x); ``sizes`` = (D, NK,
-        KIND, CLOSED)) into ``out[p]`` and APIC's spin into ``spin[p]`` (``outputs`` = (out,
-        spin)), given its velocity gradient ``Lp``."""
+        r"""What G2P stores of the grid velocity ``v`` at particle p (``at`` = (N, cell_dofs, c,
+        o): its basis, its cell and the nodal columns from ``o``; ``fields`` = (v, xi, x);
+        ``sizes`` = (D, NK, KIND, CLOSED, PARTS)), given its velocity gradient ``Lp``: with
+        ``PARTS`` & 1 the matrix into ``out[p]``, with ``PARTS`` & 2 APIC's spin into ``spin[p]``
+        (``outputs`` = (out, spin))."""
         N, cell_dofs, c, o = at
-        v_new, xi, x = fields
-        D, NK, KIND, CLOSED = sizes
+        v, xi, x = fields
+        D, NK, KIND, CLOSED, PARTS = sizes
         out, spin = outputs
         B, Dm, R, Di, s = work
-        for j in range(D):
-            for k in range(D):
-                out[p, j, k] = Lp[j, k]
-        if KIND != APIC:
+        if PARTS & 1:
+            for j in range(D):
+                for k in range(D):
+                    out[p, j, k] = Lp[j, k]
+        if KIND != APIC or (CLOSED and not PARTS & 2):
             return
         for j in range(D):
             for k in range(D):
@@ -191,13 +193,14 @@ if AVAILABLE:
             i = cell_dofs[c, a]
             w = N[a]
             for j in range(D):
-                vj = w * v_new[i, o + j]
+                vj = w * v[i, o + j]
                 for k in range(D):
                     B[j, k] += vj * (xi[i, k] - x[p, k])
-        spin_of(B, D, s)
-        for j in range(spin.shape[1]):
-            spin[p, j] = s[j]
-        if CLOSED:
+        if PARTS & 2:
+            spin_of(B, D, s)
+            for j in range(spin.shape[1]):
+                spin[p, j] = s[j]
+        if CLOSED or not PARTS & 1:
             return
         tr = second_moment(N, cell_dofs, c, xi, x, p, D, NK, Dm)[0]
         if not det(Dm, D) > THICK * (tr / D) ** D:

@@ -293,16 +293,17 @@ def _g2p_kernel(cell: str, blend: bool, kinematics: bool, move: bool, remap: boo
     the state the pass leaves, :math:`[\sum_p \tfrac12 M_p |v_p|^2,\ \sum_p V^0_p W(F_p),\ \sum_p
     M_p |v_p|,\ \sum_p M_p v_p]` (W of the compiled laws; 0 for the others). Returns (#non-finite J,
     #J <= 0, min J, max J, #non-finite x or v). ``grouped``: particle p reads (and re-maps into) the columns ``group[p] d`` to
-    ``(group[p] + 1) d`` of the nodal arrays. ``kind`` (1 APIC, 2 TPIC; a blend pass, PIC's
-    velocity): the particles' affine matrices (and APIC's spins) of ``v_new`` into the
-    ``affine`` bundle (:func:`fempm.kernels.affine.g2p_affine`); ``remap_affine``: the re-map
-    maps them too (the lumped mass)."""
+    ``(group[p] + 1) d`` of the nodal arrays. ``kind`` (1 APIC, 2 TPIC; a blend pass): the
+    particles' affine matrices (and APIC's spins) of ``v_new`` into the ``affine`` bundle
+    (:func:`fempm.kernels.affine.g2p_affine`); ``remap_affine``: the re-map maps them too (the
+    lumped mass)."""
     D, NK, SIMPLEX = CELLS[cell]
     KIND = kind
     AFFINE = is_affine(cell)
     DEGREE, BERNSTEIN = space_of(cell)
     # C_p = L_p: equal on degree-1 affine cells (fempm.transfer.affine.closed_form); P2 Lagrange's D_p is no moment
     CLOSED = (DEGREE == 1 and AFFINE) or (DEGREE == 2 and not BERNSTEIN)
+    PARTS = 3 if blend else 0  # the matrix and the spin, of the updated grid velocity
 
     @njit(cache=True, error_model="numpy")
     def g2p_update(where, grid, state, laws, moves, outputs, groups, affine=None):  # pragma: no cover
@@ -340,8 +341,8 @@ def _g2p_kernel(cell: str, blend: bool, kinematics: bool, move: bool, remap: boo
             if blend and not still:
                 for j in range(D):
                     v[p, j] = flip * (v[p, j] + dv[j]) + (1.0 - flip) * vg[j]
-            if KIND:
-                g2p_affine((N, cell_dofs, c, o), (v_new, xi, x), p, Lp, (D, NK, KIND, CLOSED), (C, spin), gwork)
+            if KIND and PARTS:
+                g2p_affine((N, cell_dofs, c, o), (v_new, xi, x), p, Lp, (D, NK, KIND, CLOSED, PARTS), (C, spin), gwork)
             if remap:  # MUSL: the blended momenta back to the grid, in the same pass
                 if remap_affine:
                     carried_at((N, cell_dofs, c), (C, spin, xi, x), p, (D, NK, KIND), Dm, cwork)

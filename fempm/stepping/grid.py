@@ -347,13 +347,13 @@ class SingleFieldGrid(BasisGrid):
         if blend:
             self.record_reaction(v_new, v_old, dt)
             fld["v"], at_grid, L = g2p.blend(basis, v_new, v_old, fld["v"], transfer.blend)
-            if transfer.affine:
-                C, spin = affine.grid_affine(transfer.kind, basis, v_new, s.dof_coordinates(), p.x, L)
-                fld[AFFINE_FIELD] = C
-                if spin is not None and spin.shape[1]:
-                    fld[SPIN_FIELD] = spin
         elif kinematics or move:
             at_grid, L = g2p.velocity_and_gradient(basis, v_new)
+        if transfer.affine and blend:  # the affine state of the updated grid velocity
+            C, spin = affine.grid_affine(transfer.kind, basis, v_new, s.dof_coordinates(), p.x, L)
+            fld[AFFINE_FIELD] = C
+            if spin is not None and spin.shape[1]:
+                fld[SPIN_FIELD] = spin
         if kinematics:
             self.update_kinematics(L, dt)
         if move:

@@ -9,18 +9,27 @@ after the grid update, the transfers are:
   P2G :math:`p_i = \sum_p M_p S_{ip} v_p`; G2P
   :math:`v_p^+ = \alpha (v_p + \sum_i S_{ip}(v_i^+ - v_i)) + (1 - \alpha) \sum_i S_{ip} v_i^+`.
 * :class:`APIC` (Jiang et al. 2015): each particle carries an affine velocity
-  :math:`v_p + C_p (x - x_p)` with :math:`C_p = B_p D_p^{-1}`. G2P:
-  :math:`v_p^+ = \sum_i S_{ip} v_i^+`, :math:`B_p = \sum_i S_{ip} v_i^+ (x_i - x_p)^T`;
-  P2G: :math:`p_i = \sum_p M_p S_{ip} (v_p + B_p D_p^{-1} (x_i - x_p))` with the inertia-like
-  :math:`D_p = \sum_i S_{ip} (x_i - x_p)(x_i - x_p)^T` of any finite element basis, evaluated at
-  the P2G positions. For degree-1 point particles on affine cells :math:`S_{ip} D_p^{-1}(x_i - x_p)
-  = \nabla N_{ip}` (from :math:`(x_j - x_p) \cdot \nabla N_i = \delta_{ij} - N_{ip}`), so the
-  term is :math:`M_p B_p \nabla N_{ip}` with no inverse (and no singular :math:`D_p` on a
-  cell's edges). The particle field ``affine`` holds :math:`B_p`; the particles' angular
-  momentum is :math:`\sum_p M_p (x_p \times v_p + \epsilon : B_p^T)`, which the lumped map keeps
-  exactly (:func:`fempm.transfer.affine.angular_momentum`).
+  :math:`v_p + C_p (x - x_p)`. G2P: :math:`v_p^+ = \sum_i S_{ip} v_i^+`,
+  :math:`B_p = \sum_i S_{ip} v_i^+ (x_i - x_p)^T`, :math:`C_p = B_p D_p^{-1}` with the
+  inertia-like :math:`D_p = \sum_i S_{ip} (x_i - x_p)(x_i - x_p)^T` of any finite element basis
+  (on degree-1 point particles of affine cells :math:`C_p = L_p`, since
+  :math:`(x_j - x_p) \cdot \nabla N_i = \delta_{ij} - N_{ip}` gives
+  :math:`S_{ip} (x_i - x_p) = D_p \nabla N_{ip}`; no inverse, and none of :math:`D_p`'s
+  singularity on a cell's edges), and the spin :math:`s_p = \epsilon : B_p^T`. P2G:
+  :math:`p_i = \sum_p M_p S_{ip} (v_p + \hat C_p (x_i - x_p))` with
+  :math:`\hat C_p = C_p + W(\omega_p)`, the rotation :math:`W(\omega_p)` that gives the carried
+  field the stored spin at the particle's present :math:`D_p`,
+  :math:`\epsilon : (\hat C_p D_p)^T = s_p` (:func:`fempm.transfer.affine.carried_matrix`).
+  The fields ``affine`` and ``affine_spin`` hold :math:`C_p` and :math:`s_p`; the particles'
+  angular momentum is :math:`\sum_p M_p (x_p \times v_p + s_p)`, which the lumped map keeps to
+  round-off (:func:`fempm.transfer.affine.angular_momentum`). Jiang et al. keep :math:`B_p`
+  and map :math:`B_p D_p^{-1}` at the new position, which conserves the same; on a degree-1
+  basis that is :math:`M_p B_p \nabla N_{ip}`, momentum on nodes whose mass :math:`M_p N_{ip}`
+  vanishes as :math:`D_p` changes under the motion (on B-splines of degree 2 and more
+  :math:`D_p` is constant), while :math:`\hat C_p` moves momentum in proportion to
+  :math:`N_{ip}`.
 * :class:`TPIC` (Nakamura et al. 2023): the particle carries its velocity gradient,
-  :math:`C_p = \sum_i v_i^+ \otimes \nabla S_{ip}` (the :math:`L_p` of G2P), in ``affine``;
+  :math:`C_p = \sum_i v_i \otimes \nabla S_{ip}` (the :math:`L_p` of G2P), in ``affine``;
   P2G :math:`p_i = \sum_p M_p S_{ip} (v_p + C_p (x_i - x_p))`; G2P as APIC's velocity.
 * :class:`XPIC` (``xpic``, order m; Hammerquist and Nairn 2017): the particles' velocities are
   first extrapolated on the grid by the series FMPM(m) sums,

@@ -22,9 +22,9 @@ from fempm.scenes import spin
 from fempm.stepping.contact import Contact
 from fempm.transfer.transfers import AFFINE_FIELD, SPIN_FIELD, velocity_transfer
 
-pytestmark = pytest.mark.parallel  # also under mpiexec -n 2 (scripts/run-tests)
-
 CELLS = ("triangle", "quadrilateral", "tetrahedron", "hexahedron")
+#: the compiled cases of the default run (each compiles its kernels' variants: the others are slow)
+COMPILED_DEFAULT = {("triangle", "apic", "lumped"), ("triangle", "apic", "consistent"), ("hexahedron", "tpic", "lumped")}
 
 
 def _affine_step(mesh_name: str, transfer: str, mass: str, *, degree: int = 1, variant: str | None = None,
@@ -58,10 +58,18 @@ def _affine_step(mesh_name: str, transfer: str, mass: str, *, degree: int = 1, v
     return err_v, err_C
 
 
-@pytest.mark.parametrize("compiled", [False, None], ids=["numpy", "compiled"])
-@pytest.mark.parametrize("mass", ["lumped", "consistent", "fmpm2"])
-@pytest.mark.parametrize("transfer", ["apic", "tpic"])
-@pytest.mark.parametrize("cell", CELLS)
+def _cases():
+    for cell in CELLS:
+        for transfer in ("apic", "tpic"):
+            for mass in ("lumped", "consistent", "fmpm2"):
+                yield pytest.param(cell, transfer, mass, False, id=f"{cell}-{transfer}-{mass}-numpy",
+                                   marks=[pytest.mark.parallel] if cell == "triangle" else [])
+                slow = (cell, transfer, mass) not in COMPILED_DEFAULT
+                yield pytest.param(cell, transfer, mass, None, id=f"{cell}-{transfer}-{mass}-compiled",
+                                   marks=[pytest.mark.slow] if slow else [pytest.mark.parallel])
+
+
+@pytest.mark.parametrize(("cell", "transfer", "mass", "compiled"), list(_cases()))
 def test_an_affine_field_survives_p2g_then_g2p(cell, transfer, mass, compiled):
     err_v, err_C = _affine_step(cell, transfer, mass, compiled=compiled)
     assert err_v < 1e-11 and err_C < 1e-10, (err_v, err_C)
@@ -78,18 +86,33 @@ def test_an_affine_field_survives_p2g_then_g2p(cell, transfer, mass, compiled):
 ])
 def test_an_affine_field_survives_on_degree_2_distorted_cells_and_particle_domains(case):
     cell, transfer, mass, degree, variant, domain = case
-    for compiled in (False, None):  # (domains take the numpy step with APIC and TPIC)
-        err_v, err_C = _affine_step(cell, transfer, mass, degree=degree, variant=variant, domain=domain,
-                                    compiled=compiled)
-        assert err_v < 1e-11 and err_C < 1e-9, (compiled, err_v, err_C)
+    err_v, err_C = _affine_step(cell, transfer, mass, degree=degree, variant=variant, domain=domain)
+    assert err_v < 1e-11 and err_C < 1e-9, (err_v, err_C)
 
 
+@pytest.mark.slow
+@pytest.mark.parametrize("case", [
+    ("triangle", "apic", "lumped", 2, "bernstein", "point"),
+    ("tetrahedron", "tpic", "lumped", 2, "bernstein", "point"),
+    ("triangle", "apic", "consistent", 2, None, "point"),
+    ("distorted-quadrilateral", "apic", "lumped", 1, None, "point"),
+    ("interval", "apic", "lumped", 1, None, "point"),
+])
+def test_the_compiled_generic_passes_map_an_affine_field(case):
+    """The generic kernels (degree 2, multilinear cells, intervals) as the numpy step."""
+    cell, transfer, mass, degree, variant, domain = case
+    err_v, err_C = _affine_step(cell, transfer, mass, degree=degree, variant=variant, domain=domain, compiled=None)
+    assert err_v < 1e-11 and err_C < 1e-9, (err_v, err_C)
+
+
+@pytest.mark.parallel
 @pytest.mark.parametrize("mass", ["lumped", "consistent"])
 def test_the_implicit_step_maps_an_affine_field_with_apic(mass):
     err_v, err_C = _affine_step("triangle", "apic", mass, integrator="implicit")
     assert err_v < 1e-9 and err_C < 1e-8, (err_v, err_C)
 
 
+@pytest.mark.slow
 def test_xpic_1_and_2_map_like_the_numpy_step_in_1d_and_on_domains():
     """The compiled XPIC passes (interval: the generic kernels; CPDI1: the domain grid) against
     the numpy step."""
@@ -117,10 +140,13 @@ def test_pic_and_flip_lose_the_affine_part_that_apic_keeps():
     assert err_v > 1e-2
 
 
-def _spin(transfer: str, mass: str = "lumped", steps: int = 40, **changes):
+def _spin(transfer: str, mass: str = "lumped", steps: int = 40, compiled: bool | None = False, **changes):
+    """``steps`` steps of the spinning disk (the numpy step by default: the compiled passes are
+    tested against it above)."""
     scene = spin(cells=10, t_end=1.0, frames=0)
     scene.options = dataclasses.replace(scene.options, transfer=transfer, mass=mass, **changes)
     solver = scene.solver()
+    solver.compiled = compiled
     p = solver.particles
     e0, L0 = solver.energies(), solver.angular_momentum()["angular_momentum"]
     for _ in range(steps):
@@ -130,20 +156,22 @@ def _spin(transfer: str, mass: str = "lumped", steps: int = 40, **changes):
 
 
 @pytest.mark.parametrize("scheme", ["USL", "MUSL"])
+@pytest.mark.parallel
 def test_xpic_1_is_pic_and_xpic_m_is_fmpm_m_with_lumped_forces_and_pic(scheme):
     """XPIC(1) is PIC step after step; XPIC(m)'s particle velocities after a step are those of
     FMPM(m) with lumped forces and PIC (the strain rate and, with MUSL, the motion then differ:
     XPIC takes them from the lumped grid velocity, FMPM from its series)."""
-    _, _, _, pic = _spin("pic", steps=15, scheme=scheme)
-    _, _, _, xpic1 = _spin("xpic", xpic_order=1, steps=15, scheme=scheme)
+    _, _, _, pic = _spin("pic", steps=15, scheme=scheme, compiled=None)
+    _, _, _, xpic1 = _spin("xpic", xpic_order=1, steps=15, scheme=scheme, compiled=None)
     assert np.allclose(xpic1.fields["v"], pic.fields["v"], rtol=0, atol=1e-13)
-    _, _, _, xpic3 = _spin("xpic", xpic_order=3, steps=1, scheme=scheme)
-    _, _, _, fmpm3 = _spin("pic", mass="fmpm3", lumped_forces=True, steps=1, scheme=scheme)
+    _, _, _, xpic3 = _spin("xpic", xpic_order=3, steps=1, scheme=scheme, compiled=None)
+    _, _, _, fmpm3 = _spin("pic", mass="fmpm3", lumped_forces=True, steps=1, scheme=scheme, compiled=None)
     assert np.allclose(xpic3.fields["v"], fmpm3.fields["v"], rtol=0, atol=1e-12)
-    _, _, _, pic1 = _spin("pic", steps=1, scheme=scheme)
+    _, _, _, pic1 = _spin("pic", steps=1, scheme=scheme, compiled=None)
     assert np.abs(xpic3.fields["v"] - pic1.fields["v"]).max() > 1e-3  # (and it is not PIC)
 
 
+@pytest.mark.parallel
 def test_apic_keeps_the_spinning_disks_angular_momentum_and_pic_loses_its_energy():
     solver, kinetic, drift, p = _spin("apic", steps=60)
     assert drift < 1e-10 and kinetic > 0.99, (drift, kinetic)
@@ -154,6 +182,7 @@ def test_apic_keeps_the_spinning_disks_angular_momentum_and_pic_loses_its_energy
     assert kinetic_tpic > 0.99 and drift_tpic > 1e-6  # TPIC transports C: its spin leaks as D changes
 
 
+@pytest.mark.parallel
 def test_apic_with_the_consistent_mass_keeps_the_angular_momentum():
     """The exact projection leaves the affine part out and keeps the angular momentum by itself
     (no lumped row: lump_below=0, the scene's)."""
