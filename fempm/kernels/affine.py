@@ -62,22 +62,44 @@ if AVAILABLE:
                     out[i, j] = (A[i1, j1] * A[i2, j2] - A[i1, j2] * A[i2, j1]) / a
 
     @njit(inline="always")
-    def second_moment(N, cell_dofs, c, xi, x, p, D, NK, Dm):  # pragma: no cover - compiled
-        r""":math:`D_p = \sum_a N_a r_a r_a^T` into ``Dm``; returns (its trace, the largest
-        :math:`|r_a|^2`)."""
+    def offsets(geo, p, sizes, R, J):  # pragma: no cover - compiled
+        r"""``R[a]`` = :math:`x_a - x_p` of particle p's dofs (``geo`` = (X, K, c, cell_dofs, xi,
+        x), ``sizes`` = (D, NK, SIMPLEX, FROM_K)): with ``FROM_K`` (degree 1 on affine cells)
+        :math:`J (X_a - X_p)` of the reference vertices and :math:`J = K_c^{-1}`, no gather of the
+        dofs' coordinates; else ``xi[dof] - x[p]``."""
+        X, K, c, cell_dofs, xi, x = geo
+        D, NK, SIMPLEX, FROM_K = sizes
+        if not FROM_K:
+            for a in range(NK):
+                i = cell_dofs[c, a]
+                for j in range(D):
+                    R[a, j] = xi[i, j] - x[p, j]
+            return
+        inverse(K[c], D, J)
+        for a in range(NK):
+            for j in range(D):
+                t = 0.0
+                for i in range(D):
+                    ref = (1.0 if a == i + 1 else 0.0) if SIMPLEX else float((a >> i) & 1)
+                    t += J[j, i] * (ref - X[p, i])
+                R[a, j] = t
+
+    @njit(inline="always")
+    def second_moment(N, R, D, NK, Dm):  # pragma: no cover - compiled
+        r""":math:`D_p = \sum_a N_a r_a r_a^T` into ``Dm`` of the offsets ``R``; returns (its trace,
+        the largest :math:`|r_a|^2`)."""
         for j in range(D):
             for k in range(D):
                 Dm[j, k] = 0.0
         top = 0.0
         for a in range(NK):
-            i = cell_dofs[c, a]
             w = N[a]
             r2 = 0.0
             for j in range(D):
-                rj = xi[i, j] - x[p, j]
+                rj = R[a, j]
                 r2 += rj * rj
                 for k in range(D):
-                    Dm[j, k] += w * rj * (xi[i, k] - x[p, k])
+                    Dm[j, k] += w * rj * R[a, k]
             top = max(top, r2)
         tr = 0.0
         for j in range(D):
@@ -135,51 +157,51 @@ if AVAILABLE:
         Cu[2, 1] += om[0]
 
     @njit(inline="always")
-    def affine_work(D):  # pragma: no cover - compiled
-        """Scratch arrays of a pass: :math:`D_p`, :func:`g2p_affine`'s and :func:`carried`'s."""
+    def affine_work(D, NK):  # pragma: no cover - compiled
+        """Scratch arrays of a pass: :math:`D_p`, :func:`g2p_affine`'s, :func:`carried`'s and
+        :func:`offsets`' (R, J)."""
         return (np.empty((D, D)), (np.empty((D, D)), np.empty((D, D)), np.empty((D, D)), np.empty((D, D)), np.empty(3)),
-                (np.empty((D, D)), np.empty((D, D)), np.empty((3, 3)), np.empty((3, 3)), np.empty(3), np.empty(3)))
+                (np.empty((D, D)), np.empty((D, D)), np.empty((3, 3)), np.empty((3, 3)), np.empty(3), np.empty(3)),
+                (np.empty((NK, D)), np.empty((D, D))))
 
     @njit(inline="always")
-    def carried_at(at, state, p, sizes, Dm, work):  # pragma: no cover - compiled
-        """:func:`carried` of particle p at its present :math:`D_p` (``at`` = (N, cell_dofs, c),
-        ``state`` = (C, spin, xi, x), ``sizes`` = (D, NK, KIND)) into ``work[0]``."""
-        N, cell_dofs, c = at
-        C, spin, xi, x = state
+    def carried_at(N, R, state, p, sizes, Dm, work):  # pragma: no cover - compiled
+        """:func:`carried` of particle p at its present :math:`D_p` (of the offsets ``R``;
+        ``state`` = (C, spin), ``sizes`` = (D, NK, KIND)) into ``work[0]``."""
+        C, spin = state
         D, NK, KIND = sizes
-        tr, top = second_moment(N, cell_dofs, c, xi, x, p, D, NK, Dm) if KIND == APIC else (0.0, 0.0)
+        tr, top = second_moment(N, R, D, NK, Dm) if KIND == APIC else (0.0, 0.0)
         carried(C, spin, p, Dm, tr, top, D, KIND, work)
 
     @njit(inline="always")
     def add_momentum(at, mom, particle, sizes, affine):  # pragma: no cover - compiled
-        r"""``mom[i, o + j]`` += :math:`N_a M_p (v_p + C (x_a - x_p))_j` over the particle's dofs
-        (``at`` = (N, cell_dofs, c, o), ``particle`` = (v, p, M_p), ``sizes`` = (D, NK),
-        ``affine`` = (C, xi, x, with it or not))."""
+        r"""``mom[i, o + j]`` += :math:`N_a M_p (v_p + C r_a)_j` over the particle's dofs (``at`` =
+        (N, cell_dofs, c, o), ``particle`` = (v, p, M_p), ``sizes`` = (D, NK), ``affine`` = (C,
+        the offsets R, with it or not))."""
         N, cell_dofs, c, o = at
         v, p, m = particle
         D, NK = sizes
-        Cu, xi, x, with_affine = affine
+        Cu, R, with_affine = affine
         for a in range(NK):
             i = cell_dofs[c, a]
             for j in range(D):
                 t = v[p, j]
                 if with_affine:
                     for k in range(D):
-                        t += Cu[j, k] * (xi[i, k] - x[p, k])
+                        t += Cu[j, k] * R[a, k]
                 mom[i, o + j] += N[a] * (m * t)
 
     @njit(inline="always")
-    def g2p_affine(at, fields, p, Lp, sizes, outputs, work):  # pragma: no cover - compiled
+    def g2p_affine(at, v, R, p, Lp, sizes, outputs, work):  # pragma: no cover - compiled
         r"""What G2P stores of the grid velocity ``v`` at particle p (``at`` = (N, cell_dofs, c,
-        o): its basis, its cell and the nodal columns from ``o``; ``fields`` = (v, xi, x);
+        o): its basis, its cell and the nodal columns from ``o``; ``R`` its dofs' offsets;
         ``sizes`` = (D, NK, KIND, CLOSED, PARTS)), given its velocity gradient ``Lp``: with
         ``PARTS`` & 1 the matrix into ``out[p]``, with ``PARTS`` & 2 APIC's spin into ``spin[p]``
         (``outputs`` = (out, spin))."""
         N, cell_dofs, c, o = at
-        v, xi, x = fields
         D, NK, KIND, CLOSED, PARTS = sizes
         out, spin = outputs
-        B, Dm, R, Di, s = work
+        B, Dm, BL, Di, s = work
         if PARTS & 1:
             for j in range(D):
                 for k in range(D):
@@ -195,26 +217,26 @@ if AVAILABLE:
             for j in range(D):
                 vj = w * v[i, o + j]
                 for k in range(D):
-                    B[j, k] += vj * (xi[i, k] - x[p, k])
+                    B[j, k] += vj * R[a, k]
         if PARTS & 2:
             spin_of(B, D, s)
             for j in range(spin.shape[1]):
                 spin[p, j] = s[j]
         if CLOSED or not PARTS & 1:
             return
-        tr = second_moment(N, cell_dofs, c, xi, x, p, D, NK, Dm)[0]
+        tr = second_moment(N, R, D, NK, Dm)[0]
         if not det(Dm, D) > THICK * (tr / D) ** D:
             return
         inverse(Dm, D, Di)
-        for j in range(D):  # R = B - L D
+        for j in range(D):  # BL = B - L D
             for k in range(D):
                 t = B[j, k]
                 for q in range(D):
                     t -= Lp[j, q] * Dm[q, k]
-                R[j, k] = t
+                BL[j, k] = t
         for j in range(D):
             for k in range(D):
                 t = 0.0
                 for q in range(D):
-                    t += R[j, q] * Di[q, k]
+                    t += BL[j, q] * Di[q, k]
                 out[p, j, k] += t

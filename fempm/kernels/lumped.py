@@ -71,7 +71,7 @@ NO_STABLE = Stable(np.zeros(0), np.zeros(0))
 if AVAILABLE:
     from numba import njit
 
-    from fempm.kernels.affine import add_momentum, affine_work, carried_at, g2p_affine
+    from fempm.kernels.affine import add_momentum, affine_work, carried_at, g2p_affine, offsets
     from fempm.kernels.kinematics import _det, add_totals, linear_elastic_at, neo_hookean_at
     from fempm.kernels.shape import inside_after_pull_back, shape, star_search
 
@@ -208,6 +208,7 @@ def _scatter_kernel(cell: str, with_mass: bool, with_momentum: bool, with_force:
     AFFINE = is_affine(cell)
     DEGREE, BERNSTEIN = space_of(cell)
     SIGNED = DEGREE == 2 and not BERNSTEIN  # a basis with negative values: the mass column is its support measure
+    FROM_K = DEGREE == 1 and AFFINE  # the dofs' offsets from the cell's inverse Jacobian (fempm.kernels.affine.offsets)
     CV = 1 if with_mass else 0
     CF = CV + (D if with_momentum else 0)
     CG = CF + (D if with_force else 0)
@@ -225,7 +226,7 @@ def _scatter_kernel(cell: str, with_mass: bool, with_momentum: bool, with_force:
         mv = np.empty(D)
         fe = np.empty(D)
         sg = np.empty((D, D))
-        Dm, _, work = affine_work(D)
+        Dm, _, work, (R, Jw) = affine_work(D, NK)
         Cu = work[0]
         if KIND:
             C, spin, xi = affine
@@ -248,7 +249,8 @@ def _scatter_kernel(cell: str, with_mass: bool, with_momentum: bool, with_force:
                     for e in range(D):
                         sg[j, e] = sigma[p, j, e]
             if KIND:
-                carried_at((N, cell_dofs, cp), (C, spin, xi, x), p, (D, NK, KIND), Dm, work)
+                offsets((X, K, cp, cell_dofs, xi, x), p, (D, NK, SIMPLEX, FROM_K), R, Jw)
+                carried_at(N, R, (C, spin), p, (D, NK, KIND), Dm, work)
             if with_dt:
                 best = stable_time(best, bound, m, V, speed, modulus[body[p]], c, p, h[cp])
             o = group[p] * stride if grouped else 0
@@ -262,7 +264,7 @@ def _scatter_kernel(cell: str, with_mass: bool, with_momentum: bool, with_force:
                         t = mv[j]
                         if KIND:
                             for k in range(D):
-                                t += m * Cu[j, k] * (xi[i, k] - x[p, k])
+                                t += m * Cu[j, k] * R[a, k]
                         out[i, o + CV + j] += w * t
                 if with_force:
                     for j in range(D):
@@ -304,6 +306,7 @@ def _g2p_kernel(cell: str, blend: bool, kinematics: bool, move: bool, remap: boo
     # C_p = L_p: equal on degree-1 affine cells (fempm.transfer.affine.closed_form); P2 Lagrange's D_p is no moment
     CLOSED = (DEGREE == 1 and AFFINE) or (DEGREE == 2 and not BERNSTEIN)
     PARTS = 3 if blend else 0  # the matrix and the spin, of the updated grid velocity
+    FROM_K = DEGREE == 1 and AFFINE  # the dofs' offsets from the cell's inverse Jacobian (fempm.kernels.affine.offsets)
 
     @njit(cache=True, error_model="numpy")
     def g2p_update(where, grid, state, laws, moves, outputs, groups, affine=None):  # pragma: no cover
@@ -325,7 +328,7 @@ def _g2p_kernel(cell: str, blend: bool, kinematics: bool, move: bool, remap: boo
         jmin, jmax = np.inf, -np.inf
         dv = np.empty(D)
         acc = np.zeros(3 + D)  # the state's sums (totals)
-        Dm, gwork, cwork = affine_work(D)
+        Dm, gwork, cwork, (R, Jw) = affine_work(D, NK)
         Cu = cwork[0]
         if KIND:
             C, spin, xi = affine
@@ -342,11 +345,12 @@ def _g2p_kernel(cell: str, blend: bool, kinematics: bool, move: bool, remap: boo
                 for j in range(D):
                     v[p, j] = flip * (v[p, j] + dv[j]) + (1.0 - flip) * vg[j]
             if KIND and PARTS:
-                g2p_affine((N, cell_dofs, c, o), (v_new, xi, x), p, Lp, (D, NK, KIND, CLOSED, PARTS), (C, spin), gwork)
+                offsets((X, K, c, cell_dofs, xi, x), p, (D, NK, SIMPLEX, FROM_K), R, Jw)
+                g2p_affine((N, cell_dofs, c, o), v_new, R, p, Lp, (D, NK, KIND, CLOSED, PARTS), (C, spin), gwork)
             if remap:  # MUSL: the blended momenta back to the grid, in the same pass
                 if remap_affine:
-                    carried_at((N, cell_dofs, c), (C, spin, xi, x), p, (D, NK, KIND), Dm, cwork)
-                add_momentum((N, cell_dofs, c, o), mom, (v, p, mass[p]), (D, NK), (Cu, xi, x, remap_affine))
+                    carried_at(N, R, (C, spin), p, (D, NK, KIND), Dm, cwork)
+                add_momentum((N, cell_dofs, c, o), mom, (v, p, mass[p]), (D, NK), (Cu, R, remap_affine))
             if kinematics:
                 J = deform_at(F, p, dt, Lp, D, Fn)
                 if keep_L:
