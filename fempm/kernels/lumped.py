@@ -318,18 +318,13 @@ def _g2p_kernel(cell: str, blend: bool, kinematics: bool, move: bool, remap: boo
         L, mom, sums = outputs
         group, rigid = groups.group, groups.rigid
         n = len(cells)
-        N = np.empty(NK)
-        G = np.empty((NK, D))
-        vg = np.empty(D)
-        Lp = np.empty((D, D))
-        Fn = np.empty((D, D))
+        N, G = np.empty(NK), np.empty((NK, D))
+        vg, dv, Lp, Fn = np.empty(D), np.empty(D), np.empty((D, D)), np.empty((D, D))
         keep_L = L.shape[0] == n
         nonfinite_j, inverted, nonfinite = 0, 0, 0
         jmin, jmax = np.inf, -np.inf
-        dv = np.empty(D)
         acc = np.zeros(3 + D)  # the state's sums (totals)
         Dm, gwork, cwork, (R, Jw) = affine_work(D, NK)
-        Cu = cwork[0]
         if KIND:
             C, spin, xi = affine
         else:  # (typed, unused)
@@ -350,7 +345,7 @@ def _g2p_kernel(cell: str, blend: bool, kinematics: bool, move: bool, remap: boo
             if remap:  # MUSL: the blended momenta back to the grid, in the same pass
                 if remap_affine:
                     carried_at(N, R, (C, spin), p, (D, NK, KIND), Dm, cwork)
-                add_momentum((N, cell_dofs, c, o), mom, (v, p, mass[p]), (D, NK), (Cu, R, remap_affine))
+                add_momentum((N, cell_dofs, c, o), mom, (v, p, mass[p]), (D, NK), (cwork[0], R, remap_affine))
             if kinematics:
                 J = deform_at(F, p, dt, Lp, D, Fn)
                 if keep_L:

@@ -133,9 +133,11 @@ def run(
     domains=("point",),
     log=print,
     provenance: Provenance | None = None,
+    velocity_kinds=None,
 ) -> list[dict]:
     """Run every case, write ``mapping.csv``, ``mapping.md``, ``mapping.png`` and
-    ``provenance.json`` into ``out``.
+    ``provenance.json`` into ``out``; with point particles also the velocity round trips on the
+    mesh kinds ``velocity_kinds`` (default ``kinds``; :mod:`fempm.studies.velocity_mapping`).
 
     Note:
         Collective.
@@ -171,7 +173,8 @@ def run(
                 if comm.rank == 0:
                     log(f"{kind:17s} n={n:4d} ppc={ppc:2d} {domain:5s} {field:6s} P{degree} {mass:10s} "
                         f"L2={r['l2_error']:.3e}  t={r['time_s']:.4f}s  its={r['ksp_its']}")
-    velocity_rows = velocity_mapping.run(make_mesh, kinds, sizes, ppcs, comm, log) if "point" in domains else []
+    velocity_rows = (velocity_mapping.run(make_mesh, kinds if velocity_kinds is None else velocity_kinds, sizes, ppcs,
+                                          comm, log) if "point" in domains else [])
     if comm.rank == 0:
         write(rows, out, provenance, velocity_rows)
     return rows
