@@ -178,10 +178,11 @@ def call_g2p(kernel, cells, X, K, cell_dofs, v_new, v_old, flip, dt, by_particle
                   Groups(group, 0, rigid))
 
 
-# affine quads: the Q1 basis of the one, the pull-back of the other; the default run checks the
-# triangle's (the compiled step of every cell against the numpy step: tests/stepping/test_compiled_step.py)
-@pytest.mark.parametrize("cell", ["triangle", pytest.param("quadrilateral", marks=pytest.mark.slow),
-                                  pytest.param("quadrilateral-multilinear", marks=pytest.mark.slow)])
+# affine quads: the Q1 basis of the one, the pull-back of the other; make test-all (27 s cold, 14
+# kernel variants: the default run checks the compiled step of every cell against the numpy
+# step, tests/stepping/test_compiled_step.py)
+@pytest.mark.slow
+@pytest.mark.parametrize("cell", ["triangle", "quadrilateral", "quadrilateral-multilinear"])
 def test_planar_kernels_equal_the_generic_ones_bit_for_bit(cell):
     """fempm.kernels.planar (scalar 2D) against the dimension-generic passes of
     fempm.kernels.lumped: identical results, not only to round-off, in variants that together

@@ -11,8 +11,16 @@ pytestmark = pytest.mark.xdist_group("test_mapping_study")  # one worker compute
 @pytest.fixture(scope="module")
 def study(tmp_path_factory):
     out = tmp_path_factory.mktemp("study")
-    rows = mapping.run(sizes=(8, 16, 32), ppcs=(4,), out=out, log=lambda *a: None, velocity_kinds=("structured-tri",))
+    rows = mapping.run(sizes=(8, 16, 32), ppcs=(4,), out=out, log=lambda *a: None, velocity_kinds=())
     return rows, out
+
+
+@pytest.fixture(scope="module")
+def velocity_study(tmp_path_factory):
+    out = tmp_path_factory.mktemp("study-velocity")
+    mapping.run(sizes=(8, 16, 32), ppcs=(4,), kinds=("structured-tri",), fields=("smooth",), out=out,
+                log=lambda *a: None)
+    return out
 
 
 def test_study_writes_table_and_plot(study):
@@ -30,10 +38,11 @@ def test_fe_field_reproduced_by_consistent_only(study):
     assert all(r["l2_error"] > 1e-3 for r in fe if r["mass"] == "lumped")
 
 
-def test_velocity_round_trip_of_each_transfer(study):
+@pytest.mark.slow  # 50 s cold (the transfers' kernels); tests/transfer/test_transfers.py in the default run
+def test_velocity_round_trip_of_each_transfer(velocity_study):
     """FLIP keeps the particle velocities; APIC with the lumped mass maps like the exact
     projection (rate 2), PIC's lumped map worse (rate about 1.6), XPIC(m) between."""
-    _, out = study
+    out = velocity_study
     if MPI.COMM_WORLD.rank != 0:
         return
     import csv

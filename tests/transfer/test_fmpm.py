@@ -59,6 +59,7 @@ def test_mass_option_parsing():
             mass_model(bad)
 
 
+@pytest.mark.slow  # 19 s cold; the default run: FMPM's compiled step against the numpy one (test_compiled_step.py)
 def test_loop_fmpm1_equals_lumped_and_fmpm_runs_stably():
     runs = {}
     for mass in ("lumped", "fmpm1"):
