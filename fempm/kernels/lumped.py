@@ -65,6 +65,8 @@ from fempm.kernels.shape import AVAILABLE, CELLS, MULTILINEAR, is_affine, space_
 
 __all__ = ["NO_GROUPS", "NO_STABLE", "kernels_for"]
 
+#: the cells whose affine transfers run the scalar 2D passes (:mod:`fempm.kernels.planar_affine`)
+AFFINE_PLANAR = ("triangle", "quadrilateral")
 #: no stable time asked of a P2G pass
 NO_STABLE = Stable(np.zeros(0), np.zeros(0))
 
@@ -147,8 +149,9 @@ def kernels_for(cell: str) -> SimpleNamespace:
         part (the generic kernel)."""
         flags = (cm >= 0, cv >= 0, cf >= 0, stable.h.shape[0] > 0, forces.fext.shape[0] > 0, bool(bound),
                  groups.group.shape[0] > 0, cg >= 0)
-        if kind and cv >= 0:
-            return _scatter_kernel(cell, *flags, kind)(where, state, laws, forces, out, stable, groups, affine)
+        if kind and cv >= 0:  # the affine transfers: the planar passes on affine 2D cells, else the generic ones
+            make = scatter_kernel if cell in AFFINE_PLANAR else _scatter_kernel
+            return make(cell, *flags, kind)(where, state, laws, forces, out, stable, groups, affine)
         return scatter_kernel(cell, *flags)(where, state, laws, forces, out, stable, groups)
 
     def g2p_update(where: Basis, grid: GridStep, state: State, laws: Laws, moves: Moves, outputs: Outputs,
@@ -167,8 +170,9 @@ def kernels_for(cell: str) -> SimpleNamespace:
         totals = move and outputs.sums.shape[0] > 0
         flags = (bool(blend), bool(kinematics), bool(move), remap, totals, groups.group.shape[0] > 0)
         if kind and blend:
-            return _g2p_kernel(cell, *flags, kind, remap and remap_affine)(where, grid, state, laws, moves, outputs,
-                                                                            groups, affine)
+            make = g2p_kernel if cell in AFFINE_PLANAR else _g2p_kernel
+            return make(cell, *flags, kind, remap and remap_affine)(where, grid, state, laws, moves, outputs, groups,
+                                                                     affine)
         return g2p_kernel(cell, *flags)(where, grid, state, laws, moves, outputs, groups)
 
     return SimpleNamespace(scatter=scatter, g2p_update=g2p_update)

@@ -21,6 +21,7 @@ import functools
 
 import numpy as np
 
+from fempm.kernels.affine import APIC
 from fempm.kernels.particle_checks import LINEAR_ELASTIC, NEO_HOOKEAN
 from fempm.kernels.shape import AVAILABLE
 
@@ -32,6 +33,7 @@ if AVAILABLE:
     from fempm.kernels.kinematics import add_totals
     from fempm.kernels.multilinear import quad_pull_back
     from fempm.kernels.particle_checks import count_j, stable_time
+    from fempm.kernels.planar_affine import carried2, offsets2, spin2
     from fempm.kernels.shape import inside_after_pull_back, star_search
 
     @njit(inline="always")
@@ -80,6 +82,25 @@ if AVAILABLE:
             out[i3, col + 1] += N3 * q1
 
     @njit(inline="always")
+    def add_affine(out, col, dofs, values, q, mc, r, quad):  # pragma: no cover - compiled
+        r"""``out[i_a, col:col+2]`` += :math:`N_a (q + M C r_a)` (``q`` = :math:`M v`, ``mc`` =
+        :math:`M C` row by row, ``r`` the offsets)."""
+        i0, i1, i2, i3 = dofs
+        N0, N1, N2, N3 = values
+        q0, q1 = q
+        m00, m01, m10, m11 = mc
+        r0x, r0y, r1x, r1y, r2x, r2y, r3x, r3y = r
+        out[i0, col] += N0 * (q0 + m00 * r0x + m01 * r0y)
+        out[i0, col + 1] += N0 * (q1 + m10 * r0x + m11 * r0y)
+        out[i1, col] += N1 * (q0 + m00 * r1x + m01 * r1y)
+        out[i1, col + 1] += N1 * (q1 + m10 * r1x + m11 * r1y)
+        out[i2, col] += N2 * (q0 + m00 * r2x + m01 * r2y)
+        out[i2, col + 1] += N2 * (q1 + m10 * r2x + m11 * r2y)
+        if quad:
+            out[i3, col] += N3 * (q0 + m00 * r3x + m01 * r3y)
+            out[i3, col + 1] += N3 * (q1 + m10 * r3x + m11 * r3y)
+
+    @njit(inline="always")
     def deform(F, p, dt, L00, L01, L10, L11):  # pragma: no cover - compiled
         r""":math:`F_p \leftarrow (I + \Delta t L) F_p`; returns the new entries and
         :math:`J = \det F_p`."""
@@ -114,18 +135,21 @@ if AVAILABLE:
 
 @functools.cache
 def scatter_kernel(simplex: bool, affine: bool, with_mass: bool, with_momentum: bool, with_force: bool, with_dt: bool,
-                   has_fext: bool, bound: bool, grouped: bool = False, with_gradient: bool = False):
+                   has_fext: bool, bound: bool, grouped: bool = False, with_gradient: bool = False, kind: int = 0):
     """:func:`fempm.kernels.lumped._scatter_kernel` for ``triangle`` (``simplex``) or
-    ``quadrilateral`` cells, ``affine`` or multilinear."""
+    ``quadrilateral`` cells, ``affine`` or multilinear (``kind``, APIC or TPIC: affine cells;
+    :mod:`fempm.kernels.planar_affine`)."""
+    KIND = kind
     CV = 1 if with_mass else 0
     CF = CV + (2 if with_momentum else 0)
     CG = CF + (2 if with_force else 0)
     QUAD = not simplex
 
     @njit(cache=True, error_model="numpy")
-    def scatter(where, state, laws, forces, out, stable, groups):  # pragma: no cover
+    def scatter(where, state, laws, forces, out, stable, groups, carried=None):  # pragma: no cover
         cells, X, K, cell_dofs = where
         mass, v, volume, sigma, body = state.mass, state.v, state.volume, state.sigma, state.body
+        C, spin = (carried.C, carried.spin) if KIND else (np.empty((0, 2, 2)), np.empty((0, 1)))
         modulus, g, fext, h, c = laws.modulus, forces.g, forces.fext, stable.h, stable.c
         group, stride = groups.group, groups.stride
         best = 0.0 if bound else np.inf
@@ -149,7 +173,11 @@ def scatter_kernel(simplex: bool, affine: bool, with_mass: bool, with_momentum: 
                 out[i2, o] += N2 * m
                 if QUAD:
                     out[i3, o] += N3 * m
-            if with_momentum:
+            if with_momentum and KIND:
+                r = offsets2(X0, X1, (k00, k01, k10, k11), simplex)
+                c00, c01, c10, c11 = carried2(C, spin, p, (N0, N1, N2, N3 if QUAD else 0.0), r, KIND)
+                add_affine(out, o + CV, (i0, i1, i2, i3), (N0, N1, N2, N3), (m * v0, m * v1), (m * c00, m * c01, m * c10, m * c11), r, QUAD)
+            elif with_momentum:
                 add_pair(out, o + CV, (i0, i1, i2, i3), (N0, N1, N2, N3), m * v0, m * v1, QUAD)
             if with_force:
                 fe0, fe1 = m * g[0], m * g[1]
@@ -185,14 +213,17 @@ def scatter_kernel(simplex: bool, affine: bool, with_mass: bool, with_momentum: 
 
 @functools.cache
 def g2p_kernel(simplex: bool, affine: bool, blend: bool, kinematics: bool, move: bool, remap: bool,
-               totals: bool = False, grouped: bool = False):
+               totals: bool = False, grouped: bool = False, kind: int = 0, remap_affine: bool = False):
     """:func:`fempm.kernels.lumped._g2p_kernel` for ``triangle`` (``simplex``) or
-    ``quadrilateral`` cells, ``affine`` or multilinear."""
+    ``quadrilateral`` cells, ``affine`` or multilinear (``kind``, APIC or TPIC, in a blend pass:
+    affine cells; :mod:`fempm.kernels.planar_affine`)."""
     QUAD = not simplex
+    KIND = kind
 
     @njit(cache=True, error_model="numpy")
-    def g2p_update(where, grid, state, laws, moves, outputs, groups):  # pragma: no cover
+    def g2p_update(where, grid, state, laws, moves, outputs, groups, carried=None):  # pragma: no cover
         cells, X, K, cell_dofs = where
+        C, spin = (carried.C, carried.spin) if KIND else (np.empty((0, 2, 2)), np.empty((0, 1)))
         v_new, v_old, flip, dt, by_particle = grid
         x, v, F, volume0, volume, sigma, body, mass = state
         law, lam, mu, x0, tol, left, star = laws.law, laws.lam, laws.mu, moves.x0, moves.tol, moves.left, moves.star
@@ -222,7 +253,21 @@ def g2p_kernel(simplex: bool, affine: bool, blend: bool, kinematics: bool, move:
                     dv1 += N3 * (b3 - v_old[i3, o1])
                 v[p, 0] = flip * (v[p, 0] + dv0) + (1.0 - flip) * vg0
                 v[p, 1] = flip * (v[p, 1] + dv1) + (1.0 - flip) * vg1
-            if remap:  # MUSL: the blended momenta back to the grid, in the same pass
+            if KIND:  # the affine state: C = L (degree 1), APIC's spin, the re-map with them
+                r = offsets2(X0, X1, (k00, k01, k10, k11), simplex)
+                N4 = (N0, N1, N2, N3 if QUAD else 0.0)
+                C[p, 0, 0] = a0 * g0x + a1 * g1x + a2 * g2x + (a3 * g3x if QUAD else 0.0)
+                C[p, 0, 1] = a0 * g0y + a1 * g1y + a2 * g2y + (a3 * g3y if QUAD else 0.0)
+                C[p, 1, 0] = b0 * g0x + b1 * g1x + b2 * g2x + (b3 * g3x if QUAD else 0.0)
+                C[p, 1, 1] = b0 * g0y + b1 * g1y + b2 * g2y + (b3 * g3y if QUAD else 0.0)
+                if KIND == APIC:
+                    spin[p, 0] = spin2(N4, r, (a0, a1, a2, a3 if QUAD else 0.0), (b0, b1, b2, b3 if QUAD else 0.0))
+            if remap and KIND and remap_affine:
+                mp = mass[p]
+                c00, c01, c10, c11 = carried2(C, spin, p, N4, r, KIND)
+                add_affine(mom, o, (i0, i1, i2, i3), (N0, N1, N2, N3), (mp * v[p, 0], mp * v[p, 1]),
+                           (mp * c00, mp * c01, mp * c10, mp * c11), r, QUAD)
+            elif remap:  # MUSL: the blended momenta back to the grid, in the same pass
                 add_pair(mom, o, (i0, i1, i2, i3), (N0, N1, N2, N3), mass[p] * v[p, 0], mass[p] * v[p, 1], QUAD)
             if kinematics:
                 L00 = a0 * g0x + a1 * g1x + a2 * g2x

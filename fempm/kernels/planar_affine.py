@@ -1,0 +1,69 @@
+r"""The affine transfers' per-particle pieces of the scalar 2D passes (:mod:`fempm.kernels.planar`),
+written out for triangles and affine quadrilaterals: the generic ones are
+:mod:`fempm.kernels.affine`, the reference :mod:`fempm.transfer.affine`.
+
+On an affine cell the offsets of the particle's dofs are
+:math:`x_a - x_p = J (X_a - X_p)` with :math:`J = K_c^{-1}` and the reference vertices
+:math:`X_a`, so no dof coordinate is gathered; :math:`C_p = L_p` (degree 1).
+"""
+
+from __future__ import annotations
+
+from fempm.kernels.affine import APIC, THIN
+from fempm.kernels.shape import AVAILABLE
+
+__all__: list[str] = []
+
+if AVAILABLE:
+    from numba import njit
+
+    __all__ += ["carried2", "offsets2", "spin2"]
+
+    @njit(inline="always")
+    def offsets2(X0, X1, k, simplex):  # pragma: no cover - compiled
+        """(r0x, r0y, r1x, r1y, r2x, r2y, r3x, r3y): the offsets of the cell's vertices from the
+        particle at reference point (X0, X1) of a cell whose inverse Jacobian is ``k`` =
+        (k00, k01, k10, k11) (r3 = 0 on a triangle)."""
+        k00, k01, k10, k11 = k
+        det = k00 * k11 - k01 * k10
+        j00, j01, j10, j11 = k11 / det, -k01 / det, -k10 / det, k00 / det
+        d0, d1 = -X0, -X1
+        e0, e1 = 1.0 - X0, 1.0 - X1
+        r0x, r0y = j00 * d0 + j01 * d1, j10 * d0 + j11 * d1
+        r1x, r1y = j00 * e0 + j01 * d1, j10 * e0 + j11 * d1
+        r2x, r2y = j00 * d0 + j01 * e1, j10 * d0 + j11 * e1
+        if simplex:
+            return r0x, r0y, r1x, r1y, r2x, r2y, 0.0, 0.0
+        return r0x, r0y, r1x, r1y, r2x, r2y, j00 * e0 + j01 * e1, j10 * e0 + j11 * e1
+
+    @njit(inline="always")
+    def carried2(C, spin, p, N, r, kind):  # pragma: no cover - compiled
+        r"""The matrix P2G maps (c00, c01, c10, c11): ``C[p]``, plus for APIC the rotation that
+        gives it the stored spin at the present :math:`D_p = \sum_a N_a r_a r_a^T`
+        (:func:`fempm.kernels.affine.carried`)."""
+        c00, c01, c10, c11 = C[p, 0, 0], C[p, 0, 1], C[p, 1, 0], C[p, 1, 1]
+        if kind != APIC:
+            return c00, c01, c10, c11
+        N0, N1, N2, N3 = N
+        r0x, r0y, r1x, r1y, r2x, r2y, r3x, r3y = r
+        d00 = N0 * r0x * r0x + N1 * r1x * r1x + N2 * r2x * r2x + N3 * r3x * r3x
+        d01 = N0 * r0x * r0y + N1 * r1x * r1y + N2 * r2x * r2y + N3 * r3x * r3y
+        d11 = N0 * r0y * r0y + N1 * r1y * r1y + N2 * r2y * r2y + N3 * r3y * r3y
+        top = max(r0x * r0x + r0y * r0y, r1x * r1x + r1y * r1y, r2x * r2x + r2y * r2y, r3x * r3x + r3y * r3y)
+        tr = d00 + d11
+        if tr > THIN * top:
+            w = (spin[p, 0] - (c10 * d00 + c11 * d01 - c00 * d01 - c01 * d11)) / tr
+            c01 -= w
+            c10 += w
+        return c00, c01, c10, c11
+
+    @njit(inline="always")
+    def spin2(N, r, a, b):  # pragma: no cover - compiled
+        r""":math:`\epsilon : B_p^T = \sum_a N_a (r_a \times v_a)` of the nodal velocities
+        ``a`` (x components) and ``b`` (y)."""
+        N0, N1, N2, N3 = N
+        r0x, r0y, r1x, r1y, r2x, r2y, r3x, r3y = r
+        a0, a1, a2, a3 = a
+        b0, b1, b2, b3 = b
+        return (N0 * (r0x * b0 - r0y * a0) + N1 * (r1x * b1 - r1y * a1) + N2 * (r2x * b2 - r2y * a2)
+                + N3 * (r3x * b3 - r3y * a3))
