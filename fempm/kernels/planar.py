@@ -21,7 +21,6 @@ import functools
 
 import numpy as np
 
-from fempm.kernels.affine import APIC
 from fempm.kernels.particle_checks import LINEAR_ELASTIC, NEO_HOOKEAN
 from fempm.kernels.shape import AVAILABLE
 
@@ -33,7 +32,7 @@ if AVAILABLE:
     from fempm.kernels.kinematics import add_totals
     from fempm.kernels.multilinear import quad_pull_back
     from fempm.kernels.particle_checks import count_j, stable_time
-    from fempm.kernels.planar_affine import carried2, offsets2, spin2
+    from fempm.kernels.planar_affine import add_affine, affine_g2p2, carried2, offsets2
     from fempm.kernels.shape import inside_after_pull_back, star_search
 
     @njit(inline="always")
@@ -80,25 +79,6 @@ if AVAILABLE:
         if quad:
             out[i3, col] += N3 * q0
             out[i3, col + 1] += N3 * q1
-
-    @njit(inline="always")
-    def add_affine(out, col, dofs, values, q, mc, r, quad):  # pragma: no cover - compiled
-        r"""``out[i_a, col:col+2]`` += :math:`N_a (q + M C r_a)` (``q`` = :math:`M v`, ``mc`` =
-        :math:`M C` row by row, ``r`` the offsets)."""
-        i0, i1, i2, i3 = dofs
-        N0, N1, N2, N3 = values
-        q0, q1 = q
-        m00, m01, m10, m11 = mc
-        r0x, r0y, r1x, r1y, r2x, r2y, r3x, r3y = r
-        out[i0, col] += N0 * (q0 + m00 * r0x + m01 * r0y)
-        out[i0, col + 1] += N0 * (q1 + m10 * r0x + m11 * r0y)
-        out[i1, col] += N1 * (q0 + m00 * r1x + m01 * r1y)
-        out[i1, col + 1] += N1 * (q1 + m10 * r1x + m11 * r1y)
-        out[i2, col] += N2 * (q0 + m00 * r2x + m01 * r2y)
-        out[i2, col + 1] += N2 * (q1 + m10 * r2x + m11 * r2y)
-        if quad:
-            out[i3, col] += N3 * (q0 + m00 * r3x + m01 * r3y)
-            out[i3, col + 1] += N3 * (q1 + m10 * r3x + m11 * r3y)
 
     @njit(inline="always")
     def deform(F, p, dt, L00, L01, L10, L11):  # pragma: no cover - compiled
@@ -217,8 +197,7 @@ def g2p_kernel(simplex: bool, affine: bool, blend: bool, kinematics: bool, move:
     """:func:`fempm.kernels.lumped._g2p_kernel` for ``triangle`` (``simplex``) or
     ``quadrilateral`` cells, ``affine`` or multilinear (``kind``, APIC or TPIC, in a blend pass:
     affine cells; :mod:`fempm.kernels.planar_affine`)."""
-    QUAD = not simplex
-    KIND = kind
+    QUAD, KIND = not simplex, kind
 
     @njit(cache=True, error_model="numpy")
     def g2p_update(where, grid, state, laws, moves, outputs, groups, carried=None):  # pragma: no cover
@@ -243,31 +222,19 @@ def g2p_kernel(simplex: bool, affine: bool, blend: bool, kinematics: bool, move:
             vg1 = N0 * b0 + N1 * b1 + N2 * b2
             if QUAD:
                 a3, b3 = v_new[i3, o], v_new[i3, o1]
-                vg0 += N3 * a3
-                vg1 += N3 * b3
+                vg0, vg1 = vg0 + N3 * a3, vg1 + N3 * b3
             if blend and not still:
                 dv0 = N0 * (a0 - v_old[i0, o]) + N1 * (a1 - v_old[i1, o]) + N2 * (a2 - v_old[i2, o])
                 dv1 = N0 * (b0 - v_old[i0, o1]) + N1 * (b1 - v_old[i1, o1]) + N2 * (b2 - v_old[i2, o1])
                 if QUAD:
-                    dv0 += N3 * (a3 - v_old[i3, o])
-                    dv1 += N3 * (b3 - v_old[i3, o1])
-                v[p, 0] = flip * (v[p, 0] + dv0) + (1.0 - flip) * vg0
-                v[p, 1] = flip * (v[p, 1] + dv1) + (1.0 - flip) * vg1
-            if KIND:  # the affine state: C = L (degree 1), APIC's spin, the re-map with them
-                r = offsets2(X0, X1, (k00, k01, k10, k11), simplex)
-                N4 = (N0, N1, N2, N3 if QUAD else 0.0)
-                C[p, 0, 0] = a0 * g0x + a1 * g1x + a2 * g2x + (a3 * g3x if QUAD else 0.0)
-                C[p, 0, 1] = a0 * g0y + a1 * g1y + a2 * g2y + (a3 * g3y if QUAD else 0.0)
-                C[p, 1, 0] = b0 * g0x + b1 * g1x + b2 * g2x + (b3 * g3x if QUAD else 0.0)
-                C[p, 1, 1] = b0 * g0y + b1 * g1y + b2 * g2y + (b3 * g3y if QUAD else 0.0)
-                if KIND == APIC:
-                    spin[p, 0] = spin2(N4, r, (a0, a1, a2, a3 if QUAD else 0.0), (b0, b1, b2, b3 if QUAD else 0.0))
-            if remap and KIND and remap_affine:
-                mp = mass[p]
-                c00, c01, c10, c11 = carried2(C, spin, p, N4, r, KIND)
-                add_affine(mom, o, (i0, i1, i2, i3), (N0, N1, N2, N3), (mp * v[p, 0], mp * v[p, 1]),
-                           (mp * c00, mp * c01, mp * c10, mp * c11), r, QUAD)
-            elif remap:  # MUSL: the blended momenta back to the grid, in the same pass
+                    dv0, dv1 = dv0 + N3 * (a3 - v_old[i3, o]), dv1 + N3 * (b3 - v_old[i3, o1])
+                v[p, 0], v[p, 1] = flip * (v[p, 0] + dv0) + (1.0 - flip) * vg0, flip * (v[p, 1] + dv1) + (1.0 - flip) * vg1
+            if KIND:  # the affine state (C = L, APIC's spin) and with the lumped mass the re-map with it
+                va, vb = (a0, a1, a2, a3 if QUAD else 0.0), (b0, b1, b2, b3 if QUAD else 0.0)
+                affine_g2p2(p, (X0, X1, (k00, k01, k10, k11), simplex, QUAD), ((N0, N1, N2, N3 if QUAD else 0.0), va, vb,
+                            (g0x, g0y, g1x, g1y, g2x, g2y, g3x, g3y), (i0, i1, i2, i3)), (C, spin, mom, o, mass, v),
+                            remap and remap_affine, KIND)
+            if remap and not (KIND and remap_affine):  # MUSL: the blended momenta back to the grid, in the same pass
                 add_pair(mom, o, (i0, i1, i2, i3), (N0, N1, N2, N3), mass[p] * v[p, 0], mass[p] * v[p, 1], QUAD)
             if kinematics:
                 L00 = a0 * g0x + a1 * g1x + a2 * g2x
@@ -275,10 +242,7 @@ def g2p_kernel(simplex: bool, affine: bool, blend: bool, kinematics: bool, move:
                 L10 = b0 * g0x + b1 * g1x + b2 * g2x
                 L11 = b0 * g0y + b1 * g1y + b2 * g2y
                 if QUAD:
-                    L00 += a3 * g3x
-                    L01 += a3 * g3y
-                    L10 += b3 * g3x
-                    L11 += b3 * g3y
+                    L00, L01, L10, L11 = L00 + a3 * g3x, L01 + a3 * g3y, L10 + b3 * g3x, L11 + b3 * g3y
                 L00, L01, L10, L11 = (0.0, 0.0, 0.0, 0.0) if still else (L00, L01, L10, L11)
                 n00, n01, n10, n11, J = deform(F, p, dt, L00, L01, L10, L11)
                 if keep_L:

@@ -17,7 +17,26 @@ __all__: list[str] = []
 if AVAILABLE:
     from numba import njit
 
-    __all__ += ["carried2", "offsets2", "spin2"]
+    __all__ += ["add_affine", "affine_g2p2", "carried2", "offsets2", "spin2"]
+
+    @njit(inline="always")
+    def add_affine(out, col, dofs, values, q, mc, r, quad):  # pragma: no cover - compiled
+        r"""``out[i_a, col:col+2]`` += :math:`N_a (q + M C r_a)` (``q`` = :math:`M v`, ``mc`` =
+        :math:`M C` row by row, ``r`` the offsets)."""
+        i0, i1, i2, i3 = dofs
+        N0, N1, N2, N3 = values
+        q0, q1 = q
+        m00, m01, m10, m11 = mc
+        r0x, r0y, r1x, r1y, r2x, r2y, r3x, r3y = r
+        out[i0, col] += N0 * (q0 + m00 * r0x + m01 * r0y)
+        out[i0, col + 1] += N0 * (q1 + m10 * r0x + m11 * r0y)
+        out[i1, col] += N1 * (q0 + m00 * r1x + m01 * r1y)
+        out[i1, col + 1] += N1 * (q1 + m10 * r1x + m11 * r1y)
+        out[i2, col] += N2 * (q0 + m00 * r2x + m01 * r2y)
+        out[i2, col + 1] += N2 * (q1 + m10 * r2x + m11 * r2y)
+        if quad:
+            out[i3, col] += N3 * (q0 + m00 * r3x + m01 * r3y)
+            out[i3, col + 1] += N3 * (q1 + m10 * r3x + m11 * r3y)
 
     @njit(inline="always")
     def offsets2(X0, X1, k, simplex):  # pragma: no cover - compiled
@@ -67,3 +86,28 @@ if AVAILABLE:
         b0, b1, b2, b3 = b
         return (N0 * (r0x * b0 - r0y * a0) + N1 * (r1x * b1 - r1y * a1) + N2 * (r2x * b2 - r2y * a2)
                 + N3 * (r3x * b3 - r3y * a3))
+
+    @njit(inline="always")
+    def affine_g2p2(p, geo, nodal, state, remap, kind):  # pragma: no cover - compiled
+        r"""G2P's affine state of particle p from the updated grid velocity (``geo`` = (X0, X1,
+        k, simplex, quad); ``nodal`` = (N, the velocities' x and y components, the gradients
+        (g0x, g0y, ...), the dofs)): :math:`C_p = L_p`, APIC's spin; with ``remap`` (the lumped
+        mass's MUSL) the particle's momenta with their affine part into ``mom`` (``state`` =
+        (C, spin, mom, the first column, mass, v))."""
+        X0, X1, k, simplex, quad = geo
+        N4, a, b, g, dofs = nodal
+        C, spin, mom, o, mass, v = state
+        a0, a1, a2, a3 = a
+        b0, b1, b2, b3 = b
+        g0x, g0y, g1x, g1y, g2x, g2y, g3x, g3y = g
+        r = offsets2(X0, X1, k, simplex)
+        C[p, 0, 0] = a0 * g0x + a1 * g1x + a2 * g2x + a3 * g3x
+        C[p, 0, 1] = a0 * g0y + a1 * g1y + a2 * g2y + a3 * g3y
+        C[p, 1, 0] = b0 * g0x + b1 * g1x + b2 * g2x + b3 * g3x
+        C[p, 1, 1] = b0 * g0y + b1 * g1y + b2 * g2y + b3 * g3y
+        if kind == APIC:
+            spin[p, 0] = spin2(N4, r, a, b)
+        if remap:
+            mp = mass[p]
+            c00, c01, c10, c11 = carried2(C, spin, p, N4, r, kind)
+            add_affine(mom, o, dofs, N4, (mp * v[p, 0], mp * v[p, 1]), (mp * c00, mp * c01, mp * c10, mp * c11), r, quad)
