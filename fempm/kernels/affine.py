@@ -193,20 +193,18 @@ if AVAILABLE:
 
     @njit(inline="always")
     def g2p_affine(at, v, R, p, Lp, sizes, outputs, work):  # pragma: no cover - compiled
-        r"""What G2P stores of the grid velocity ``v`` at particle p (``at`` = (N, cell_dofs, c,
-        o): its basis, its cell and the nodal columns from ``o``; ``R`` its dofs' offsets;
-        ``sizes`` = (D, NK, KIND, CLOSED, PARTS)), given its velocity gradient ``Lp``: with
-        ``PARTS`` & 1 the matrix into ``out[p]``, with ``PARTS`` & 2 APIC's spin into ``spin[p]``
-        (``outputs`` = (out, spin))."""
+        r"""What G2P stores of the updated grid velocity ``v`` at particle p (``at`` = (N,
+        cell_dofs, c, o): its basis, its cell and the nodal columns from ``o``; ``R`` its dofs'
+        offsets; ``sizes`` = (D, NK, KIND, CLOSED)), given its velocity gradient ``Lp``: the
+        matrix into ``out[p]`` and APIC's spin into ``spin[p]`` (``outputs`` = (out, spin))."""
         N, cell_dofs, c, o = at
-        D, NK, KIND, CLOSED, PARTS = sizes
+        D, NK, KIND, CLOSED = sizes
         out, spin = outputs
         B, Dm, BL, Di, s = work
-        if PARTS & 1:
-            for j in range(D):
-                for k in range(D):
-                    out[p, j, k] = Lp[j, k]
-        if KIND != APIC or (CLOSED and not PARTS & 2):
+        for j in range(D):
+            for k in range(D):
+                out[p, j, k] = Lp[j, k]
+        if KIND != APIC:
             return
         for j in range(D):
             for k in range(D):
@@ -218,11 +216,10 @@ if AVAILABLE:
                 vj = w * v[i, o + j]
                 for k in range(D):
                     B[j, k] += vj * R[a, k]
-        if PARTS & 2:
-            spin_of(B, D, s)
-            for j in range(spin.shape[1]):
-                spin[p, j] = s[j]
-        if CLOSED or not PARTS & 1:
+        spin_of(B, D, s)
+        for j in range(spin.shape[1]):
+            spin[p, j] = s[j]
+        if CLOSED:
             return
         tr = second_moment(N, R, D, NK, Dm)[0]
         if not det(Dm, D) > THICK * (tr / D) ** D:

@@ -309,7 +309,6 @@ def _g2p_kernel(cell: str, blend: bool, kinematics: bool, move: bool, remap: boo
     DEGREE, BERNSTEIN = space_of(cell)
     # C_p = L_p: equal on degree-1 affine cells (fempm.transfer.affine.closed_form); P2 Lagrange's D_p is no moment
     CLOSED = (DEGREE == 1 and AFFINE) or (DEGREE == 2 and not BERNSTEIN)
-    PARTS = 3 if blend else 0  # the matrix and the spin, of the updated grid velocity
     FROM_K = DEGREE == 1 and AFFINE  # the dofs' offsets from the cell's inverse Jacobian (fempm.kernels.affine.offsets)
 
     @njit(cache=True, error_model="numpy")
@@ -343,9 +342,9 @@ def _g2p_kernel(cell: str, blend: bool, kinematics: bool, move: bool, remap: boo
             if blend and not still:
                 for j in range(D):
                     v[p, j] = flip * (v[p, j] + dv[j]) + (1.0 - flip) * vg[j]
-            if KIND and PARTS:
+            if KIND and blend:
                 offsets((X, K, c, cell_dofs, xi, x), p, (D, NK, SIMPLEX, FROM_K), R, Jw)
-                g2p_affine((N, cell_dofs, c, o), v_new, R, p, Lp, (D, NK, KIND, CLOSED, PARTS), (C, spin), gwork)
+                g2p_affine((N, cell_dofs, c, o), v_new, R, p, Lp, (D, NK, KIND, CLOSED), (C, spin), gwork)
             if remap:  # MUSL: the blended momenta back to the grid, in the same pass
                 if remap_affine:
                     carried_at(N, R, (C, spin), p, (D, NK, KIND), Dm, cwork)

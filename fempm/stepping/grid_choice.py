@@ -63,7 +63,7 @@ def choose_grid(state: StepState) -> Grid:
     transfer = state.options.velocity_transfer
     if state.contact is not None and transfer.name not in ("flip", "pic"):
         raise ValueError(f"contact (one velocity field per body) takes transfer='flip' or 'pic', not {transfer.name!r}")
-    state.affine()  # the particles' affine matrices, made where the transfer carries them
+    state.affine(check=True)  # the particles' affine matrices, made where the transfer carries them
     fbar = state.options.volumetric_average is not None
     if state.compiled and fbar:
         raise ValueError("compiled=True with volumetric='fbar': F-bar runs on the numpy step (compiled=None)")

@@ -40,7 +40,6 @@ from fempm.stepping.state import StepState
 from fempm.transfer.centres import NodalCentres
 from fempm.transfer.mapping import mass_centres
 from fempm.transfer.mass_models import FMPM, Lumped
-from fempm.transfer.transfers import AFFINE_FIELD, SPIN_FIELD
 
 __all__ = ["PointPasses"]
 
@@ -143,12 +142,8 @@ class PointPasses(Grid):
         kind = self.options.velocity_transfer.kind
         if not kind:
             return NO_AFFINE, 0
-        f = s.particles.fields
-        s.affine()
-        spin = f.get(SPIN_FIELD)
-        if spin is None:
-            spin = np.zeros((len(s.particles), 0))
-        return Affine(f[AFFINE_FIELD], spin, s.dof_coordinates()), kind
+        C, spin = s.affine()
+        return Affine(C, np.zeros((len(C), 0)) if spin is None else spin, s.dof_coordinates()), kind
 
     def _scatter(self, nodal, forces: Forces, cm: int, cv: int, cf: int, stable: str = "", velocity=None,
                  groups: Groups = NO_GROUPS, cg: int = -1, affine: bool = False):

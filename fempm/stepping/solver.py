@@ -351,7 +351,7 @@ class Solver:
         grad = np.asarray(gradient, dtype=np.float64)
         if grad.shape not in ((d, d), (len(p), d, d)):
             raise ValueError(f"the velocity gradient has shape {grad.shape}; expected ({d}, {d}) or ({len(p)}, {d}, {d})")
-        state = s.affine()
+        state = s.affine(check=True)
         if state is None:
             return
         grad = np.array(np.broadcast_to(grad, (len(p), d, d)), order="C")  # (writable: the passes update it)

@@ -120,13 +120,14 @@ class StepState:
         local = np.min(self.h_cell[p.cells][moving] / speed[moving], initial=np.inf)
         return self.options.cfl * p.comm.allreduce(local, op=MPI.MIN)
 
-    def affine(self) -> tuple[npt.NDArray, npt.NDArray | None] | None:
+    def affine(self, check: bool = False) -> tuple[npt.NDArray, npt.NDArray | None] | None:
         """The particles' affine matrices (the field ``affine``, (n, d, d)) and APIC's spins (the
         field ``affine_spin``, (n, 1) in 2D, (n, 3) in 3D; None for TPIC and in 1D), zeros where
-        the fields are new, where the transfer carries them; else None. Collective.
+        the fields are new, where the transfer carries them; else None. ``check``: their shapes
+        (collective; the choice of grid checks them, the step's passes read them).
 
         Raises:
-            ValueError: A given field of another shape (on every rank).
+            ValueError: With ``check``, a given field of another shape (on every rank).
         """
         transfer = self.options.velocity_transfer
         if not transfer.affine:
@@ -136,6 +137,8 @@ class StepState:
         k = affine.spin_width(d) if transfer.kind == 1 else 0
         C = p.fields.setdefault(AFFINE_FIELD, np.zeros((n, d, d)))
         spin = p.fields.setdefault(SPIN_FIELD, np.zeros((n, k))) if k else None
+        if not check:
+            return C, spin
         bad = [f"{name!r} has shape {np.shape(a)}; expected {shape}"
                for name, a, shape in ((AFFINE_FIELD, C, (n, d, d)), (SPIN_FIELD, spin, (n, k)))
                if a is not None and np.shape(a) != shape]
