@@ -26,6 +26,7 @@ ugimp         exact uGIMP                                           the base ste
 cpgimp        exact cpGIMP                                          the base step
 apic          APIC (fempm.transfer.transfers)                       the base step (FLIP)
 tpic          TPIC                                                  the base step (FLIP)
+apic0         APIC without the weak nodes' cutoff (affine_cutoff=0)  the base step (FLIP)
 xpic2         XPIC(2)                                               the base step (FLIP)
 bernstein2    Bernstein P2, lumped                                  the base step
 distorted     quadrilaterals that are not parallelograms (``quad``)  the base step (parallelograms)
@@ -85,6 +86,7 @@ CASES = {
     "cpgimp": Case({"domain": "cpgimp"}),
     "apic": Case({"transfer": "apic"}),
     "tpic": Case({"transfer": "tpic"}),
+    "apic0": Case({"transfer": "apic", "affine_cutoff": 0.0}),
     "xpic2": Case({"transfer": "xpic", "xpic_order": 2}),
     "bernstein2": Case(degree=2, variant="bernstein", meshes=("tri", "tet")),  # basix: simplices only
     "distorted": Case(meshes=("quad",), kind="distorted"),

@@ -211,7 +211,9 @@ def _run(args, rest: list[str]) -> int:
               "--steps N (fixed steps to t_end; implicit runs need it), --tangent analytic|finite-difference "
               "(implicit: the laws' own tangents or central differences), --volumetric standard|fbar, "
               "--outside raise|remove (particles that leave the mesh), --transfer flip|pic|apic|tpic|xpic (the velocity "
-              "transfer; flip takes the scene's --flip blend), --xpic-order M (XPIC's series terms, default 2)")
+              "transfer; flip takes the scene's --flip blend), --xpic-order M (XPIC's series terms, default 2), "
+              "--affine-cutoff C (APIC/TPIC: nodes below C of the largest mass pass their acceleration to the "
+              "particles' affine matrices in proportion; default 0.01)")
         print("run health (fempm.stepping.health.Health; a crossed limit stops the run with exit code 3):")
         limits = health_descriptions()
         for k, v in Health().asdict().items():

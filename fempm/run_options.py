@@ -127,18 +127,25 @@ def health_options(rest: list[str]) -> tuple[dict, list[str]]:
 #: the stepping options every scene takes on the command line, with the values they accept
 STEPPING_FLAGS = {"integrator": ("explicit", "implicit"), "dynamics": ("newmark", "quasi-static"), "steps": None,
                   "volumetric": ("standard", "fbar"), "outside": ("raise", "remove"),
-                  "tangent": ("analytic", "finite-difference"), "transfer": tuple(TRANSFERS), "xpic_order": None}
+                  "tangent": ("analytic", "finite-difference"), "transfer": tuple(TRANSFERS), "xpic_order": None,
+                  "affine_cutoff": float}
 
 
 def stepping_options(rest: list[str]) -> tuple[dict, list[str]]:
     """Split the stepping options every scene takes (``--integrator explicit|implicit``,
     ``--dynamics newmark|quasi-static``, ``--steps N``, ``--volumetric standard|fbar``,
     ``--outside raise|remove``, ``--tangent analytic|finite-difference``, ``--transfer
-    flip|pic|apic|tpic|xpic``, ``--xpic-order M``) from the scene options."""
+    flip|pic|apic|tpic|xpic``, ``--xpic-order M``, ``--affine-cutoff C``) from the scene options."""
     chosen, others = split_flags(rest, STEPPING_FLAGS)
     stepping = {}
     for name, (flag, value) in chosen.items():
         choices = STEPPING_FLAGS[name]
+        if choices is float:  # --affine-cutoff
+            try:
+                stepping[name] = float(value)
+            except ValueError:
+                raise UsageError(f"fempm run: option {flag} expects a number, got {value!r}") from None
+            continue
         if choices is None:  # --steps, --xpic-order
             if not (value.isdigit() and int(value) >= 1):
                 what = "steps" if name == "steps" else "series terms (XPIC(1) is PIC)"
@@ -153,6 +160,8 @@ def stepping_options(rest: list[str]) -> tuple[dict, list[str]]:
             raise UsageError(f"fempm run: option --{name} applies to --integrator implicit")
     if "xpic_order" in stepping and stepping.get("transfer") != "xpic":
         raise UsageError("fempm run: option --xpic-order applies to --transfer xpic")
+    if "affine_cutoff" in stepping and stepping.get("transfer") not in ("apic", "tpic"):
+        raise UsageError("fempm run: option --affine-cutoff applies to --transfer apic or tpic")
     return stepping, others
 
 
@@ -163,8 +172,8 @@ def with_stepping(scene, stepping: dict):
         return scene
     if "outside" in stepping:
         scene.outside = stepping["outside"]
-    changes = {k: stepping[k] for k in ("integrator", "dynamics", "volumetric", "tangent", "transfer", "xpic_order")
-               if k in stepping}
+    changes = {k: stepping[k] for k in ("integrator", "dynamics", "volumetric", "tangent", "transfer", "xpic_order",
+                                   "affine_cutoff") if k in stepping}
     if stepping.get("integrator") == "implicit" and stepping.get("dynamics") == "quasi-static":
         changes["load_ramp"] = scene.t_end
     if changes:

@@ -192,20 +192,10 @@ if AVAILABLE:
                 mom[i, o + j] += N[a] * (m * t)
 
     @njit(inline="always")
-    def g2p_affine(at, v, R, p, Lp, sizes, outputs, work):  # pragma: no cover - compiled
-        r"""What G2P stores of the updated grid velocity ``v`` at particle p (``at`` = (N,
-        cell_dofs, c, o): its basis, its cell and the nodal columns from ``o``; ``R`` its dofs'
-        offsets; ``sizes`` = (D, NK, KIND, CLOSED)), given its velocity gradient ``Lp``: the
-        matrix into ``out[p]`` and APIC's spin into ``spin[p]`` (``outputs`` = (out, spin))."""
+    def velocity_moment(at, v, R, D, NK, B):  # pragma: no cover - compiled
+        r""":math:`B = \sum_a N_a v_a r_a^T` of the nodal velocity ``v`` (``at`` as
+        :func:`g2p_affine`'s)."""
         N, cell_dofs, c, o = at
-        D, NK, KIND, CLOSED = sizes
-        out, spin = outputs
-        B, Dm, BL, Di, s = work
-        for j in range(D):
-            for k in range(D):
-                out[p, j, k] = Lp[j, k]
-        if KIND != APIC:
-            return
         for j in range(D):
             for k in range(D):
                 B[j, k] = 0.0
@@ -216,12 +206,35 @@ if AVAILABLE:
                 vj = w * v[i, o + j]
                 for k in range(D):
                     B[j, k] += vj * R[a, k]
-        spin_of(B, D, s)
+
+    @njit(inline="always")
+    def g2p_affine(at, velocities, R, p, Lp, sizes, outputs, work):  # pragma: no cover - compiled
+        r"""What G2P stores at particle p (``at`` = (N, cell_dofs, c, o): its basis, its cell and
+        the nodal columns from ``o``; ``R`` its dofs' offsets; ``sizes`` = (D, NK, KIND, CLOSED))
+        of the grid velocities ``velocities`` = (v, v_spin, apart): the matrix of ``v``, given
+        its velocity gradient ``Lp``, into ``out[p]`` and APIC's spin, of ``v_spin`` when
+        ``apart`` (``affine_cutoff``: the updated velocity) else of ``v``, into ``spin[p]``
+        (``outputs`` = (out, spin))."""
+        v, v_spin, apart = velocities
+        D, NK, KIND, CLOSED = sizes
+        out, spin = outputs
+        B, Dm, BL, Di, s = work
+        for j in range(D):
+            for k in range(D):
+                out[p, j, k] = Lp[j, k]
+        if KIND != APIC:
+            return
+        velocity_moment(at, v, R, D, NK, B)
+        if apart:  # (BL as scratch)
+            velocity_moment(at, v_spin, R, D, NK, BL)
+            spin_of(BL, D, s)
+        else:
+            spin_of(B, D, s)
         for j in range(spin.shape[1]):
             spin[p, j] = s[j]
         if CLOSED:
             return
-        tr = second_moment(N, R, D, NK, Dm)[0]
+        tr = second_moment(at[0], R, D, NK, Dm)[0]
         if not det(Dm, D) > THICK * (tr / D) ** D:
             return
         inverse(Dm, D, Di)

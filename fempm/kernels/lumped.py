@@ -233,7 +233,7 @@ def _scatter_kernel(cell: str, with_mass: bool, with_momentum: bool, with_force:
         Dm, _, work, (R, Jw) = affine_work(D, NK)
         Cu = work[0]
         if KIND:
-            C, spin, xi = affine
+            C, spin, xi = affine.C, affine.spin, affine.xi
         else:  # (typed, unused)
             C, spin, xi = np.empty((0, D, D)), np.empty((0, 1)), np.empty((0, D))
         best = 0.0 if bound else np.inf
@@ -300,8 +300,8 @@ def _g2p_kernel(cell: str, blend: bool, kinematics: bool, move: bool, remap: boo
     M_p |v_p|,\ \sum_p M_p v_p]` (W of the compiled laws; 0 for the others). Returns (#non-finite J,
     #J <= 0, min J, max J, #non-finite x or v). ``grouped``: particle p reads (and re-maps into) the columns ``group[p] d`` to
     ``(group[p] + 1) d`` of the nodal arrays. ``kind`` (1 APIC, 2 TPIC; a blend pass): the
-    particles' affine matrices (and APIC's spins) of ``v_new`` into the ``affine`` bundle
-    (:func:`fempm.kernels.affine.g2p_affine`); ``remap_affine``: the re-map maps them too (the
+    particles' affine matrices (of the bundle's ``v`` under ``affine_cutoff``) and APIC's spins
+    of ``v_new`` into the ``affine`` bundle (:func:`fempm.kernels.affine.g2p_affine`); ``remap_affine``: the re-map maps them too (the
     lumped mass)."""
     D, NK, SIMPLEX = CELLS[cell]
     KIND = kind
@@ -329,9 +329,11 @@ def _g2p_kernel(cell: str, blend: bool, kinematics: bool, move: bool, remap: boo
         acc = np.zeros(3 + D)  # the state's sums (totals)
         Dm, gwork, cwork, (R, Jw) = affine_work(D, NK)
         if KIND:
-            C, spin, xi = affine
+            C, spin, xi, va = affine
         else:  # (typed, unused)
-            C, spin, xi = np.empty((0, D, D)), np.empty((0, 1)), np.empty((0, D))
+            C, spin, xi, va = np.empty((0, D, D)), np.empty((0, 1)), np.empty((0, D)), np.empty((0, D))
+        cut = va.shape[0] > 0  # affine_cutoff: the matrices of their own grid velocity
+        vga, dva, La = np.empty(D), np.empty(D), np.empty((D, D))
         for p in range(n):
             c = cells[p]
             shape(X, p, K, c, SIMPLEX, AFFINE, D, NK, N, G, DEGREE, BERNSTEIN)
@@ -344,7 +346,13 @@ def _g2p_kernel(cell: str, blend: bool, kinematics: bool, move: bool, remap: boo
                     v[p, j] = flip * (v[p, j] + dv[j]) + (1.0 - flip) * vg[j]
             if KIND and blend:
                 offsets((X, K, c, cell_dofs, xi, x), p, (D, NK, SIMPLEX, FROM_K), R, Jw)
-                g2p_affine((N, cell_dofs, c, o), v_new, R, p, Lp, (D, NK, KIND, CLOSED), (C, spin), gwork)
+                if cut:  # the matrix of the cutoff's velocity, the spin of v_new
+                    gather(N, G, cell_dofs, c, o, va, va, False, True, D, NK, (vga, dva, La))
+                    g2p_affine((N, cell_dofs, c, o), (va, v_new, True), R, p, La, (D, NK, KIND, CLOSED), (C, spin),
+                               gwork)
+                else:
+                    g2p_affine((N, cell_dofs, c, o), (v_new, v_new, False), R, p, Lp, (D, NK, KIND, CLOSED),
+                               (C, spin), gwork)
             if remap:  # MUSL: the blended momenta back to the grid, in the same pass
                 if remap_affine:
                     carried_at(N, R, (C, spin), p, (D, NK, KIND), Dm, cwork)

@@ -89,13 +89,14 @@ if AVAILABLE:
 
     @njit(inline="always")
     def affine_g2p2(p, geo, nodal, state, remap, kind):  # pragma: no cover - compiled
-        r"""G2P's affine state of particle p from the updated grid velocity (``geo`` = (X0, X1,
-        k, simplex, quad); ``nodal`` = (N, the velocities' x and y components, the gradients
-        (g0x, g0y, ...), the dofs)): :math:`C_p = L_p`, APIC's spin; with ``remap`` (the lumped
-        mass's MUSL) the particle's momenta with their affine part into ``mom`` (``state`` =
-        (C, spin, mom, the first column, mass, v))."""
+        r"""G2P's affine state of particle p (``geo`` = (X0, X1, k, simplex, quad); ``nodal`` =
+        (N, the updated grid velocity's x and y components, those of the velocity the matrix
+        is taken from (``affine_cutoff``; else the same), the gradients (g0x, g0y, ...), the
+        dofs)): :math:`C_p = L_p`, APIC's spin of the updated velocity; with ``remap`` (the
+        lumped mass's MUSL) the particle's momenta with their affine part into ``mom``
+        (``state`` = (C, spin, mom, the first column, mass, v))."""
         X0, X1, k, simplex, quad = geo
-        N4, a, b, g, dofs = nodal
+        N4, (sa, sb), (a, b), g, dofs = nodal
         C, spin, mom, o, mass, v = state
         a0, a1, a2, a3 = a
         b0, b1, b2, b3 = b
@@ -106,7 +107,7 @@ if AVAILABLE:
         C[p, 1, 0] = b0 * g0x + b1 * g1x + b2 * g2x + b3 * g3x
         C[p, 1, 1] = b0 * g0y + b1 * g1y + b2 * g2y + b3 * g3y
         if kind == APIC:
-            spin[p, 0] = spin2(N4, r, a, b)
+            spin[p, 0] = spin2(N4, r, sa, sb)
         if remap:
             mp = mass[p]
             c00, c01, c10, c11 = carried2(C, spin, p, N4, r, kind)

@@ -15,10 +15,12 @@ velocity (``position="particle"``: with MUSL the re-mapped grid velocity would m
 otherwise than their momenta say), every node with mass takes its force (``mass_cutoff=0`` by
 default) and the consistent mass lumps no row (``lump_below=0``), so APIC keeps the angular
 momentum to round-off with the lumped and the consistent mass. What that costs (docs/transfers.md):
-beyond 20 cells a node at the rim, supported by one particle with a tiny share of its mass,
-takes an acceleration that the velocity gradient, hence APIC's and TPIC's affine matrices,
-carry back (``mass_cutoff`` about 1e-2 holds them); the consistent mass without lumped rows
-grows unstable at the rim within a few hundred steps.
+a node at the rim, supported by one particle with a tiny share of its mass, takes an
+acceleration that the velocity gradient, hence APIC's and TPIC's affine matrices, would carry
+back (the transfers' ``affine_cutoff``, 1e-2 by default, weighs it by the node's mass, and APIC
+still keeps the angular momentum to round-off, 10 to 60 cells); the consistent mass without
+lumped rows grows unstable at the rim within a few hundred steps; structured triangles need
+``cfl=0.2`` with APIC.
 """
 
 from __future__ import annotations
@@ -84,8 +86,7 @@ def spin(
         rho: The density.
         mass_cutoff: Nodes whose mass is below this share of the largest take no force update
             (:class:`fempm.stepping.StepOptions`; 0: every node takes its force, the angular
-            momentum kept to round-off; APIC and TPIC beyond 20 cells need about 1e-2,
-            docs/transfers.md).
+            momentum kept to round-off).
     """
     check_counts(cells=cells, ppc=ppc)
     if not radius <= 0.45:

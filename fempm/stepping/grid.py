@@ -350,7 +350,14 @@ class SingleFieldGrid(BasisGrid):
         elif kinematics or move:
             at_grid, L = g2p.velocity_and_gradient(basis, v_new)
         if transfer.affine and blend:  # the affine state of the updated grid velocity
-            C, spin = affine.grid_affine(transfer.kind, basis, v_new, s.dof_coordinates(), p.x, L)
+            v_affine, L_affine = v_new, L
+            if self.options.affine_share:  # weak nodes' accelerations in proportion to their mass
+                m = self.mass_op.lumped_masses()
+                weak = self.options.affine_share * p.comm.allreduce(float(m.max(initial=0.0)), op=MPI.MAX)
+                v_affine = affine.affine_velocity(v_new, v_old, m, weak)
+                L_affine = g2p.velocity_and_gradient(basis, v_affine)[1]
+            C, spin = affine.grid_affine(transfer.kind, basis, v_affine, s.dof_coordinates(), p.x, L_affine,
+                                         v_spin=None if v_affine is v_new else v_new)
             fld[AFFINE_FIELD] = C
             if spin is not None and spin.shape[1]:
                 fld[SPIN_FIELD] = spin

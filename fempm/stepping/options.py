@@ -13,7 +13,12 @@ from fempm.transfer.domains import step_domain
 from fempm.transfer.mass_models import FMPM, mass_model
 from fempm.transfer.transfers import velocity_transfer
 
-__all__ = ["SchemeName", "SimulationError", "StepOptions"]
+__all__ = ["AFFINE_CUTOFF", "SchemeName", "SimulationError", "StepOptions"]
+
+#: the explicit step's ``affine_cutoff`` by default: the share of the largest nodal mass below
+#: which a node passes its acceleration to APIC's and TPIC's affine matrices in proportion
+#: (docs/transfers.md: 1e-3 lets a disk of 30 cells grow energy, 1e-2 holds 10 to 60 cells)
+AFFINE_CUTOFF = 1e-2
 
 #: the names of the built-in schemes (the option's values; a :class:`fempm.stepping.schemes.Scheme`
 #: subclass may be given instead)
@@ -44,6 +49,13 @@ class StepOptions:
             (extended PIC of order ``xpic_order``: the lumped velocities extrapolated by the
             series FMPM sums before G2P). APIC and TPIC keep a particle field ``affine`` (n, d, d).
         xpic_order: XPIC's m, an integer in [1, 10] (XPIC(1) is PIC).
+        affine_cutoff: APIC and TPIC: G2P takes the particles' affine matrices from
+            :math:`v_i + w_i (v_i^+ - v_i)`, :math:`w_i = \min(1, m_i / (c \max_j m_j))` with
+            this c, so that nodes with a small share of mass do not feed their large
+            accelerations back through :math:`\nabla N` (:func:`fempm.transfer.affine.affine_velocity`;
+            APIC's spin, and with it the angular momentum, stays that of :math:`v^+`). None:
+            :data:`AFFINE_CUTOFF` with the explicit step, 0 with the implicit one; 0: the
+            updated grid velocity itself (unstable at the CFL step on fine grids).
         mass: The grid mass: lumped, consistent, or FMPM(k) as fmpmK (or ``fmpm`` with
             ``fmpm_order`` k). FMPM(k) (:mod:`fempm.transfer.fmpm`) takes k - 1 extra G2P/P2G
             sweeps, and a step :math:`1/\sqrt{k}` of the lumped one unless ``lumped_forces``.
@@ -94,6 +106,7 @@ class StepOptions:
     flip: float = 1.0
     transfer: Literal["flip", "pic", "apic", "tpic", "xpic"] = "flip"
     xpic_order: int = 2
+    affine_cutoff: float | None = None
     mass: str = "lumped"
     cfl: float = 0.4
     mass_cutoff: float = 1e-9
@@ -114,6 +127,21 @@ class StepOptions:
     max_cuts: int = 6
     load_ramp: float | None = None
     volumetric: Literal["standard", "fbar"] = "standard"
+
+    def _affine_share(self) -> float:
+        """The ``affine_cutoff`` in force (see the class)."""
+        given = self.affine_cutoff
+        if given is None:
+            return AFFINE_CUTOFF if self.velocity_transfer.affine and self.integration is None else 0.0
+        if not 0.0 <= given < 1.0:
+            raise ValueError(f"affine_cutoff={given} must lie in [0, 1): a fraction of the largest nodal mass")
+        if given and not self.velocity_transfer.affine:
+            raise ValueError(f"affine_cutoff={given} applies to transfer='apic' or 'tpic', not "
+                             f"{self.velocity_transfer.name!r}")
+        if given and self.integration is not None:
+            raise ValueError("the implicit step takes no affine_cutoff (an explicit step's bound of the weak nodes' "
+                             "feedback): give affine_cutoff=0")
+        return float(given)
 
     def __post_init__(self):
         check_numbers(self)
@@ -137,6 +165,7 @@ class StepOptions:
         if self.integration is not None and isinstance(self.mass_model, FMPM):
             raise ValueError("the implicit step takes lumped or consistent mass, not FMPM (an explicit step's "
                              "approximation of the consistent mass): give mass='consistent'")
+        self.affine_share = self._affine_share()
         if self.integration is not None and self.velocity_transfer.name not in ("flip", "pic", "apic"):
             raise ValueError(f"the implicit step takes transfer='flip', 'pic' or 'apic', not {self.transfer!r}")
         if self.integration is not None and self.particle_position:

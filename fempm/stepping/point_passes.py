@@ -37,6 +37,7 @@ from fempm.stepping.loads import external_forces
 from fempm.stepping.nodal import kept_nodal_array, sum_ghosts
 from fempm.stepping.spaces import compiled_space
 from fempm.stepping.state import StepState
+from fempm.transfer.affine import affine_velocity
 from fempm.transfer.centres import NodalCentres
 from fempm.transfer.mapping import mass_centres
 from fempm.transfer.mass_models import FMPM, Lumped
@@ -92,6 +93,7 @@ class PointPasses(Grid):
         self.affine_apart = state.options.velocity_transfer.affine and type(state.options.mass_model) is FMPM
         self._start = self.nodal_array(d) if self.affine_apart else None
         self.start: npt.NDArray | None = None
+        self.top = 0.0  # the step's largest nodal mass, over all ranks (set as the step opens)
         self._sums = np.zeros(3 + d)  # the moving pass's sums of the state (state_sums)
         self._summed = False  # whether they are the last step's
 
@@ -135,15 +137,27 @@ class PointPasses(Grid):
         return State(p.x, f["v"] if velocity is None else velocity, f["F"], f["volume0"], p.volume, f["sigma"],
                      f["body"], p.mass)
 
-    def affine_state(self) -> tuple[Affine, int]:
-        """The passes' affine bundle (the particles' ``affine`` and ``affine_spin`` fields and the
-        dofs' coordinates) and the transfer's code (0: none; :mod:`fempm.kernels.affine`)."""
+    def affine_state(self, velocity: npt.NDArray | None = None) -> tuple[Affine, int]:
+        """The passes' affine bundle (the particles' ``affine`` and ``affine_spin`` fields, the
+        dofs' coordinates and the grid ``velocity`` G2P takes the affine state from, None: the
+        updated one) and the transfer's code (0: none; :mod:`fempm.kernels.affine`)."""
         s = self.state
         kind = self.options.velocity_transfer.kind
         if not kind:
             return NO_AFFINE, 0
         C, spin = s.affine()
-        return Affine(C, np.zeros((len(C), 0)) if spin is None else spin, s.dof_coordinates()), kind
+        v = np.zeros((0, self.d)) if velocity is None else velocity
+        return Affine(C, np.zeros((len(C), 0)) if spin is None else spin, s.dof_coordinates(), v), kind
+
+    def affine_velocity(self, v_new: npt.NDArray, v_old: npt.NDArray) -> npt.NDArray | None:
+        """The grid velocity G2P takes the affine matrices from under ``affine_cutoff``
+        (:func:`fempm.transfer.affine.affine_velocity` of the step's lumped masses), None where
+        that is the updated velocity itself (no cutoff, or no node below it)."""
+        cut = self.options.affine_share
+        if not cut:
+            return None
+        v = affine_velocity(v_new, v_old, self._nodal[1][:, 0], cut * self.top)
+        return None if v is v_new else v
 
     def _scatter(self, nodal, forces: Forces, cm: int, cv: int, cf: int, stable: str = "", velocity=None,
                  groups: Groups = NO_GROUPS, cg: int = -1, affine: bool = False):
@@ -191,9 +205,9 @@ class PointPasses(Grid):
         blend pass of APIC or TPIC also stores the affine matrices (and re-maps with them with
         the lumped mass)."""
         p = self.state.particles
-        affine, kind = self.affine_state() if blend else (NO_AFFINE, 0)
+        carried, kind = self.affine_state(self.affine_velocity(grid.v_new, grid.v_old)) if blend else (NO_AFFINE, 0)
         return self.kernels.g2p_update(Basis(p.cells, p.X, self.K, self.cell_dofs), grid, state, self.laws, moves,
-                                       outputs, blend=blend, kinematics=kinematics, move=move, affine=affine,
+                                       outputs, blend=blend, kinematics=kinematics, move=move, affine=carried,
                                        kind=kind, remap_affine=self.affine_with_momenta)
 
     def _centroids(self, nodal) -> NodalCentres | None:

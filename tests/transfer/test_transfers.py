@@ -1,7 +1,7 @@
 """The velocity transfers (fempm.transfer.transfers): APIC and TPIC map an affine velocity field
 exactly for every mass model, cell type, degree and particle domain; XPIC(1) is PIC and XPIC(m)
 with the lumped mass is FMPM(m) with lumped forces and PIC; the spinning disk keeps its angular
-momentum with APIC; bad options are clear errors."""
+momentum with APIC, and on fine grids with ``affine_cutoff``; bad options are clear errors."""
 
 from __future__ import annotations
 
@@ -21,6 +21,8 @@ from fempm.materials import LinearElastic
 from fempm.particles.seeding import create_particles
 from fempm.scenes import spin
 from fempm.stepping.contact import Contact
+from fempm.stepping.options import SimulationError
+from fempm.transfer.affine import affine_velocity
 from fempm.transfer.transfers import AFFINE_FIELD, SPIN_FIELD, velocity_transfer
 
 CELLS = ("triangle", "quadrilateral", "tetrahedron", "hexahedron")
@@ -191,6 +193,85 @@ def test_apic_with_the_consistent_mass_keeps_the_angular_momentum():
     assert drift < 1e-10 and kinetic > 0.99, (drift, kinetic)
 
 
+def test_the_affine_cutoff_weights_weak_nodes_accelerations_by_their_mass():
+    rng = np.random.default_rng(5)
+    v_old, v_new = rng.normal(size=(4, 2)), rng.normal(size=(4, 2))
+    mass = np.array([2.0, 1.0, 0.5, 0.0])
+    assert affine_velocity(v_new, v_old, mass, 0.0) is v_new
+    v = affine_velocity(v_new, v_old, mass, 1.0)
+    assert np.allclose(v, v_old + np.array([1.0, 1.0, 0.5, 0.0])[:, None] * (v_new - v_old), rtol=0, atol=1e-15)
+    assert affine_velocity(v_new, v_old, mass, 0.5) is v_new  # no node with mass below the cutoff
+
+
+@pytest.mark.parametrize("mesh", ["triangle", "quadrilateral"])
+def test_the_compiled_affine_cutoff_is_the_numpy_one(mesh):
+    """APIC with ``affine_cutoff`` in the scalar 2D passes as in the numpy step (the state after
+    20 steps of the spinning disk, whose rim nodes fall under the cutoff)."""
+    states = []
+    for compiled in (False, None):
+        scene = spin(cells=10, mesh=mesh, t_end=1.0, frames=0)
+        scene.options = dataclasses.replace(scene.options, transfer="apic", affine_cutoff=0.05)
+        solver = scene.solver()
+        solver.compiled = compiled
+        for _ in range(20):
+            solver.step()
+        states.append(_sorted_state(solver))
+    assert np.abs(states[0] - states[1]).max() < 1e-11
+    scene = spin(cells=10, mesh=mesh, t_end=1.0, frames=0)
+    scene.options = dataclasses.replace(scene.options, transfer="apic", affine_cutoff=0.0)
+    solver = scene.solver()
+    for _ in range(20):
+        solver.step()
+    assert np.abs(_sorted_state(solver) - states[1]).max() > 1e-6  # (the cutoff changes the state)
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("cell", ["tetrahedron", "distorted-quadrilateral"])
+def test_the_generic_passes_affine_cutoff_is_the_numpy_one(cell):
+    """The generic compiled passes (3D, multilinear cells) with ``affine_cutoff`` as the numpy
+    step: one step of a strained body, a cutoff that weighs most nodes."""
+    states = []
+    for compiled in (False, None):
+        mesh = make_mesh(cell)
+        d = mesh.geometry.dim
+        V = dolfinx.fem.functionspace(mesh, ("Lagrange", 1, (d,)))
+        p = create_particles(mesh, 8 if d == 3 else 9, density=1.0,
+                             where=lambda x, d=d: np.all((x[:d] > 0.2) & (x[:d] < 0.7), axis=0))
+        p.fields["v"] = np.random.default_rng(2).normal(size=(len(p), d))
+        opts = StepOptions(transfer="apic", affine_cutoff=0.5, mass_cutoff=0.0)
+        solver = fempm.Solver(V, p, [LinearElastic(1.0, 0.3)], options=opts, compiled=compiled)
+        solver.step(1e-3)  # (a first step to strain the body)
+        p.fields["F"][:] = np.eye(d) + 0.01 * np.arange(d * d).reshape(d, d) / d
+        p.fields["sigma"][:] = np.arange(d * d).reshape(d, d) / d
+        solver.step(1e-3)
+        f = p.fields
+        states.append(np.hstack([f["v"], f[AFFINE_FIELD].reshape(len(p), -1), f[SPIN_FIELD]]))
+    assert np.abs(states[0] - states[1]).max() < 1e-11
+
+
+def test_the_affine_cutoff_holds_apic_and_tpic_on_a_fine_grid():
+    """At 30 cells across the disk's rim nodes feed their accelerations back through the
+    affine matrices: APIC and TPIC at the CFL step grow energy and stop; with
+    ``affine_cutoff=0.01`` (the default) they run on, APIC's angular momentum kept to
+    round-off (its spin is that of the updated grid velocity) and the kinetic energy within
+    1 %."""
+    def run(transfer, cut, steps=200):
+        scene = spin(cells=30, t_end=1.0, frames=0)
+        scene.options = dataclasses.replace(scene.options, transfer=transfer, affine_cutoff=cut)
+        solver = scene.solver()
+        e0, L0 = solver.energies()["kinetic"], solver.angular_momentum()["angular_momentum"]
+        for _ in range(steps):
+            solver.step()
+        return solver.energies()["kinetic"] / e0, abs(solver.angular_momentum()["angular_momentum"] / L0 - 1)
+
+    with pytest.raises(SimulationError):
+        run("apic", 0.0)
+    kinetic, drift = run("apic", 0.01)
+    assert kinetic > 0.99 and drift < 1e-11, (kinetic, drift)
+    kinetic, drift = run("tpic", 0.01)
+    assert kinetic > 0.99 and drift < 1e-2, (kinetic, drift)
+
+
 def test_angular_momentum_columns_in_2d_and_3d():
     solver, *_ = _spin("apic", steps=1)
     row = solver.energies()
@@ -215,6 +296,12 @@ def test_bad_transfer_options_are_clear_errors():
         StepOptions(transfer="xpic", xpic_order=2.5)
     with pytest.raises(ValueError, match="implicit step takes transfer"):
         StepOptions(transfer="tpic", integrator="implicit")
+    with pytest.raises(ValueError, match="affine_cutoff=0.01 applies to transfer='apic' or 'tpic', not 'flip'"):
+        StepOptions(affine_cutoff=0.01)
+    with pytest.raises(ValueError, match=r"affine_cutoff=1.5 must lie in \[0, 1\)"):
+        StepOptions(transfer="apic", affine_cutoff=1.5)
+    with pytest.raises(ValueError, match="implicit step takes no affine_cutoff"):
+        StepOptions(transfer="apic", affine_cutoff=0.01, integrator="implicit")
     assert velocity_transfer("pic").blend == 0.0 and velocity_transfer("flip", flip=0.7).blend == 0.7
     mesh = make_mesh("quadrilateral")
     V = dolfinx.fem.functionspace(mesh, ("Lagrange", 1, (2,)))
@@ -279,6 +366,9 @@ def test_the_affine_state_is_checkpointed_and_resumed(tmp_path):
     (["--transfer", "xpic", "--xpic-order", "0"], "option --xpic-order expects a positive number of series terms"),
     (["--xpic-order", "3"], "option --xpic-order applies to --transfer xpic"),
     (["--transfer", "xpic", "--xpic-order", "11"], "xpic_order=11 must be an integer in [1, 10]"),
+    (["--affine-cutoff", "0.01"], "option --affine-cutoff applies to --transfer apic or tpic"),
+    (["--transfer", "apic", "--affine-cutoff", "x"], "option --affine-cutoff expects a number, got 'x'"),
+    (["--transfer", "apic", "--affine-cutoff", "-1"], "affine_cutoff=-1.0 must lie in [0, 1)"),
 ])
 def test_bad_transfer_options_on_the_command_line_exit_2_with_one_line(argv, message, capsys, tmp_path):
     from fempm.cli import main
