@@ -192,6 +192,14 @@ if AVAILABLE:
                 mom[i, o + j] += N[a] * (m * t)
 
     @njit(inline="always")
+    def flagged(flags, cell_dofs, c, NK):  # pragma: no cover - compiled
+        """Whether a dof of cell ``c`` is flagged (``affine_cutoff``'s weak nodes)."""
+        for a in range(NK):
+            if flags[cell_dofs[c, a]]:
+                return True
+        return False
+
+    @njit(inline="always")
     def velocity_moment(at, v, R, D, NK, B):  # pragma: no cover - compiled
         r""":math:`B = \sum_a N_a v_a r_a^T` of the nodal velocity ``v`` (``at`` as
         :func:`g2p_affine`'s)."""

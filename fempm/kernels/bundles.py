@@ -35,8 +35,8 @@ bundle         members
                ``rigid`` per group
 ``Affine``     APIC/TPIC (:mod:`fempm.kernels.affine`): the particles' affine matrices ``C``
                (n, d, d), APIC's spins ``spin`` (n, 1 or 3), the dofs' coordinates ``xi``, the
-               grid velocity ``v`` G2P takes the affine state from (``affine_cutoff``; (0, d):
-               ``v_new``)
+               grid velocity ``v`` G2P takes the affine matrices from where a particle's
+               dofs include one flagged in ``weak`` (``affine_cutoff``; (0, d): ``v_new``)
 =============  ===================================================================================
 """
 
@@ -61,9 +61,9 @@ Forces = namedtuple("Forces", "g fext")
 Stable = namedtuple("Stable", "h c")
 Groups = namedtuple("Groups", "group stride rigid")
 Corners = namedtuple("Corners", "yc moved bad sample_cells")
-Affine = namedtuple("Affine", "C spin xi v")
+Affine = namedtuple("Affine", "C spin xi v weak")
 
 #: one velocity field: no group per particle, no rigid group
 NO_GROUPS = Groups(np.zeros(0, dtype=np.int64), 0, np.zeros(1, dtype=np.bool_))
 #: no affine transfer
-NO_AFFINE = Affine(np.zeros((0, 1, 1)), np.zeros((0, 1)), np.zeros((0, 1)), np.zeros((0, 1)))
+NO_AFFINE = Affine(np.zeros((0, 1, 1)), np.zeros((0, 1)), np.zeros((0, 1)), np.zeros((0, 1)), np.zeros(0, np.uint8))

@@ -65,15 +65,16 @@ from fempm.kernels.shape import AVAILABLE, CELLS, MULTILINEAR, is_affine, space_
 
 __all__ = ["NO_GROUPS", "NO_STABLE", "kernels_for"]
 
-#: the cells whose affine transfers run the scalar 2D passes (:mod:`fempm.kernels.planar_affine`)
-AFFINE_PLANAR = ("triangle", "quadrilateral")
+#: the cells whose affine transfers run the scalar passes (:mod:`fempm.kernels.planar` with
+#: :mod:`fempm.kernels.planar_affine`, :mod:`fempm.kernels.solid`), not the generic ones
+AFFINE_SCALAR = ("triangle", "quadrilateral", "tetrahedron", "hexahedron")
 #: no stable time asked of a P2G pass
 NO_STABLE = Stable(np.zeros(0), np.zeros(0))
 
 if AVAILABLE:
     from numba import njit
 
-    from fempm.kernels.affine import add_momentum, affine_work, carried_at, g2p_affine, offsets
+    from fempm.kernels.affine import add_momentum, affine_work, carried_at, flagged, g2p_affine, offsets
     from fempm.kernels.kinematics import _det, add_totals, linear_elastic_at, neo_hookean_at
     from fempm.kernels.shape import inside_after_pull_back, shape, star_search
 
@@ -150,7 +151,7 @@ def kernels_for(cell: str) -> SimpleNamespace:
         flags = (cm >= 0, cv >= 0, cf >= 0, stable.h.shape[0] > 0, forces.fext.shape[0] > 0, bool(bound),
                  groups.group.shape[0] > 0, cg >= 0)
         if kind and cv >= 0:  # the affine transfers: the planar passes on affine 2D cells, else the generic ones
-            make = scatter_kernel if cell in AFFINE_PLANAR else _scatter_kernel
+            make = scatter_kernel if cell in AFFINE_SCALAR else _scatter_kernel
             return make(cell, *flags, kind)(where, state, laws, forces, out, stable, groups, affine)
         return scatter_kernel(cell, *flags)(where, state, laws, forces, out, stable, groups)
 
@@ -170,7 +171,7 @@ def kernels_for(cell: str) -> SimpleNamespace:
         totals = move and outputs.sums.shape[0] > 0
         flags = (bool(blend), bool(kinematics), bool(move), remap, totals, groups.group.shape[0] > 0)
         if kind and blend:
-            make = g2p_kernel if cell in AFFINE_PLANAR else _g2p_kernel
+            make = g2p_kernel if cell in AFFINE_SCALAR else _g2p_kernel
             return make(cell, *flags, kind, remap and remap_affine)(where, grid, state, laws, moves, outputs, groups,
                                                                      affine)
         return g2p_kernel(cell, *flags)(where, grid, state, laws, moves, outputs, groups)
@@ -329,9 +330,10 @@ def _g2p_kernel(cell: str, blend: bool, kinematics: bool, move: bool, remap: boo
         acc = np.zeros(3 + D)  # the state's sums (totals)
         Dm, gwork, cwork, (R, Jw) = affine_work(D, NK)
         if KIND:
-            C, spin, xi, va = affine
+            C, spin, xi, va, weak = affine
         else:  # (typed, unused)
-            C, spin, xi, va = np.empty((0, D, D)), np.empty((0, 1)), np.empty((0, D)), np.empty((0, D))
+            C, spin, xi, va, weak = (np.empty((0, D, D)), np.empty((0, 1)), np.empty((0, D)), np.empty((0, D)),
+                                     np.empty(0, np.uint8))
         cut = va.shape[0] > 0  # affine_cutoff: the matrices of their own grid velocity
         vga, dva, La = np.empty(D), np.empty(D), np.empty((D, D))
         for p in range(n):
@@ -346,7 +348,7 @@ def _g2p_kernel(cell: str, blend: bool, kinematics: bool, move: bool, remap: boo
                     v[p, j] = flip * (v[p, j] + dv[j]) + (1.0 - flip) * vg[j]
             if KIND and blend:
                 offsets((X, K, c, cell_dofs, xi, x), p, (D, NK, SIMPLEX, FROM_K), R, Jw)
-                if cut:  # the matrix of the cutoff's velocity, the spin of v_new
+                if cut and flagged(weak, cell_dofs, c, NK):  # the matrix of the cutoff's velocity, the spin of v_new
                     gather(N, G, cell_dofs, c, o, va, va, False, True, D, NK, (vga, dva, La))
                     g2p_affine((N, cell_dofs, c, o), (va, v_new, True), R, p, La, (D, NK, KIND, CLOSED), (C, spin),
                                gwork)

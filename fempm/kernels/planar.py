@@ -204,6 +204,7 @@ def g2p_kernel(simplex: bool, affine: bool, blend: bool, kinematics: bool, move:
         cells, X, K, cell_dofs = where
         C, spin = (carried.C, carried.spin) if KIND else (np.empty((0, 2, 2)), np.empty((0, 1)))
         va = carried.v if KIND else np.empty((0, 2))  # affine_cutoff: the matrices of their own grid velocity
+        weak = carried.weak if KIND else np.empty(0, np.uint8)  # where a particle's dofs include one of these
         cut = va.shape[0] > 0
         v_new, v_old, flip, dt, by_particle = grid
         x, v, F, volume0, volume, sigma, body, mass = state
@@ -234,7 +235,7 @@ def g2p_kernel(simplex: bool, affine: bool, blend: bool, kinematics: bool, move:
             if KIND:  # the affine state (C = L, APIC's spin) and with the lumped mass the re-map with it
                 sa, sb = (a0, a1, a2, a3 if QUAD else 0.0), (b0, b1, b2, b3 if QUAD else 0.0)
                 ua, ub = sa, sb
-                if cut:  # the matrix of the cutoff's velocity, the spin of v_new
+                if cut and (weak[i0] or weak[i1] or weak[i2] or (QUAD and weak[i3])):  # the cutoff's matrix, v_new's spin
                     ua = (va[i0, o], va[i1, o], va[i2, o], va[i3, o] if QUAD else 0.0)
                     ub = (va[i0, o1], va[i1, o1], va[i2, o1], va[i3, o1] if QUAD else 0.0)
                 affine_g2p2(p, (X0, X1, (k00, k01, k10, k11), simplex, QUAD),

@@ -29,6 +29,7 @@ __all__ = ["g2p_kernel", "scatter_kernel"]
 if AVAILABLE:
     from numba import njit
 
+    from fempm.kernels.affine import add_momentum, affine_work, carried_at, flagged, g2p_affine, offsets
     from fempm.kernels.kinematics import add_totals
     from fempm.kernels.particle_checks import LINEAR_ELASTIC, NEO_HOOKEAN, count_j, stable_time
     from fempm.kernels.shape import inside_after_pull_back, star_search
@@ -58,6 +59,28 @@ if AVAILABLE:
             d0, d1, d2 = 1.0 if a == 1 else 0.0, 1.0 if a == 2 else 0.0, 1.0 if a == 3 else 0.0
         return (N, d0 * k[0] + d1 * k[3] + d2 * k[6], d0 * k[1] + d1 * k[4] + d2 * k[7],
                 d0 * k[2] + d1 * k[5] + d2 * k[8])
+
+    @njit(inline="always")
+    def values_into(Nw, X, k, NK, hexa):  # pragma: no cover - compiled
+        """``Nw[a]`` = :math:`N_a` at the reference point ``X`` = (X0, X1, X2) (the affine
+        transfers' pieces of :mod:`fempm.kernels.affine` take the values in an array)."""
+        for a in range(NK):
+            Nw[a] = node(a, X[0], X[1], X[2], k, hexa)[0]
+
+    @njit(inline="always")
+    def gradient_of(c, o, X, k, cell_dofs, v, NK, hexa, out):  # pragma: no cover - compiled
+        r"""``out`` = :math:`\sum_a v_a \otimes \nabla N_a` of the nodal velocity ``v`` (3, 3)."""
+        for j in range(3):
+            for e in range(3):
+                out[j, e] = 0.0
+        for a in range(NK):
+            _, gx, gy, gz = node(a, X[0], X[1], X[2], k, hexa)
+            i = cell_dofs[c, a]
+            for j in range(3):
+                vj = v[i, o + j]
+                out[j, 0] += vj * gx
+                out[j, 1] += vj * gy
+                out[j, 2] += vj * gz
 
     @njit(inline="always")
     def gather(c, o, X, k, cell_dofs, v_new, v_old, blend, kinematics, NK, hexa):  # pragma: no cover
@@ -144,20 +167,26 @@ if AVAILABLE:
 
 @functools.cache
 def scatter_kernel(hexa: bool, with_mass: bool, with_momentum: bool, with_force: bool, with_dt: bool, has_fext: bool,
-                   bound: bool, grouped: bool = False, with_gradient: bool = False):
+                   bound: bool, grouped: bool = False, with_gradient: bool = False, kind: int = 0):
     """:func:`fempm.kernels.lumped._scatter_kernel` for ``tetrahedron`` or (``hexa``) affine
-    ``hexahedron`` cells."""
+    ``hexahedron`` cells (``kind``, APIC or TPIC: the momenta with the particles' affine part,
+    :func:`fempm.kernels.affine.carried_at` and :func:`~fempm.kernels.affine.add_momentum`)."""
     NK = 8 if hexa else 4
     CV = 1 if with_mass else 0
     CF = CV + (3 if with_momentum else 0)
     CG = CF + (3 if with_force else 0)
+    KIND = kind
 
     @njit(cache=True, error_model="numpy")
-    def scatter(where, state, laws, forces, out, stable, groups):  # pragma: no cover
+    def scatter(where, state, laws, forces, out, stable, groups, carried=None):  # pragma: no cover
         cells, X, K, cell_dofs = where
         mass, v, volume, sigma, body = state.mass, state.v, state.volume, state.sigma, state.body
         modulus, g, fext, h, c = laws.modulus, forces.g, forces.fext, stable.h, stable.c
         group, stride = groups.group, groups.stride
+        C, spin, xi = (carried.C, carried.spin, carried.xi) if KIND else (np.empty((0, 3, 3)), np.empty((0, 1)),
+                                                                        np.empty((0, 3)))
+        Dm, _, cwork, (R, Jw) = affine_work(3, NK)
+        Nw = np.empty(NK)
         best = 0.0 if bound else np.inf
         fe0 = fe1 = fe2 = s00 = s01 = s02 = s10 = s11 = s12 = s20 = s21 = s22 = 0.0
         for p in range(len(cells)):
@@ -177,12 +206,17 @@ def scatter_kernel(hexa: bool, with_mass: bool, with_momentum: bool, with_force:
                 s10, s11, s12 = sigma[p, 1, 0], sigma[p, 1, 1], sigma[p, 1, 2]
                 s20, s21, s22 = sigma[p, 2, 0], sigma[p, 2, 1], sigma[p, 2, 2]
             o = group[p] * stride if grouped else 0
+            if with_momentum and KIND:  # the momenta with the affine part
+                offsets((X, K, cp, cell_dofs, xi, state.x), p, (3, NK, not hexa, True), R, Jw)
+                values_into(Nw, (X0, X1, X2), k, NK, hexa)
+                carried_at(Nw, R, (C, spin), p, (3, NK, KIND), Dm, cwork)
+                add_momentum((Nw, cell_dofs, cp, o + CV), out, (v, p, m), (3, NK), (cwork[0], R, True))
             for a in range(NK):
                 N, gx, gy, gz = node(a, X0, X1, X2, k, hexa)
                 i = cell_dofs[cp, a]
                 if with_mass:
                     out[i, o] += N * m
-                if with_momentum:
+                if with_momentum and not KIND:
                     out[i, o + CV] += N * mv0
                     out[i, o + CV + 1] += N * mv1
                     out[i, o + CV + 2] += N * mv2
@@ -201,13 +235,15 @@ def scatter_kernel(hexa: bool, with_mass: bool, with_momentum: bool, with_force:
 
 @functools.cache
 def g2p_kernel(hexa: bool, blend: bool, kinematics: bool, move: bool, remap: bool, totals: bool = False,
-               grouped: bool = False):
+               grouped: bool = False, kind: int = 0, remap_affine: bool = False):
     """:func:`fempm.kernels.lumped._g2p_kernel` for ``tetrahedron`` or (``hexa``) affine
-    ``hexahedron`` cells."""
+    ``hexahedron`` cells (``kind``, APIC or TPIC, in a blend pass: the affine state,
+    :func:`fempm.kernels.affine.g2p_affine`, and with ``remap_affine`` the re-map with it)."""
     NK = 8 if hexa else 4
+    KIND = kind
 
     @njit(cache=True, error_model="numpy")
-    def g2p_update(where, grid, state, laws, moves, outputs, groups):  # pragma: no cover
+    def g2p_update(where, grid, state, laws, moves, outputs, groups, carried=None):  # pragma: no cover
         cells, X, K, cell_dofs = where
         v_new, v_old, flip, dt, by_particle = grid
         x, v, F, volume0, volume, sigma, body, mass = state
@@ -218,6 +254,14 @@ def g2p_kernel(hexa: bool, blend: bool, kinematics: bool, move: bool, remap: boo
         n, keep_L = len(cells), L.shape[0] == len(cells)
         nonfinite_j, inverted, jmin, jmax, nonfinite = 0, 0, np.inf, -np.inf, 0  # the pass's checks
         acc = np.zeros(6)  # the state's sums (totals)
+        if KIND:
+            C, spin, xi, va, weak = carried
+        else:  # (typed, unused)
+            C, spin, xi, va, weak = (np.empty((0, 3, 3)), np.empty((0, 1)), np.empty((0, 3)), np.empty((0, 3)),
+                                     np.empty(0, np.uint8))
+        cut = va.shape[0] > 0  # affine_cutoff: the matrices of their own grid velocity
+        Dm, gwork, cwork, (R, Jw) = affine_work(3, NK)
+        Nw, La = np.empty(NK), np.empty((3, 3))
         for p in range(n):
             c = cells[p]
             X0, X1, X2 = X[p, 0], X[p, 1], X[p, 2]
@@ -230,7 +274,21 @@ def g2p_kernel(hexa: bool, blend: bool, kinematics: bool, move: bool, remap: boo
                 v[p, 0] = flip * (v[p, 0] + dv0) + (1.0 - flip) * vg0
                 v[p, 1] = flip * (v[p, 1] + dv1) + (1.0 - flip) * vg1
                 v[p, 2] = flip * (v[p, 2] + dv2) + (1.0 - flip) * vg2
-            if remap:  # MUSL: the blended momenta back to the grid, in the same pass
+            if KIND:  # the affine state: the matrix of v_new (or of the cutoff's velocity), APIC's spin of v_new
+                offsets((X, K, c, cell_dofs, xi, x), p, (3, NK, not hexa, True), R, Jw)
+                values_into(Nw, (X0, X1, X2), k, NK, hexa)
+                apart = cut and flagged(weak, cell_dofs, c, NK)  # (a dof below the cutoff)
+                if apart or not kinematics:
+                    gradient_of(c, o, (X0, X1, X2), k, cell_dofs, va if apart else v_new, NK, hexa, La)
+                else:
+                    for e in range(9):
+                        La[e // 3, e % 3] = Lp[e]
+                g2p_affine((Nw, cell_dofs, c, o), (va if apart else v_new, v_new, apart), R, p, La,
+                           (3, NK, KIND, True), (C, spin), gwork)
+                if remap and remap_affine:  # MUSL with the lumped mass: the momenta with their affine part
+                    carried_at(Nw, R, (C, spin), p, (3, NK, KIND), Dm, cwork)
+                    add_momentum((Nw, cell_dofs, c, o), mom, (v, p, mass[p]), (3, NK), (cwork[0], R, True))
+            if remap and not (KIND and remap_affine):  # MUSL: the blended momenta back to the grid, in the same pass
                 for a in range(NK):
                     i = cell_dofs[c, a]
                     N = node(a, X0, X1, X2, k, hexa)[0]

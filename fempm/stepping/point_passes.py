@@ -37,7 +37,7 @@ from fempm.stepping.loads import external_forces
 from fempm.stepping.nodal import kept_nodal_array, sum_ghosts
 from fempm.stepping.spaces import compiled_space
 from fempm.stepping.state import StepState
-from fempm.transfer.affine import affine_velocity
+from fempm.transfer.affine import affine_velocity, weak_nodes
 from fempm.transfer.centres import NodalCentres
 from fempm.transfer.mapping import mass_centres
 from fempm.transfer.mass_models import FMPM, Lumped
@@ -137,27 +137,34 @@ class PointPasses(Grid):
         return State(p.x, f["v"] if velocity is None else velocity, f["F"], f["volume0"], p.volume, f["sigma"],
                      f["body"], p.mass)
 
-    def affine_state(self, velocity: npt.NDArray | None = None) -> tuple[Affine, int]:
+    def affine_state(self, cutoff: tuple | None = None) -> tuple[Affine, int]:
         """The passes' affine bundle (the particles' ``affine`` and ``affine_spin`` fields, the
-        dofs' coordinates and the grid ``velocity`` G2P takes the affine state from, None: the
-        updated one) and the transfer's code (0: none; :mod:`fempm.kernels.affine`)."""
+        dofs' coordinates and the ``cutoff`` = (the grid velocity G2P takes the affine matrices
+        from, a flag per dof where it differs from the updated one) of :meth:`affine_velocity`,
+        None: the updated one everywhere) and the transfer's code (0: none; :mod:`fempm.kernels.affine`)."""
         s = self.state
         kind = self.options.velocity_transfer.kind
         if not kind:
             return NO_AFFINE, 0
         C, spin = s.affine()
-        v = np.zeros((0, self.d)) if velocity is None else velocity
-        return Affine(C, np.zeros((len(C), 0)) if spin is None else spin, s.dof_coordinates(), v), kind
+        v, weak = (np.zeros((0, self.d)), np.zeros(0, np.uint8)) if cutoff is None else cutoff
+        return Affine(C, np.zeros((len(C), 0)) if spin is None else spin, s.dof_coordinates(), v, weak), kind
 
-    def affine_velocity(self, v_new: npt.NDArray, v_old: npt.NDArray) -> npt.NDArray | None:
-        """The grid velocity G2P takes the affine matrices from under ``affine_cutoff``
-        (:func:`fempm.transfer.affine.affine_velocity` of the step's lumped masses), None where
-        that is the updated velocity itself (no cutoff, or no node below it)."""
+    def affine_velocity(self, v_new: npt.NDArray, v_old: npt.NDArray) -> tuple | None:
+        """(The grid velocity G2P takes the affine matrices from under ``affine_cutoff``,
+        :func:`fempm.transfer.affine.affine_velocity` of the step's lumped masses, a flag per dof
+        below the cutoff, where it differs from ``v_new``), None where it is the updated velocity
+        itself (no cutoff, or no node below it)."""
         cut = self.options.affine_share
         if not cut:
             return None
-        v = affine_velocity(v_new, v_old, self._nodal[1][:, 0], cut * self.top)
-        return None if v is v_new else v
+        m, weak = self._nodal[1][:, 0], cut * self.top
+        v = affine_velocity(v_new, v_old, m, weak)
+        if v is v_new:
+            return None
+        flags = np.zeros(len(m), dtype=np.uint8)
+        flags[weak_nodes(m, weak)] = 1
+        return v, flags
 
     def _scatter(self, nodal, forces: Forces, cm: int, cv: int, cf: int, stable: str = "", velocity=None,
                  groups: Groups = NO_GROUPS, cg: int = -1, affine: bool = False):

@@ -45,8 +45,8 @@ from fempm.kernels.affine import THICK, THIN
 from fempm.transfer.basis import ParticleBasis
 from fempm.transfer.mapping import sum_over_ranks
 
-__all__ = ["affine_momentum", "affine_velocity", "angular_momentum", "carried_matrix", "closed_form", "dof_coordinates", "grid_affine",
-           "second_moments", "spin_of", "spin_width"]
+__all__ = ["affine_momentum", "affine_velocity", "angular_momentum", "carried_matrix", "closed_form", "dof_coordinates",
+           "grid_affine", "second_moments", "spin_of", "spin_width", "weak_nodes"]
 
 
 
@@ -202,10 +202,17 @@ def affine_velocity(v_new: npt.NDArray, v_old: npt.NDArray, mass: npt.NDArray, w
         mass: The lumped nodal masses :math:`m_i` of the same dofs.
         weak: :math:`m_w`, ``affine_cutoff`` times the largest nodal mass over all ranks.
     """
-    if weak <= 0.0:
+    nodes = weak_nodes(mass[: len(v_new)], weak)
+    if not len(nodes):
         return v_new
-    m = np.asarray(mass)[: len(v_new)]
-    if not np.any((m > 0.0) & (m < weak)):
-        return v_new
-    w = np.minimum(1.0, m / weak)
-    return v_old + w[:, None] * (v_new - v_old)
+    v = np.array(v_new, copy=True)
+    w = (np.asarray(mass)[nodes] / weak)[:, None]
+    v[nodes] = v_old[nodes] + w * (v_new[nodes] - v_old[nodes])
+    return v
+
+
+def weak_nodes(mass: npt.NDArray, weak: float) -> npt.NDArray:
+    r"""The nodes with mass below ``weak`` :math:`m_w` (:func:`affine_velocity`), none for
+    :math:`m_w = 0`; a node without mass is none of them (no particle reads it)."""
+    m = np.asarray(mass)
+    return np.flatnonzero((m > 0.0) & (m < weak)) if weak > 0.0 else np.zeros(0, dtype=np.intp)
