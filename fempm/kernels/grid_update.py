@@ -2,14 +2,15 @@ r"""The lumped mass's grid update, compiled passes over the dofs (the explicit s
 :class:`fempm.stepping.lumped.PointGrid` and :class:`fempm.stepping.lumped_mass.LumpedNodalMass`):
 :math:`v_i = (m v)_i / m_i` on free dofs with :math:`m_i > \epsilon_a`, 0 elsewhere;
 :math:`a_i = f_i / m_i - c\, v_i` (0 on constrained dofs and where :math:`m_i \le \epsilon_w`),
-:math:`v_i^+ = v_i + \Delta t\, a_i`.
+:math:`v_i^+ = v_i + \Delta t\, a_i`; and the grid velocity of the affine transfers' weak-node
+cutoff (:func:`affine_cutoff_velocity`, reference :func:`fempm.transfer.affine.affine_velocity`).
 """
 
 from __future__ import annotations
 
 from fempm.kernels.shape import AVAILABLE
 
-__all__ = ["grid_advance", "grid_update", "grid_velocity"]
+__all__ = ["affine_cutoff_velocity", "grid_advance", "grid_update", "grid_velocity"]
 
 if AVAILABLE:
     from numba import njit
@@ -58,3 +59,22 @@ if AVAILABLE:
                     a = 0.0
                 v_old[i, j] = vo
                 v_new[i, j] = vo + dt * a
+
+    @njit(cache=True, error_model="numpy")
+    def affine_cutoff_velocity(v_new, v_old, mass, weak, v, flags):  # pragma: no cover
+        r"""The grid velocity G2P takes the affine matrices from (as
+        :func:`fempm.transfer.affine.affine_velocity`): ``v`` = :math:`v_i + w_i (v_i^+ - v_i)`,
+        :math:`w_i = m_i / m_w`, and ``flags[i]`` = 1 on the dofs with :math:`0 < m_i < m_w`
+        (``weak``, over all of ``mass``); elsewhere ``flags`` 0 and ``v`` = :math:`v_i^+`.
+        Returns the number of flagged dofs of ``v``."""
+        nd, d = v_new.shape
+        count = 0
+        for i in range(len(flags)):
+            m = mass[i]
+            on = 0.0 < m < weak
+            flags[i] = 1 if on else 0
+            if i < nd:
+                for j in range(d):
+                    v[i, j] = v_old[i, j] + (m / weak) * (v_new[i, j] - v_old[i, j]) if on else v_new[i, j]
+                count += 1 if on else 0
+        return count

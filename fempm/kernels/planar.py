@@ -32,7 +32,7 @@ if AVAILABLE:
     from fempm.kernels.kinematics import add_totals
     from fempm.kernels.multilinear import quad_pull_back
     from fempm.kernels.particle_checks import count_j, stable_time
-    from fempm.kernels.planar_affine import add_affine, affine_g2p2, carried2, offsets2
+    from fempm.kernels.planar_affine import add_affine, affine_g2p2, carried2, jacobian2, offsets2
     from fempm.kernels.shape import inside_after_pull_back, star_search
 
     @njit(inline="always")
@@ -154,8 +154,9 @@ def scatter_kernel(simplex: bool, affine: bool, with_mass: bool, with_momentum: 
                 if QUAD:
                     out[i3, o] += N3 * m
             if with_momentum and KIND:
-                r = offsets2(X0, X1, (k00, k01, k10, k11), simplex)
-                c00, c01, c10, c11 = carried2(C, spin, p, (N0, N1, N2, N3 if QUAD else 0.0), r, KIND)
+                j = jacobian2((k00, k01, k10, k11))
+                r = offsets2(X0, X1, j, simplex)
+                c00, c01, c10, c11 = carried2(C, spin, p, (X0, X1), j, simplex, KIND)
                 add_affine(out, o + CV, (i0, i1, i2, i3), (N0, N1, N2, N3), (m * v0, m * v1), (m * c00, m * c01, m * c10, m * c11), r, QUAD)
             elif with_momentum:
                 add_pair(out, o + CV, (i0, i1, i2, i3), (N0, N1, N2, N3), m * v0, m * v1, QUAD)

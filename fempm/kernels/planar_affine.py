@@ -17,7 +17,7 @@ __all__: list[str] = []
 if AVAILABLE:
     from numba import njit
 
-    __all__ += ["add_affine", "affine_g2p2", "carried2", "offsets2", "spin2"]
+    __all__ += ["add_affine", "affine_g2p2", "carried2", "jacobian2", "offsets2", "spin2"]
 
     @njit(inline="always")
     def add_affine(out, col, dofs, values, q, mc, r, quad):  # pragma: no cover - compiled
@@ -39,13 +39,18 @@ if AVAILABLE:
             out[i3, col + 1] += N3 * (q1 + m10 * r3x + m11 * r3y)
 
     @njit(inline="always")
-    def offsets2(X0, X1, k, simplex):  # pragma: no cover - compiled
-        """(r0x, r0y, r1x, r1y, r2x, r2y, r3x, r3y): the offsets of the cell's vertices from the
-        particle at reference point (X0, X1) of a cell whose inverse Jacobian is ``k`` =
-        (k00, k01, k10, k11) (r3 = 0 on a triangle)."""
+    def jacobian2(k):  # pragma: no cover - compiled
+        """The Jacobian (j00, j01, j10, j11) of a cell whose inverse Jacobian is ``k``."""
         k00, k01, k10, k11 = k
         det = k00 * k11 - k01 * k10
-        j00, j01, j10, j11 = k11 / det, -k01 / det, -k10 / det, k00 / det
+        return k11 / det, -k01 / det, -k10 / det, k00 / det
+
+    @njit(inline="always")
+    def offsets2(X0, X1, j, simplex):  # pragma: no cover - compiled
+        """(r0x, r0y, r1x, r1y, r2x, r2y, r3x, r3y): the offsets of the cell's vertices from the
+        particle at reference point (X0, X1) of a cell whose Jacobian is ``j`` =
+        (j00, j01, j10, j11) (r3 = 0 on a triangle)."""
+        j00, j01, j10, j11 = j
         d0, d1 = -X0, -X1
         e0, e1 = 1.0 - X0, 1.0 - X1
         r0x, r0y = j00 * d0 + j01 * d1, j10 * d0 + j11 * d1
@@ -56,36 +61,48 @@ if AVAILABLE:
         return r0x, r0y, r1x, r1y, r2x, r2y, j00 * e0 + j01 * e1, j10 * e0 + j11 * e1
 
     @njit(inline="always")
-    def carried2(C, spin, p, N, r, kind):  # pragma: no cover - compiled
+    def carried2(C, spin, p, X, j, simplex, kind):  # pragma: no cover - compiled
         r"""The matrix P2G maps (c00, c01, c10, c11): ``C[p]``, plus for APIC the rotation that
         gives it the stored spin at the present :math:`D_p = \sum_a N_a r_a r_a^T`
-        (:func:`fempm.kernels.affine.carried`)."""
+        (:func:`fempm.kernels.affine.carried`). On an affine cell with the Jacobian ``j``
+        :math:`D_p = J M(X) J^T` in closed form at the reference point ``X``:
+        :math:`M = \mathrm{diag}(X) - X X^T` on the triangle, :math:`\mathrm{diag}(X_i (1 - X_i))`
+        on the parallelogram."""
         c00, c01, c10, c11 = C[p, 0, 0], C[p, 0, 1], C[p, 1, 0], C[p, 1, 1]
         if kind != APIC:
             return c00, c01, c10, c11
-        N0, N1, N2, N3 = N
-        r0x, r0y, r1x, r1y, r2x, r2y, r3x, r3y = r
-        d00 = N0 * r0x * r0x + N1 * r1x * r1x + N2 * r2x * r2x + N3 * r3x * r3x
-        d01 = N0 * r0x * r0y + N1 * r1x * r1y + N2 * r2x * r2y + N3 * r3x * r3y
-        d11 = N0 * r0y * r0y + N1 * r1y * r1y + N2 * r2y * r2y + N3 * r3y * r3y
-        top = max(r0x * r0x + r0y * r0y, r1x * r1x + r1y * r1y, r2x * r2x + r2y * r2y, r3x * r3x + r3y * r3y)
+        X0, X1 = X
+        j00, j01, j10, j11 = j
+        m00, m11 = X0 - X0 * X0, X1 - X1 * X1
+        m01 = -X0 * X1 if simplex else 0.0
+        a00, a01 = j00 * m00 + j01 * m01, j00 * m01 + j01 * m11  # J M
+        a10, a11 = j10 * m00 + j11 * m01, j10 * m01 + j11 * m11
+        d00, d01, d11 = a00 * j00 + a01 * j01, a00 * j10 + a01 * j11, a10 * j10 + a11 * j11
         tr = d00 + d11
-        if tr > THIN * top:
+        if tr > THIN * (j00 * j00 + j01 * j01 + j10 * j10 + j11 * j11):
             w = (spin[p, 0] - (c10 * d00 + c11 * d01 - c00 * d01 - c01 * d11)) / tr
             c01 -= w
             c10 += w
         return c00, c01, c10, c11
 
     @njit(inline="always")
-    def spin2(N, r, a, b):  # pragma: no cover - compiled
+    def spin2(N, X, j, a, b, simplex):  # pragma: no cover - compiled
         r""":math:`\epsilon : B_p^T = \sum_a N_a (r_a \times v_a)` of the nodal velocities
-        ``a`` (x components) and ``b`` (y)."""
+        ``a`` (x components) and ``b`` (y), with :math:`r_a = J (X_a - X)`:
+        :math:`\sum_q J_q \times u_q - (J X) \times v_g`, the Jacobian's columns :math:`J_q`,
+        :math:`u_q = \sum_a N_a X_{aq} v_a`, :math:`v_g = \sum_a N_a v_a`."""
         N0, N1, N2, N3 = N
-        r0x, r0y, r1x, r1y, r2x, r2y, r3x, r3y = r
         a0, a1, a2, a3 = a
         b0, b1, b2, b3 = b
-        return (N0 * (r0x * b0 - r0y * a0) + N1 * (r1x * b1 - r1y * a1) + N2 * (r2x * b2 - r2y * a2)
-                + N3 * (r3x * b3 - r3y * a3))
+        j00, j01, j10, j11 = j
+        X0, X1 = X
+        u0x, u0y, u1x, u1y = N1 * a1, N1 * b1, N2 * a2, N2 * b2
+        if not simplex:
+            u0x, u0y, u1x, u1y = u0x + N3 * a3, u0y + N3 * b3, u1x + N3 * a3, u1y + N3 * b3
+        gx = N0 * a0 + N1 * a1 + N2 * a2 + N3 * a3
+        gy = N0 * b0 + N1 * b1 + N2 * b2 + N3 * b3
+        yx, yy = j00 * X0 + j01 * X1, j10 * X0 + j11 * X1
+        return (j00 * u0y - j10 * u0x) + (j01 * u1y - j11 * u1x) - (yx * gy - yy * gx)
 
     @njit(inline="always")
     def affine_g2p2(p, geo, nodal, state, remap, kind):  # pragma: no cover - compiled
@@ -101,14 +118,15 @@ if AVAILABLE:
         a0, a1, a2, a3 = a
         b0, b1, b2, b3 = b
         g0x, g0y, g1x, g1y, g2x, g2y, g3x, g3y = g
-        r = offsets2(X0, X1, k, simplex)
+        j = jacobian2(k)
         C[p, 0, 0] = a0 * g0x + a1 * g1x + a2 * g2x + a3 * g3x
         C[p, 0, 1] = a0 * g0y + a1 * g1y + a2 * g2y + a3 * g3y
         C[p, 1, 0] = b0 * g0x + b1 * g1x + b2 * g2x + b3 * g3x
         C[p, 1, 1] = b0 * g0y + b1 * g1y + b2 * g2y + b3 * g3y
         if kind == APIC:
-            spin[p, 0] = spin2(N4, r, sa, sb)
+            spin[p, 0] = spin2(N4, (X0, X1), j, sa, sb, simplex)
         if remap:
             mp = mass[p]
-            c00, c01, c10, c11 = carried2(C, spin, p, N4, r, kind)
-            add_affine(mom, o, dofs, N4, (mp * v[p, 0], mp * v[p, 1]), (mp * c00, mp * c01, mp * c10, mp * c11), r, quad)
+            c00, c01, c10, c11 = carried2(C, spin, p, (X0, X1), j, simplex, kind)
+            add_affine(mom, o, dofs, N4, (mp * v[p, 0], mp * v[p, 1]), (mp * c00, mp * c01, mp * c10, mp * c11),
+                       offsets2(X0, X1, j, simplex), quad)

@@ -29,10 +29,11 @@ __all__ = ["g2p_kernel", "scatter_kernel"]
 if AVAILABLE:
     from numba import njit
 
-    from fempm.kernels.affine import add_momentum, affine_work, carried_at, flagged, g2p_affine, offsets
+    from fempm.kernels.affine import APIC, flagged
     from fempm.kernels.kinematics import add_totals
     from fempm.kernels.particle_checks import LINEAR_ELASTIC, NEO_HOOKEAN, count_j, stable_time
     from fempm.kernels.shape import inside_after_pull_back, star_search
+    from fempm.kernels.solid_affine import add_affine3, carried3, jacobian3, offset3, spin3
 
     @njit(inline="always")
     def inverse_jacobian(K, c):  # pragma: no cover - compiled
@@ -61,13 +62,6 @@ if AVAILABLE:
                 d0 * k[2] + d1 * k[5] + d2 * k[8])
 
     @njit(inline="always")
-    def values_into(Nw, X, k, NK, hexa):  # pragma: no cover - compiled
-        """``Nw[a]`` = :math:`N_a` at the reference point ``X`` = (X0, X1, X2) (the affine
-        transfers' pieces of :mod:`fempm.kernels.affine` take the values in an array)."""
-        for a in range(NK):
-            Nw[a] = node(a, X[0], X[1], X[2], k, hexa)[0]
-
-    @njit(inline="always")
     def gradient_of(c, o, X, k, cell_dofs, v, NK, hexa, out):  # pragma: no cover - compiled
         r"""``out`` = :math:`\sum_a v_a \otimes \nabla N_a` of the nodal velocity ``v`` (3, 3)."""
         for j in range(3):
@@ -83,13 +77,17 @@ if AVAILABLE:
                 out[j, 2] += vj * gz
 
     @njit(inline="always")
-    def gather(c, o, X, k, cell_dofs, v_new, v_old, blend, kinematics, NK, hexa):  # pragma: no cover
+    def gather(c, o, X, k, cell_dofs, v_new, v_old, blend, kinematics, NK, hexa, spin):  # pragma: no cover
         r"""(:math:`\sum_a N_a v_a^+` (3), with ``blend`` :math:`\sum_a N_a (v_a^+ - v_a)` (3),
-        with ``kinematics`` :math:`L = \sum_a v_a^+ \otimes \nabla N_a` (9, row by row)), over
-        the dofs of cell ``c`` (columns from ``o``), at reference coordinates ``X`` = (X0, X1, X2)."""
+        with ``kinematics`` :math:`L = \sum_a v_a^+ \otimes \nabla N_a` (9, row by row), with
+        ``spin`` = (APIC, the Jacobian's 9 entries) APIC's spin :math:`\sum_a N_a r_a \times v_a^+`
+        (3)), over the dofs of cell ``c`` (columns from ``o``), at reference coordinates ``X`` =
+        (X0, X1, X2)."""
         X0, X1, X2 = X
+        with_spin, jac = spin
         vg0 = vg1 = vg2 = dv0 = dv1 = dv2 = 0.0
         L00 = L01 = L02 = L10 = L11 = L12 = L20 = L21 = L22 = 0.0
+        u00 = u01 = u02 = u10 = u11 = u12 = u20 = u21 = u22 = 0.0
         for a in range(NK):
             N, gx, gy, gz = node(a, X0, X1, X2, k, hexa)
             i = cell_dofs[c, a]
@@ -97,6 +95,13 @@ if AVAILABLE:
             vg0 += N * a0
             vg1 += N * a1
             vg2 += N * a2
+            if with_spin:  # u_q = sum_a N_a X_aq v_a (X_a the reference vertex)
+                if a & 1 if hexa else a == 1:
+                    u00, u01, u02 = u00 + N * a0, u01 + N * a1, u02 + N * a2
+                if a & 2 if hexa else a == 2:
+                    u10, u11, u12 = u10 + N * a0, u11 + N * a1, u12 + N * a2
+                if a & 4 if hexa else a == 3:
+                    u20, u21, u22 = u20 + N * a0, u21 + N * a1, u22 + N * a2
             if blend:
                 dv0 += N * (a0 - v_old[i, o])
                 dv1 += N * (a1 - v_old[i, o + 1])
@@ -105,7 +110,8 @@ if AVAILABLE:
                 L00, L01, L02 = L00 + a0 * gx, L01 + a0 * gy, L02 + a0 * gz
                 L10, L11, L12 = L10 + a1 * gx, L11 + a1 * gy, L12 + a1 * gz
                 L20, L21, L22 = L20 + a2 * gx, L21 + a2 * gy, L22 + a2 * gz
-        return vg0, vg1, vg2, dv0, dv1, dv2, (L00, L01, L02, L10, L11, L12, L20, L21, L22)
+        w = spin3(jac, X, (u00, u01, u02, u10, u11, u12, u20, u21, u22), (vg0, vg1, vg2)) if with_spin else (0.0, 0.0, 0.0)
+        return vg0, vg1, vg2, dv0, dv1, dv2, (L00, L01, L02, L10, L11, L12, L20, L21, L22), w
 
     @njit(inline="always")
     def deform(F, p, dt, L):  # pragma: no cover - compiled
@@ -170,7 +176,7 @@ def scatter_kernel(hexa: bool, with_mass: bool, with_momentum: bool, with_force:
                    bound: bool, grouped: bool = False, with_gradient: bool = False, kind: int = 0):
     """:func:`fempm.kernels.lumped._scatter_kernel` for ``tetrahedron`` or (``hexa``) affine
     ``hexahedron`` cells (``kind``, APIC or TPIC: the momenta with the particles' affine part,
-    :func:`fempm.kernels.affine.carried_at` and :func:`~fempm.kernels.affine.add_momentum`)."""
+    :mod:`fempm.kernels.solid_affine`)."""
     NK = 8 if hexa else 4
     CV = 1 if with_mass else 0
     CF = CV + (3 if with_momentum else 0)
@@ -183,10 +189,8 @@ def scatter_kernel(hexa: bool, with_mass: bool, with_momentum: bool, with_force:
         mass, v, volume, sigma, body = state.mass, state.v, state.volume, state.sigma, state.body
         modulus, g, fext, h, c = laws.modulus, forces.g, forces.fext, stable.h, stable.c
         group, stride = groups.group, groups.stride
-        C, spin, xi = (carried.C, carried.spin, carried.xi) if KIND else (np.empty((0, 3, 3)), np.empty((0, 1)),
-                                                                        np.empty((0, 3)))
-        Dm, _, cwork, (R, Jw) = affine_work(3, NK)
-        Nw = np.empty(NK)
+        C, spin = (carried.C, carried.spin) if KIND else (np.empty((0, 3, 3)), np.empty((0, 1)))
+        mc = jac = (0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0)
         best = 0.0 if bound else np.inf
         fe0 = fe1 = fe2 = s00 = s01 = s02 = s10 = s11 = s12 = s20 = s21 = s22 = 0.0
         for p in range(len(cells)):
@@ -206,17 +210,18 @@ def scatter_kernel(hexa: bool, with_mass: bool, with_momentum: bool, with_force:
                 s10, s11, s12 = sigma[p, 1, 0], sigma[p, 1, 1], sigma[p, 1, 2]
                 s20, s21, s22 = sigma[p, 2, 0], sigma[p, 2, 1], sigma[p, 2, 2]
             o = group[p] * stride if grouped else 0
-            if with_momentum and KIND:  # the momenta with the affine part
-                offsets((X, K, cp, cell_dofs, xi, state.x), p, (3, NK, not hexa, True), R, Jw)
-                values_into(Nw, (X0, X1, X2), k, NK, hexa)
-                carried_at(Nw, R, (C, spin), p, (3, NK, KIND), Dm, cwork)
-                add_momentum((Nw, cell_dofs, cp, o + CV), out, (v, p, m), (3, NK), (cwork[0], R, True))
+            if with_momentum and KIND:  # the matrix the momenta carry (times the mass)
+                jac = jacobian3(K, cp)
+                cc = carried3(C, spin, p, (X0, X1, X2), jac, hexa, KIND)
+                mc = (m * cc[0], m * cc[1], m * cc[2], m * cc[3], m * cc[4], m * cc[5], m * cc[6], m * cc[7], m * cc[8])
             for a in range(NK):
                 N, gx, gy, gz = node(a, X0, X1, X2, k, hexa)
                 i = cell_dofs[cp, a]
                 if with_mass:
                     out[i, o] += N * m
-                if with_momentum and not KIND:
+                if with_momentum and KIND:
+                    add_affine3(out, i, o + CV, N, (mv0, mv1, mv2), mc, offset3(a, X0, X1, X2, jac, hexa))
+                elif with_momentum:
                     out[i, o + CV] += N * mv0
                     out[i, o + CV + 1] += N * mv1
                     out[i, o + CV + 2] += N * mv2
@@ -237,8 +242,8 @@ def scatter_kernel(hexa: bool, with_mass: bool, with_momentum: bool, with_force:
 def g2p_kernel(hexa: bool, blend: bool, kinematics: bool, move: bool, remap: bool, totals: bool = False,
                grouped: bool = False, kind: int = 0, remap_affine: bool = False):
     """:func:`fempm.kernels.lumped._g2p_kernel` for ``tetrahedron`` or (``hexa``) affine
-    ``hexahedron`` cells (``kind``, APIC or TPIC, in a blend pass: the affine state,
-    :func:`fempm.kernels.affine.g2p_affine`, and with ``remap_affine`` the re-map with it)."""
+    ``hexahedron`` cells (``kind``, APIC or TPIC, in a blend pass: the affine state and with
+    ``remap_affine`` the re-map with it, :mod:`fempm.kernels.solid_affine`)."""
     NK = 8 if hexa else 4
     KIND = kind
 
@@ -255,39 +260,45 @@ def g2p_kernel(hexa: bool, blend: bool, kinematics: bool, move: bool, remap: boo
         nonfinite_j, inverted, jmin, jmax, nonfinite = 0, 0, np.inf, -np.inf, 0  # the pass's checks
         acc = np.zeros(6)  # the state's sums (totals)
         if KIND:
-            C, spin, xi, va, weak = carried
+            C, spin, _, va, weak = carried
         else:  # (typed, unused)
-            C, spin, xi, va, weak = (np.empty((0, 3, 3)), np.empty((0, 1)), np.empty((0, 3)), np.empty((0, 3)),
-                                     np.empty(0, np.uint8))
+            C, spin, va, weak = np.empty((0, 3, 3)), np.empty((0, 1)), np.empty((0, 3)), np.empty(0, np.uint8)
         cut = va.shape[0] > 0  # affine_cutoff: the matrices of their own grid velocity
-        Dm, gwork, cwork, (R, Jw) = affine_work(3, NK)
-        Nw, La = np.empty(NK), np.empty((3, 3))
+        La = np.empty((3, 3))
+        jac = (0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0)
         for p in range(n):
             c = cells[p]
             X0, X1, X2 = X[p, 0], X[p, 1], X[p, 2]
             k = inverse_jacobian(K, c)
             o = group[p] * 3 if grouped else 0
             still = grouped and rigid[group[p]]  # a rigid body's particle: its own velocity, L = 0
-            vg0, vg1, vg2, dv0, dv1, dv2, Lp = gather(c, o, (X0, X1, X2), k, cell_dofs, v_new, v_old, blend,
-                                                      kinematics and not still, NK, hexa)
+            if KIND:
+                jac = jacobian3(K, c)
+            vg0, vg1, vg2, dv0, dv1, dv2, Lp, sp = gather(c, o, (X0, X1, X2), k, cell_dofs, v_new, v_old, blend,
+                                                          kinematics and not still, NK, hexa, (KIND == APIC, jac))
             if blend and not still:
                 v[p, 0] = flip * (v[p, 0] + dv0) + (1.0 - flip) * vg0
                 v[p, 1] = flip * (v[p, 1] + dv1) + (1.0 - flip) * vg1
                 v[p, 2] = flip * (v[p, 2] + dv2) + (1.0 - flip) * vg2
-            if KIND:  # the affine state: the matrix of v_new (or of the cutoff's velocity), APIC's spin of v_new
-                offsets((X, K, c, cell_dofs, xi, x), p, (3, NK, not hexa, True), R, Jw)
-                values_into(Nw, (X0, X1, X2), k, NK, hexa)
+            if KIND:  # the affine state: C = L of v_new (or of the cutoff's velocity), APIC's spin of v_new
                 apart = cut and flagged(weak, cell_dofs, c, NK)  # (a dof below the cutoff)
                 if apart or not kinematics:
                     gradient_of(c, o, (X0, X1, X2), k, cell_dofs, va if apart else v_new, NK, hexa, La)
+                    for e in range(9):
+                        C[p, e // 3, e % 3] = La[e // 3, e % 3]
                 else:
                     for e in range(9):
-                        La[e // 3, e % 3] = Lp[e]
-                g2p_affine((Nw, cell_dofs, c, o), (va if apart else v_new, v_new, apart), R, p, La,
-                           (3, NK, KIND, True), (C, spin), gwork)
+                        C[p, e // 3, e % 3] = Lp[e]
+                if KIND == APIC:
+                    spin[p, 0], spin[p, 1], spin[p, 2] = sp
                 if remap and remap_affine:  # MUSL with the lumped mass: the momenta with their affine part
-                    carried_at(Nw, R, (C, spin), p, (3, NK, KIND), Dm, cwork)
-                    add_momentum((Nw, cell_dofs, c, o), mom, (v, p, mass[p]), (3, NK), (cwork[0], R, True))
+                    mp = mass[p]
+                    cc = carried3(C, spin, p, (X0, X1, X2), jac, hexa, KIND)
+                    mc = (mp * cc[0], mp * cc[1], mp * cc[2], mp * cc[3], mp * cc[4], mp * cc[5], mp * cc[6],
+                          mp * cc[7], mp * cc[8])
+                    for a in range(NK):
+                        add_affine3(mom, cell_dofs[c, a], o, node(a, X0, X1, X2, k, hexa)[0],
+                                    (mp * v[p, 0], mp * v[p, 1], mp * v[p, 2]), mc, offset3(a, X0, X1, X2, jac, hexa))
             if remap and not (KIND and remap_affine):  # MUSL: the blended momenta back to the grid, in the same pass
                 for a in range(NK):
                     i = cell_dofs[c, a]

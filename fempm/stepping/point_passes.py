@@ -27,6 +27,7 @@ from fempm.kernels.bundles import (
     Stable,
     State,
 )
+from fempm.kernels.grid_update import affine_cutoff_velocity
 from fempm.kernels.lumped import NO_STABLE
 from fempm.materials.base import IsotropicElastic
 from fempm.materials.linear_elastic import LinearElastic
@@ -37,7 +38,6 @@ from fempm.stepping.loads import external_forces
 from fempm.stepping.nodal import kept_nodal_array, sum_ghosts
 from fempm.stepping.spaces import compiled_space
 from fempm.stepping.state import StepState
-from fempm.transfer.affine import affine_velocity, weak_nodes
 from fempm.transfer.centres import NodalCentres
 from fempm.transfer.mapping import mass_centres
 from fempm.transfer.mass_models import FMPM, Lumped
@@ -93,6 +93,7 @@ class PointPasses(Grid):
         self.affine_apart = state.options.velocity_transfer.affine and type(state.options.mass_model) is FMPM
         self._start = self.nodal_array(d) if self.affine_apart else None
         self.start: npt.NDArray | None = None
+        self._cutoff: tuple | None = None  # kept arrays of affine_velocity: (the velocity, the flags)
         self.top = 0.0  # the step's largest nodal mass, over all ranks (set as the step opens)
         self._sums = np.zeros(3 + d)  # the moving pass's sums of the state (state_sums)
         self._summed = False  # whether they are the last step's
@@ -158,12 +159,12 @@ class PointPasses(Grid):
         cut = self.options.affine_share
         if not cut:
             return None
-        m, weak = self._nodal[1][:, 0], cut * self.top
-        v = affine_velocity(v_new, v_old, m, weak)
-        if v is v_new:
+        m = self._nodal[1][:, 0]
+        if self._cutoff is None or self._cutoff[0].shape != v_new.shape or len(self._cutoff[1]) != len(m):
+            self._cutoff = (np.empty_like(v_new), np.empty(len(m), dtype=np.uint8))
+        v, flags = self._cutoff
+        if not affine_cutoff_velocity(v_new, v_old, m, cut * self.top, v, flags):
             return None
-        flags = np.zeros(len(m), dtype=np.uint8)
-        flags[weak_nodes(m, weak)] = 1
         return v, flags
 
     def _scatter(self, nodal, forces: Forces, cm: int, cv: int, cf: int, stable: str = "", velocity=None,

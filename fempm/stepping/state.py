@@ -135,8 +135,9 @@ class StepState:
         p = self.particles
         d, n = p.gdim, len(p)
         k = affine.spin_width(d) if transfer.kind == 1 else 0
-        C = p.fields.setdefault(AFFINE_FIELD, np.zeros((n, d, d)))
-        spin = p.fields.setdefault(SPIN_FIELD, np.zeros((n, k))) if k else None
+        f = p.fields
+        C = f[AFFINE_FIELD] if AFFINE_FIELD in f else f.setdefault(AFFINE_FIELD, np.zeros((n, d, d)))
+        spin = (f[SPIN_FIELD] if SPIN_FIELD in f else f.setdefault(SPIN_FIELD, np.zeros((n, k)))) if k else None
         if not check:
             return C, spin
         bad = [f"{name!r} has shape {np.shape(a)}; expected {shape}"

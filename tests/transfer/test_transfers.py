@@ -204,6 +204,23 @@ def test_the_affine_cutoff_weights_weak_nodes_accelerations_by_their_mass():
     assert affine_velocity(v_new, v_old, mass, 0.5) is v_new  # no node with mass below the cutoff
 
 
+def test_the_compiled_cutoff_velocity_is_the_numpy_one():
+    """fempm.kernels.grid_update.affine_cutoff_velocity: the numpy reference's velocity and
+    a flag on its weak nodes (a massless node none of them)."""
+    from fempm.kernels.grid_update import affine_cutoff_velocity
+    from fempm.transfer.affine import weak_nodes
+
+    rng = np.random.default_rng(6)
+    v_old, v_new = rng.normal(size=(50, 3)), rng.normal(size=(50, 3))
+    mass = rng.uniform(0.0, 1.0, 50)
+    mass[::7] = 0.0
+    v, flags = np.full_like(v_new, np.nan), np.full(50, 7, dtype=np.uint8)
+    count = affine_cutoff_velocity(v_new, v_old, mass, 0.3, v, flags)
+    nodes = weak_nodes(mass, 0.3)
+    assert count == len(nodes) > 0 and np.array_equal(np.flatnonzero(flags), nodes)
+    assert np.allclose(v, affine_velocity(v_new, v_old, mass, 0.3), rtol=0, atol=1e-15)
+
+
 @pytest.mark.parametrize("mesh", ["triangle", "quadrilateral"])
 def test_the_compiled_affine_cutoff_is_the_numpy_one(mesh):
     """APIC with ``affine_cutoff`` in the scalar 2D passes as in the numpy step (the state after
