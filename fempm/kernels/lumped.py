@@ -321,21 +321,15 @@ def _g2p_kernel(cell: str, blend: bool, kinematics: bool, move: bool, remap: boo
         x0, tol, left, star = moves
         L, mom, sums = outputs
         group, rigid = groups.group, groups.rigid
-        n = len(cells)
-        N, G = np.empty(NK), np.empty((NK, D))
+        n, N, G = len(cells), np.empty(NK), np.empty((NK, D))
         vg, dv, Lp, Fn = np.empty(D), np.empty(D), np.empty((D, D)), np.empty((D, D))
         keep_L = L.shape[0] == n
-        nonfinite_j, inverted, nonfinite = 0, 0, 0
-        jmin, jmax = np.inf, -np.inf
+        nonfinite_j, inverted, nonfinite, jmin, jmax = 0, 0, 0, np.inf, -np.inf
         acc = np.zeros(3 + D)  # the state's sums (totals)
         Dm, gwork, cwork, (R, Jw) = affine_work(D, NK)
-        if KIND:
-            C, spin, xi, va, weak = affine
-        else:  # (typed, unused)
-            C, spin, xi, va, weak = (np.empty((0, D, D)), np.empty((0, 1)), np.empty((0, D)), np.empty((0, D)),
-                                     np.empty(0, np.uint8))
-        cut = va.shape[0] > 0  # affine_cutoff: the matrices of their own grid velocity
-        vga, dva, La = np.empty(D), np.empty(D), np.empty((D, D))
+        C, spin, xi, va, weak = affine if KIND else (np.empty((0, D, D)), np.empty((0, 1)), np.empty((0, D)),
+                                                     np.empty((0, D)), np.empty(0, np.uint8))  # (typed, unused)
+        cut, vga, dva, La = va.shape[0] > 0, np.empty(D), np.empty(D), np.empty((D, D))  # cut: affine_cutoff
         for p in range(n):
             c = cells[p]
             shape(X, p, K, c, SIMPLEX, AFFINE, D, NK, N, G, DEGREE, BERNSTEIN)
@@ -348,13 +342,11 @@ def _g2p_kernel(cell: str, blend: bool, kinematics: bool, move: bool, remap: boo
                     v[p, j] = flip * (v[p, j] + dv[j]) + (1.0 - flip) * vg[j]
             if KIND and blend:
                 offsets((X, K, c, cell_dofs, xi, x), p, (D, NK, SIMPLEX, FROM_K), R, Jw)
-                if cut and flagged(weak, cell_dofs, c, NK):  # the matrix of the cutoff's velocity, the spin of v_new
+                apart = cut and flagged(weak, cell_dofs, c, NK)  # the matrix of the cutoff's velocity, the spin of v_new
+                if apart:
                     gather(N, G, cell_dofs, c, o, va, va, False, True, D, NK, (vga, dva, La))
-                    g2p_affine((N, cell_dofs, c, o), (va, v_new, True), R, p, La, (D, NK, KIND, CLOSED), (C, spin),
-                               gwork)
-                else:
-                    g2p_affine((N, cell_dofs, c, o), (v_new, v_new, False), R, p, Lp, (D, NK, KIND, CLOSED),
-                               (C, spin), gwork)
+                g2p_affine((N, cell_dofs, c, o), (va if apart else v_new, v_new, apart), R, p, La if apart else Lp,
+                           (D, NK, KIND, CLOSED), (C, spin), gwork)
             if remap:  # MUSL: the blended momenta back to the grid, in the same pass
                 if remap_affine:
                     carried_at(N, R, (C, spin), p, (D, NK, KIND), Dm, cwork)

@@ -203,10 +203,8 @@ def g2p_kernel(simplex: bool, affine: bool, blend: bool, kinematics: bool, move:
     @njit(cache=True, error_model="numpy")
     def g2p_update(where, grid, state, laws, moves, outputs, groups, carried=None):  # pragma: no cover
         cells, X, K, cell_dofs = where
-        C, spin = (carried.C, carried.spin) if KIND else (np.empty((0, 2, 2)), np.empty((0, 1)))
-        va = carried.v if KIND else np.empty((0, 2))  # affine_cutoff: the matrices of their own grid velocity
-        weak = carried.weak if KIND else np.empty(0, np.uint8)  # where a particle's dofs include one of these
-        cut = va.shape[0] > 0
+        C, spin, va, weak = ((carried.C, carried.spin, carried.v, carried.weak) if KIND else
+                             (np.empty((0, 2, 2)), np.empty((0, 1)), np.empty((0, 2)), np.empty(0, np.uint8)))
         v_new, v_old, flip, dt, by_particle = grid
         x, v, F, volume0, volume, sigma, body, mass = state
         law, lam, mu, x0, tol, left, star = laws.law, laws.lam, laws.mu, moves.x0, moves.tol, moves.left, moves.star
@@ -233,15 +231,10 @@ def g2p_kernel(simplex: bool, affine: bool, blend: bool, kinematics: bool, move:
                 if QUAD:
                     dv0, dv1 = dv0 + N3 * (a3 - v_old[i3, o]), dv1 + N3 * (b3 - v_old[i3, o1])
                 v[p, 0], v[p, 1] = flip * (v[p, 0] + dv0) + (1.0 - flip) * vg0, flip * (v[p, 1] + dv1) + (1.0 - flip) * vg1
-            if KIND:  # the affine state (C = L, APIC's spin) and with the lumped mass the re-map with it
-                sa, sb = (a0, a1, a2, a3 if QUAD else 0.0), (b0, b1, b2, b3 if QUAD else 0.0)
-                ua, ub = sa, sb
-                if cut and (weak[i0] or weak[i1] or weak[i2] or (QUAD and weak[i3])):  # the cutoff's matrix, v_new's spin
-                    ua = (va[i0, o], va[i1, o], va[i2, o], va[i3, o] if QUAD else 0.0)
-                    ub = (va[i0, o1], va[i1, o1], va[i2, o1], va[i3, o1] if QUAD else 0.0)
-                affine_g2p2(p, (X0, X1, (k00, k01, k10, k11), simplex, QUAD),
-                            ((N0, N1, N2, N3 if QUAD else 0.0), (sa, sb), (ua, ub), (g0x, g0y, g1x, g1y, g2x, g2y, g3x,
-                             g3y), (i0, i1, i2, i3)), (C, spin, mom, o, mass, v), remap and remap_affine, KIND)
+            if KIND:  # the affine state (C = L, APIC's spin; the cutoff) and with the lumped mass the re-map with it
+                affine_g2p2(p, (X0, X1, (k00, k01, k10, k11), simplex, QUAD), ((N0, N1, N2, N3 if QUAD else 0.0), (
+                    a0, a1, a2, a3 if QUAD else 0.0), (b0, b1, b2, b3 if QUAD else 0.0), (g0x, g0y, g1x, g1y, g2x, g2y, g3x, g3y),
+                    (i0, i1, i2, i3)), (C, spin, mom, o, mass, v), (va, weak, o1), remap and remap_affine, KIND)
             if remap and not (KIND and remap_affine):  # MUSL: the blended momenta back to the grid, in the same pass
                 add_pair(mom, o, (i0, i1, i2, i3), (N0, N1, N2, N3), mass[p] * v[p, 0], mass[p] * v[p, 1], QUAD)
             if kinematics:

@@ -105,16 +105,23 @@ if AVAILABLE:
         return (j00 * u0y - j10 * u0x) + (j01 * u1y - j11 * u1x) - (yx * gy - yy * gx)
 
     @njit(inline="always")
-    def affine_g2p2(p, geo, nodal, state, remap, kind):  # pragma: no cover - compiled
+    def affine_g2p2(p, geo, nodal, state, cutoff, remap, kind):  # pragma: no cover - compiled
         r"""G2P's affine state of particle p (``geo`` = (X0, X1, k, simplex, quad); ``nodal`` =
-        (N, the updated grid velocity's x and y components, those of the velocity the matrix
-        is taken from (``affine_cutoff``; else the same), the gradients (g0x, g0y, ...), the
-        dofs)): :math:`C_p = L_p`, APIC's spin of the updated velocity; with ``remap`` (the
-        lumped mass's MUSL) the particle's momenta with their affine part into ``mom``
-        (``state`` = (C, spin, mom, the first column, mass, v))."""
+        (N, the updated grid velocity's x and y components, the gradients (g0x, g0y, ...), the
+        dofs)): :math:`C_p = L_p`, APIC's spin of the updated velocity; where a dof is flagged
+        below ``affine_cutoff`` (``cutoff`` = (its velocity, the flags, the second column)) the
+        matrix of the cutoff's velocity; with ``remap`` (the lumped mass's MUSL) the particle's
+        momenta with their affine part into ``mom`` (``state`` = (C, spin, mom, the first column,
+        mass, v))."""
         X0, X1, k, simplex, quad = geo
-        N4, (sa, sb), (a, b), g, dofs = nodal
+        N4, sa, sb, g, dofs = nodal
         C, spin, mom, o, mass, v = state
+        va, weak, o1 = cutoff
+        i0, i1, i2, i3 = dofs
+        a, b = sa, sb
+        if va.shape[0] > 0 and (weak[i0] or weak[i1] or weak[i2] or (quad and weak[i3])):
+            a = (va[i0, o], va[i1, o], va[i2, o], va[i3, o] if quad else 0.0)
+            b = (va[i0, o1], va[i1, o1], va[i2, o1], va[i3, o1] if quad else 0.0)
         a0, a1, a2, a3 = a
         b0, b1, b2, b3 = b
         g0x, g0y, g1x, g1y, g2x, g2y, g3x, g3y = g

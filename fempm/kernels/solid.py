@@ -114,6 +114,39 @@ if AVAILABLE:
         return vg0, vg1, vg2, dv0, dv1, dv2, (L00, L01, L02, L10, L11, L12, L20, L21, L22), w
 
     @njit(inline="always")
+    def g2p_affine3(p, at, velocities, particle, state, sizes, La):  # pragma: no cover - compiled
+        r"""G2P's affine state of particle p (``at`` = (X, k, the Jacobian, cell_dofs, c, o),
+        ``particle`` = (its :math:`L_p` of ``v_new``, 9 entries, given with ``kinematics``; APIC's
+        spin of ``v_new``)): :math:`C_p = L_p`, or where one of its dofs is flagged below
+        ``affine_cutoff`` (``velocities`` = (v_new, the cutoff's velocity, the flags)) the gradient
+        of the cutoff's velocity; with ``remap`` (``sizes`` = (NK, hexa, KIND, kinematics,
+        remap)) the momenta with their affine part into ``mom`` (``state`` = (C, spin, mom, mass,
+        v); :mod:`fempm.kernels.solid_affine`)."""
+        X, k, jac, cell_dofs, c, o = at
+        v_new, va, weak = velocities
+        Lp, sp = particle
+        C, spin, mom, mass, v = state
+        NK, hexa, KIND, kinematics, remap = sizes
+        apart = va.shape[0] > 0 and flagged(weak, cell_dofs, c, NK)
+        if apart or not kinematics:
+            gradient_of(c, o, X, k, cell_dofs, va if apart else v_new, NK, hexa, La)
+            for e in range(9):
+                C[p, e // 3, e % 3] = La[e // 3, e % 3]
+        else:
+            for e in range(9):
+                C[p, e // 3, e % 3] = Lp[e]
+        if KIND == APIC:
+            spin[p, 0], spin[p, 1], spin[p, 2] = sp
+        if remap:
+            mp = mass[p]
+            cc = carried3(C, spin, p, X, jac, hexa, KIND)
+            mc = (mp * cc[0], mp * cc[1], mp * cc[2], mp * cc[3], mp * cc[4], mp * cc[5], mp * cc[6], mp * cc[7],
+                  mp * cc[8])
+            for a in range(NK):
+                add_affine3(mom, cell_dofs[c, a], o, node(a, X[0], X[1], X[2], k, hexa)[0],
+                            (mp * v[p, 0], mp * v[p, 1], mp * v[p, 2]), mc, offset3(a, X[0], X[1], X[2], jac, hexa))
+
+    @njit(inline="always")
     def deform(F, p, dt, L):  # pragma: no cover - compiled
         r""":math:`F_p \leftarrow (I + \Delta t L) F_p` (``L`` 9 entries, row by row); returns
         the new entries (9, row by row) and :math:`\det F_p`, in scalars (not read back)."""
@@ -263,9 +296,7 @@ def g2p_kernel(hexa: bool, blend: bool, kinematics: bool, move: bool, remap: boo
             C, spin, _, va, weak = carried
         else:  # (typed, unused)
             C, spin, va, weak = np.empty((0, 3, 3)), np.empty((0, 1)), np.empty((0, 3)), np.empty(0, np.uint8)
-        cut = va.shape[0] > 0  # affine_cutoff: the matrices of their own grid velocity
-        La = np.empty((3, 3))
-        jac = (0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0)
+        La, jac = np.empty((3, 3)), (0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0)
         for p in range(n):
             c = cells[p]
             X0, X1, X2 = X[p, 0], X[p, 1], X[p, 2]
@@ -281,24 +312,8 @@ def g2p_kernel(hexa: bool, blend: bool, kinematics: bool, move: bool, remap: boo
                 v[p, 1] = flip * (v[p, 1] + dv1) + (1.0 - flip) * vg1
                 v[p, 2] = flip * (v[p, 2] + dv2) + (1.0 - flip) * vg2
             if KIND:  # the affine state: C = L of v_new (or of the cutoff's velocity), APIC's spin of v_new
-                apart = cut and flagged(weak, cell_dofs, c, NK)  # (a dof below the cutoff)
-                if apart or not kinematics:
-                    gradient_of(c, o, (X0, X1, X2), k, cell_dofs, va if apart else v_new, NK, hexa, La)
-                    for e in range(9):
-                        C[p, e // 3, e % 3] = La[e // 3, e % 3]
-                else:
-                    for e in range(9):
-                        C[p, e // 3, e % 3] = Lp[e]
-                if KIND == APIC:
-                    spin[p, 0], spin[p, 1], spin[p, 2] = sp
-                if remap and remap_affine:  # MUSL with the lumped mass: the momenta with their affine part
-                    mp = mass[p]
-                    cc = carried3(C, spin, p, (X0, X1, X2), jac, hexa, KIND)
-                    mc = (mp * cc[0], mp * cc[1], mp * cc[2], mp * cc[3], mp * cc[4], mp * cc[5], mp * cc[6],
-                          mp * cc[7], mp * cc[8])
-                    for a in range(NK):
-                        add_affine3(mom, cell_dofs[c, a], o, node(a, X0, X1, X2, k, hexa)[0],
-                                    (mp * v[p, 0], mp * v[p, 1], mp * v[p, 2]), mc, offset3(a, X0, X1, X2, jac, hexa))
+                g2p_affine3(p, ((X0, X1, X2), k, jac, cell_dofs, c, o), (v_new, va, weak), (Lp, sp), (C, spin, mom, mass, v),
+                            (NK, hexa, KIND, kinematics, remap and remap_affine), La)
             if remap and not (KIND and remap_affine):  # MUSL: the blended momenta back to the grid, in the same pass
                 for a in range(NK):
                     i = cell_dofs[c, a]

@@ -83,7 +83,8 @@ def test_a_plastic_membrane_converges_in_load_steps():
     for _ in range(5):
         s.step(0.2)
         e = s.implicit.last.residuals / s.implicit.last.residuals[0]
-        assert e[-1] < 1e-8 and e[-2] < 1e-2 and e[-1] < 10 * e[-2] ** 2  # the last iterations quadratic
+        # the last iterations quadratic, down to round-off (a last residual of 5.6e-14 after 6.0e-8)
+        assert e[-1] < 1e-8 and e[-2] < 1e-2 and e[-1] < max(10 * e[-2] ** 2, 1e-12), e
     eps_p = s.particles.comm.allreduce(float(s.particles.fields["eps_p"].max(initial=0.0)), op=MPI.MAX)
     assert eps_p > 5e-5 and s.record.cut_steps == 0  # measured 7.7e-5
 
