@@ -33,8 +33,12 @@ distorted     quadrilaterals that are not parallelograms (``quad``)  the base st
 point3d       the base step in 3D (``tet``, ``hex``)                the base step on triangles
 contact       two disks, ``contact=True``                           the same disks, one field
 scene         two disks, ``fempm.run`` (energies, health checks)    the same disks, bare steps
+output        one particle frame, VTKHDF (``fempm.io.vtkhdf``)      the base step
+output-vtu    one particle frame, VTK XML pieces (``frame_format``)  the base step
 ============  ====================================================  ==========================
 
+(``output``: the ratio is the time of one frame of the base step's particles, as a run writes
+it, over the time of one step, both of the same particles: "a frame costs that many steps".)
 (``contact`` and ``scene``: ``fempm.scenes.two_disks`` on the benchmark's mesh, CFL step, about
 the same number of particles.) Each (size, mesh, ranks) runs in its own process under
 ``mpiexec -n R`` (this script with ``--worker``); a step's time is the slowest rank's. On
@@ -72,7 +76,8 @@ class Case:
     degree: int = 1
     variant: str | None = None
     meshes: tuple[str, ...] = ("tri", "quad", "tet", "hex")
-    kind: str = "reference"  # or "distorted", "point3d", "contact", "scene"
+    kind: str = "reference"  # or "distorted", "point3d", "contact", "scene", "output"
+    frame_format: str = "vtkhdf"  # kind "output"
 
 
 CASES = {
@@ -93,6 +98,8 @@ CASES = {
     "point3d": Case(meshes=("tet", "hex"), kind="point3d"),
     "contact": Case(meshes=("tri", "quad"), kind="contact"),
     "scene": Case(meshes=("tri", "quad"), kind="scene"),
+    "output": Case(kind="output"),
+    "output-vtu": Case(kind="output", frame_format="vtu"),
 }
 
 
@@ -263,6 +270,8 @@ def measure(name: str, n: int, mesh: str, a, comm) -> dict | None:
         N = base.particles.num_global
         return {"config": name, "mesh": mesh, "n": N, "base_n": N, "t_base_s": tb, "t_s": tc,
                 "ratio": tc / tb, "base": "two disks, one field, bare step"}
+    if case.kind == "output":
+        return frame_row(name, n, mesh, case, ref, a, comm)
     if case.kind == "point3d":
         base, dt_b = reference_problem(n, "tri", ref)
         other, dt = reference_problem(n, mesh, ref)
@@ -279,6 +288,36 @@ def measure(name: str, n: int, mesh: str, a, comm) -> dict | None:
     nb, nc = base.particles.num_global, other.particles.num_global
     return {"config": name, "mesh": mesh, "n": nc, "base_n": nb, "t_base_s": tb, "t_s": tc,
             "ratio": (tc / nc) / (tb / nb), "compiled": type(other.grid).__name__, "base": what}
+
+
+def frame_row(name: str, n: int, mesh: str, case: Case, ref: Path, a, comm) -> dict:
+    """One row of ``output``: a particle frame of the base step's particles (a run's writer,
+    :class:`fempm.io.RunWriter`) against one base step; each frame's file is deleted after it."""
+    import shutil
+
+    from fempm.io import RunWriter
+
+    base, dt = reference_problem(n, mesh, ref)
+    base.step(dt)  # the fields a run writes
+    folder = Path(comm.bcast(tempfile.mkdtemp(prefix="fempm-bench-frames-") if comm.rank == 0 else None))
+    writer = RunWriter(folder / "run", base.particles, None, frame_format=case.frame_format)
+
+    def frame():
+        writer.write_frame(base.t, base.particles)
+        comm.Barrier()
+        if comm.rank == 0:
+            for old in (folder / "run" / "particles").glob("particles_*"):
+                old.unlink()
+
+    try:
+        tb, tc = compare(lambda: base.step(dt), frame, a.batches, a.min_batch, comm)
+    finally:
+        writer.close()
+        if comm.rank == 0:
+            shutil.rmtree(folder, ignore_errors=True)
+    N = base.particles.num_global
+    return {"config": name, "mesh": mesh, "n": N, "base_n": N, "t_base_s": tb, "t_s": tc, "ratio": tc / tb,
+            "base": "one base step (a frame costs that many steps)"}
 
 
 def worker(a) -> None:
@@ -336,8 +375,6 @@ def main(argv=None) -> None:
     if not (a.reference / "common.py").exists():
         raise SystemExit(f"bench_configurations: no reference kernels in {a.reference} (their seeding makes the "
                          "problem; set --reference or FEMPM_REFERENCE_MPM)")
-    meshes = tempfile.TemporaryDirectory(prefix="fempm-bench-meshes-")
-    os.environ["FEMPM_BENCH_MESHES"] = meshes.name  # the workers share the triangle meshes
     rows = []
     for n in a.sizes:
         for mesh in a.meshes:

@@ -113,23 +113,11 @@ def build(n_target: int, mesh_kind: str, mass: str, reference: Path, partition: 
 
 
 def triangle_mesh(comm, dx: float):
-    """gmsh triangles of size ``dx`` on the unit square; kept as XDMF in ``$FEMPM_BENCH_MESHES``
-    (set by the driver for one run) so that each size is meshed once, not once per worker."""
-    from dolfinx.io import XDMFFile
-
+    """gmsh triangles of size ``dx`` on the unit square, from fempm's mesh cache after the first
+    run (:mod:`fempm.meshes.cache`: meshed once, not once per worker or per run)."""
     from fempm.meshes import unstructured_rectangle
 
-    folder = os.environ.get("FEMPM_BENCH_MESHES")
-    path = Path(folder) / f"triangles_{dx:.6g}.xdmf" if folder else None
-    if path is not None and path.exists():
-        with XDMFFile(comm, str(path), "r") as f:
-            return f.read_mesh(name="mesh")
-    mesh = unstructured_rectangle(comm, dx)
-    if path is not None:
-        mesh.name = "mesh"
-        with XDMFFile(comm, str(path), "w") as f:
-            f.write_mesh(mesh)
-    return mesh
+    return unstructured_rectangle(comm, dx)
 
 
 def dolfinx_space(mesh):
@@ -318,8 +306,6 @@ def main(argv=None) -> None:
         return
     if not (a.reference / "common.py").exists():
         raise SystemExit(f"bench_reference: no reference kernels in {a.reference} (set --reference or FEMPM_REFERENCE_MPM)")
-    meshes = tempfile.TemporaryDirectory(prefix="fempm-bench-meshes-")
-    os.environ["FEMPM_BENCH_MESHES"] = meshes.name  # the workers share the triangle meshes
     out = {"check": None, "rows": []}
     if a.check:
         out["check"] = check_physics(a.reference)

@@ -7,8 +7,10 @@
     python -m fempm study error-vs-time [--quick] [--problems NAME ...] [--out DIR]
     python -m fempm study scenes [--quick] [--problems NAME ...] [--out DIR]
     python -m fempm study all [--out DIR]   (the quick version of every study, into DIR/study-NAME)
-    python -m fempm run SCENE [--out DIR] [--overwrite] [--force] [--checkpoint-every N] [--option value ...]
+    python -m fempm run SCENE [--out DIR] [--overwrite] [--force] [--checkpoint-every N] [--frame-format F]
+                              [--option value ...]
     python -m fempm resume OUT [--t-end T] [--checkpoint-every N]
+    (run, resume, study: [--mesh-cache DIR | --no-mesh-cache], where gmsh's meshes are kept)
     python -m fempm run --help          (the scenes, a line each)
     python -m fempm --version
 
@@ -34,11 +36,13 @@ from fempm.abort import abort_on_error
 from fempm.io.checkpoint import CheckpointError, choose
 from fempm.io.stops import RunInterrupted
 from fempm.io.writers import (
+    FRAME_FORMATS,
     OUTPUT_LIMIT,
     OutputFolderError,
     OutputSizeError,
     OutputWriteError,
 )
+from fempm.meshes.cache import CACHE_ENV, set_mesh_cache
 from fempm.particles.location import OutsideMeshError
 from fempm.run_options import (UsageError, health_descriptions, health_options, option_descriptions, scene_options,
                                 stepping_options, with_stepping)
@@ -97,14 +101,35 @@ def _parser() -> argparse.ArgumentParser:
     runp.add_argument("--checkpoint-every", type=int, default=None, metavar="N",
                       help="write the full state to OUT/checkpoint every N steps and at the end")
     runp.add_argument("--overwrite", action="store_true", help="replace the outputs of an earlier run in OUT")
+    runp.add_argument("--frame-format", choices=list(FRAME_FORMATS), default="vtkhdf",
+                      help="particle frames: vtkhdf (one file per frame for all ranks, default) or vtu (VTK XML, a "
+                           "piece per rank)")
     runp.add_argument("--force", action="store_true",
                       help="write the frames even when they would exceed 2 GB (else the run stops before it starts)")
+    _cache_options(runp)
     resume = sub.add_parser("resume", help="continue a run from the checkpoint in its output folder", allow_abbrev=False)
     resume.add_argument("out", type=Path, help="the output folder of the run")
     resume.add_argument("--t-end", type=float, default=None, help="run to this time (default: the run's own t_end)")
     resume.add_argument("--checkpoint-every", type=int, default=None, metavar="N",
                         help="checkpoint every N steps (default: as the run did)")
+    _cache_options(resume)
+    _cache_options(study)
     return parser
+
+
+def _cache_options(parser: argparse.ArgumentParser) -> None:
+    """``--mesh-cache DIR`` and ``--no-mesh-cache`` (:mod:`fempm.meshes.cache`)."""
+    cache = parser.add_mutually_exclusive_group()
+    cache.add_argument("--mesh-cache", type=Path, default=None, metavar="DIR",
+                       help=f"keep the meshes gmsh makes in DIR (default ${CACHE_ENV}, else ~/.cache/fempm)")
+    cache.add_argument("--no-mesh-cache", action="store_true", help="make every gmsh mesh anew, keep none")
+
+
+def _use_cache(args) -> None:
+    if args.no_mesh_cache:
+        set_mesh_cache(None)
+    elif args.mesh_cache is not None:
+        set_mesh_cache(args.mesh_cache)
 
 
 def _main(argv: list[str] | None) -> int:
@@ -112,6 +137,7 @@ def _main(argv: list[str] | None) -> int:
     args, rest = parser.parse_known_args(argv)
     if args.command != "run" and rest:
         parser.error(f"unrecognized arguments: {' '.join(rest)}")
+    _use_cache(args)
     if args.command == "run":
         return _run(args, rest)
     if args.command == "resume":
@@ -201,8 +227,8 @@ def _run(args, rest: list[str]) -> int:
         raise UsageError(f"fempm run: unknown scene {args.scene!r}; scenes: {', '.join(SCENES)}")
     builder = SCENES[args.scene]
     if args.help:
-        print(f"python -m fempm run {args.scene} [--out DIR] [--overwrite] [--force] [--checkpoint-every N] options "
-              "(defaults):")
+        print(f"python -m fempm run {args.scene} [--out DIR] [--overwrite] [--force] [--checkpoint-every N] "
+              "[--frame-format vtkhdf|vtu] [--mesh-cache DIR | --no-mesh-cache] options (defaults):")
         described = option_descriptions(builder)
         for k, v in inspect.signature(builder).parameters.items():
             if k != "comm":
@@ -227,7 +253,8 @@ def _run(args, rest: list[str]) -> int:
                "checkpoint_every": args.checkpoint_every}
     scene = _build(rebuild)
     return _execute(scene, args.out or Path("output") / args.scene, args.scene, checkpoint_every=args.checkpoint_every,
-                    rebuild=rebuild, overwrite=args.overwrite, output_limit=None if args.force else OUTPUT_LIMIT)
+                    rebuild=rebuild, overwrite=args.overwrite, output_limit=None if args.force else OUTPUT_LIMIT,
+                    frame_format=args.frame_format)
 
 
 def _check_every(every: int | None, command: str) -> None:

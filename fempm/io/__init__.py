@@ -1,7 +1,9 @@
-"""Outputs: particle and grid frame series (VTU/PVTU/PVD), the energies file and summary, the
-output size estimate, checkpoints and plots."""
+"""Outputs: particle frame series (VTKHDF or VTU/PVTU, a PVD collection) and grid frame series
+(VTU/PVTU/PVD), the energies file and summary, the output size estimate, checkpoints and
+plots."""
 
 from fempm.io.writers import (
+    FRAME_FORMATS,
     GRID_FIELDS,
     OUTPUT_FILES,
     OUTPUT_LIMIT,
@@ -10,6 +12,7 @@ from fempm.io.writers import (
     OutputFolderError,
     OutputSizeError,
     OutputWriteError,
+    PointFileSeries,
     RunWriter,
     check_output_size,
     earlier_outputs,
@@ -19,6 +22,7 @@ from fempm.io.writers import (
 )
 
 __all__ = [
+    "FRAME_FORMATS",
     "FrameSeries",
     "GRID_FIELDS",
     "GridField",
@@ -27,6 +31,7 @@ __all__ = [
     "OutputFolderError",
     "OutputSizeError",
     "OutputWriteError",
+    "PointFileSeries",
     "RunWriter",
     "check_output_size",
     "earlier_outputs",

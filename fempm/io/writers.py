@@ -1,9 +1,10 @@
-"""Output as a run goes: energies CSV (flushed every row), particle frames and grid fields as
-VTK XML time series written by every rank in parallel (:mod:`fempm.io.vtu`, :class:`FrameSeries`),
-and a JSON summary.
+"""Output as a run goes: energies CSV (flushed every row), particle frames as VTKHDF, one file
+per frame for all ranks (:mod:`fempm.io.vtkhdf`, :class:`PointFileSeries`; or as VTK XML,
+``frame_format="vtu"``), grid fields as VTK XML time series written by every rank in parallel
+(:mod:`fempm.io.vtu`, :class:`FrameSeries`), and a JSON summary.
 
 A run's folder holds ``energies.csv``, ``summary.json``, the collections ``particles.pvd``,
-``grid_velocity.pvd`` and ``grid_stress.pvd``, and their pieces in ``particles/`` and ``grid/``.
+``grid_velocity.pvd`` and ``grid_stress.pvd``, and their files in ``particles/`` and ``grid/``.
 Every collection is rewritten with each frame, so that a run killed at any moment leaves series
 that ParaView reads; a continued run (:mod:`fempm.io.checkpoint`) drops what was written after its
 checkpoint and goes on with the same series, so that they equal the uninterrupted run's.
@@ -17,7 +18,6 @@ from __future__ import annotations
 import csv
 import json
 import shutil
-from collections.abc import Callable
 from pathlib import Path
 
 import dolfinx.fem
@@ -27,28 +27,41 @@ import numpy.typing as npt
 from mpi4py import MPI
 
 from fempm.io import vtu
+from fempm.io.series import FRAME_FORMATS, FrameSeries, OutputWriteError, PointFileSeries, everywhere
 from fempm.io.plot import plot_particle_frame
 from fempm.particles.particle_set import Particles
 
-__all__ = ["GRID_FIELDS", "OUTPUT_FILES", "OUTPUT_LIMIT", "FrameSeries", "GridField", "OutputFolderError",
-           "OutputSizeError", "OutputWriteError", "RunWriter", "check_output_size", "earlier_outputs", "frame_bytes",
-           "make_folder", "write_json"]
+__all__ = ["FRAME_FORMATS", "GRID_FIELDS", "OUTPUT_FILES", "OUTPUT_LIMIT", "FrameSeries", "GridField",
+           "OutputFolderError", "OutputSizeError", "OutputWriteError", "PointFileSeries", "RunWriter",
+           "check_output_size", "earlier_outputs", "frame_bytes", "make_folder", "write_json"]
 
 
 def _pad3(a: npt.NDArray) -> npt.NDArray:
-    """Vectors (n, d) -> (n, 3); tensors (n, d, d) -> (n, 3, 3)."""
+    """Vectors (n, d) -> (n, 3); tensors (n, d, d) -> (n, 3, 3) (zeros in the added places)."""
+    d = a.shape[1]
+    out = np.zeros((len(a), 3) if a.ndim == 2 else (len(a), 3, 3))
     if a.ndim == 2:
-        return np.pad(a, ((0, 0), (0, 3 - a.shape[1])))
-    return np.pad(a, ((0, 0), (0, 3 - a.shape[1]), (0, 3 - a.shape[2])))
+        out[:, :d] = a
+    else:
+        out[:, :d, :d] = a
+    return out
+
+
+def determinants(F: npt.NDArray) -> npt.NDArray:
+    """det F of (n, d, d) matrices, d <= 3, in closed form (10x numpy.linalg.det's speed on small
+    matrices; the same to round-off)."""
+    d = F.shape[1]
+    if d == 1:
+        return F[:, 0, 0].copy()
+    if d == 2:
+        return F[:, 0, 0] * F[:, 1, 1] - F[:, 0, 1] * F[:, 1, 0]
+    return (F[:, 0, 0] * (F[:, 1, 1] * F[:, 2, 2] - F[:, 1, 2] * F[:, 2, 1])
+            - F[:, 0, 1] * (F[:, 1, 0] * F[:, 2, 2] - F[:, 1, 2] * F[:, 2, 0])
+            + F[:, 0, 2] * (F[:, 1, 0] * F[:, 2, 1] - F[:, 1, 1] * F[:, 2, 0]))
 
 
 class OutputFolderError(OSError):
     """The output folder cannot be created or written (raised on every rank alike)."""
-
-
-class OutputWriteError(OSError):
-    """Writing an output failed on some rank during a run (raised on every rank alike; the
-    message names the failing ranks and their errors)."""
 
 
 #: the grid fields a run can write (:attr:`fempm.scene.Scene.outputs`)
@@ -94,30 +107,6 @@ def write_json(path: Path, data: dict) -> None:
     """``data`` as JSON into ``path``, atomically (a complete file or the one before; numpy
     numbers as plain ones). Local: any rank may call it."""
     vtu.write_atomic(path, json.dumps(data, indent=2, default=float))
-
-
-def _everywhere(comm: MPI.Comm, what: str, action: Callable[[], None], *, root_only: bool = False) -> None:
-    """``action`` on every rank (or rank 0 with ``root_only``), then an
-    :class:`OutputWriteError` on every rank if it failed on any. Collective."""
-    error = None
-    if not root_only or comm.rank == 0:
-        try:
-            action()
-        except OSError as e:
-            error = f"rank {comm.rank}: {e}"
-    errors = [e for e in comm.allgather(error) if e] if comm.size > 1 else [error] if error else []
-    if errors:
-        raise OutputWriteError(f"writing {what} failed ({'; '.join(errors)})")
-
-
-def _read_times(path: Path) -> list[tuple[int, float]]:
-    """The (frame, time) rows of a times file; a last line a kill cut short (no newline yet) is
-    not one."""
-    if not path.exists():
-        return []
-    text = path.read_text()
-    complete = text[: text.rfind("\n") + 1]
-    return [(int(k), float(t)) for k, t in (line.split(",") for line in complete.splitlines() if line)]
 
 
 #: a run whose outputs would exceed this many bytes stops before it starts, unless allowed
@@ -167,67 +156,6 @@ def check_output_size(particles: Particles, V, outputs: tuple[str, ...], frames:
     return total
 
 
-class FrameSeries:
-    """A time series of one output in VTK XML: each rank's piece ``DIR/STEM_NNNNN_rRRRRR.vtu``
-    (``NNNNN`` the run's frame number), their index ``DIR/STEM_NNNNN.pvtu``, the collection
-    ``OUT/STEM.pvd`` and the frames' times ``times`` (CSV rows ``frame,t``; default
-    ``DIR/STEM_times.csv``). The collection is rewritten with every frame. The folder is made
-    at the first frame."""
-
-    def __init__(self, out: Path, folder: str, stem: str, comm: MPI.Comm, times: Path | None = None):
-        self.out, self.folder, self.stem, self.comm = Path(out), Path(out) / folder, stem, comm
-        self.times_path = times or self.folder / f"{stem}_times.csv"
-        self.frames = _read_times(self.times_path) if comm.rank == 0 else []  # (frame, time) written (rank 0)
-        self._made = False
-
-    def _name(self, frame: int) -> str:
-        return f"{self.stem}_{frame:05d}"
-
-    def write(self, frame: int, t: float, x: npt.NDArray, data: dict[str, npt.NDArray],
-              cells: tuple[npt.NDArray, npt.NDArray] | None = None) -> None:
-        """Frame ``frame`` at time ``t``: this rank's points ``x`` (n, 3), point ``data`` and
-        ``cells`` (:func:`fempm.io.vtu.write_piece`). Ranks without points write no piece (one piece
-        at least, rank 0's). Collective."""
-        name = self._name(frame)
-        if not self._made:  # the allgather after rank 0's mkdir: no rank writes into it before
-            _everywhere(self.comm, f"the folder {self.folder}", lambda: self.folder.mkdir(parents=True, exist_ok=True),
-                        root_only=True)
-            self._made = True
-        ranks = [r for r, c in enumerate(self.comm.allgather(len(x))) if c] or [0]  # ranks holding points
-
-        def piece():
-            if self.comm.rank in ranks:
-                vtu.write_piece(self.folder / f"{name}_r{self.comm.rank:05d}.vtu", x, data, cells)
-
-        _everywhere(self.comm, f"{self.stem} frame {frame}", piece)
-
-        def index():
-            vtu.write_index(self.folder / f"{name}.pvtu", [f"{name}_r{r:05d}.vtu" for r in ranks], x, data)
-            with open(self.times_path, "a", newline="") as fh:
-                fh.write(f"{frame},{float(t)!r}\n")  # a plain number, not np.float64(...)
-            self.frames.append((frame, float(t)))
-            self._collection()
-
-        _everywhere(self.comm, f"the index of {self.stem} frame {frame}", index, root_only=True)
-
-    def _collection(self) -> None:
-        vtu.write_collection(self.out / f"{self.stem}.pvd",
-                             [(t, f"{self.folder.name}/{self._name(k)}.pvtu") for k, t in self.frames])
-
-    def truncate(self, frames: int) -> None:
-        """Drop the frames numbered ``frames`` and later (a continued run's outputs after its
-        checkpoint) and rewrite the times and the collection; rank 0 only."""
-        self.frames = [(k, t) for k, t in _read_times(self.times_path) if k < frames]
-        if self.times_path.exists():
-            vtu.write_atomic(self.times_path, "".join(f"{k},{t!r}\n" for k, t in self.frames))
-        for q in self.folder.glob(f"{self.stem}_*.*vtu"):
-            number = q.stem[len(self.stem) + 1:].split("_")[0]
-            if number.isdigit() and int(number) >= frames:
-                q.unlink()
-        if self.frames or (self.out / f"{self.stem}.pvd").exists():
-            self._collection()
-
-
 class GridField:
     """What the VTK pieces of a Lagrange field of ``V`` need: this rank's cells and dof points
     (:func:`dolfinx.plot.vtk_mesh`: VTK Lagrange cells of the space's degree) and its values
@@ -260,11 +188,18 @@ class RunWriter:
     """Writes a run's outputs into ``folder`` as the run goes (nothing kept only in memory)."""
 
     def __init__(self, folder: Path, particles: Particles, V: dolfinx.fem.FunctionSpace | None = None,
-                 *, png: bool = False, resume: dict | None = None, overwrite: bool = True):
+                 *, png: bool = False, resume: dict | None = None, overwrite: bool = True,
+                 frame_format: str = "vtkhdf"):
         """``resume``: the :meth:`state` of the writer of the run being continued (from its
         checkpoint): the energies and frames written after it are dropped and the series go on
-        from its frame count. Otherwise the outputs of an earlier run in ``folder`` are removed
-        with ``overwrite``, else refused (:func:`make_folder`). Collective."""
+        from its frame count, in its frame format. Otherwise the outputs of an earlier run in
+        ``folder`` are removed with ``overwrite``, else refused (:func:`make_folder`).
+        ``frame_format``: the particle frames' format, of :data:`FRAME_FORMATS`. Collective."""
+        if resume is not None:
+            frame_format = resume.get("frame_format", "vtu")  # (checkpoints before VTKHDF frames wrote VTK XML)
+        if frame_format not in FRAME_FORMATS:
+            raise ValueError(f"unknown frame_format={frame_format!r}; expected one of {', '.join(FRAME_FORMATS)}")
+        self.frame_format = frame_format
         self.folder = Path(folder)
         self.png = png
         x = particles.mesh.geometry.x
@@ -277,8 +212,8 @@ class RunWriter:
         self.rows = 0  # energies.csv rows written
         self._csv = None
         make_folder(self.folder, self.comm, keep=resume is not None, overwrite=overwrite)
-        self._particles = FrameSeries(self.folder, "particles", "particles", self.comm,
-                                      times=self.folder / "particles" / "times.csv")
+        self._particles = FRAME_FORMATS[frame_format](self.folder, "particles", "particles", self.comm,
+                                                      times=self.folder / "particles" / "times.csv")
         self._grid = {stem: FrameSeries(self.folder, "grid", stem, self.comm) for stem in GRID_FIELDS}
         self._fields: dict[str, GridField] = {}  # made on first use: only the fields written
         self.V = V
@@ -307,7 +242,7 @@ class RunWriter:
 
     def state_dict(self) -> dict:
         """What a continuation needs (:mod:`fempm.io.checkpoint`; given back as ``resume``)."""
-        return {"frame": self.frame, "rows": self.rows}
+        return {"frame": self.frame, "rows": self.rows, "frame_format": self.frame_format}
 
     def energies(self, row: dict) -> None:
         """One row of ``energies.csv`` (rank 0 writes; LF line ends; flushed)."""
@@ -350,16 +285,14 @@ class RunWriter:
         """The particle frame: point data velocity, stress (9 components), J, id, body and every
         other scalar or vector field (the laws' internal variables, ``volume0``, ``X0``)."""
         f = particles.fields
-        n = len(particles)
-        x = _pad3(particles.x)
-        data = {"velocity": _pad3(f["v"]), "stress": _pad3(f["sigma"]).reshape(n, 9), "J": np.linalg.det(f["F"]),
-                "id": particles.ids.astype(np.int64), "body": f["body"].astype(np.int32)}
+        data = {"velocity": f["v"], "stress": f["sigma"], "J": determinants(f["F"]),
+                "id": particles.ids.astype(np.int64, copy=False), "body": f["body"].astype(np.int32, copy=False)}
         for name, a in f.items():  # the laws' internal variables and other per-particle fields
             if name not in ("v", "sigma", "F", "body") and a.ndim in (1, 2) and a.dtype == np.float64:
                 data[name] = a
-        self._particles.write(self.frame, t, x, data)
+        self._particles.write_points(self.frame, t, particles.x, data, vectors=("velocity",))
         if self.png:  # a picture of all particles: gathered
-            parts = self.comm.gather((x, np.linalg.norm(data["velocity"], axis=1)), root=0)
+            parts = self.comm.gather((_pad3(particles.x), np.linalg.norm(f["v"], axis=1)), root=0)
             if self.comm.rank == 0:
                 plot_particle_frame(np.concatenate([q[0] for q in parts]), np.concatenate([q[1] for q in parts]),
                                     self.folder / "frames" / f"frame_{self.frame:05d}.png", title=f"t = {t:.4g}",
@@ -368,7 +301,7 @@ class RunWriter:
     def summary(self, data: dict) -> None:
         """``summary.json``, written by rank 0 (atomically); every rank returns once it is on
         disk (a script on any rank may read it next). Collective."""
-        _everywhere(self.comm, "summary.json", lambda: write_json(self.folder / "summary.json", data), root_only=True)
+        everywhere(self.comm, "summary.json", lambda: write_json(self.folder / "summary.json", data), root_only=True)
 
     def close(self) -> None:
         """Close the energies file (local: any rank may call it, also after a failure)."""

@@ -19,6 +19,7 @@ from mpi4py import MPI
 from fempm.abort import raise_together
 from fempm.particles.location import CellLocator, OutsideMeshError, outside_message
 from fempm.particles.migration import distribute, migrate, with_room
+from fempm.timings import timed
 
 __all__ = ["OutsidePolicy", "Particles"]
 
@@ -86,6 +87,7 @@ class Particles:
         Collective: every particle ends on the rank owning its cell.
     """
 
+    @timed("particles_s")
     def __init__(
         self,
         mesh: dolfinx.mesh.Mesh,

@@ -25,6 +25,7 @@ import numpy.typing as npt
 from fempm.particles.corners import box_corners, domain_geometry
 from fempm.particles.location import CellLocator, as_points3
 from fempm.particles.particle_set import Particles
+from fempm.timings import timed
 
 __all__ = ["create_particles", "hashed_uniform", "per_direction", "reference_pattern"]
 
@@ -88,6 +89,7 @@ def hashed_uniform(seed: int, keys: npt.NDArray[np.int64], k: int) -> npt.NDArra
     return ((z >> np.uint64(11)).astype(np.float64) + 0.5) / float(1 << 53)
 
 
+@timed("particles_s")
 def create_particles(
     mesh: dolfinx.mesh.Mesh,
     ppc: int,

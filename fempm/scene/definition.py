@@ -23,6 +23,7 @@ from fempm.stepping.loads import Loads
 from fempm.stepping.options import StepOptions
 from fempm.stepping.outside import outside_policy
 from fempm.stepping.solver import ExplicitSolver
+from fempm.timings import SETUP
 from fempm.transfer.transfers import AFFINE_FIELD
 
 __all__ = [
@@ -139,6 +140,9 @@ class Scene:
             which APIC and TPIC start their affine matrices
             (:meth:`fempm.stepping.Solver.set_velocity_gradient`; None: from 0); a resumed run
             keeps its checkpoint's.
+        timings: The seconds its set-up took on this rank (``mesh_s``, ``particles_s``): by
+            default what :data:`fempm.timings.SETUP` gathered since the previous scene was made
+            (the run's summary reports them, :mod:`fempm.timings`).
     """
 
     name: str
@@ -162,6 +166,7 @@ class Scene:
     outside: str = "raise"
     colliders: Sequence = ()
     velocity_gradient: npt.ArrayLike | None = None
+    timings: dict[str, float] = field(default_factory=SETUP.take)
 
     def __post_init__(self):
         outside_policy(self.outside)

@@ -14,13 +14,14 @@ from tqdm import tqdm
 
 from fempm.abort import FailureAgreement, abort
 from fempm.io import checkpoint, stops
-from fempm.io.writers import OUTPUT_LIMIT, RunWriter, check_output_size, write_json
+from fempm.io.writers import FRAME_FORMATS, OUTPUT_LIMIT, RunWriter, check_output_size, write_json
 from fempm.particles.location import OutsideMeshError
 from fempm.scene.definition import MAX_STEPS, Scene
 from fempm.scene.observers import Checkpoints, Energies, Frames, HealthChecks, Observer, Progress, Watch
 from fempm.stepping.health import HealthMonitor
 from fempm.stepping.options import SimulationError
 from fempm.stepping.solver import ExplicitSolver
+from fempm.timings import Timings, line
 from fempm.transfer.mapping import SingularMassError
 
 __all__ = ["RUN_STATS", "Run", "outcome_of", "run", "run_stats", "write_frame"]
@@ -75,12 +76,13 @@ def run(
     rebuild: dict | None = None,
     overwrite: bool = True,
     output_limit: float | None = OUTPUT_LIMIT,
+    frame_format: str = "vtkhdf",
 ) -> dict:
     """Run ``scene`` to ``t_end``, writing its outputs as it goes.
 
     Energies and momentum are recorded every step (returned in ``history``; with ``out``
     written to ``energies.csv`` as the run goes, with the particle frames, the grid velocity
-    and stress (VTK XML; the stress projected as a per-volume field,
+    and stress (particles as VTKHDF or VTK XML, grid fields as VTK XML; the stress projected as a per-volume field,
     :meth:`ExplicitSolver.grid_stress`), ``summary.json`` and, with ``png``, a PNG of the
     particles per frame in ``frames/``; :mod:`fempm.io`). The scene's
     :class:`~fempm.stepping.health.Health` limits are checked every step.
@@ -108,6 +110,9 @@ def run(
         overwrite: Remove the outputs of an earlier run in ``out`` (else they are an error).
         output_limit: The bytes of frames a run may write, estimated before it starts (None:
             no limit).
+        frame_format: The particle frames' format: ``"vtkhdf"``, one file per frame for all
+            ranks (:mod:`fempm.io.vtkhdf`), or ``"vtu"``, VTK XML, a piece per rank (a resumed
+            run keeps its checkpoint's).
 
     Returns:
         The summary (as in ``summary.json``) with the energy ``history``.
@@ -129,6 +134,8 @@ def run(
     """
     if (checkpoint_every is not None or resume) and out is None:
         raise ValueError("checkpoints need an output folder (out)")
+    if frame_format not in FRAME_FORMATS:
+        raise ValueError(f"unknown frame_format={frame_format!r}; expected one of {', '.join(FRAME_FORMATS)}")
     if scene.options.integration is not None and scene.dt is None:
         raise ValueError("an implicit run takes fixed steps: give the scene a dt (Scene(dt=...), or --steps N on the "
                          "command line); the CFL condition does not bound it")
@@ -137,7 +144,7 @@ def run(
         raise ValueError(f"checkpoint_every={checkpoint_every!r} must be a positive number of steps")
     return Run(scene, None if out is None else Path(out), png=png, resume=resume, overwrite=overwrite,
                 checkpoint_every=checkpoint_every, rebuild=rebuild, output_limit=output_limit,
-                progress=progress).execute(progress, callback)
+                progress=progress, frame_format=frame_format).execute(progress, callback)
 
 
 class Run:
@@ -145,15 +152,20 @@ class Run:
     how it ends."""
 
     def __init__(self, scene: Scene, out: Path | None, *, png: bool, resume: bool, overwrite: bool,
-                 checkpoint_every: int | None, rebuild: dict | None, output_limit: float | None, progress: bool):
+                 checkpoint_every: int | None, rebuild: dict | None, output_limit: float | None, progress: bool,
+                 frame_format: str = "vtkhdf"):
 
         self.scene, self.out, self.every, self.resumed, self.rebuild = scene, out, checkpoint_every, resume, rebuild
         self.comm = comm = scene.mesh.comm
         # the particles the scene starts with (a resumed run's as its first part's: some may have
         # left the mesh since, and the checkpoint holds only the survivors)
         self.num_particles = scene.particles.num_global
-        saved, arrays = checkpoint.restore_particles(out, scene, comm) if resume else (None, {})
-        self.solver = solver = scene.solver()
+        self.timings = timings = Timings()
+        timings.add(scene.timings)
+        with timings.phase("checkpoint_s"):
+            saved, arrays = checkpoint.restore_particles(out, scene, comm) if resume else (None, {})
+        with timings.phase("solver_s"):
+            self.solver = solver = scene.solver()
         if saved is not None:
             checkpoint.check_fields(saved, scene.particles, comm)
         if out is not None:
@@ -161,14 +173,15 @@ class Run:
             if progress and comm.rank == 0:
                 print(f"{scene.name}: about {size / 1e6:.3g} MB of frames into {out}")
         self.writer = (RunWriter(out, scene.particles, solver.V, png=png, resume=saved["writer"] if saved else None,
-                                 overwrite=overwrite) if out is not None else None)
+                                 overwrite=overwrite, frame_format=frame_format) if out is not None else None)
         self.monitor = HealthMonitor(solver, scene.health)
         self.history = [solver.energies()]
         self.frames = Frames(scene.t_end / max(scene.frames, 1))
         if saved is None and callable(getattr(scene.watch, "start", None)):
             scene.watch.start(solver)
         if saved is not None:
-            checkpoint.restore_solver(solver, self.monitor, saved, arrays)
+            with timings.phase("checkpoint_s"):
+                checkpoint.restore_solver(solver, self.monitor, saved, arrays)
             checkpoint.restore_watch(scene.watch, saved)
             self.history[0] = saved["writer"]["initial"]
             self.frames = Frames(saved["writer"]["frame_interval"], saved["writer"]["next_frame"])
@@ -183,17 +196,19 @@ class Run:
 
         state = {**self.writer.state_dict(), "next_frame": self.frames.next_frame, "frame_interval": self.frames.interval,
                  "initial": self.history[0]}
-        return checkpoint.write(self.out, self.scene, self.solver, self.monitor, state, self.rebuild)
+        with self.timings.phase("checkpoint_s"):
+            return checkpoint.write(self.out, self.scene, self.solver, self.monitor, state, self.rebuild)
 
     def step(self) -> float:
         """One step to at most ``t_end`` (the scene's fixed ``dt`` or the stable one); the
         last step ends exactly at ``t_end``. Returns the step's ``dt``."""
         scene, solver = self.scene, self.solver
         remaining = scene.t_end - solver.t
-        if scene.dt is None:
-            dt = solver.step(dt_max=remaining, totals=True)
-        else:  # a last step shorter than 1e-9 dt is merged into the one before
-            dt = solver.step(remaining if remaining <= scene.dt * (1 + 1e-9) else scene.dt, totals=True)
+        with self.timings.phase("first_step_s" if solver.step_count == self.steps0 else "steps_s"):
+            if scene.dt is None:
+                dt = solver.step(dt_max=remaining, totals=True)
+            else:  # a last step shorter than 1e-9 dt is merged into the one before
+                dt = solver.step(remaining if remaining <= scene.dt * (1 + 1e-9) else scene.dt, totals=True)
         final = dt >= remaining
         if not final and remaining > MAX_STEPS * dt:  # e.g. velocities of 1e200: no progress
             raise SimulationError(f"step {solver.step_count}, t = {solver.t:.6g}: time step collapse: dt = {dt:.3g} "
@@ -204,7 +219,8 @@ class Run:
 
     def write_frame(self) -> None:
         """The frames the scene asks for at the solver's time (collective)."""
-        write_frame(self.writer, self.scene, self.solver)
+        with self.timings.phase("output_s"):
+            write_frame(self.writer, self.scene, self.solver)
 
     def observers(self, bar, stop, callback) -> list[Observer]:
         """The loop's observers, in the order they are called."""
@@ -250,7 +266,7 @@ class Run:
             summary.update(self.scene.results(self.scene, solver))
         if progress and comm.rank == 0 and failure is None:
             print(f"{self.scene.name}: {solver.step_count} steps to t = {solver.t:.4g} in {summary['wall_time_s']:.2f} s "
-                  f"({summary['particle_steps_per_s']:.3g} particle-steps/s)")
+                  f"({summary['particle_steps_per_s']:.3g} particle-steps/s; {line(summary['timings'])})")
         if self.writer is not None:
             self.writer.summary(summary)
         self.agreement.free()
@@ -280,7 +296,8 @@ class Run:
             return
         writing = self.monitor.outcome in ("completed", INTERRUPTED) and self.solver.grid_velocity is not None
         try:
-            write_frame(self.writer, self.scene, self.solver, grid=writing, particles=True)
+            with self.timings.phase("output_s"):
+                write_frame(self.writer, self.scene, self.solver, grid=writing, particles=True)
         except Exception as e:  # noqa: BLE001 - the summary is still written
             self.settle(e, t0)
             self.monitor.error = "; ".join(filter(None, [self.monitor.error, f"the final frame: {e}"]))
@@ -291,6 +308,7 @@ class Run:
         """The run's summary; ``collective``: the wall time is the slowest rank's (else this
         rank's, for a summary written by one rank)."""
         solver = self.solver
+        timings = self.timings.slowest(self.comm) if collective else dict(self.timings.seconds)
         if collective:
             wall = self.comm.allreduce(wall, op=MPI.MAX)
         return {
@@ -300,6 +318,7 @@ class Run:
             "steps": solver.step_count,
             "t_end": solver.t,
             "wall_time_s": wall,
+            "timings": timings,
             "particle_steps_per_s": self.num_particles * (solver.step_count - self.steps0) / wall if wall > 0 else 0.0,
             "terms_assembled": dict(solver.terms),
             "final": self.history[-1],

@@ -15,6 +15,7 @@ from fempm.io import stops
 from fempm.io.writers import RunWriter
 from fempm.stepping.health import HealthMonitor
 from fempm.stepping.solver import ExplicitSolver
+from fempm.timings import Timings
 
 __all__ = ["Checkpoints", "Energies", "Frames", "HealthChecks", "Observer", "Progress", "Run", "Watch"]
 
@@ -30,6 +31,7 @@ class Run(Protocol):
         momentum_scale: The last step's sum of the particles' |momentum| (the health checks').
         out: The output folder (None: none).
         comm: The run's communicator.
+        timings: The seconds of the run's phases on this rank (:mod:`fempm.timings`).
     """
 
     solver: ExplicitSolver
@@ -39,6 +41,7 @@ class Run(Protocol):
     momentum_scale: float | None
     out: Path | None
     comm: MPI.Comm
+    timings: Timings
 
     def save(self) -> Path:
         """A checkpoint of the state now (collective)."""
@@ -76,7 +79,8 @@ class Energies(Observer):
     def after_step(self, run: Run, dt: float, row: dict, final: bool) -> None:
         run.history.append(row)
         if run.writer is not None:
-            run.writer.energies(row)
+            with run.timings.phase("output_s"):
+                run.writer.energies(row)
 
 
 class HealthChecks(Observer):

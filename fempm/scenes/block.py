@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-import dolfinx.mesh as dm
+from fempm.meshes import structured as dm
 import numpy as np
 from mpi4py import MPI
 
@@ -24,7 +24,8 @@ __all__ = ["hanging_block", "largest_neighbour_gap"]
 def hanging_block(
     *, cells: int = 10, ppc: int = 9, domain: str = "point", mesh: str = "structured", scheme: str = "MUSL",
     flip: float = 0.99, mass: str = "lumped", cfl: float = 0.4, t_end: float = 0.5, g: float = 1000.0,
-    E: float = 1e6, nu: float = 0.3, rho: float = 1050.0, frames: int = 10, comm: MPI.Comm = MPI.COMM_WORLD,
+    E: float = 1e6, nu: float = 0.3, rho: float = 1050.0, frames: int = 10, refine: int = 0,
+    comm: MPI.Comm = MPI.COMM_WORLD,
 ) -> Scene:
     r"""Unit block hanging from its top under extreme self-weight (docs/verification.md):
     neo-Hookean, :math:`\rho g L / E \approx 1`, so the block stretches to several times its
@@ -45,14 +46,17 @@ def hanging_block(
         E: Young's modulus in Pa.
         nu: Poisson's ratio.
         rho: The density in kg/m^3.
+        refine: Uniform refinements of a coarser gmsh mesh: gmsh meshes at 2^refine times the cell size and every rank splits its triangles refine times (:mod:`fempm.meshes.refinement`; a large mesh made in parallel).
     """
     check_counts(cells=cells, ppc=ppc)
     h = 1.0 / cells
     box = [[-0.5, -4.0], [1.5, h]]
+    if refine and mesh != "unstructured":
+        raise ValueError(f"refine={refine} refines the gmsh mesh: it needs mesh='unstructured'")
     if mesh == "structured":
         m = dm.create_rectangle(comm, box, [int(round(2 / h)), int(round((4 + h) / h))], dm.CellType.quadrilateral)
     elif mesh == "unstructured":
-        m = unstructured_rectangle(comm, h, size=(2.0, 4.0 + h), origin=(-0.5, -4.0), split_y=(0.0,))
+        m = unstructured_rectangle(comm, h, size=(2.0, 4.0 + h), origin=(-0.5, -4.0), split_y=(0.0,), refine=refine)
     else:
         raise ValueError(f"unknown option mesh={mesh!r}; expected structured or unstructured")
     # particles on a regular lattice of spacing h / sqrt(ppc) (also on the triangle mesh)
@@ -67,7 +71,7 @@ def hanging_block(
         fields["corners"] = box_corners(x, fields["lp"])
     p = Particles(m, x, rho * vol, vol, fields=fields)
     params = dict(cells=cells, ppc=ppc, domain=domain, mesh=mesh, scheme=scheme, flip=flip, mass=mass, cfl=cfl, g=g, E=E,
-                  nu=nu, rho=rho, spacing=1.0 / n, h=h)
+                  nu=nu, rho=rho, spacing=1.0 / n, h=h, **({"refine": refine} if refine else {}))
     return Scene(
         name="hanging_block", mesh=m, particles=p, materials=[NeoHookean(E, nu)], t_end=t_end, frames=frames,
         bcs=lambda V: [fixed(V, lambda x: x[1] > -0.5 * h)], loads=Loads(body_force=(0.0, -g)),

@@ -82,7 +82,8 @@ class DiskMotion(Recorder):
 def bowl(*, cells: int = 8, ppc: int = 4, wall: str = "slip", friction: float = 0.3, release: float = 30.0,
          radius: float = 0.2, bowl_radius: float = 1.0, rho: float = 1000.0, E: float = 1.0e6, nu: float = 0.3,
          g: float = 10.0, periods: float = 2.0, segments: int = 48, scheme: str = "MUSL", flip: float = 1.0,
-         cfl: float = 0.4, frames: int = 20, mass: str = "lumped", comm: MPI.Comm = MPI.COMM_WORLD) -> Scene:
+         cfl: float = 0.4, frames: int = 20, mass: str = "lumped", refine: int = 0,
+         comm: MPI.Comm = MPI.COMM_WORLD) -> Scene:
     """The disk and its bowl (the module), ``cells`` cells across the disk (the gmsh size
     ``2 radius / cells``), run for ``periods`` of the sliding pendulum.
 
@@ -100,6 +101,7 @@ def bowl(*, cells: int = 8, ppc: int = 4, wall: str = "slip", friction: float = 
         g: Gravity in m/s^2.
         periods: The run's length in periods of the sliding pendulum.
         segments: The straight segments of the bowl's arc.
+        refine: Uniform refinements of a coarser gmsh mesh: gmsh meshes at 2^refine times the cell size and every rank splits its triangles refine times (:mod:`fempm.meshes.refinement`; a large mesh made in parallel).
 
     Raises:
         ValueError: An unknown ``wall``, counts that are not positive, a release outside
@@ -116,7 +118,7 @@ def bowl(*, cells: int = 8, ppc: int = 4, wall: str = "slip", friction: float = 
     R = bowl_radius
     arc = [(R * np.sin(a), R - R * np.cos(a)) for a in np.linspace(-0.5 * np.pi, 0.5 * np.pi, segments + 1)]
     data = tagged_polygon(comm, arc + [(R, 1.3 * R), (-R, 1.3 * R)], 2.0 * radius / cells,
-                          [WALL_TAG] * segments + [0, 0, 0])
+                          [WALL_TAG] * segments + [0, 0, 0], refine=refine)
     theta0 = np.radians(release)
     arm = R - radius  # the centre's path
     centre = np.array([arm * np.sin(theta0), R - arm * np.cos(theta0)])
@@ -143,7 +145,7 @@ def bowl(*, cells: int = 8, ppc: int = 4, wall: str = "slip", friction: float = 
 
     params = {"cells": cells, "ppc": ppc, "wall": wall, "friction": friction, "release": release, "radius": radius,
               "bowl_radius": bowl_radius, "rho": rho, "E": E, "nu": nu, "g": g, "periods": periods,
-              "segments": segments, "scheme": scheme, "flip": flip, "mass": mass, "cfl": cfl}
+              "segments": segments, "scheme": scheme, "flip": flip, "mass": mass, "cfl": cfl, **({"refine": refine} if refine else {})}
     return Scene(name="bowl", mesh=data.mesh, particles=p, materials=[NeoHookean(E, nu)], t_end=periods * sliding,
                  bcs=bcs, loads=Loads(body_force=(0.0, -g)), options=StepOptions(scheme=scheme, flip=flip, mass=mass, cfl=cfl),
                  frames=frames, params=params, results=results, watch=motion)

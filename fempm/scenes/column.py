@@ -15,7 +15,7 @@ when it is small).
 
 from __future__ import annotations
 
-import dolfinx.mesh as dm
+from fempm.meshes import structured as dm
 import numpy as np
 from mpi4py import MPI
 

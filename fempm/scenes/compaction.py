@@ -18,7 +18,7 @@ summary holds ``stress_error``, the relative, volume-weighted L2 error of the pa
 
 from __future__ import annotations
 
-import dolfinx.mesh as dm
+from fempm.meshes import structured as dm
 import numpy as np
 from mpi4py import MPI
 

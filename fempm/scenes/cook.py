@@ -83,7 +83,7 @@ def cook_membrane(
     *, h: float = 3.0, nu: float = 1 / 3, E: float = 1.0, rho: float = 1.0, load: float = 1e-3, spacing: float | None = None,
     degree: int = 1, variant: str | None = None, mass: str = "lumped", domain: str = "point", scheme: str = "MUSL",
     flip: float = 1.0, cfl: float = 0.4, damping: float | None = None, t_end: float | None = None, frames: int = 10,
-    ppc: int | None = None, comm: MPI.Comm = MPI.COMM_WORLD,
+    ppc: int | None = None, refine: int = 0, comm: MPI.Comm = MPI.COMM_WORLD,
 ) -> Scene:
     """Cook's membrane with triangles of size ``h`` and ``ppc`` particles seeded per triangle
     (default 4 for degree 1, 9 for degree 2: at least as many as the element's basis functions),
@@ -103,6 +103,7 @@ def cook_membrane(
         damping: The grid damping rate in 1/s (None: twice the estimated first frequency).
         t_end: The end time (None: 12 over the estimated first frequency).
         ppc: Particles per triangle (None: 4 for degree 1, 9 for degree 2).
+        refine: Uniform refinements of a coarser gmsh mesh: gmsh meshes at 2^refine times the cell size and every rank splits its triangles refine times (:mod:`fempm.meshes.refinement`; a large mesh made in parallel).
     """
     check_counts(degree=degree)
     if spacing is not None and not 0.0 < spacing < np.inf:
@@ -111,7 +112,7 @@ def cook_membrane(
         raise ValueError(f"unknown option variant={variant!r}; expected one of {', '.join(VARIANTS)}")
     if spacing is not None and ppc is not None:
         raise ValueError(f"spacing={spacing} and ppc={ppc} are two seedings: give one of them")
-    mesh = unstructured_polygon(comm, CORNERS, h)
+    mesh = unstructured_polygon(comm, CORNERS, h, refine=refine)
     # degree >= 2 needs every triangle to hold as many particles as dofs: the consistent mass
     # would be singular, and the particles' quadrature of the stiffness would leave zero-energy
     # modes (the implicit step's tangent is then singular, the explicit step rings in them)
@@ -136,7 +137,7 @@ def cook_membrane(
         return p.fields["loaded"][:, None] * traction
 
     params = dict(h=h, nu=nu, E=E, rho=rho, load=load, spacing=spacing, ppc=ppc, lattice=(nx, ny), degree=degree,
-                  mass=mass, domain=domain, scheme=scheme, omega1=omega1)
+                  mass=mass, domain=domain, scheme=scheme, omega1=omega1, **({"refine": refine} if refine else {}))
     return Scene(
         name="cook_membrane", mesh=mesh, particles=p, materials=[LinearElastic(E, nu)],
         t_end=12.0 / omega1 if t_end is None else t_end, frames=frames,

@@ -23,7 +23,7 @@ every step (``collider_force_0_y``, ``collider_displacement_0_y``: the force-pen
 
 from __future__ import annotations
 
-import dolfinx.mesh as dm
+from fempm.meshes import structured as dm
 import numpy as np
 from mpi4py import MPI
 

@@ -45,7 +45,7 @@ settled on the plane), and ``analytic``, the value above.
 
 from __future__ import annotations
 
-import dolfinx.mesh as dm
+from fempm.meshes import structured as dm
 import numpy as np
 from mpi4py import MPI
 
@@ -131,7 +131,8 @@ def incline(
     body: str = "block", angle: float = 30.0, friction: float = 0.2, *, cells: int = 8, ppc: int | None = None,
     size: float = 0.1, E: float = 1.0e6, nu: float = 0.3, rho: float = 1000.0, g: float = 9.81,
     t_end: float | None = None, scheme: str = "MUSL", flip: float | None = None, cfl: float = 0.4, frames: int = 10,
-    plane: str = "grid", gap: float | None = None, turned: bool = True, mass: str = "lumped", comm: MPI.Comm = MPI.COMM_WORLD,
+    plane: str = "grid", gap: float | None = None, turned: bool = True, mass: str = "lumped", refine: int = 0,
+    comm: MPI.Comm = MPI.COMM_WORLD,
 ) -> Scene:
     """The incline of the module: ``cells`` cells across ``size``, ``ppc`` particles per
     cell, a square lattice (default 4 = 2 x 2 for the block, 16 = 4 x 4 for the disk, whose
@@ -168,6 +169,7 @@ def incline(
         gap: How near, in cells, a node's centre of mass must come to the plane to touch it
             (None: 0 for the block, 0.5 for the disk).
         turned: The collider plane on the slope's turned grid (else an axis-aligned one).
+        refine: Uniform refinements of a coarser gmsh mesh: gmsh meshes at 2^refine times the cell size and every rank splits its triangles refine times (:mod:`fempm.meshes.refinement`; a large mesh made in parallel).
     """
     ppc = (16 if body == "disk" else 4) if ppc is None else ppc
     flip = (1.0 if body == "disk" else BLOCK_FLIP) if flip is None else flip
@@ -185,8 +187,10 @@ def incline(
     below = 3 if plane == "rigid" else 0  # cells under the plane: the rigid layer and one empty row
     frame = np.array([[np.cos(th), np.sin(th)], [-np.sin(th), np.cos(th)]])  # columns: down the slope, normal
     corners = np.array([[0.0, 0.0], [nx * h, 0.0], [nx * h, ny * h], [0.0, ny * h]]) @ frame.T
+    if refine and plane != "tagged":
+        raise ValueError(f"refine={refine} refines the gmsh mesh: it needs plane='tagged'")
     if plane == "tagged":  # the slope's region turned by theta, its floor tagged
-        data = tagged_polygon(comm, corners, h, [FLOOR_TAG, 0, 0, 0])
+        data = tagged_polygon(comm, corners, h, [FLOOR_TAG, 0, 0, 0], refine=refine)
         mesh = data.mesh
     elif plane == "collider" and not turned:  # an axis-aligned grid over the turned region and a cell under it
         lo, hi = corners.min(axis=0) - h, corners.max(axis=0)
@@ -208,7 +212,7 @@ def incline(
 
     params = {"body": body, "angle": angle, "friction": friction, "cells": cells, "ppc": ppc, "size": size, "E": E,
               "nu": nu, "rho": rho, "g": g, "scheme": scheme, "flip": flip, "mass": mass, "cfl": cfl, "plane": plane, "gap": gap,
-              **({"turned": turned} if plane == "collider" else {})}
+              **({"turned": turned} if plane == "collider" else {}), **({"refine": refine} if refine else {})}
 
     def walls(V):
         if plane in ("rigid", "collider"):

@@ -102,7 +102,7 @@ def silo(*, cells: int = 5, outlet: float = 0.1, half_angle: float = 30.0, fill:
          wall_friction: float = 0.3, floor_friction: float = 0.5, g: float = 9.81, t_end: float = 1.0,
          scheme: str = "MUSL", flip: float = 0.99, cfl: float = 0.4, frames: int = 20, law: str = "mu-i",
          grain_diameter: float = 0.53e-3, width: float = TOP, floor: bool = True,
-         mass: str = "lumped", comm: MPI.Comm = MPI.COMM_WORLD) -> Scene:
+         mass: str = "lumped", refine: int = 0, comm: MPI.Comm = MPI.COMM_WORLD) -> Scene:
     r"""The silo of the module, ``cells`` cells across the outlet (the gmsh size ``outlet / cells``),
     the grains a ``law`` of :data:`LAWS`: ``"mu-i"`` the :math:`\mu(I)` rheology
     (:class:`fempm.materials.MuI`, Jop et al.'s glass beads of ``grain_diameter``), ``"dp"`` Drucker-Prager
@@ -130,6 +130,7 @@ def silo(*, cells: int = 5, outlet: float = 0.1, half_angle: float = 30.0, fill:
         grain_diameter: The grains' diameter in m (``law="mu-i"``).
         width: The hopper's top width in m.
         floor: A floor under the outlet (false: the grains fall out of the mesh).
+        refine: Uniform refinements of a coarser gmsh mesh: gmsh meshes at 2^refine times the cell size and every rank splits its triangles refine times (:mod:`fempm.meshes.refinement`; a large mesh made in parallel).
 
     Raises:
         ValueError: Counts that are not positive, a half-angle outside (0, 60) degrees, a fill
@@ -146,7 +147,7 @@ def silo(*, cells: int = 5, outlet: float = 0.1, half_angle: float = 30.0, fill:
     vertices, tags, top = _outline(outlet, half_angle, width)
     if not 0.0 < fill < top - OUTLET_HEIGHT:
         raise ValueError(f"fill={fill:g} must lie in (0, {top - OUTLET_HEIGHT:.4g}) (the hopper's height)")
-    data = tagged_polygon(comm, vertices, outlet / cells, tags)
+    data = tagged_polygon(comm, vertices, outlet / cells, tags, refine=refine)
     tan = np.tan(np.radians(half_angle))
 
     def inside(x):
@@ -169,7 +170,7 @@ def silo(*, cells: int = 5, outlet: float = 0.1, half_angle: float = 30.0, fill:
     params = {"cells": cells, "outlet": outlet, "half_angle": half_angle, "fill": fill, "ppc": ppc, "rho": rho,
               "E": E, "nu": nu, "friction_angle": friction_angle, "wall_friction": wall_friction,
               "floor_friction": floor_friction, "g": g, "scheme": scheme, "flip": flip, "mass": mass, "cfl": cfl, "law": law,
-              "grain_diameter": grain_diameter, "width": width, "floor": floor}
+              "grain_diameter": grain_diameter, "width": width, "floor": floor, **({"refine": refine} if refine else {})}
     material = MuI(E, nu, grain_diameter=grain_diameter) if law == "mu-i" else DruckerPrager(E, nu, friction_angle)
     return Scene(name="silo", mesh=data.mesh, particles=p, materials=[material],
                  t_end=t_end, bcs=bcs, loads=Loads(body_force=(0.0, -g)),

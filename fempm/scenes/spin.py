@@ -25,7 +25,7 @@ lumped rows grows unstable at the rim within a few hundred steps; structured tri
 
 from __future__ import annotations
 
-import dolfinx.mesh as dm
+from fempm.meshes import structured as dm
 import numpy as np
 from mpi4py import MPI
 

@@ -22,7 +22,7 @@ scheme's own dissipation over the path).
 
 from __future__ import annotations
 
-import dolfinx.mesh as dm
+from fempm.meshes import structured as dm
 import numpy as np
 from mpi4py import MPI
 

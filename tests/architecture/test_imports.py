@@ -14,7 +14,7 @@ PACKAGE = Path(__file__).resolve().parents[2] / "fempm"
 
 #: the layers, lowest first: a module may import modules of its own layer or of lower ones
 LAYERS = (
-    ("fempm.arguments", "fempm.abort", "fempm.petsc", "fempm.docstrings"),
+    ("fempm.arguments", "fempm.abort", "fempm.petsc", "fempm.docstrings", "fempm.timings"),
     ("fempm.kernels",),
     ("fempm.meshes",),
     ("fempm.materials",),

@@ -40,7 +40,7 @@ def test_two_disks_demo_writes_outputs(tmp_path):
     res = demo.main(["--mesh", "structured", "--t-end", "0.5", "--out", str(out)])
     assert res["momentum_drift"] < 1e-13
     frames = sorted((out / "frames").glob("frame_*.png"))
-    assert len(frames) == len(list((out / "particles").glob("particles_*.pvtu"))) > 3
+    assert len(frames) == len(list((out / "particles").glob("particles_*.vtkhdf"))) > 3
     rows = (out / "energies.csv").read_text().splitlines()
     assert len(rows) == res["steps"] + 1 and rows[0].startswith("step,dt,t,kinetic,strain,total")
     assert (out / "energies.png").stat().st_size > 10_000 and (out / "summary.json").exists()

@@ -56,7 +56,7 @@ def _interrupted_then_resumed(out: Path, c=comm, mass="lumped") -> dict:
 
 
 #: the summary entries that measure the machine, not the run
-TIMINGS = ("wall_time_s", "particle_steps_per_s")
+TIMINGS = ("wall_time_s", "particle_steps_per_s", "timings")
 
 
 def outputs(out: Path) -> dict[str, bytes]:

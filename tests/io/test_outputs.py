@@ -1,5 +1,5 @@
-"""A run's outputs read back with pyvista: particle frames (parallel VTK XML pieces, their
-index and time collection) and the grid fields (VTK XML time series); the energies and the
+"""A run's outputs read back with pyvista: particle frames (VTKHDF, one file per frame for
+all ranks, or parallel VTK XML pieces and their index; the time collection) and the grid fields (VTK XML time series); the energies and the
 summary, also after a failed run; an earlier run's outputs refused or replaced."""
 
 import csv
@@ -34,18 +34,24 @@ def _gathered(particles) -> dict:
             "J": np.concatenate(comm.allgather(np.linalg.det(particles.fields["F"])))[order]}
 
 
-def test_particle_frames_are_parallel_pieces_that_pyvista_reads(tmp_path):
+@pytest.mark.parametrize("frame_format, suffix", [("vtkhdf", ".vtkhdf"), ("vtu", ".pvtu")])
+def test_particle_frames_are_files_that_pyvista_reads(tmp_path, frame_format, suffix):
     out = _folder(tmp_path, "disks")
-    result = run(two_disks(cells=10, t_end=0.3, frames=3), out, progress=False)
+    result = run(two_disks(cells=10, t_end=0.3, frames=3), out, progress=False, frame_format=frame_format)
     final = _gathered(result["solver"].particles)
+    with pytest.raises(ValueError, match="unknown frame_format='xdmf'; expected one of vtkhdf, vtu"):
+        run(two_disks(cells=10, t_end=0.3, frames=3), out, progress=False, frame_format="xdmf")
     if comm.rank != 0:
         return
-    frames = sorted((out / "particles").glob("particles_*.pvtu"))
+    frames = sorted((out / "particles").glob(f"particles_*{suffix}"))
     times = [float(t) for _, t in csv.reader(open(out / "particles" / "times.csv"))]
     assert len(frames) == len(times) == 4 and times[0] == 0.0 and times[-1] == 0.3  # 3 frames + the final state
     pieces = sorted((out / "particles").glob(frames[-1].stem + "_r*.vtu"))
-    assert len(pieces) == comm.size  # one per rank, nothing gathered
+    assert len(pieces) == (comm.size if frame_format == "vtu" else 0)  # one per rank, or one file for all
+    assert sorted(q.suffix for q in (out / "particles").iterdir()) == sorted(
+        [".csv"] + [suffix] * 4 + [".vtu"] * len(pieces) * 4)  # nothing else left (no temporary file)
     grid = pv.read(frames[-1])
+    assert isinstance(grid, pv.UnstructuredGrid) and grid.n_cells == grid.n_points  # a vertex per particle
     assert grid.n_points == len(final["id"]) == result["particles"]
     order = np.argsort(grid.point_data["id"])
     assert np.array_equal(grid.point_data["id"][order], final["id"])
@@ -112,7 +118,7 @@ def test_a_failed_run_leaves_its_summary_and_failing_state(tmp_path):
     if comm.rank == 0:
         summary = json.loads((out / "summary.json").read_text())
         assert summary["status"] == "aborted" and "inverted deformation" in summary["health"]["error"]
-        frames = sorted((out / "particles").glob("particles_*.pvtu"))
+        frames = sorted((out / "particles").glob("particles_*.vtkhdf"))
         assert pv.read(frames[-1]).n_points == summary["particles"]
 
 
@@ -123,7 +129,7 @@ def test_an_earlier_run_is_refused_or_replaced(tmp_path):
         run(two_disks(cells=10, t_end=0.1, frames=1), out, progress=False, overwrite=False)
     run(two_disks(cells=10, t_end=0.1, frames=1), out, progress=False)  # overwrite=True: replaced
     if comm.rank == 0:  # no frame of the earlier run is left
-        assert len(list((out / "particles").glob("particles_*.pvtu"))) == 2
+        assert len(list((out / "particles").glob("particles_*.vtkhdf"))) == 2
         assert len(list(csv.reader(open(out / "particles" / "times.csv")))) == 2
 
 
@@ -139,6 +145,6 @@ def test_a_run_computes_only_the_outputs_its_scene_asks_for(tmp_path, monkeypatc
     assert projections == []  # the grid stress is never projected
     if comm.rank == 0:
         assert (out / "grid_velocity.pvd").exists() and not (out / "grid_stress.pvd").exists()
-        assert len(list((out / "particles").glob("*.pvtu"))) == 1  # the final state only
+        assert len(list((out / "particles").glob("*.vtkhdf"))) == 1  # the final state only
     with pytest.raises(ValueError, match=r"unknown output\(s\) \['stress'\]"):
         dataclasses.replace(scene, outputs=("stress",))

@@ -71,5 +71,5 @@ def test_a_resumed_plastic_run_is_bit_identical(tmp_path):
     if comm.rank == 0:
         import pyvista as pv
 
-        frame = pv.read(sorted((out / "parts" / "particles").glob("*.pvtu"))[-1])
+        frame = pv.read(sorted((out / "parts" / "particles").glob("*.vtkhdf"))[-1])
         assert np.array_equal(np.sort(frame.point_data["eps_p"]), np.sort(a["eps_p"]))

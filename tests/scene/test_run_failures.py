@@ -48,13 +48,13 @@ def two_disks(**kw):
 fempm.scenes.SCENES["disks"] = two_disks
 """,
     "frame": """
-import fempm.io.vtu
-_piece = fempm.io.vtu.write_piece
-def write_piece(path, *args, **kw):
+import fempm.io.vtkhdf
+_fill = fempm.io.vtkhdf._fill
+def fill(path, *args, **kw):  # rank 1's rows of a particle frame
     if MPI.COMM_WORLD.rank == 1 and armed() and "particles_" in str(path):
         raise PermissionError(13, "Permission denied", str(path))  # as in a read-only folder
-    return _piece(path, *args, **kw)
-fempm.io.vtu.write_piece = write_piece
+    return _fill(path, *args, **kw)
+fempm.io.vtkhdf._fill = fill
 """,
 }
 

@@ -35,7 +35,7 @@ def test_unstable_cli_runs_exit_nonzero_naming_the_cause(tmp_path, capsys, argv,
         assert cause in capsys.readouterr().err
         summary = json.loads((out / "summary.json").read_text())
         assert summary["status"] == "aborted" and cause in summary["health"]["error"]
-        assert len(list((out / "particles").glob("*.pvtu"))) >= 2  # the failing state is written
+        assert len(list((out / "particles").glob("*.vtkhdf"))) >= 2  # the failing state is written
 
 
 def test_default_scheme_runs_the_bar_at_cfl_0_9_within_5_percent(tmp_path):
