@@ -1,23 +1,25 @@
-"""Particle frames as VTKHDF: one file per frame for all ranks, the arrays raw (HDF5 through
-h5py), read by ParaView (5.12 and later) and pyvista (``pyvista.read``, and
-``pyvista.PVDReader`` on the run's ``particles.pvd``, which names these files).
+"""Particle frames as VTKHDF: one file per frame for all ranks, the arrays raw, read by
+ParaView (5.12 and later) and pyvista (``pyvista.read``, and ``pyvista.PVDReader`` on the run's
+``particles.pvd``, which names these files).
 
 The file is one UnstructuredGrid piece: the particles of every rank, rank after rank, each a
-vertex cell, with their point data. Rank 0 makes the file with every dataset at its full size;
-the ranks then write their rows in turn (an HDF5 file without MPI-IO takes one writer at a
-time: the ranks pass a token), and rank 0 renames the finished file into place, so that a run
-killed while it writes leaves the frames before, never half a frame.
+vertex cell, with their point data. Rank 0 lays the file out with h5py (every dataset
+contiguous, its space allocated at creation and never filled) and tells the ranks where each
+dataset starts; every rank then writes its own rows at their byte offsets at the same time
+(``os.pwrite``: parallel writes into one file without MPI-IO, which the wheel's HDF5 lacks), and
+rank 0 renames the finished file into place, so that a run killed while it writes leaves the
+frames before, never half a frame.
 
 Why not the VTK XML pieces (:mod:`fempm.io.vtu`, still written with ``frame_format="vtu"``):
-at 1e6 particles their base64 encoding costs several times the raw write (docs/performance.md);
-why not ADIOS2: the wheel's ADIOS2 is DOLFINx's, without Python bindings for arbitrary arrays,
-and the ``adios2`` package would add a second MPI-built library for what h5py does here.
+their base64 encoding costs several times the raw write and a file per rank
+(docs/performance.md); why not ADIOS2: the wheel's ADIOS2 is DOLFINx's, without Python bindings
+for arbitrary arrays, and the ``adios2`` package would add a second MPI-built library for what
+h5py's layout and a positional write do here.
 """
 
 from __future__ import annotations
 
 import os
-import time
 from pathlib import Path
 
 import numpy as np
@@ -42,25 +44,6 @@ def _h5py():
     return h5py
 
 
-def _create(path: Path, total: int, dtypes: dict[str, tuple[np.dtype, tuple[int, ...]]]) -> None:
-    """The file with every dataset at its full size (rank 0)."""
-    h5py = _h5py()
-    with h5py.File(path, "w") as f:
-        root = f.create_group("VTKHDF")
-        root.attrs["Version"] = np.array(VERSION, dtype=np.int64)
-        root.attrs.create("Type", np.bytes_(_TYPE), dtype=h5py.string_dtype("ascii", len(_TYPE)))
-        for name in ("NumberOfPoints", "NumberOfCells", "NumberOfConnectivityIds"):
-            root.create_dataset(name, data=np.array([total], dtype=np.int64))
-        root.create_dataset("Points", (total, 3), dtype=np.float64)
-        root.create_dataset("Types", data=np.full(total, _VERTEX, dtype=np.uint8))
-        index = np.int32 if total < 2**31 - 1 else np.int64  # (VTK reads either)
-        root.create_dataset("Connectivity", data=np.arange(total, dtype=index))
-        root.create_dataset("Offsets", data=np.arange(total + 1, dtype=index))
-        data = root.create_group("PointData")
-        for name, (dtype, shape) in dtypes.items():
-            data.create_dataset(name, (total, *shape), dtype=dtype)
-
-
 def _stored(a: npt.NDArray, vector: bool) -> tuple[int, ...]:
     """The shape of a row as written: a (d, d) tensor as 9 components, a vector as 3."""
     if a.ndim == 3:
@@ -68,13 +51,47 @@ def _stored(a: npt.NDArray, vector: bool) -> tuple[int, ...]:
     return (3,) if vector else a.shape[1:]
 
 
-def _write(dataset, start: int, a: npt.NDArray, vector: bool) -> None:
-    """Rows ``a`` into ``dataset`` from ``start``; padded ones (vectors to 3 components,
-    tensors to 3 x 3) through a small buffer, :data:`BLOCK` rows at a time (no copy of the
-    whole array, no fresh pages to fault in)."""
+def _create(path: Path, total: int, specs: dict[str, tuple[np.dtype, tuple[int, ...]]]) -> dict[str, int]:
+    """The file with every dataset laid out at its full size, unwritten (rank 0); returns each
+    dataset's byte offset in the file (``Types``, ``Connectivity``, ``Offsets``, ``Points`` and
+    ``PointData/NAME`` for the ``specs`` (dtype, row shape))."""
+    h5py = _h5py()
+    dcpl = h5py.h5p.create(h5py.h5p.DATASET_CREATE)
+    dcpl.set_alloc_time(h5py.h5d.ALLOC_TIME_EARLY)  # the space is there now, contiguous
+    dcpl.set_fill_time(h5py.h5d.FILL_TIME_NEVER)  # and not written twice
+    index = np.int32 if total < 2**31 - 1 else np.int64  # (VTK reads either)
+    layout = {"Types": (np.dtype(np.uint8), (), total), "Connectivity": (np.dtype(index), (), total),
+              "Offsets": (np.dtype(index), (), total + 1), "Points": (np.dtype(np.float64), (3,), total)}
+    layout.update({f"PointData/{k}": (np.dtype(t), shape, total) for k, (t, shape) in specs.items()})
+    with h5py.File(path, "w") as f:
+        root = f.create_group("VTKHDF")
+        root.attrs["Version"] = np.array(VERSION, dtype=np.int64)
+        root.attrs.create("Type", np.bytes_(_TYPE), dtype=h5py.string_dtype("ascii", len(_TYPE)))
+        for name in ("NumberOfPoints", "NumberOfCells", "NumberOfConnectivityIds"):
+            root.create_dataset(name, data=np.array([total], dtype=np.int64))
+        root.create_group("PointData")
+        made = {name: root.create_dataset(name, (rows, *shape), dtype=dtype, dcpl=dcpl)
+                for name, (dtype, shape, rows) in layout.items()}
+        return {name: ds.id.get_offset() for name, ds in made.items()}
+
+
+def _pwrite(fd: int, a: npt.NDArray, offset: int) -> None:
+    view = memoryview(np.ascontiguousarray(a)).cast("B")
+    while len(view):
+        done = os.pwrite(fd, view, offset)
+        view, offset = view[done:], offset + done
+
+
+def _write(fd: int, offset: int | None, start: int, a: npt.NDArray, vector: bool) -> None:
+    """Rows ``a`` of a dataset at byte ``offset`` from row ``start``; padded ones (vectors to 3
+    components, tensors to 3 x 3) through a small buffer, :data:`BLOCK` rows at a time (no copy
+    of the whole array, no fresh pages to fault in)."""
+    if offset is None or not len(a):  # (an empty dataset has no place in the file)
+        return
     shape = _stored(a, vector)
+    row = a.dtype.itemsize * int(np.prod(shape))
     if shape == a.shape[1:]:
-        dataset[start:start + len(a)] = a
+        _pwrite(fd, a, offset + start * row)
         return
     buf = np.zeros((min(BLOCK, len(a)), *shape), dtype=a.dtype)
     d = a.shape[1]
@@ -84,26 +101,26 @@ def _write(dataset, start: int, a: npt.NDArray, vector: bool) -> None:
             buf[:m].reshape(m, 3, 3)[:, :d, :d] = a[lo:lo + m]
         else:
             buf[:m, :d] = a[lo:lo + m]
-        dataset[start + lo:start + lo + m] = buf[:m]
+        _pwrite(fd, buf[:m], offset + (start + lo) * row)
 
 
-def _fill(path: Path, start: int, x: npt.NDArray, data: dict[str, npt.NDArray], vectors) -> None:
-    """This rank's rows from ``start``."""
-    with _h5py().File(path, "r+") as f:
-        root = f["VTKHDF"]
-        _write(root["Points"], start, x, True)
+def _fill(path: Path, offsets: dict[str, int], start: int, total: int, x: npt.NDArray, data: dict[str, npt.NDArray],
+          vectors, last: bool) -> None:
+    """This rank's rows from ``start`` (of ``total``), at the datasets' ``offsets``; the
+    ``last`` rank also the closing entry of ``Offsets``."""
+    n = len(x)
+    index = np.int32 if total < 2**31 - 1 else np.int64
+    fd = os.open(path, os.O_WRONLY)
+    try:
+        _write(fd, offsets["Types"], start, np.full(n, _VERTEX, dtype=np.uint8), False)
+        ids = np.arange(start, start + n + (1 if last else 0), dtype=index)
+        _write(fd, offsets["Connectivity"], start, ids[:n], False)
+        _write(fd, offsets["Offsets"], start, ids, False)
+        _write(fd, offsets["Points"], start, x, True)
         for name, a in data.items():
-            _write(root["PointData"][name], start, a, name in vectors)
-
-
-def _idle(request):
-    """Wait for ``request`` without spinning: MPI's blocking calls poll a core while the rank
-    writing takes the other (on this machine's two cores the writer ran at half speed)."""
-    while True:
-        done, value = request.test()
-        if done:
-            return value
-        time.sleep(2e-4)
+            _write(fd, offsets[f"PointData/{name}"], start, a, name in vectors)
+    finally:
+        os.close(fd)
 
 
 def write_points(path: str | Path, comm: MPI.Comm, x: npt.NDArray, data: dict[str, npt.NDArray],
@@ -128,32 +145,29 @@ def write_points(path: str | Path, comm: MPI.Comm, x: npt.NDArray, data: dict[st
             caller agrees on the failure, :class:`fempm.io.writers.RunWriter`).
 
     Note:
-        Collective. The ranks write one after the other; nothing is gathered.
+        Collective. Every rank writes its own rows at once; nothing is gathered.
     """
     path = Path(path)
     tmp = path.with_name(f".{path.name}.tmp")
     counts = comm.allgather(len(x))
     start, total = sum(counts[: comm.rank]), sum(counts)
     error: BaseException | None = None
+    offsets = None
     if comm.rank == 0:
         try:
-            _create(tmp, total, {k: (a.dtype, _stored(a, k in vectors)) for k, a in data.items()})
-        except Exception as e:  # noqa: BLE001 - passed on with the token, raised below
+            offsets = _create(tmp, total, {k: (a.dtype, _stored(a, k in vectors)) for k, a in data.items()})
+        except Exception as e:  # noqa: BLE001 - agreed on below
             error = e
-    ok = comm.bcast(error is None, root=0)
-    if comm.rank > 0:  # the token: the rank before has written (or failed)
-        ok = _idle(comm.irecv(source=comm.rank - 1, tag=77)) and ok
-    if ok and counts[comm.rank]:
+    offsets = comm.bcast(offsets, root=0)
+    if offsets is not None:
         try:
-            _fill(tmp, start, x, data, vectors)
+            _fill(tmp, offsets, start, total, x, data, vectors, comm.rank == comm.size - 1)
         except Exception as e:  # noqa: BLE001
-            error, ok = e, False
-    if comm.rank + 1 < comm.size:
-        comm.send(ok, dest=comm.rank + 1, tag=77)
-    last = np.array([ok], dtype=np.int8)
-    _idle(comm.Ibcast(last, root=comm.size - 1))
-    ok = bool(last[0])
-    if comm.rank == 0 and ok:
+            error = e
+    if comm.allreduce(error is not None, op=MPI.LOR):
+        if comm.rank == 0:
+            tmp.unlink(missing_ok=True)
+    elif comm.rank == 0:
         try:
             os.replace(tmp, path)
         except OSError as e:

@@ -2,12 +2,12 @@
 
 from __future__ import annotations
 
-from fempm.meshes import structured as dm
 import numpy as np
 from mpi4py import MPI
 
 from fempm.boundary.walls import fixed
 from fempm.materials.neo_hookean import NeoHookean
+from fempm.meshes import structured as dm
 from fempm.meshes.generators import unstructured_rectangle
 from fempm.particles.corners import box_corners
 from fempm.particles.particle_set import Particles

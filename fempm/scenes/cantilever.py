@@ -2,13 +2,13 @@
 
 from __future__ import annotations
 
-from fempm.meshes import structured as dm
 import numpy as np
 from mpi4py import MPI
 
 from fempm.boundary.walls import fixed
 from fempm.materials.linear_elastic import LinearElastic
 from fempm.materials.neo_hookean import NeoHookean
+from fempm.meshes import structured as dm
 from fempm.particles.seeding import create_particles, per_direction
 from fempm.scene.definition import Scene, check_counts, check_finite, checked, dofs_per_cell
 from fempm.stepping.loads import Loads

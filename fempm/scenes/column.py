@@ -15,7 +15,6 @@ when it is small).
 
 from __future__ import annotations
 
-from fempm.meshes import structured as dm
 import numpy as np
 from mpi4py import MPI
 
@@ -23,6 +22,7 @@ from fempm.boundary.walls import friction, slip
 from fempm.materials.drucker_prager import DruckerPrager
 from fempm.particles.seeding import create_particles, per_direction
 from fempm.scene.definition import Scene, check_counts, checked
+from fempm.scenes.dims import axis, block_mesh, check_dim, lattice_ppc
 from fempm.stepping.loads import Loads
 from fempm.stepping.options import StepOptions
 
@@ -70,21 +70,25 @@ def deposit(scene: Scene, solver) -> dict:
 
 @checked(positive=("aspect", "width", "rho", "E"), non_negative=("cohesion", "floor_friction", "g"))
 def column_collapse(
-    *, aspect: float = 1.0, width: float = 0.2, cells: int = 16, ppc: int = 4, rho: float = 2000.0, E: float = 5.0e6,
+    *, aspect: float = 1.0, width: float = 0.2, cells: int = 16, ppc: int | None = None, rho: float = 2000.0, E: float = 5.0e6,
     nu: float = 0.3, friction_angle: float = 30.0, dilation_angle: float = 0.0, cohesion: float = 0.0,
     floor_friction: float = 0.5, g: float = 9.81, t_end: float | None = None, scheme: str = "MUSL",
-    flip: float = 0.99, cfl: float = 0.4, frames: int = 20, mass: str = "lumped", comm: MPI.Comm = MPI.COMM_WORLD,
+    flip: float = 0.99, cfl: float = 0.4, frames: int = 20, mass: str = "lumped", dim: int = 2,
+    comm: MPI.Comm = MPI.COMM_WORLD,
 ) -> Scene:
     """The column collapse (see the module): ``cells`` square cells across the column width,
-    ``ppc`` particles per cell (a square lattice: 4 = 2 x 2); the mesh reaches ``2 + 3 a`` column widths along the
-    floor and ``1.05 a`` up. ``t_end`` defaults to :math:`6\\sqrt{H_0/g}` (the collapse ends
-    after about :math:`3\\sqrt{H_0/g}`).
+    ``ppc`` particles per cell (a lattice: 4 = 2 x 2 in 2D, 8 = 2 x 2 x 2 in 3D); the mesh reaches ``2 + 3 a`` column
+    widths along the floor and ``1.05 a`` up. ``t_end`` defaults to :math:`6\\sqrt{H_0/g}` (the collapse ends
+    after about :math:`3\\sqrt{H_0/g}`). With ``dim=3`` the column is a square one,
+    :math:`L_0 \\times L_0` in plan, in a corner of two smooth walls (``x = 0`` and ``z = 0``: the
+    symmetry planes of a column twice as wide both ways), y up, on hexahedra reaching ``2 + 3 a``
+    widths along x and z; the runout is measured along x.
 
     Args:
         aspect: The column's height over its width, a = H0 / L0.
         width: The column's width L0 in m.
         cells: Cells across the column's width.
-        ppc: Particles per cell, a lattice.
+        ppc: Particles per cell, a lattice (None: 4 in 2D, 8 in 3D).
         rho: The density in kg/m^3.
         E: Young's modulus in Pa.
         nu: Poisson's ratio.
@@ -94,7 +98,10 @@ def column_collapse(
         floor_friction: The floor's Coulomb coefficient.
         g: Gravity in m/s^2.
         t_end: The end time in s (None: 6 sqrt(H0 / g)).
+        dim: 2 (plane strain) or 3 (a square column in a corner).
     """
+    dim = check_dim(dim)
+    ppc = lattice_ppc(ppc, dim)
     check_counts(cells=cells, ppc=ppc)
     if not 0.0 < aspect < np.inf or not 0.0 < width < np.inf:
         raise ValueError(f"column_collapse needs a positive aspect and width (got aspect={aspect}, width={width})")
@@ -103,24 +110,34 @@ def column_collapse(
     h = width / cells
     H0 = aspect * width
     nx, ny = int(np.ceil((2.0 + 3.0 * aspect) * cells)), int(np.ceil(1.05 * aspect * cells)) + 1
-    mesh = dm.create_rectangle(comm, [[0.0, 0.0], [nx * h, ny * h]], [nx, ny], dm.CellType.quadrilateral)
-    p = create_particles(mesh, ppc, density=rho, cells=lambda x: (x[0] < width) & (x[1] < H0))
+    n = [nx, ny] if dim == 2 else [nx, ny, nx]
+    mesh = block_mesh(comm, [0.0] * dim, [k * h for k in n], n)
+    p = create_particles(mesh, ppc, density=rho,
+                         cells=lambda x: (x[0] < width) & (x[1] < H0) & ((x[2] < width) if dim == 3 else True))
     sand = DruckerPrager(E, nu, friction_angle=friction_angle, dilation_angle=dilation_angle, cohesion=cohesion)
     K0 = 1.0 - np.sin(np.radians(friction_angle))
     syy = -rho * g * (H0 - p.x[:, 1])
-    sigma = np.zeros((len(p), 2, 2))
+    sigma = np.zeros((len(p), dim, dim))
     sigma[:, 0, 0], sigma[:, 1, 1] = K0 * syy, syy
+    if dim == 3:
+        sigma[:, 2, 2] = K0 * syy
+    else:
+        p.fields["sigma_zz"] = K0 * syy
     p.fields["sigma"] = sigma
-    p.fields["sigma_zz"] = K0 * syy
     if t_end is None:
         t_end = 6.0 * np.sqrt(H0 / g)
     params = dict(aspect=aspect, width=width, height=H0, cells=cells, ppc=ppc, rho=rho, E=E, nu=nu,
                   friction_angle=friction_angle, dilation_angle=dilation_angle, cohesion=cohesion,
-                  floor_friction=floor_friction, g=g, K0=K0, spacing=h / per_direction(ppc, 2), scheme=scheme, flip=flip, mass=mass, cfl=cfl)
+                  floor_friction=floor_friction, g=g, K0=K0, spacing=h / per_direction(ppc, dim), scheme=scheme, flip=flip,
+                  mass=mass, cfl=cfl, **({"dim": dim} if dim == 3 else {}))
+
+    def bcs(V):
+        walls = [slip(V, lambda x: np.isclose(x[0], 0.0), axis(0, dim, -1.0)),
+                 friction(V, lambda x: np.isclose(x[1], 0.0), axis(1, dim, -1.0), floor_friction)]
+        return walls + ([slip(V, lambda x: np.isclose(x[2], 0.0), axis(2, dim, -1.0))] if dim == 3 else [])
+
     return Scene(
         name="column_collapse", mesh=mesh, particles=p, materials=[sand], t_end=t_end,
-        bcs=lambda V: [slip(V, lambda x: np.isclose(x[0], 0.0), (-1.0, 0.0)),
-                       friction(V, lambda x: np.isclose(x[1], 0.0), (0.0, -1.0), floor_friction)],
-        loads=Loads(body_force=(0.0, -g)), options=StepOptions(scheme=scheme, flip=flip, mass=mass, cfl=cfl),
+        bcs=bcs, loads=Loads(body_force=axis(1, dim, -g)), options=StepOptions(scheme=scheme, flip=flip, mass=mass, cfl=cfl),
         frames=frames, params=params, results=deposit,
     )

@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-from fempm.meshes import structured as dm
 import numpy as np
 from mpi4py import MPI
 
@@ -10,6 +9,7 @@ from fempm.boundary.walls import slip
 from fempm.materials.newtonian_eos import NewtonianTait
 from fempm.particles.seeding import create_particles, per_direction
 from fempm.scene.definition import Scene, check_counts, checked
+from fempm.scenes.dims import axis, block_mesh, check_dim, lattice_ppc
 from fempm.stepping.health import Health
 from fempm.stepping.loads import Loads
 from fempm.stepping.options import StepOptions
@@ -33,10 +33,10 @@ def surge_front(particles, params: dict) -> float:
 
 @checked(positive=("a", "box", "rho0", "kappa", "gamma"), non_negative=("viscosity", "g"))
 def dam_break(
-    *, cells: int = 10, ppc: int = 4, scheme: str = "MUSL", flip: float = 0.99, mass: str = "lumped",
+    *, cells: int = 10, ppc: int | None = None, scheme: str = "MUSL", flip: float = 0.99, mass: str = "lumped",
     cfl: float = 0.4, t_end: float = 0.22, a: float = 0.1, box: float = 0.4, rho0: float = 1000.0,
     kappa: float = 2.0e4, gamma: float = 7.0, viscosity: float = 1.0e-3, g: float = 9.81, frames: int = 22,
-    comm: MPI.Comm = MPI.COMM_WORLD,
+    dim: int = 2, comm: MPI.Comm = MPI.COMM_WORLD,
 ) -> Scene:
     r"""Dam break (docs/verification.md): a water column ``a`` wide and ``2 a`` high
     (n^2 = 2) at the left of a box ``box`` wide, slip walls left, right and at the bottom, open
@@ -46,10 +46,12 @@ def dam_break(
     cell. The column starts at rest in hydrostatic equilibrium: the particle density is
     :math:`\rho = \rho_0 (1 + \rho_0 g (2a - y) / \kappa)^{1/\gamma}` and its stress
     :math:`-p I`. Reference: the surge front of Martin and Moyce (1952), ``MARTIN_MOYCE``.
+    With ``dim=3`` the tank is a channel ``a`` deep in z between two more slip walls, the
+    column filling its depth (y up; the same surge front), on hexahedra.
 
     Args:
         cells: Cells across the water column's width.
-        ppc: Particles per cell, a lattice.
+        ppc: Particles per cell, a lattice (None: 4 in 2D, 8 in 3D).
         t_end: The end time in s.
         a: The column's width in m (its height is 2 a).
         box: The tank's width in m.
@@ -58,11 +60,15 @@ def dam_break(
         gamma: Tait's exponent.
         viscosity: The dynamic viscosity in Pa s.
         g: Gravity in m/s^2.
+        dim: 2 (plane strain) or 3 (a channel a deep).
     """
+    dim = check_dim(dim)
+    ppc = lattice_ppc(ppc, dim)
     check_counts(cells=cells, ppc=ppc)
     h = a / cells
     nx, ny = int(round(box / h)), int(round(3 * a / h))
-    mesh = dm.create_rectangle(comm, [[0.0, 0.0], [nx * h, ny * h]], [nx, ny], dm.CellType.quadrilateral)
+    n = [nx, ny] if dim == 2 else [nx, ny, cells]
+    mesh = block_mesh(comm, [0.0] * dim, [k * h for k in n], n)
     H = 2 * a
 
     def density(x):
@@ -71,18 +77,21 @@ def dam_break(
     p = create_particles(mesh, ppc, density=density, cells=lambda x: (x[0] < a) & (x[1] < H))
     water = NewtonianTait(rho0=rho0, kappa=kappa, gamma=gamma, viscosity=viscosity)
     pressure = water.pressure(p.mass / p.volume)
-    p.fields["sigma"] = -pressure[:, None, None] * np.eye(2)
+    p.fields["sigma"] = -pressure[:, None, None] * np.eye(dim)
     params = dict(cells=cells, ppc=ppc, scheme=scheme, flip=flip, mass=mass, cfl=cfl, a=a, box=nx * h, rho0=rho0,
-                  kappa=kappa, gamma=gamma, viscosity=viscosity, g=g, spacing=h / per_direction(ppc, 2), time_scale=np.sqrt(2 * g / a))
+                  kappa=kappa, gamma=gamma, viscosity=viscosity, g=g, spacing=h / per_direction(ppc, dim), time_scale=np.sqrt(2 * g / a),
+                  **({"dim": dim} if dim == 3 else {}))
     W = nx * h
 
     def bcs(V):
-        return [slip(V, lambda x: np.isclose(x[0], 0.0) | np.isclose(x[0], W), (1.0, 0.0)),
-                slip(V, lambda x: np.isclose(x[1], 0.0), (0.0, 1.0))]
+        walls = [slip(V, lambda x: np.isclose(x[0], 0.0) | np.isclose(x[0], W), axis(0, dim)),
+                 slip(V, lambda x: np.isclose(x[1], 0.0), axis(1, dim))]
+        return walls + ([slip(V, lambda x: np.isclose(x[2], 0.0) | np.isclose(x[2], cells * h), axis(2, dim))]
+                        if dim == 3 else [])
 
     return Scene(
         name="dam_break", mesh=mesh, particles=p, materials=[water], t_end=t_end, frames=frames, bcs=bcs,
-        loads=Loads(body_force=(0.0, -g)), options=StepOptions(scheme=scheme, flip=flip, mass=mass, cfl=cfl),
+        loads=Loads(body_force=axis(1, dim, -g)), options=StepOptions(scheme=scheme, flip=flip, mass=mass, cfl=cfl),
         params=params,
         # the column starts compressed with F = I, so the Tait energy W(J) misses the initial compression
         # and the energy balance cannot be checked: J bounds and the step floor still apply

@@ -27,12 +27,12 @@ the end.
 
 from __future__ import annotations
 
-from fempm.meshes import structured as dm
 import numpy as np
 from mpi4py import MPI
 
 from fempm.boundary.walls import slip
 from fempm.materials.neo_hookean import NeoHookean
+from fempm.meshes import structured as dm
 from fempm.particles.seeding import create_particles, per_direction
 from fempm.scene.definition import Scene, check_counts, checked
 from fempm.scene.recorder import Recorder

@@ -45,7 +45,6 @@ settled on the plane), and ``analytic``, the value above.
 
 from __future__ import annotations
 
-from fempm.meshes import structured as dm
 import numpy as np
 from mpi4py import MPI
 
@@ -54,6 +53,7 @@ from fempm.boundary.walls import friction as friction_wall
 from fempm.colliders.collider import Collider
 from fempm.colliders.shapes import plane as collider_plane
 from fempm.materials.von_mises import VonMises
+from fempm.meshes import structured as dm
 from fempm.meshes.generators import tagged_polygon
 from fempm.particles.seeding import create_particles, per_direction
 from fempm.scene.definition import Scene, check_counts, checked

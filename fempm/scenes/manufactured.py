@@ -10,11 +10,11 @@ follow the problem's walls.
 
 from __future__ import annotations
 
-from fempm.meshes import structured as dm
 import numpy as np
 from mpi4py import MPI
 
 from fempm.boundary.walls import fixed, slip
+from fempm.meshes import structured as dm
 from fempm.meshes.generators import unstructured_box, unstructured_rectangle
 from fempm.particles.corners import domain_geometry
 from fempm.particles.particle_set import Particles

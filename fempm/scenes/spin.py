@@ -25,11 +25,11 @@ lumped rows grows unstable at the rim within a few hundred steps; structured tri
 
 from __future__ import annotations
 
-from fempm.meshes import structured as dm
 import numpy as np
 from mpi4py import MPI
 
 from fempm.materials.neo_hookean import NeoHookean
+from fempm.meshes import structured as dm
 from fempm.meshes.generators import MESHES, read_msh
 from fempm.particles.seeding import create_particles
 from fempm.scene.definition import Scene, check_counts, checked

@@ -22,13 +22,13 @@ scheme's own dissipation over the path).
 
 from __future__ import annotations
 
-from fempm.meshes import structured as dm
 import numpy as np
 from mpi4py import MPI
 
 from fempm.boundary.absorbing import absorbing
 from fempm.boundary.walls import fixed, slip
 from fempm.materials.linear_elastic import LinearElastic
+from fempm.meshes import structured as dm
 from fempm.particles.seeding import create_particles
 from fempm.scene.definition import Scene, check_counts, check_finite, checked
 from fempm.stepping import diagnostics
