@@ -90,12 +90,12 @@ def worker(a) -> None:
     scene = build(a, comm)
     steps = scene.t_end * STEPS / (STEPS + MORE)
     scene.t_end = steps
-    first = run(scene, out, checkpoint_every=STEPS, progress=False)
+    first = run(scene, out, checkpoint_every=STEPS, progress=False, output_limit=None)
     saved = choose(out, comm)[1]
     t = time.perf_counter()
     again = build(a, comm)
     rebuilt = comm.allreduce(time.perf_counter() - t, op=MPI.MAX)
-    second = run(again, out, resume=True, progress=False)
+    second = run(again, out, resume=True, progress=False, output_limit=None)
     total = comm.allreduce(time.perf_counter() - start, op=MPI.MAX)
     peak = comm.allreduce(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss * 1024)
     phases = {k: first["timings"][k] + second["timings"][k] for k in first["timings"]}

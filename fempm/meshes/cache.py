@@ -28,6 +28,7 @@ from pathlib import Path
 
 import dolfinx.io
 import dolfinx.mesh
+import numpy as np
 from mpi4py import MPI
 
 __all__ = ["CACHE_ENV", "FORMAT", "cached", "mesh_cache", "set_mesh_cache"]
@@ -96,21 +97,36 @@ def _write(comm: MPI.Comm, entry: Path, data, meta: dict) -> None:
     comm.barrier()
     mesh = data.mesh
     mesh.name = "mesh"
+    uniform = _uniform(comm, mesh, data.cell_tags)
     with dolfinx.io.XDMFFile(comm, tmp / "mesh.xdmf", "w") as f:
         f.write_mesh(mesh)
         for name, tags in (("cell_tags", data.cell_tags), ("facet_tags", data.facet_tags)):
-            if tags is not None:
+            if tags is not None and not (name == "cell_tags" and uniform is not None):
                 tags.name = name
                 f.write_meshtags(tags, mesh.geometry)
     if comm.rank == 0:
         groups = {name: [int(g.dim), int(g.tag)] for name, g in data.physical_groups.items()}
         tags = [name for name, t in (("cell_tags", data.cell_tags), ("facet_tags", data.facet_tags)) if t is not None]
-        (tmp / "physical_groups.json").write_text(json.dumps({**meta, "groups": groups, "tags": tags}, default=repr))
+        (tmp / "physical_groups.json").write_text(json.dumps({**meta, "groups": groups, "tags": tags,
+                                                              "uniform_cell_tag": uniform}, default=repr))
         try:
             tmp.rename(entry)
         except OSError:  # another run wrote the same entry meanwhile
             shutil.rmtree(tmp, ignore_errors=True)
     comm.barrier()
+
+
+def _uniform(comm: MPI.Comm, mesh, tags) -> int | None:
+    """The one value of cell tags that tag every cell alike (the usual single physical group:
+    rebuilt on reading instead of read, which takes as long as the mesh), else None."""
+    if tags is None:
+        return None
+    num = mesh.topology.index_map(mesh.topology.dim).size_local
+    values = np.unique(tags.values[tags.indices < num])
+    every = comm.allreduce(int(np.count_nonzero(tags.indices < num))) == comm.allreduce(num)
+    found = comm.allgather(values.tolist())
+    distinct = set(v for part in found for v in part)
+    return int(distinct.pop()) if every and len(distinct) == 1 else None
 
 
 def _read(comm: MPI.Comm, entry: Path) -> dolfinx.io.gmsh.MeshData:
@@ -119,7 +135,15 @@ def _read(comm: MPI.Comm, entry: Path) -> dolfinx.io.gmsh.MeshData:
     with dolfinx.io.XDMFFile(comm, entry / "mesh.xdmf", "r") as f:
         mesh = f.read_mesh(ghost_mode=dolfinx.mesh.GhostMode.none, name="mesh")
         tdim = mesh.topology.dim
-        mesh.topology.create_connectivity(tdim - 1, tdim)
-        tags = {name: f.read_meshtags(mesh, name) for name in meta["tags"]}
+        if "facet_tags" in meta["tags"]:
+            mesh.topology.create_connectivity(tdim - 1, tdim)
+        uniform = meta.get("uniform_cell_tag")
+        tags = {name: f.read_meshtags(mesh, name) for name in meta["tags"]
+                if not (name == "cell_tags" and uniform is not None)}
+    if uniform is not None and "cell_tags" in meta["tags"]:
+        num = mesh.topology.index_map(tdim).size_local + mesh.topology.index_map(tdim).num_ghosts
+        tags["cell_tags"] = dolfinx.mesh.meshtags(mesh, tdim, np.arange(num, dtype=np.int32),
+                                                  np.full(num, uniform, dtype=np.int32))
+        tags["cell_tags"].name = "cell_tags"
     groups = {name: dolfinx.io.gmsh.PhysicalGroup(dim, tag) for name, (dim, tag) in meta["groups"].items()}
     return dolfinx.io.gmsh.MeshData(mesh, tags.get("cell_tags"), tags.get("facet_tags"), None, None, groups)

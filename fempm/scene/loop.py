@@ -169,7 +169,8 @@ class Run:
         if saved is not None:
             checkpoint.check_fields(saved, scene.particles, comm)
         if out is not None:
-            size = check_output_size(scene.particles, solver.V, scene.outputs, scene.frames, output_limit)
+            size = check_output_size(scene.particles, solver.V, scene.outputs, scene.frames, output_limit,
+                                     saved["writer"].get("frame_format", "vtu") if saved else frame_format)
             if progress and comm.rank == 0:
                 print(f"{scene.name}: about {size / 1e6:.3g} MB of frames into {out}")
         self.writer = (RunWriter(out, scene.particles, solver.V, png=png, resume=saved["writer"] if saved else None,

@@ -172,7 +172,7 @@ def test_frames_above_2_gb_need_force(tmp_path, capsys):
     argv = ["run", "column", "--aspect", "50", "--cells", "8", "--out", str(tmp_path / "c")]
     assert main(argv) == 2
     err = capsys.readouterr().err
-    assert "would write about 3.32 GB of frames (21 frames" in err and "--force" in err
+    assert "would write about 3.3 GB of frames (21 frames" in err and "--force" in err
     assert not (tmp_path / "c" / "energies.csv").exists()
     from fempm.io import check_output_size
     from fempm.scenes import column_collapse
