@@ -27,6 +27,8 @@ from __future__ import annotations
 import numpy as np
 import numpy.typing as npt
 
+from fempm.kernels.implicit import nominal
+
 __all__ = ["nominal_stress"]
 
 
@@ -34,21 +36,13 @@ def nominal_stress(sigma: npt.NDArray, D: npt.NDArray | None, G: npt.NDArray) ->
     r"""The nominal stress :math:`P` (n, d, d) and its tangent :math:`\mathbb{A} = \partial P / \partial G`
     (n, d, d, d, d) of particles with Cauchy stress ``sigma`` (n, d, d) after the increment of
     displacement gradient ``G`` (n, d, d), of law tangent ``D`` (n, d, d, d, d) (see the module;
-    ``D`` None: :math:`P` alone, the tangent None).
+    ``D`` None: :math:`P` alone, the tangent None). One compiled pass
+    (:func:`fempm.kernels.implicit.nominal`, its numpy reference ``nominal_numpy``).
 
     Raises:
         ValueError: An increment that inverts a particle (:math:`\det(I + G) \le 0`).
     """
-    d = G.shape[1]
-    dF = np.eye(d) + G
-    J = np.linalg.det(dF)
+    P, A, J = nominal(sigma, D, G)
     if np.any(~(J > 0.0)):
         raise ValueError(f"an increment inverts {int(np.count_nonzero(~(J > 0.0)))} particle(s): det(I + G) <= 0")
-    inv = np.linalg.inv(dF)
-    Pt = sigma @ np.swapaxes(inv, 1, 2)
-    if D is None:
-        return J[:, None, None] * Pt, None
-    A = np.einsum("nijkl,nmj->nimkl", D, inv, optimize=True)
-    A += Pt[:, :, :, None, None] * np.swapaxes(inv, 1, 2)[:, None, None, :, :]  # P~_im inv_lk
-    A -= Pt[:, :, None, None, :] * inv[:, None, :, :, None]  # P~_il inv_mk
-    return J[:, None, None] * Pt, J[:, None, None, None, None] * A
+    return P, A

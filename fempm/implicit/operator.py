@@ -24,6 +24,7 @@ import numpy as np
 import numpy.typing as npt
 
 from fempm.implicit.nominal import nominal_stress
+from fempm.kernels.implicit import increment_gradients, tangent_blocks
 from fempm.materials.tangent import stress_after, tangent_of
 from fempm.particles.particle_set import Particles
 from fempm.stepping.laws import law_state, material_groups
@@ -64,7 +65,7 @@ class IncrementOperator:
         r""":math:`G_p = \sum_a \Delta u_a \otimes \nabla N_a(x_p)` (n, d, d) of an increment ``du``
         (owned + ghost dofs, d)."""
         b = self.basis
-        return np.einsum("pak,pal->pkl", du[b.dofs], b.gradients)
+        return increment_gradients(np.ascontiguousarray(du), b.dofs, b.gradients)
 
     def stresses(self, G: npt.NDArray, tangent: bool) -> tuple[npt.NDArray, npt.NDArray | None]:
         r"""The nominal stresses :math:`P_p` (n, d, d) after the increments of gradients ``G``,
@@ -136,19 +137,8 @@ class IncrementOperator:
     def tangent_values(self, A: npt.NDArray, mass_factor: float, consistent: bool) -> npt.NDArray:
         r"""The entries of :meth:`pattern`: each particle's
         :math:`V_p^n \nabla N_a \cdot \mathbb{A}_p \cdot \nabla N_b` plus ``mass_factor`` times
-        its mass block (consistent, or lumped on the block's diagonal), then zeros."""
-        b, d = self.basis, self.d
-        k = b.dofs.shape[1]
-        VA = self.volume[:, None, None, None, None] * A
-        K = np.einsum("paikl,pbl->paibk", np.einsum("pam,pimkl->paikl", b.gradients, VA, optimize=True), b.gradients,
-                      optimize=True)
-        if mass_factor:
-            S = b.values
-            eye = np.eye(d)
-            if consistent:
-                block = (mass_factor * self.mass)[:, None, None] * S[:, :, None] * S[:, None, :]
-                K += block[:, :, None, :, None] * eye[None, None, :, None, :]
-            else:
-                a = np.arange(k)
-                K[:, a, :, a, :] += ((mass_factor * self.mass)[:, None] * S).T[:, :, None, None] * eye
-        return np.concatenate([K.ravel(), np.zeros(b.num_dofs_local * d)])
+        its mass block (consistent, or lumped on the block's diagonal), then zeros (one compiled
+        pass, :func:`fempm.kernels.implicit.tangent_blocks`)."""
+        b = self.basis
+        return tangent_blocks(b.gradients, b.values, A, self.volume, self.mass, mass_factor, consistent,
+                              b.num_dofs_local * self.d)

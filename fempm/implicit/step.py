@@ -46,6 +46,8 @@ from fempm import petsc as fpetsc
 from fempm.implicit.fbar import FBarIncrementOperator, PatchCoupling
 from fempm.implicit.newton import Newton, null_pivots
 from fempm.implicit.operator import IncrementOperator
+from fempm.implicit.pattern import KeptPattern
+from fempm.kernels.implicit import increment_determinants
 from fempm.stepping.particle_stages import ParticleStages
 from fempm.stepping.state import StepState
 from fempm.stepping.loads import external_forces
@@ -95,6 +97,7 @@ class ImplicitStep:
             raise ValueError("Newmark's inertia: " + negative_basis_message(opts.mass_model.label,
                                                                              state.V.element.basix_element.degree))
         self.newton = Newton(state.particles.comm)
+        self.pattern = KeptPattern()
         self.last = None  # the NewtonResult of the last accepted (sub)step
         self.last_failure = ""  # what the last failed Newton solve reported
 
@@ -154,7 +157,7 @@ class ImplicitStep:
             return ghosted.array.reshape(-1, d).copy()
 
         def inverts(G) -> bool:
-            bad = int(np.count_nonzero(~(np.linalg.det(np.eye(d) + G) > 0.0)))
+            bad = int(np.count_nonzero(~(increment_determinants(G) > 0.0)))
             return bool(p.comm.allreduce(bad))
 
         def residual(x, r) -> None:
@@ -169,10 +172,13 @@ class ImplicitStep:
             R[~free] = du[~free]
             r.array[:] = R[:owned].ravel()
 
-        rows, cols = op.pattern()
-        local = fpetsc.coo_pattern(imap, rows, cols, bs=d)
         patches = PatchCoupling(op) if fbar else None
-        J = local if patches is None else self._coupled_pattern(local, patches, len(rows))
+        if patches is None:
+            J = local = self.pattern.matrix_for(op, imap, d)  # kept while the particles keep their dofs
+        else:
+            rows, cols = op.pattern()
+            local = fpetsc.coo_pattern(imap, rows, cols, bs=d)
+            J = self._coupled_pattern(local, patches, len(rows))
 
         def jacobian(x, JJ) -> None:
             self._fill_tangent(JJ, local, patches, op, op.gradients(increment(x)), c)
@@ -193,7 +199,7 @@ class ImplicitStep:
                 return False
             du = increment(x)
         finally:
-            for obj in [x, local] + ([J, patches] if patches is not None else []):
+            for obj in [x] + ([local, J, patches] if patches is not None else []):
                 obj.destroy()
         self.last = result
         self._count_loads(op, t, dt, fext, du, owned)

@@ -37,10 +37,18 @@ BLOCK = 1 << 15
 
 
 def _h5py():
+    """h5py, checked to run on the HDF5 it was built for: in one process with DOLFINx, whose
+    wheel loads its own HDF5 (1.14) first, an h5py built for another (h5py 3.16 bundles HDF5
+    2.0) fails on its first dataset with "Not a datatype"."""
     try:
         import h5py
     except ImportError as e:  # pragma: no cover - depends on the installation
-        raise ImportError("VTKHDF frames need h5py: pip install h5py (or frame_format='vtu')") from e
+        raise ImportError("VTKHDF frames need h5py: pip install 'h5py<3.16' (or frame_format='vtu')") from e
+    running, built = h5py.version.hdf5_version_tuple[:2], h5py.version.hdf5_built_version_tuple[:2]
+    if running != built:  # pragma: no cover - depends on the installation
+        raise ImportError(f"h5py {h5py.__version__} was built for HDF5 {'.'.join(map(str, built))} but runs on "
+                          f"{'.'.join(map(str, running))} (DOLFINx's): install an h5py built for DOLFINx's HDF5 "
+                          "(pip install 'h5py<3.16'), or write frames with frame_format='vtu'")
     return h5py
 
 

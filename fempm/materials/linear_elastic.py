@@ -13,6 +13,7 @@ from typing import ClassVar
 import numpy as np
 import numpy.typing as npt
 
+from fempm.kernels.implicit import linear_elastic_tangent
 from fempm.kernels.kinematics import linear_elastic_stress, sym
 from fempm.materials.base import IsotropicElastic, identity, trace
 
@@ -51,11 +52,9 @@ class LinearElastic(IsotropicElastic):
         r""":math:`\partial \sigma_{ij} / \partial G_{kl}` (n, d, d, d, d) of the increment
         :math:`F = (I + G) F_n` (:mod:`fempm.materials.tangent`):
         :math:`\lambda\, \delta_{ij} F_{n,lk} + \mu (\delta_{ik} F_{n,lj} + \delta_{jk} F_{n,li})`,
-        independent of ``G`` (the law is linear in F)."""
-        lam, mu = self.lame
-        eye = np.eye(F.shape[1])
-        return (lam * np.einsum("ij,nlk->nijkl", eye, F) + mu * np.einsum("ik,nlj->nijkl", eye, F)
-                + mu * np.einsum("jk,nli->nijkl", eye, F))
+        independent of ``G`` (the law is linear in F); compiled
+        (:func:`fempm.kernels.implicit.linear_elastic_tangent`)."""
+        return linear_elastic_tangent(F, *self.lame)
 
     def energy_density(self, F) -> npt.NDArray:
         lam, mu = self.lame

@@ -28,6 +28,9 @@ from __future__ import annotations
 import numpy as np
 import numpy.typing as npt
 
+from fempm.kernels.implicit import deformed as deformed_kernel
+from fempm.kernels.implicit import increment_determinants
+
 __all__ = ["FD_STEP", "deformed", "finite_difference_tangent", "rate_dependent", "stress_after", "tangent_of"]
 
 #: the step of the finite-difference tangent, relative to 1 (G is dimensionless)
@@ -35,8 +38,8 @@ FD_STEP = 1e-6
 
 
 def deformed(F: npt.NDArray, G: npt.NDArray) -> npt.NDArray:
-    r""":math:`F = (I + G) F_n` (n, d, d)."""
-    return F + G @ F
+    r""":math:`F = (I + G) F_n` (n, d, d) (compiled, :func:`fempm.kernels.implicit.deformed`)."""
+    return deformed_kernel(F, G)
 
 
 def rate_dependent(law) -> bool:
@@ -64,9 +67,7 @@ def stress_after(law, F: npt.NDArray, G: npt.NDArray, sigma: npt.NDArray, rho: n
     Returns:
         (the stresses, a new dict of the internal variables).
     """
-    d = F.shape[1]
-    dF = np.eye(d) + G
-    rho_new = rho / np.linalg.det(dF)
+    rho_new = rho / increment_determinants(np.ascontiguousarray(G))
     L = G / dt
     if law.history:
         new = dict(state or {})

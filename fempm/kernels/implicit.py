@@ -1,0 +1,265 @@
+r"""The implicit step's per-particle passes (:mod:`fempm.implicit`), compiled.
+
+* :func:`increment_gradients`: :math:`G_p = \sum_a \Delta u_a \otimes \nabla N_a(x_p)` (n, d, d).
+* :func:`increment_determinants`: :math:`\det(I + G_p)` (n,), closed form.
+* :func:`deformed`: :math:`F = (I + G) F_n` (n, d, d).
+* :func:`nominal`: the nominal stress :math:`P = J_\Delta \sigma \Delta F^{-T}` and, from the law's
+  :math:`\mathbb{D} = \partial \sigma / \partial G`, its tangent
+  :math:`\mathbb{A}_{imkl} = J_\Delta (\tilde P_{im} \Delta F^{-1}_{lk} + \mathbb{D}_{ijkl}
+  \Delta F^{-1}_{mj} - \tilde P_{il} \Delta F^{-1}_{mk})` (:mod:`fempm.implicit.nominal`).
+* :func:`tangent_blocks`: each particle's block
+  :math:`V_p \partial_m N_a \mathbb{A}_{imkl} \partial_l N_b` plus ``c`` times its mass block
+  (consistent :math:`M_p N_a N_b \delta_{ik}`, or lumped on the diagonal), in the order of
+  :meth:`fempm.implicit.operator.IncrementOperator.pattern`, then zeros for the diagonal entries.
+* :func:`linear_elastic_tangent`: :math:`\lambda \delta_{ij} F_{lk} + \mu (\delta_{ik} F_{lj}
+  + \delta_{jk} F_{li})` (:class:`fempm.materials.LinearElastic`).
+
+Each ``*_numpy`` is the reference its compiled form is tested against
+(``tests/kernels/test_implicit_kernels.py``); :func:`fempm.kernels.choice.pick` chooses.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import numpy.typing as npt
+
+from fempm.kernels.choice import pick
+
+__all__ = ["deformed", "increment_determinants", "increment_gradients", "linear_elastic_tangent", "nominal", "tangent_blocks"]
+
+
+# -- the numpy references -------------------------------------------------------------------------
+def increment_gradients_numpy(du: npt.NDArray, dofs: npt.NDArray, gradients: npt.NDArray) -> npt.NDArray:
+    return np.einsum("pak,pal->pkl", du[dofs], gradients)
+
+
+def deformed_numpy(F: npt.NDArray, G: npt.NDArray) -> npt.NDArray:
+    return F + G @ F
+
+
+def increment_determinants_numpy(G: npt.NDArray) -> npt.NDArray:
+    return np.linalg.det(np.eye(G.shape[1]) + G)
+
+
+def nominal_numpy(sigma: npt.NDArray, D: npt.NDArray | None, G: npt.NDArray):
+    """(P, A or None, J); J the increments' determinants (no check)."""
+    d = G.shape[1]
+    dF = np.eye(d) + G
+    J = np.linalg.det(dF)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        inv = np.linalg.inv(dF) if np.all(J != 0.0) else np.full_like(dF, np.nan)
+    Pt = sigma @ np.swapaxes(inv, 1, 2)
+    if D is None:
+        return J[:, None, None] * Pt, None, J
+    A = np.einsum("nijkl,nmj->nimkl", D, inv, optimize=True)
+    A += Pt[:, :, :, None, None] * np.swapaxes(inv, 1, 2)[:, None, None, :, :]  # P~_im inv_lk
+    A -= Pt[:, :, None, None, :] * inv[:, None, :, :, None]  # P~_il inv_mk
+    return J[:, None, None] * Pt, J[:, None, None, None, None] * A, J
+
+
+def tangent_blocks_numpy(gradients, values, A, volume, mass, factor: float, consistent: bool, diagonal: int):
+    p, k, d = gradients.shape
+    VA = volume[:, None, None, None, None] * A
+    K = np.einsum("paikl,pbl->paibk", np.einsum("pam,pimkl->paikl", gradients, VA, optimize=True), gradients,
+                  optimize=True)
+    if factor:
+        eye = np.eye(d)
+        if consistent:
+            block = (factor * mass)[:, None, None] * values[:, :, None] * values[:, None, :]
+            K += block[:, :, None, :, None] * eye[None, None, :, None, :]
+        else:
+            a = np.arange(k)
+            K[:, a, :, a, :] += ((factor * mass)[:, None] * values).T[:, :, None, None] * eye
+    return np.concatenate([K.ravel(), np.zeros(diagonal)])
+
+
+def linear_elastic_tangent_numpy(F: npt.NDArray, lam: float, mu: float) -> npt.NDArray:
+    eye = np.eye(F.shape[1])
+    return (lam * np.einsum("ij,nlk->nijkl", eye, F) + mu * np.einsum("ik,nlj->nijkl", eye, F)
+            + mu * np.einsum("jk,nli->nijkl", eye, F))
+
+
+try:
+    from numba import njit
+
+    @njit(inline="always")
+    def _det_inv(G, p, d, inv):  # pragma: no cover - compiled
+        """det(I + G[p]) and its inverse into ``inv`` (d x d; not written where det = 0)."""
+        if d == 1:
+            a = 1.0 + G[p, 0, 0]
+            if a != 0.0:
+                inv[0, 0] = 1.0 / a
+            return a
+        if d == 2:
+            a, b, c, e = 1.0 + G[p, 0, 0], G[p, 0, 1], G[p, 1, 0], 1.0 + G[p, 1, 1]
+            J = a * e - b * c
+            if J != 0.0:
+                inv[0, 0], inv[0, 1], inv[1, 0], inv[1, 1] = e / J, -b / J, -c / J, a / J
+            return J
+        m00, m01, m02 = 1.0 + G[p, 0, 0], G[p, 0, 1], G[p, 0, 2]
+        m10, m11, m12 = G[p, 1, 0], 1.0 + G[p, 1, 1], G[p, 1, 2]
+        m20, m21, m22 = G[p, 2, 0], G[p, 2, 1], 1.0 + G[p, 2, 2]
+        c00, c01, c02 = m11 * m22 - m12 * m21, m12 * m20 - m10 * m22, m10 * m21 - m11 * m20
+        J = m00 * c00 + m01 * c01 + m02 * c02
+        if J != 0.0:
+            r = 1.0 / J
+            inv[0, 0], inv[1, 0], inv[2, 0] = c00 * r, c01 * r, c02 * r
+            inv[0, 1] = (m02 * m21 - m01 * m22) * r
+            inv[1, 1] = (m00 * m22 - m02 * m20) * r
+            inv[2, 1] = (m01 * m20 - m00 * m21) * r
+            inv[0, 2] = (m01 * m12 - m02 * m11) * r
+            inv[1, 2] = (m02 * m10 - m00 * m12) * r
+            inv[2, 2] = (m00 * m11 - m01 * m10) * r
+        return J
+
+    @njit(cache=True)
+    def increment_gradients_numba(du, dofs, gradients):  # pragma: no cover - compiled
+        n, k = dofs.shape
+        d = du.shape[1]
+        G = np.zeros((n, d, d))
+        for p in range(n):
+            for a in range(k):
+                r = dofs[p, a]
+                for i in range(d):
+                    u = du[r, i]
+                    for m in range(d):
+                        G[p, i, m] += u * gradients[p, a, m]
+        return G
+
+    @njit(cache=True)
+    def _deformed(F, G):  # pragma: no cover - compiled
+        n, d = F.shape[0], F.shape[1]
+        out = np.empty((n, d, d))
+        for p in range(n):
+            for i in range(d):
+                for j in range(d):
+                    s = F[p, i, j]
+                    for k in range(d):
+                        s += G[p, i, k] * F[p, k, j]
+                    out[p, i, j] = s
+        return out
+
+    def deformed_numba(F, G):
+        return _deformed(np.ascontiguousarray(F), np.ascontiguousarray(G))
+
+    @njit(cache=True)
+    def increment_determinants_numba(G):  # pragma: no cover - compiled
+        n, d = G.shape[0], G.shape[1]
+        J = np.empty(n)
+        inv = np.empty((d, d))
+        for p in range(n):
+            J[p] = _det_inv(G, p, d, inv)
+        return J
+
+    @njit(cache=True)
+    def _nominal(sigma, D, G, tangent):  # pragma: no cover - compiled
+        n, d = G.shape[0], G.shape[1]
+        P = np.empty((n, d, d))
+        A = np.zeros((n, d, d, d, d)) if tangent else np.zeros((0, d, d, d, d))
+        J = np.empty(n)
+        inv = np.full((d, d), np.nan)
+        Pt = np.empty((d, d))
+        for p in range(n):
+            Jp = _det_inv(G, p, d, inv)
+            J[p] = Jp
+            if Jp == 0.0:
+                inv[:, :] = np.nan
+            for i in range(d):
+                for m in range(d):
+                    s = 0.0
+                    for j in range(d):
+                        s += sigma[p, i, j] * inv[m, j]
+                    Pt[i, m] = s
+                    P[p, i, m] = Jp * s
+            if tangent:
+                for i in range(d):
+                    for m in range(d):
+                        for k in range(d):
+                            for l in range(d):
+                                s = Pt[i, m] * inv[l, k] - Pt[i, l] * inv[m, k]
+                                for j in range(d):
+                                    s += D[p, i, j, k, l] * inv[m, j]
+                                A[p, i, m, k, l] = Jp * s
+        return P, A, J
+
+    def nominal_numba(sigma, D, G):
+        P, A, J = _nominal(np.ascontiguousarray(sigma), np.zeros((0,) + (G.shape[1],) * 4) if D is None
+                           else np.ascontiguousarray(D), np.ascontiguousarray(G), D is not None)
+        return P, (A if D is not None else None), J
+
+    @njit(cache=True)
+    def _tangent_blocks(gradients, values, A, volume, mass, factor, consistent, diagonal):  # pragma: no cover
+        n, k, d = gradients.shape
+        m = k * d
+        out = np.zeros(n * m * m + diagonal)
+        B = np.empty((k, d, d, d))  # B[a, i, kk, l] = sum_m g[a, m] A[i, m, kk, l]
+        for p in range(n):
+            V = volume[p]
+            for a in range(k):
+                for i in range(d):
+                    for kk in range(d):
+                        for l in range(d):
+                            s = 0.0
+                            for mm in range(d):
+                                s += gradients[p, a, mm] * A[p, i, mm, kk, l]
+                            B[a, i, kk, l] = V * s
+            base = p * m * m
+            for a in range(k):
+                for i in range(d):
+                    row = base + (a * d + i) * m
+                    for b in range(k):
+                        for kk in range(d):
+                            s = 0.0
+                            for l in range(d):
+                                s += B[a, i, kk, l] * gradients[p, b, l]
+                            out[row + b * d + kk] = s
+            if factor != 0.0:
+                cm = factor * mass[p]
+                for a in range(k):
+                    for i in range(d):
+                        row = base + (a * d + i) * m
+                        if consistent:
+                            for b in range(k):
+                                out[row + b * d + i] += cm * values[p, a] * values[p, b]
+                        else:
+                            out[row + a * d + i] += cm * values[p, a]
+        return out
+
+    def tangent_blocks_numba(gradients, values, A, volume, mass, factor, consistent, diagonal):
+        return _tangent_blocks(np.ascontiguousarray(gradients), np.ascontiguousarray(values), np.ascontiguousarray(A),
+                               np.ascontiguousarray(volume, dtype=np.float64), np.ascontiguousarray(mass),
+                               float(factor), bool(consistent), int(diagonal))
+
+    @njit(cache=True)
+    def _linear_elastic_tangent(F, lam, mu):  # pragma: no cover - compiled
+        n, d = F.shape[0], F.shape[1]
+        D = np.zeros((n, d, d, d, d))
+        for p in range(n):
+            for i in range(d):
+                for k in range(d):
+                    for l in range(d):
+                        D[p, i, i, k, l] += lam * F[p, l, k]
+                        for j in range(d):
+                            if i == k:
+                                D[p, i, j, k, l] += mu * F[p, l, j]
+                            if j == k:
+                                D[p, i, j, k, l] += mu * F[p, l, i]
+        return D
+
+    def linear_elastic_tangent_numba(F, lam, mu):
+        return _linear_elastic_tangent(np.ascontiguousarray(F), float(lam), float(mu))
+
+except ImportError:  # pragma: no cover - numba is a dependency
+    increment_gradients_numba = increment_gradients_numpy
+    increment_determinants_numba = increment_determinants_numpy
+    deformed_numba = deformed_numpy
+    nominal_numba = nominal_numpy
+    tangent_blocks_numba = tangent_blocks_numpy
+    linear_elastic_tangent_numba = linear_elastic_tangent_numpy
+
+increment_gradients = pick(increment_gradients_numba, increment_gradients_numpy)
+increment_determinants = pick(increment_determinants_numba, increment_determinants_numpy)
+deformed = pick(deformed_numba, deformed_numpy)
+nominal = pick(nominal_numba, nominal_numpy)
+tangent_blocks = pick(tangent_blocks_numba, tangent_blocks_numpy)
+linear_elastic_tangent = pick(linear_elastic_tangent_numba, linear_elastic_tangent_numpy)
