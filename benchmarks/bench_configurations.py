@@ -33,6 +33,11 @@ distorted     quadrilaterals that are not parallelograms (``quad``)  the base st
 point3d       the base step in 3D (``tet``, ``hex``)                the base step on triangles
 contact       two disks, ``contact=True``                           the same disks, one field
 scene         two disks, ``fempm.run`` (energies, health checks)    the same disks, bare steps
+fbar          F-bar (``volumetric="fbar"``)                          the base step
+cons-cpdi1    consistent mass, CPDI1 domains                        consistent mass, points
+cons-ugimp    consistent mass, exact uGIMP                          consistent mass, points
+cons-cpgimp   consistent mass, exact cpGIMP                         consistent mass, points
+contact-cons  two disks, ``contact=True``, consistent mass          the same with lumped mass
 output        one particle frame, VTKHDF (``fempm.io.vtkhdf``)      the base step
 output-vtu    one particle frame, VTK XML pieces (``frame_format``)  the base step
 ============  ====================================================  ==========================
@@ -78,6 +83,7 @@ class Case:
     meshes: tuple[str, ...] = ("tri", "quad", "tet", "hex")
     kind: str = "reference"  # or "distorted", "point3d", "contact", "scene", "output"
     frame_format: str = "vtkhdf"  # kind "output"
+    base: dict | None = None  # the base step's options, if not the plain point step's
 
 
 CASES = {
@@ -98,6 +104,11 @@ CASES = {
     "point3d": Case(meshes=("tet", "hex"), kind="point3d"),
     "contact": Case(meshes=("tri", "quad"), kind="contact"),
     "scene": Case(meshes=("tri", "quad"), kind="scene"),
+    "fbar": Case({"volumetric": "fbar"}),
+    "cons-cpdi1": Case({"mass": "consistent", "domain": "cpdi1"}, base={"mass": "consistent"}),
+    "cons-ugimp": Case({"mass": "consistent", "domain": "ugimp"}, base={"mass": "consistent"}),
+    "cons-cpgimp": Case({"mass": "consistent", "domain": "cpgimp"}, base={"mass": "consistent"}),
+    "contact-cons": Case(meshes=("tri", "quad"), kind="contact-consistent"),
     "output": Case(kind="output"),
     "output-vtu": Case(kind="output", frame_format="vtu"),
 }
@@ -180,7 +191,7 @@ def reference_problem(n_target: int, mesh_kind: str, reference: Path, case: Case
     return solver, 0.1 * dx / 40.0
 
 
-def disks_scene(n_target: int, mesh_kind: str, contact: bool):
+def disks_scene(n_target: int, mesh_kind: str, contact: bool, mass: str = "lumped"):
     """``fempm.scenes.two_disks`` on the benchmark's mesh with about ``n_target`` particles."""
     import math
 
@@ -191,7 +202,7 @@ def disks_scene(n_target: int, mesh_kind: str, contact: bool):
     cells_per_area = 1.0 if mesh_kind == "quad" else 2.3  # gmsh triangles of size h: about 2.3 / h^2
     h = math.sqrt(DISKS_AREA * 4 * cells_per_area / n_target)
     mesh = make_mesh(MPI.COMM_WORLD, mesh_kind, max(1, round(1 / h)), h)
-    return two_disks(mesh=mesh, contact=contact, t_end=1e3, frames=0)
+    return two_disks(mesh=mesh, contact=contact, t_end=1e3, frames=0, mass=mass)
 
 
 # -- timing ---------------------------------------------------------------------------------------
@@ -255,6 +266,13 @@ def measure(name: str, n: int, mesh: str, a, comm) -> dict | None:
     if mesh not in case.meshes:
         return None
     ref = Path(a.reference)
+    if case.kind == "contact-consistent":
+        base = disks_scene(n, mesh, contact=True).solver()
+        other = disks_scene(n, mesh, contact=True, mass="consistent").solver()
+        tb, tc = compare(base.step, other.step, a.batches, a.min_batch, comm)
+        N = base.particles.num_global
+        return {"config": name, "mesh": mesh, "n": N, "base_n": N, "t_base_s": tb, "t_s": tc,
+                "ratio": tc / tb, "base": "two disks, contact, lumped mass"}
     if case.kind in ("contact", "scene"):
         base_scene = disks_scene(n, mesh, contact=False)
         base = base_scene.solver()
@@ -281,9 +299,9 @@ def measure(name: str, n: int, mesh: str, a, comm) -> dict | None:
         other, dt = reference_problem(n, "distorted", ref)
         what = "the base step on parallelograms"
     else:
-        base, dt_b = reference_problem(n, mesh, ref)
+        base, dt_b = reference_problem(n, mesh, ref, Case(case.base) if case.base else Case())
         other, dt = reference_problem(n, mesh, ref, case)
-        what = "the base step"
+        what = "the base step" if not case.base else f"the step with {case.base}"
     tb, tc = compare(lambda: base.step(dt_b), lambda: other.step(dt), a.batches, a.min_batch, comm)
     nb, nc = base.particles.num_global, other.particles.num_global
     return {"config": name, "mesh": mesh, "n": nc, "base_n": nb, "t_base_s": tb, "t_s": tc,
