@@ -19,20 +19,24 @@ class KeptPattern:
     def __init__(self) -> None:
         self.matrix: PETSc.Mat | None = None
         self.dofs: np.ndarray | None = None
+        self.index_map = None  # held: the matrix lives on its communicator
         self.layouts = 0  # how many times the pattern was laid out (tests, benchmarks)
 
     def matrix_for(self, op, index_map, d: int) -> PETSc.Mat:
         """The matrix for the particles of ``op`` (an
-        :class:`~fempm.implicit.operator.IncrementOperator`): the kept one if no particle on
-        any rank has other dofs than when it was laid out, else a new one (collective)."""
+        :class:`~fempm.implicit.operator.IncrementOperator`) on ``index_map``: the kept one if
+        the index map is the same object (the space's own; particle domains that reach remote
+        cells extend it anew every step) and no particle on any rank has other dofs than when it
+        was laid out, else a new one (collective)."""
         dofs = op.basis.dofs
-        same = self.matrix is not None and self.dofs.shape == dofs.shape and np.array_equal(self.dofs, dofs)
+        same = (self.matrix is not None and index_map is self.index_map and self.dofs.shape == dofs.shape
+                and np.array_equal(self.dofs, dofs))
         if index_map.comm.allreduce(same, op=MPI.LAND):
             return self.matrix
         self.release()
         rows, cols = op.pattern()
         self.matrix = fpetsc.coo_pattern(index_map, rows, cols, bs=d)
-        self.dofs = dofs.copy()
+        self.dofs, self.index_map = dofs.copy(), index_map
         self.layouts += 1
         return self.matrix
 
@@ -40,4 +44,4 @@ class KeptPattern:
         """Free the matrix (local)."""
         if self.matrix is not None:
             self.matrix.destroy()
-        self.matrix, self.dofs = None, None
+        self.matrix, self.dofs, self.index_map = None, None, None
