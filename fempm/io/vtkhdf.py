@@ -1,6 +1,9 @@
-"""Particle frames as VTKHDF: one file per frame for all ranks, the arrays raw, read by
-ParaView (5.12 and later) and pyvista (``pyvista.read``, and ``pyvista.PVDReader`` on the run's
-``particles.pvd``, which names these files).
+"""Particle frames as VTKHDF: one file per frame for all ranks, the arrays raw. pyvista reads a
+frame (``pyvista.read``: an UnstructuredGrid) and the run's series (``pyvista.PVDReader`` on
+``particles.pvd``, which names these files; VTK 9.7, tested); ParaView opens the files with its
+VTKHDF reader (5.12 and later), a numbered series as one, and the ``.pvd`` where its VTK's
+collection reader takes VTKHDF files (``--frame-format vtu`` writes VTK XML, which every
+version reads).
 
 The file is one UnstructuredGrid piece: the particles of every rank, rank after rank, each a
 vertex cell, with their point data. Rank 0 lays the file out with h5py (every dataset

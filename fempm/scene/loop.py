@@ -162,8 +162,10 @@ class Run:
         self.num_particles = scene.particles.num_global
         self.timings = timings = Timings()
         timings.add(scene.timings)
-        with timings.phase("checkpoint_s"):
-            saved, arrays = checkpoint.restore_particles(out, scene, comm) if resume else (None, {})
+        saved, arrays = None, {}
+        if resume:
+            with timings.phase("checkpoint_s"):
+                saved, arrays = checkpoint.restore_particles(out, scene, comm)
         with timings.phase("solver_s"):
             self.solver = solver = scene.solver()
         if saved is not None:
