@@ -8,7 +8,7 @@
     python -m fempm study scenes [--quick] [--problems NAME ...] [--out DIR]
     python -m fempm study all [--out DIR]   (the quick version of every study, into DIR/study-NAME)
     python -m fempm run SCENE [--out DIR] [--overwrite] [--force] [--checkpoint-every N] [--frame-format F]
-                              [--option value ...]
+                              [--option value ...] [-petsc_option value ...]
     python -m fempm resume OUT [--t-end T] [--checkpoint-every N]
     (run, resume, study: [--mesh-cache DIR | --no-mesh-cache], where gmsh's meshes are kept)
     python -m fempm run --help          (the scenes, a line each)
@@ -33,6 +33,7 @@ from mpi4py import MPI
 
 from fempm import __version__
 from fempm.abort import abort_on_error
+from fempm.petsc import temporary_options
 from fempm.io.checkpoint import CheckpointError, choose
 from fempm.io.stops import RunInterrupted
 from fempm.io.writers import (
@@ -44,8 +45,8 @@ from fempm.io.writers import (
 )
 from fempm.meshes.cache import CACHE_ENV, set_mesh_cache
 from fempm.particles.location import OutsideMeshError
-from fempm.run_options import (UsageError, health_descriptions, health_options, option_descriptions, scene_options,
-                                stepping_options, with_stepping)
+from fempm.run_options import (UsageError, health_descriptions, health_options, option_descriptions, petsc_options,
+                                scene_options, stepping_options, with_stepping)
 from fempm.scene.loop import run
 from fempm.scenes import SCENES
 from fempm.stepping.health import Health
@@ -240,21 +241,26 @@ def _run(args, rest: list[str]) -> int:
               "transfer; flip takes the scene's --flip blend), --xpic-order M (XPIC's series terms, default 2), "
               "--affine-cutoff C (APIC/TPIC: nodes below C of the largest mass pass their acceleration to the "
               "particles' affine matrices in proportion; default 0.01)")
+        print("PETSc options (one dash, as PETSc's own): -PREFIX_option value, e.g. -fempm_implicit_ksp_type cg "
+              "-fempm_implicit_pc_type gamg (the implicit step's linear solves), -fempm_step_ksp_rtol 1e-12 (the "
+              "consistent mass's); for the run, kept in its checkpoint for resume")
         print("run health (fempm.stepping.health.Health; a crossed limit stops the run with exit code 3):")
         limits = health_descriptions()
         for k, v in Health().asdict().items():
             print(f"  --{k.replace('_', '-')} {v}  {limits[k]}")
         return 0
+    petsc, rest = petsc_options(rest)
     health, rest = health_options(rest)
     stepping, rest = stepping_options(rest)
     options = scene_options(builder, rest)
     _check_every(args.checkpoint_every, "run")
     rebuild = {"scene": args.scene, "options": options, "health": health, "stepping": stepping,
-               "checkpoint_every": args.checkpoint_every}
-    scene = _build(rebuild)
-    return _execute(scene, args.out or Path("output") / args.scene, args.scene, checkpoint_every=args.checkpoint_every,
-                    rebuild=rebuild, overwrite=args.overwrite, output_limit=None if args.force else OUTPUT_LIMIT,
-                    frame_format=args.frame_format)
+               "checkpoint_every": args.checkpoint_every, **({"petsc": petsc} if petsc else {})}
+    with temporary_options("", petsc):  # the run's own PETSc options, then gone
+        scene = _build(rebuild)
+        return _execute(scene, args.out or Path("output") / args.scene, args.scene,
+                        checkpoint_every=args.checkpoint_every, rebuild=rebuild, overwrite=args.overwrite,
+                        output_limit=None if args.force else OUTPUT_LIMIT, frame_format=args.frame_format)
 
 
 def _check_every(every: int | None, command: str) -> None:
@@ -316,6 +322,12 @@ def _resume(args) -> int:
     if not rebuild:
         raise UsageError(f"fempm resume: the run in {str(args.out)!r} was started from Python; continue it with "
                          "fempm.scene.run(scene, out, resume=True)")
+    with temporary_options("", rebuild.get("petsc", {})):  # the run's PETSc options, from its checkpoint
+        return _continue(args, data, rebuild)
+
+
+def _continue(args, data: dict, rebuild: dict) -> int:
+    """The rest of :func:`_resume`, with the run's PETSc options set."""
     scene = _build(rebuild)
     if args.t_end is not None:
         if not 0.0 < args.t_end < float("inf"):

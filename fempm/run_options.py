@@ -14,7 +14,7 @@ from fempm.stepping.options import StepOptions
 from fempm.transfer.transfers import TRANSFERS
 
 __all__ = ["STEPPING_FLAGS", "UsageError", "boolean", "health_descriptions", "health_options", "one_line",
-           "option_descriptions", "scene_options", "split_flags", "stepping_options", "with_stepping"]
+           "option_descriptions", "petsc_options", "scene_options", "split_flags", "stepping_options", "with_stepping"]
 
 
 class UsageError(SystemExit):
@@ -122,6 +122,35 @@ def health_options(rest: list[str]) -> tuple[dict, list[str]]:
         except ValueError:
             raise UsageError(f"fempm run: option {flag} expects a number, got {value!r}") from None
     return health, others
+
+
+def petsc_options(rest: list[str]) -> tuple[dict[str, str], list[str]]:
+    """Split PETSc options (``-name value`` or ``-name`` alone, one dash, as PETSc's own command
+    line: e.g. ``-fempm_implicit_pc_type gamg``) from the scene options; returns ({name: value},
+    the rest). A value is the next word unless that is another option (a negative number is a
+    value)."""
+    options, others, i = {}, [], 0
+    while i < len(rest):
+        word = rest[i]
+        if word.startswith("-") and not word.startswith("--") and len(word) > 1 and word[1].isalpha():
+            value = rest[i + 1] if i + 1 < len(rest) else None
+            if value is not None and not (value.startswith("-") and not _number(value)):
+                options[word[1:]] = value
+                i += 2
+                continue
+            options[word[1:]] = ""
+        else:
+            others.append(word)
+        i += 1
+    return options, others
+
+
+def _number(word: str) -> bool:
+    try:
+        float(word)
+    except ValueError:
+        return False
+    return True
 
 
 #: the stepping options every scene takes on the command line, with the values they accept

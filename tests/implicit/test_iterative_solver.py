@@ -100,3 +100,37 @@ def test_a_million_dofs_in_3d_on_two_ranks_with_algebraic_multigrid(tmp_path):
     _, dofs, status, pc, uy = [line for line in r.stdout.splitlines() if line.startswith("RESULT")][0].split()
     assert int(dofs) >= 1_000_000 and status == "completed" and pc == "gamg"
     assert float(uy) == pytest.approx(-4.9141e-4, rel=2e-4)
+
+
+@pytest.mark.parallel
+def test_petsc_options_on_the_command_line_are_the_runs_and_its_resumes(tmp_path, monkeypatch):
+    """``-fempm_implicit_pc_type gamg`` after the scene options: the run's Newton takes it, the
+    checkpoint keeps it for ``resume``, and it is gone from the options database afterwards."""
+    import json
+
+    from fempm.cli import main
+    from fempm.implicit.newton import Newton
+    from fempm.run_options import petsc_options
+
+    assert petsc_options(["--cells", "4", "-a_b", "-1.5", "-flag", "-c_d", "x", "--dim", "3"]) == (
+        {"a_b": "-1.5", "flag": "", "c_d": "x"}, ["--cells", "4", "--dim", "3"])
+    seen = []
+    original = Newton.__init__
+
+    def spy(self, *args, **kwargs):
+        original(self, *args, **kwargs)
+        seen.append((self.snes.getKSP().getType(), self.snes.getKSP().getPC().getType()))
+
+    monkeypatch.setattr(Newton, "__init__", spy)
+    out = Path(comm.bcast(str(tmp_path / "c") if comm.rank == 0 else None))
+    args = ["run", "compaction", "--dim", "3", "--cells", "4", "--frames", "0", "--out", str(out),
+            "--checkpoint-every", "2", "-fempm_implicit_ksp_type", "cg", "-fempm_implicit_pc_type", "gamg"]
+    assert main(args) == 0
+    assert seen and all(kinds == ("cg", "gamg") for kinds in seen)
+    assert not PETSc.Options().hasName("fempm_implicit_pc_type")
+    checkpoint = json.loads((out / "checkpoint" / "manifest.json").read_text())
+    assert checkpoint["rebuild"]["petsc"] == {"fempm_implicit_ksp_type": "cg", "fempm_implicit_pc_type": "gamg"}
+    seen.clear()
+    assert main(["resume", str(out), "--t-end", "2"]) == 0
+    assert seen and all(kinds == ("cg", "gamg") for kinds in seen)
+    assert not PETSc.Options().hasName("fempm_implicit_pc_type")
