@@ -196,6 +196,8 @@ def _problem(path: Path) -> tuple[dict | None, str | None]:
         data = json.loads((path / "manifest.json").read_text())
     except (ValueError, UnicodeDecodeError) as e:
         return None, f"{where} is not JSON ({e})"
+    except OSError:  # renamed away since: a run writing its next checkpoint (a reader polling it)
+        return None, f"{where} is missing"
     if not isinstance(data, dict):
         return None, f"{where} is not a JSON object"
     if data.get("format") != FORMAT:
