@@ -14,10 +14,11 @@ from mpi4py import MPI
 
 from fempm.io import vtkhdf, vtu
 
-__all__ = ["FRAME_FORMATS", "FrameSeries", "OutputWriteError", "PointFileSeries", "everywhere", "read_times"]
+__all__ = ["FRAME_FORMATS", "FrameSeries", "OutputWriteError", "PointFileSeries", "everywhere", "read_times",
+           "vtk_layout"]
 
 
-def _padded(a: npt.NDArray, vector: bool) -> npt.NDArray:
+def vtk_layout(a: npt.NDArray, vector: bool = True) -> npt.NDArray:
     """VTK's layout of an array of rows: vectors (n, d) -> (n, 3), tensors (n, d, d) -> (n, 9)
     (zeros in the added places); others as they are."""
     if a.ndim == 3:
@@ -106,8 +107,8 @@ class FrameSeries:
         """A point cloud as frame ``frame``: ``x`` (n, d) and ``data`` as
         :func:`fempm.io.vtkhdf.write_points` takes them (vectors and (d, d) tensors padded to VTK's
         3 and 3 x 3 here). Collective."""
-        data = {k: _padded(a, k in vectors) for k, a in data.items()}
-        self.write(frame, t, _padded(x, True), data)
+        data = {k: vtk_layout(a, k in vectors) for k, a in data.items()}
+        self.write(frame, t, vtk_layout(x, True), data)
 
     def _write_frame(self, name: str, frame: int, x: npt.NDArray, data: dict[str, npt.NDArray],
                      cells, vectors: tuple[str, ...]) -> Callable[[], None]:

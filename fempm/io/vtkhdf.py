@@ -55,6 +55,11 @@ def _h5py():
     return h5py
 
 
+def _index_type(total: int) -> type:
+    """The integer type of the cells' connectivity and offsets (VTK reads either)."""
+    return np.int32 if total < 2**31 - 1 else np.int64
+
+
 def _stored(a: npt.NDArray, vector: bool) -> tuple[int, ...]:
     """The shape of a row as written: a (d, d) tensor as 9 components, a vector as 3."""
     if a.ndim == 3:
@@ -70,7 +75,7 @@ def _create(path: Path, total: int, specs: dict[str, tuple[np.dtype, tuple[int, 
     dcpl = h5py.h5p.create(h5py.h5p.DATASET_CREATE)
     dcpl.set_alloc_time(h5py.h5d.ALLOC_TIME_EARLY)  # the space is there now, contiguous
     dcpl.set_fill_time(h5py.h5d.FILL_TIME_NEVER)  # and not written twice
-    index = np.int32 if total < 2**31 - 1 else np.int64  # (VTK reads either)
+    index = _index_type(total)
     layout = {"Types": (np.dtype(np.uint8), (), total), "Connectivity": (np.dtype(index), (), total),
               "Offsets": (np.dtype(index), (), total + 1), "Points": (np.dtype(np.float64), (3,), total)}
     layout.update({f"PointData/{k}": (np.dtype(t), shape, total) for k, (t, shape) in specs.items()})
@@ -120,7 +125,7 @@ def _fill(path: Path, offsets: dict[str, int], start: int, total: int, x: npt.ND
     """This rank's rows from ``start`` (of ``total``), at the datasets' ``offsets``; the
     ``last`` rank also the closing entry of ``Offsets``."""
     n = len(x)
-    index = np.int32 if total < 2**31 - 1 else np.int64
+    index = _index_type(total)
     fd = os.open(path, os.O_WRONLY)
     try:
         _write(fd, offsets["Types"], start, np.full(n, _VERTEX, dtype=np.uint8), False)

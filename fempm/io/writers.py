@@ -27,24 +27,13 @@ import numpy.typing as npt
 from mpi4py import MPI
 
 from fempm.io import vtu
-from fempm.io.series import FRAME_FORMATS, FrameSeries, OutputWriteError, PointFileSeries, everywhere
+from fempm.io.series import FRAME_FORMATS, FrameSeries, OutputWriteError, PointFileSeries, everywhere, vtk_layout
 from fempm.io.plot import plot_particle_frame
 from fempm.particles.particle_set import Particles
 
 __all__ = ["FRAME_FORMATS", "GRID_FIELDS", "OUTPUT_FILES", "OUTPUT_LIMIT", "FrameSeries", "GridField",
            "OutputFolderError", "OutputSizeError", "OutputWriteError", "PointFileSeries", "RunWriter",
-           "check_output_size", "earlier_outputs", "frame_bytes", "make_folder", "write_json"]
-
-
-def _pad3(a: npt.NDArray) -> npt.NDArray:
-    """Vectors (n, d) -> (n, 3); tensors (n, d, d) -> (n, 3, 3) (zeros in the added places)."""
-    d = a.shape[1]
-    out = np.zeros((len(a), 3) if a.ndim == 2 else (len(a), 3, 3))
-    if a.ndim == 2:
-        out[:, :d] = a
-    else:
-        out[:, :d, :d] = a
-    return out
+           "check_output_size", "earlier_outputs", "frame_bytes", "frame_format_of", "make_folder", "write_json"]
 
 
 def determinants(F: npt.NDArray) -> npt.NDArray:
@@ -125,23 +114,26 @@ def frame_bytes(particles: Particles, V: dolfinx.fem.FunctionSpace | None, outpu
     particle frame (position, velocity, stress, J, id, body and the other float fields; raw in
     VTKHDF, base64-encoded in VTK XML, ``frame_format``) and the grid pieces (points, cells and
     values), base64-encoded as :mod:`fempm.io.vtu` writes them. Collective."""
-    raw, particle_bytes = 0, 0
+    raw, encoded = 0, 0  # bytes written as they are, bytes base64-encoded (4/3 as many)
     if "particles" in outputs:
         n = len(particles)
         per = 8 * (3 + 3 + 9 + 1 + 1) + 4
         per += sum(8 * int(np.prod(a.shape[1:])) for k, a in particles.fields.items()
                    if k not in ("v", "sigma", "F", "body") and a.ndim in (1, 2) and a.dtype == np.float64)
-        particle_bytes = n * (per + 8 + 8 + 1)  # + the vertex cells
+        frame = n * (per + 8 + 8 + 1)  # + the vertex cells
         if frame_format == "vtkhdf":
-            particle_bytes = particle_bytes * 3 // 4  # raw: a quarter less than base64's 4/3 below
+            raw += frame
+        else:
+            encoded += frame
     grids = [name for name in GRID_FIELDS if name in outputs]
     if grids and V is not None:
         points = V.dofmap.index_map.size_local + V.dofmap.index_map.num_ghosts
         cells = V.mesh.topology.index_map(V.mesh.topology.dim).size_local
         k = V.dofmap.dof_layout.num_dofs
         for name in grids:
-            raw += points * 8 * (3 + (3 if name == "grid_velocity" else 9)) + cells * (8 * k + 8 + 1)
-    return int(particles.comm.allreduce(raw + particle_bytes) * 4 / 3)
+            encoded += points * 8 * (3 + (3 if name == "grid_velocity" else 9)) + cells * (8 * k + 8 + 1)
+    raw, encoded = particles.comm.allreduce(np.array([raw, encoded]))
+    return int(raw + encoded * 4 / 3)
 
 
 def check_output_size(particles: Particles, V, outputs: tuple[str, ...], frames: int,
@@ -184,7 +176,14 @@ class GridField:
             self._target.interpolate(self._source)
             local = self._target.x.array
         a = np.asarray(local).reshape(len(self.points), *self.shape)
-        return _pad3(a).reshape(len(a), -1)
+        return vtk_layout(a)
+
+
+def frame_format_of(resume: dict | None, frame_format: str) -> str:
+    """The particle frames' format of a run's writer: a continued run's own (``resume``, the
+    writer state in its checkpoint; VTK XML for checkpoints from before VTKHDF frames), else
+    ``frame_format``."""
+    return resume.get("frame_format", "vtu") if resume is not None else frame_format
 
 
 class RunWriter:
@@ -198,8 +197,7 @@ class RunWriter:
         from its frame count, in its frame format. Otherwise the outputs of an earlier run in
         ``folder`` are removed with ``overwrite``, else refused (:func:`make_folder`).
         ``frame_format``: the particle frames' format, of :data:`FRAME_FORMATS`. Collective."""
-        if resume is not None:
-            frame_format = resume.get("frame_format", "vtu")  # (checkpoints before VTKHDF frames wrote VTK XML)
+        frame_format = frame_format_of(resume, frame_format)
         if frame_format not in FRAME_FORMATS:
             raise ValueError(f"unknown frame_format={frame_format!r}; expected one of {', '.join(FRAME_FORMATS)}")
         self.frame_format = frame_format
@@ -295,7 +293,7 @@ class RunWriter:
                 data[name] = a
         self._particles.write_points(self.frame, t, particles.x, data, vectors=("velocity",))
         if self.png:  # a picture of all particles: gathered
-            parts = self.comm.gather((_pad3(particles.x), np.linalg.norm(f["v"], axis=1)), root=0)
+            parts = self.comm.gather((vtk_layout(particles.x), np.linalg.norm(f["v"], axis=1)), root=0)
             if self.comm.rank == 0:
                 plot_particle_frame(np.concatenate([q[0] for q in parts]), np.concatenate([q[1] for q in parts]),
                                     self.folder / "frames" / f"frame_{self.frame:05d}.png", title=f"t = {t:.4g}",

@@ -97,8 +97,7 @@ def _model_to_data(gmsh, comm: MPI.Comm, gdim: int):
 def _generated(comm: MPI.Comm, generator: str, params: dict, gdim: int, build, refine: int):
     """The mesh ``build(gmsh)`` models on rank 0, from the mesh cache if it holds it
     (:mod:`fempm.meshes.cache`; ``params`` its key), refined ``refine`` times on every rank
-    (:func:`fempm.meshes.refinement.refined`). Collective."""
-    check_refine(refine)
+    (:func:`fempm.meshes.refinement.refined`; ``refine`` checked by :func:`_coarse` before). Collective."""
     gmsh = _gmsh()
 
     def make():

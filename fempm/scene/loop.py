@@ -14,7 +14,8 @@ from tqdm import tqdm
 
 from fempm.abort import FailureAgreement, abort
 from fempm.io import checkpoint, stops
-from fempm.io.writers import FRAME_FORMATS, OUTPUT_LIMIT, RunWriter, check_output_size, write_json
+from fempm.io.writers import (FRAME_FORMATS, OUTPUT_LIMIT, RunWriter, check_output_size, frame_format_of,
+                               write_json)
 from fempm.particles.location import OutsideMeshError
 from fempm.scene.definition import MAX_STEPS, Scene
 from fempm.scene.observers import Checkpoints, Energies, Frames, HealthChecks, Observer, Progress, Watch
@@ -172,7 +173,7 @@ class Run:
             checkpoint.check_fields(saved, scene.particles, comm)
         if out is not None:
             size = check_output_size(scene.particles, solver.V, scene.outputs, scene.frames, output_limit,
-                                     saved["writer"].get("frame_format", "vtu") if saved else frame_format)
+                                     frame_format_of(saved["writer"] if saved else None, frame_format))
             if progress and comm.rank == 0:
                 print(f"{scene.name}: about {size / 1e6:.3g} MB of frames into {out}")
         self.writer = (RunWriter(out, scene.particles, solver.V, png=png, resume=saved["writer"] if saved else None,
