@@ -26,7 +26,8 @@ bundle         members
                mask it writes, the vertex ``star``
 ``Outputs``    what G2P writes besides the state: velocity gradients ``L`` (n or 0, d, d), the
                re-mapped momenta ``mom`` (dofs or 0, ...), the state's ``sums`` (3 + d or 0)
-``Forces``     P2G's external forces: constant body force ``g`` (d,), per particle ``fext``
+``Forces``     P2G's external forces: constant body force ``g`` (d,), per particle ``fext``; F-bar's
+               nodal pressure sums ``patch`` (dofs, 2 B; (0, 0): none; :mod:`fempm.kernels.patch`)
 ``Stable``     the stable time's cell sizes ``h`` (cells or 0) and given wave speeds ``c``
 ``Corners``    CPDI2's corners moved in the 2D moving pass: their positions ``yc`` (n, Q, 2),
                the ``moved`` ones it writes, the ``bad`` counts (inverted, not located) and the
@@ -57,7 +58,7 @@ GridStep = namedtuple("GridStep", "v_new v_old flip dt by_particle")
 Star = namedtuple("Star", "c2v v_offsets v_cells num_cells")
 Moves = namedtuple("Moves", "x0 tol left star")
 Outputs = namedtuple("Outputs", "L mom sums")
-Forces = namedtuple("Forces", "g fext")
+Forces = namedtuple("Forces", "g fext patch", defaults=(np.zeros((0, 0)),))
 Stable = namedtuple("Stable", "h c")
 Groups = namedtuple("Groups", "group stride rigid")
 Corners = namedtuple("Corners", "yc moved bad sample_cells")

@@ -76,6 +76,7 @@ if AVAILABLE:
 
     from fempm.kernels.affine import add_momentum, affine_work, carried_at, flagged, g2p_affine, offsets
     from fempm.kernels.kinematics import _det, add_totals, linear_elastic_at, neo_hookean_at
+    from fempm.kernels.patch import nodal_ratio
     from fempm.kernels.shape import inside_after_pull_back, shape, star_search
 
     @njit(inline="always")
@@ -150,10 +151,11 @@ def kernels_for(cell: str) -> SimpleNamespace:
         part (the generic kernel)."""
         flags = (cm >= 0, cv >= 0, cf >= 0, stable.h.shape[0] > 0, forces.fext.shape[0] > 0, bool(bound),
                  groups.group.shape[0] > 0, cg >= 0)
+        averaged = cf >= 0 and forces.patch.shape[0] > 0  # F-bar's averaged pressure in the forces
         if kind and cv >= 0:  # the affine transfers: the planar passes on affine 2D cells, else the generic ones
             make = scatter_kernel if cell in AFFINE_SCALAR else _scatter_kernel
-            return make(cell, *flags, kind)(where, state, laws, forces, out, stable, groups, affine)
-        return scatter_kernel(cell, *flags)(where, state, laws, forces, out, stable, groups)
+            return make(cell, *flags, kind, averaged=averaged)(where, state, laws, forces, out, stable, groups, affine)
+        return scatter_kernel(cell, *flags, averaged=averaged)(where, state, laws, forces, out, stable, groups)
 
     def g2p_update(where: Basis, grid: GridStep, state: State, laws: Laws, moves: Moves, outputs: Outputs,
                    groups: Groups = NO_GROUPS, *, blend: bool, kinematics: bool, move: bool,
@@ -179,19 +181,20 @@ def kernels_for(cell: str) -> SimpleNamespace:
     return SimpleNamespace(scatter=scatter, g2p_update=g2p_update)
 
 
-def _planar(make, simplex: bool, affine: bool, cell: str, *flags):
+def _planar(make, simplex: bool, affine: bool, cell: str, *flags, **options):
     """A kernel of :mod:`fempm.kernels.planar` in the place of a generic one of ``cell``."""
-    return make(simplex, affine, *flags)
+    return make(simplex, affine, *flags, **options)
 
 
-def _solid(make, hexa: bool, cell: str, *flags):
+def _solid(make, hexa: bool, cell: str, *flags, **options):
     """A kernel of :mod:`fempm.kernels.solid` in the place of a generic one of ``cell``."""
-    return make(hexa, *flags)
+    return make(hexa, *flags, **options)
 
 
 @functools.cache
 def _scatter_kernel(cell: str, with_mass: bool, with_momentum: bool, with_force: bool, with_dt: bool, has_fext: bool,
-                    bound: bool = False, grouped: bool = False, with_gradient: bool = False, kind: int = 0):
+                    bound: bool = False, grouped: bool = False, with_gradient: bool = False, kind: int = 0,
+                    averaged: bool = False):
     r"""The P2G pass of :func:`kernels_for` with its terms fixed at compile time: the columns of
     ``out`` are [mass | momentum (d) | force (d)], of the terms present. On a basis with
     negative values (P2 Lagrange) the mass column is :math:`\sum_p M_p |N_{ip}|`, the measure
@@ -207,7 +210,10 @@ def _scatter_kernel(cell: str, with_mass: bool, with_momentum: bool, with_force:
     the columns of its group, shifted by ``group[p] * stride``. ``with_gradient``: d more
     columns, the mass gradients :math:`\sum_p M_p \nabla N_{ip}`. ``kind`` (1 APIC, 2 TPIC) adds
     the affine part to the momenta, :math:`M_p N_{ip} C_p (x_i - x_p)` of the carried matrix
-    (:func:`fempm.kernels.affine.carried`; the kernel then takes the ``affine`` bundle)."""
+    (:func:`fempm.kernels.affine.carried`; the kernel then takes the ``affine`` bundle).
+    ``averaged`` (F-bar, :mod:`fempm.stepping.fbar_grid`): the force takes :math:`\sigma_p + (\bar
+    p_p - p_p) I`, :math:`\bar p_p` the patch average of the pressures summed in ``forces.patch``
+    (:mod:`fempm.kernels.patch`)."""
     D, NK, SIMPLEX = CELLS[cell]
     KIND = kind
     AFFINE = is_affine(cell)
@@ -225,7 +231,8 @@ def _scatter_kernel(cell: str, with_mass: bool, with_momentum: bool, with_force:
         cells, X, K, cell_dofs = where
         x, mass, v, volume, sigma, body = state.x, state.mass, state.v, state.volume, state.sigma, state.body
         modulus, g, fext, h, c = laws.modulus, forces.g, forces.fext, stable.h, stable.c
-        group, stride = groups.group, groups.stride
+        group, stride, patch = groups.group, groups.stride, forces.patch
+        bodies = patch.shape[1] // 2
         N = np.empty(NK)
         G = np.empty((NK, D))
         mv = np.empty(D)
@@ -253,6 +260,15 @@ def _scatter_kernel(cell: str, with_mass: bool, with_momentum: bool, with_force:
                         fe[j] += fext[p, j]
                     for e in range(D):
                         sg[j, e] = sigma[p, j, e]
+            if with_force and averaged:  # F-bar: the patch-averaged pressure
+                t = 0.0
+                for j in range(D):
+                    t += sg[j, j]
+                t = -t / D
+                for a in range(NK):
+                    t += N[a] * nodal_ratio(patch, cell_dofs[cp, a], body[p], bodies)
+                for j in range(D):
+                    sg[j, j] += t
             if KIND:
                 offsets((X, K, cp, cell_dofs, xi, x), p, (D, NK, SIMPLEX, FROM_K), R, Jw)
                 carried_at(N, R, (C, spin), p, (D, NK, KIND), Dm, work)

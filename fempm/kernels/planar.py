@@ -32,6 +32,7 @@ if AVAILABLE:
     from fempm.kernels.kinematics import add_totals
     from fempm.kernels.multilinear import quad_pull_back
     from fempm.kernels.particle_checks import count_j, stable_time
+    from fempm.kernels.patch import nodal_ratio
     from fempm.kernels.planar_affine import add_affine, affine_g2p2, carried2, jacobian2, offsets2
     from fempm.kernels.shape import inside_after_pull_back, star_search
 
@@ -115,10 +116,11 @@ if AVAILABLE:
 
 @functools.cache
 def scatter_kernel(simplex: bool, affine: bool, with_mass: bool, with_momentum: bool, with_force: bool, with_dt: bool,
-                   has_fext: bool, bound: bool, grouped: bool = False, with_gradient: bool = False, kind: int = 0):
+                   has_fext: bool, bound: bool, grouped: bool = False, with_gradient: bool = False, kind: int = 0,
+                   averaged: bool = False):
     """:func:`fempm.kernels.lumped._scatter_kernel` for ``triangle`` (``simplex``) or
     ``quadrilateral`` cells, ``affine`` or multilinear (``kind``, APIC or TPIC: affine cells;
-    :mod:`fempm.kernels.planar_affine`)."""
+    :mod:`fempm.kernels.planar_affine`; ``averaged``: F-bar's averaged pressure in the force)."""
     KIND = kind
     CV = 1 if with_mass else 0
     CF = CV + (2 if with_momentum else 0)
@@ -131,7 +133,8 @@ def scatter_kernel(simplex: bool, affine: bool, with_mass: bool, with_momentum: 
         mass, v, volume, sigma, body = state.mass, state.v, state.volume, state.sigma, state.body
         C, spin = (carried.C, carried.spin) if KIND else (np.empty((0, 2, 2)), np.empty((0, 1)))
         modulus, g, fext, h, c = laws.modulus, forces.g, forces.fext, stable.h, stable.c
-        group, stride = groups.group, groups.stride
+        group, stride, patch = groups.group, groups.stride, forces.patch
+        bodies = patch.shape[1] // 2
         best = 0.0 if bound else np.inf
         for p in range(len(cells)):
             cp = cells[p]
@@ -166,6 +169,11 @@ def scatter_kernel(simplex: bool, affine: bool, with_mass: bool, with_momentum: 
                     fe0 += fext[p, 0]
                     fe1 += fext[p, 1]
                 s00, s01, s10, s11 = sigma[p, 0, 0], sigma[p, 0, 1], sigma[p, 1, 0], sigma[p, 1, 1]
+                if averaged:  # F-bar: the patch-averaged pressure
+                    b = body[p]
+                    t = (N0 * nodal_ratio(patch, i0, b, bodies) + N1 * nodal_ratio(patch, i1, b, bodies) + N2 * nodal_ratio(patch, i2, b, bodies)
+                         + (N3 * nodal_ratio(patch, i3, b, bodies) if QUAD else 0.0)) - 0.5 * (s00 + s11)
+                    s00, s11 = s00 + t, s11 + t
                 f = o + CF
                 out[i0, f] += N0 * fe0 - V * (s00 * g0x + s01 * g0y)
                 out[i0, f + 1] += N0 * fe1 - V * (s10 * g0x + s11 * g0y)

@@ -32,6 +32,7 @@ if AVAILABLE:
     from fempm.kernels.affine import APIC, flagged
     from fempm.kernels.kinematics import add_totals
     from fempm.kernels.particle_checks import LINEAR_ELASTIC, NEO_HOOKEAN, count_j, stable_time
+    from fempm.kernels.patch import nodal_ratio
     from fempm.kernels.shape import inside_after_pull_back, star_search
     from fempm.kernels.solid_affine import add_affine3, carried3, jacobian3, offset3, spin3
 
@@ -206,10 +207,11 @@ if AVAILABLE:
 
 @functools.cache
 def scatter_kernel(hexa: bool, with_mass: bool, with_momentum: bool, with_force: bool, with_dt: bool, has_fext: bool,
-                   bound: bool, grouped: bool = False, with_gradient: bool = False, kind: int = 0):
+                   bound: bool, grouped: bool = False, with_gradient: bool = False, kind: int = 0,
+                   averaged: bool = False):
     """:func:`fempm.kernels.lumped._scatter_kernel` for ``tetrahedron`` or (``hexa``) affine
     ``hexahedron`` cells (``kind``, APIC or TPIC: the momenta with the particles' affine part,
-    :mod:`fempm.kernels.solid_affine`)."""
+    :mod:`fempm.kernels.solid_affine`; ``averaged``: F-bar's averaged pressure in the force)."""
     NK = 8 if hexa else 4
     CV = 1 if with_mass else 0
     CF = CV + (3 if with_momentum else 0)
@@ -221,7 +223,8 @@ def scatter_kernel(hexa: bool, with_mass: bool, with_momentum: bool, with_force:
         cells, X, K, cell_dofs = where
         mass, v, volume, sigma, body = state.mass, state.v, state.volume, state.sigma, state.body
         modulus, g, fext, h, c = laws.modulus, forces.g, forces.fext, stable.h, stable.c
-        group, stride = groups.group, groups.stride
+        group, stride, patch = groups.group, groups.stride, forces.patch
+        bodies = patch.shape[1] // 2
         C, spin = (carried.C, carried.spin) if KIND else (np.empty((0, 3, 3)), np.empty((0, 1)))
         mc = jac = (0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0)
         best = 0.0 if bound else np.inf
@@ -242,6 +245,12 @@ def scatter_kernel(hexa: bool, with_mass: bool, with_momentum: bool, with_force:
                 s00, s01, s02 = sigma[p, 0, 0], sigma[p, 0, 1], sigma[p, 0, 2]
                 s10, s11, s12 = sigma[p, 1, 0], sigma[p, 1, 1], sigma[p, 1, 2]
                 s20, s21, s22 = sigma[p, 2, 0], sigma[p, 2, 1], sigma[p, 2, 2]
+                if averaged:  # F-bar: the patch-averaged pressure
+                    t = 0.0
+                    for a in range(NK):
+                        t += node(a, X0, X1, X2, k, hexa)[0] * nodal_ratio(patch, cell_dofs[cp, a], body[p], bodies)
+                    t -= (s00 + s11 + s22) / 3.0
+                    s00, s11, s22 = s00 + t, s11 + t, s22 + t
             o = group[p] * stride if grouped else 0
             if with_momentum and KIND:  # the matrix the momenta carry (times the mass)
                 jac = jacobian3(K, cp)

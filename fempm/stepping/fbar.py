@@ -35,6 +35,10 @@ law whose volumetric strain is :math:`\mathrm{tr}\,F - d` (``volumetric_measure 
 \Delta\theta) I`: a rotation changes :math:`\mathrm{tr}\,F` and not :math:`\det F`, so averaging
 :math:`\det F` for such a law leaves its pressure without the average it is conjugate to, and a
 rotating body gains energy (the colliding disks at nu = 0.4999 blow up at the impact).
+
+Point particles on a space of the compiled passes take :class:`fempm.stepping.fbar_grid.FBarPointGrid`,
+the same average in compiled passes (:mod:`fempm.kernels.fbar`), tested against :class:`FBar` on
+the numpy step; the other options run this module's numpy on that step.
 """
 
 from __future__ import annotations

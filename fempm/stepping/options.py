@@ -94,8 +94,9 @@ class StepOptions:
         load_ramp: Implicit, quasi-static: the loads scaled by :math:`\min(1, t / t_{ramp})` at
             a step's end time t (None: the loads as given).
         volumetric: standard, or fbar (:mod:`fempm.stepping.fbar`: each particle's volume
-            change averaged over its nodal patch, against volumetric locking; the explicit numpy
-            step, and the implicit step with :mod:`fempm.implicit.fbar`).
+            change averaged over its nodal patch, against volumetric locking; the compiled
+            :mod:`fempm.stepping.fbar_grid` for point particles, the numpy step for the others,
+            and the implicit step with :mod:`fempm.implicit.fbar`).
 
     Raises:
         ValueError: An unknown name or a value out of range, naming the option.

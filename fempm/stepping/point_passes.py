@@ -246,7 +246,6 @@ class PointPasses(Grid):
 
         s = self.state
         p = s.particles
-        f = p.fields
         opts = s.options
         external = kinematics and self.any_external
         L = np.empty((len(p) if external else 0, self.d, self.d))
@@ -259,20 +258,33 @@ class PointPasses(Grid):
                                   move=move)
         nonfinite_j, inverted, jmin, jmax, nonfinite = counts
         if kinematics:
-            flags = np.array([nonfinite_j, inverted, -jmin, jmax], dtype=float)
-            p.comm.Allreduce(MPI.IN_PLACE, flags, op=MPI.MAX)
-            if flags[0]:
-                s.fail(f"non-finite state (deformation gradient) at particle(s) {s.particle_ids(~np.isfinite(p.volume))}")
-            if flags[1]:
-                s.fail(f"inverted deformation J <= 0 at particle(s) {s.particle_ids(p.volume <= 0)}")
-            s.record.j_range = (-float(flags[2]), float(flags[3]))
-            if external:  # laws without a compiled kernel
-                groups = [(mat, idx) for b, (mat, idx) in enumerate(material_groups(f, s.materials))
-                          if self.law[b] == 0 and len(idx)]
-                stresses_of(p.comm, groups, f["F"], L, f["sigma"], dt, p.mass / p.volume, f)
-                for _, idx in groups:
-                    nonfinite += int(np.count_nonzero(~np.isfinite(f["sigma"][idx]).all(axis=(1, 2))))
+            nonfinite += self.kinematics_checks((nonfinite_j, inverted, jmin, jmax), L if external else None, dt)
         return nonfinite, left
+
+    def kinematics_checks(self, counts: tuple, L: npt.NDArray | None, dt: float) -> int:
+        """After a kinematics pass: its ``counts`` (#non-finite J, #J <= 0, min J, max J) checked
+        on every rank (one collective; a failure names the particles), the J range recorded and,
+        with the particles' velocity gradients ``L`` (n, d, d), the stress of the laws without a
+        compiled kernel; returns the number of those particles whose stress is not finite."""
+        s = self.state
+        p = s.particles
+        f = p.fields
+        nonfinite_j, inverted, jmin, jmax = counts
+        flags = np.array([nonfinite_j, inverted, -jmin, jmax], dtype=float)
+        p.comm.Allreduce(MPI.IN_PLACE, flags, op=MPI.MAX)
+        if flags[0]:
+            s.fail(f"non-finite state (deformation gradient) at particle(s) {s.particle_ids(~np.isfinite(p.volume))}")
+        if flags[1]:
+            s.fail(f"inverted deformation J <= 0 at particle(s) {s.particle_ids(p.volume <= 0)}")
+        s.record.j_range = (-float(flags[2]), float(flags[3]))
+        nonfinite = 0
+        if L is not None:  # laws without a compiled kernel
+            groups = [(mat, idx) for b, (mat, idx) in enumerate(material_groups(f, s.materials))
+                      if self.law[b] == 0 and len(idx)]
+            stresses_of(p.comm, groups, f["F"], L, f["sigma"], dt, p.mass / p.volume, f)
+            for _, idx in groups:
+                nonfinite += int(np.count_nonzero(~np.isfinite(f["sigma"][idx]).all(axis=(1, 2))))
+        return nonfinite
 
     def _state(self) -> tuple:
         """Identities of the particle arrays the passes read and check."""

@@ -1,0 +1,103 @@
+r"""F-bar on the compiled point grid (:class:`FBarPointGrid`): ``StepOptions(volumetric="fbar")``
+with point particles in compiled passes.
+
+The equations are those of :mod:`fempm.stepping.fbar` (the numpy :class:`~fempm.stepping.grid.SingleFieldGrid`
+with :class:`~fempm.stepping.fbar.FBar` is the reference this grid is tested against to
+round-off). Two stages of :class:`~fempm.stepping.lumped.PointGrid` change:
+
+* the kinematics: the G2P pass is split at the law. A first pass (:func:`fempm.kernels.fbar.measure_kernel`)
+  computes :math:`L_p` and the measure the law averages and adds both to nodal patch sums; once
+  the ghosts are summed a second pass (:func:`fempm.kernels.fbar.deform_kernel`) interpolates the
+  average back and sets :math:`\bar F_p`, :math:`V_p` and the stress; the blend and the motion
+  then run as the point grid's pass without kinematics;
+* the internal force: each P2G pass that maps forces takes :math:`\sigma_p + (\bar p_p - p_p) I`,
+  the pressures first summed on the nodes (:func:`fempm.kernels.fbar.pressure_kernel`) and
+  averaged inside the P2G pass (``Forces.patch``).
+
+So a step costs three more particle passes than the point step and two ghost exchanges of a
+(dofs, 2 B) array of B bodies. Every option of the point grid is taken (lumped, consistent and
+FMPM mass, every scheme and transfer, every cell and degree of the compiled passes).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import numpy.typing as npt
+
+from fempm.kernels import fbar as kb
+from fempm.kernels.bundles import NO_AFFINE, NO_GROUPS, Affine, Basis, Forces, Groups, Stable, State
+from fempm.stepping.fbar import trace_measure
+from fempm.stepping.lumped import PointGrid
+from fempm.stepping.nodal import sum_ghosts
+from fempm.stepping.state import StepState
+
+__all__ = ["FBarPointGrid"]
+
+
+class FBarPointGrid(PointGrid):
+    """The point grid's stages with F-bar's averaged kinematics and pressure (see the module)."""
+
+    takes = "point particles with F-bar (volumetric='fbar'), as PointGrid"
+
+    def __init__(self, state: StepState):
+        super().__init__(state)
+        bodies = len(state.materials)
+        self.by_trace = trace_measure(state.materials)
+        self._patch = self.nodal_array(2 * bodies)  # [sum V N | sum V N f] per body
+        self._measure = kb.measure_kernel(self.cell)
+        self._deform = kb.deform_kernel(self.cell, self.any_external)
+        self._pressures = kb.pressure_kernel(self.cell)
+        self._L, self._value = np.empty((0, self.d, self.d)), np.empty(0)  # kept: L_p and the measures
+
+    def where(self) -> Basis:
+        """The particles' basis bundle."""
+        p = self.state.particles
+        return Basis(p.cells, p.X, self.K, self.cell_dofs)
+
+    def patch_sums(self) -> npt.NDArray:
+        """The kept nodal patch sums, zeroed."""
+        out = self._patch[1]
+        out.fill(0.0)
+        return out
+
+    def pressure_sums(self) -> npt.NDArray:
+        """The nodal sums of the particles' volumes and pressures where they are (one pass, one
+        ghost exchange), for the P2G pass to average. Collective."""
+        p = self.state.particles
+        f = p.fields
+        self._pressures(self.where(), p.volume, f["sigma"], f["body"], self.patch_sums())
+        sum_ghosts(self._patch[0])
+        return self._patch[1]
+
+    def scatter_pass(self, state: State, forces: Forces, out, cm: int, cv: int, cf: int, stable: Stable, *,
+                     bound: bool = False, groups: Groups = NO_GROUPS, cg: int = -1, affine: Affine = NO_AFFINE,
+                     kind: int = 0) -> float:
+        """The point grid's P2G pass; where it maps forces, with the patch-averaged pressure."""
+        if cf >= 0:
+            forces = forces._replace(patch=self.pressure_sums())
+        return super().scatter_pass(state, forces, out, cm, cv, cf, stable, bound=bound, groups=groups, cg=cg,
+                                    affine=affine, kind=kind)
+
+    def _g2p(self, v_new, v_old, dt, *, blend: bool, kinematics: bool, move: bool, remap=None):
+        """The averaged kinematics (two passes, one ghost exchange, the checks of J), then the
+        point grid's pass for the blend, the re-map and the motion."""
+        if not kinematics:
+            return super()._g2p(v_new, v_old, dt, blend=blend, kinematics=False, move=move, remap=remap)
+        p = self.state.particles
+        f = p.fields
+        where = self.where()
+        n = len(p)
+        if len(self._value) != n:
+            self._L, self._value = np.empty((n, self.d, self.d)), np.empty(n)
+        L, value = self._L, self._value
+        self._measure(where, v_new, f["F"], p.volume, f["body"], self.by_trace, float(dt), L, value,
+                      self.patch_sums())
+        sum_ghosts(self._patch[0])
+        counts = self._deform(where, self._patch[1], self.by_trace, float(dt), L, value, self.particle_state(),
+                              self.laws)
+        nonfinite = self.kinematics_checks(counts, L if self.any_external else None, dt)
+        left = np.empty(0, dtype=np.bool_)
+        if blend or move or remap is not None:
+            more, left = super()._g2p(v_new, v_old, dt, blend=blend, kinematics=False, move=move, remap=remap)
+            nonfinite += more
+        return nonfinite, left

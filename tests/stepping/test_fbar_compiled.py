@@ -1,0 +1,68 @@
+"""F-bar on the compiled point grid (fempm.stepping.fbar_grid.FBarPointGrid) against the numpy step
+with fempm.stepping.fbar.FBar, its reference.
+
+Both run the same two-body scene (a neo-Hookean body, whose F-bar averages det F, and a linear
+elastic one, which averages tr F) from the same state on the same partition (1 or 2 ranks):
+positions, velocities, deformation gradients, stresses and volumes agree to round-off after
+every scheme, on every cell type of the compiled passes, with lumped, consistent and FMPM mass,
+with laws that keep their own numpy stress (the averaged L-bar handed to them), with APIC and
+on degree 2.
+"""
+
+import pytest
+
+from fempm.materials import LinearElastic
+from fempm.materials.newtonian_eos import NewtonianTait
+from fempm.stepping import StepOptions
+from fempm.stepping.fbar_grid import FBarPointGrid
+from fempm.stepping.grid import SingleFieldGrid
+
+from tests.matrix import covering
+from tests.stepping.test_compiled_step import MESHES, assert_close, make_solver, run_both
+
+pytestmark = pytest.mark.parallel  # also under mpiexec -n 2 (scripts/run-tests)
+
+
+class OwnLinearElastic(LinearElastic):
+    """A law averaging tr F that keeps its own numpy stress (no compiled kernel for a subclass):
+    the compiled grid hands it L-bar = L + (shift / dt) F^-1."""
+
+
+@pytest.mark.parametrize(("cell", "scheme", "mass"),
+                         covering(list(MESHES), ["USL", "MUSL", "USF"], ["lumped", "consistent", "fmpm2"]))
+def test_compiled_fbar_equals_the_numpy_fbar(cell, scheme, mass):
+    opts = StepOptions(scheme=scheme, flip=0.9, damping=0.5, mass=mass, volumetric="fbar")
+    assert isinstance(make_solver(cell, opts).grid, FBarPointGrid)
+    ref, got = run_both(cell, opts)
+    assert ref[0][1].std() > 0.005  # the particles did move differently
+    assert_close(ref, got)
+
+
+@pytest.mark.parametrize(("cell", "law"), [("triangle", NewtonianTait(rho0=1.0, kappa=30.0, viscosity=0.05)),
+                                           ("hexahedron", OwnLinearElastic(40.0, 0.25)),
+                                           ("quadrilateral", OwnLinearElastic(40.0, 0.25))],
+                         ids=["tait-triangle", "trace-hexahedron", "trace-quadrilateral"])
+def test_compiled_fbar_with_a_law_of_its_own(cell, law):
+    """The second body's law keeps its own stress (det F averaged for the Tait fluid, tr F for
+    the linear elastic subclass): it gets F-bar and L-bar as the numpy step gives them."""
+    opts = StepOptions(scheme="USL", flip=0.5, volumetric="fbar")
+    ref, got = run_both(cell, opts, law=law)
+    assert_close(ref, got)
+
+
+def test_compiled_fbar_with_apic_and_on_degree_2():
+    opts = StepOptions(scheme="MUSL", transfer="apic", volumetric="fbar")
+    assert_close(*run_both("quadrilateral", opts, steps=10))
+    opts = StepOptions(scheme="USL", flip=0.9, mass="lumped", volumetric="fbar", cfl=0.2)
+    solver = make_solver("triangle", opts, degree=2, variant="bernstein")
+    assert isinstance(solver.grid, FBarPointGrid) and solver.grid.cell.endswith("bernstein2")
+    assert_close(*run_both("triangle", opts, steps=8, degree=2, variant="bernstein"))
+
+
+def test_fbar_takes_the_numpy_step_where_no_compiled_grid_takes_it():
+    opts = StepOptions(volumetric="fbar", domain="cpdi1")
+    assert isinstance(make_solver("triangle", opts).grid, SingleFieldGrid)
+    with pytest.raises(ValueError, match=r"no compiled grid takes these options: FBarPointGrid \(.*\): particle "
+                       r"domain cpdi1: point particles$"):
+        make_solver("triangle", opts, compiled=True).step()
+    assert not isinstance(make_solver("triangle", StepOptions()).grid, FBarPointGrid)
