@@ -38,6 +38,7 @@ cons-cpdi1    consistent mass, CPDI1 domains                        consistent m
 cons-ugimp    consistent mass, exact uGIMP                          consistent mass, points
 cons-cpgimp   consistent mass, exact cpGIMP                         consistent mass, points
 contact-cons  two disks, ``contact=True``, consistent mass          the same with lumped mass
+contact-cons1 two disks, ``contact=True``, consistent mass          the same disks, one field, consistent mass
 output        one particle frame, VTKHDF (``fempm.io.vtkhdf``)      the base step
 output-vtu    one particle frame, VTK XML pieces (``frame_format``)  the base step
 ============  ====================================================  ==========================
@@ -109,6 +110,8 @@ CASES = {
     "cons-ugimp": Case({"mass": "consistent", "domain": "ugimp"}, base={"mass": "consistent"}),
     "cons-cpgimp": Case({"mass": "consistent", "domain": "cpgimp"}, base={"mass": "consistent"}),
     "contact-cons": Case(meshes=("tri", "quad"), kind="contact-consistent"),
+    "contact-cons1": Case(meshes=("tri", "quad"), kind="contact-consistent", base={"contact": False,
+                                                                                  "mass": "consistent"}),
     "output": Case(kind="output"),
     "output-vtu": Case(kind="output", frame_format="vtu"),
 }
@@ -267,12 +270,14 @@ def measure(name: str, n: int, mesh: str, a, comm) -> dict | None:
         return None
     ref = Path(a.reference)
     if case.kind == "contact-consistent":
-        base = disks_scene(n, mesh, contact=True).solver()
+        base_options = case.base or {"contact": True, "mass": "lumped"}
+        base = disks_scene(n, mesh, **base_options).solver()
         other = disks_scene(n, mesh, contact=True, mass="consistent").solver()
         tb, tc = compare(base.step, other.step, a.batches, a.min_batch, comm)
         N = base.particles.num_global
+        what = (f"two disks, {'contact' if base_options['contact'] else 'one field'}, {base_options['mass']} mass")
         return {"config": name, "mesh": mesh, "n": N, "base_n": N, "t_base_s": tb, "t_s": tc,
-                "ratio": tc / tb, "base": "two disks, contact, lumped mass"}
+                "ratio": tc / tb, "base": what}
     if case.kind in ("contact", "scene"):
         base_scene = disks_scene(n, mesh, contact=False)
         base = base_scene.solver()

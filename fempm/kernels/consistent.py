@@ -205,7 +205,8 @@ def cell_mass(cell: str):
     """The particle pass of the consistent mass, compiled for one cell type:
     ``kernel(cells, X, K, cell_dofs, mass, row, blocks, diagonal, count)`` adds to ``blocks``
     (rows, k, k), ``diagonal`` (ndofs,) and ``count`` (rows,), where cell ``c`` has row
-    ``row[c]``; returns the number of particles in cells without a row (-1), which it skips."""
+    ``row[c]``; returns the number of particles in cells without a row (-1), which it skips.
+    Particles of zero mass (another body's, for one body's matrix) add nothing and are skipped."""
     D, NK, SIMPLEX = CELLS[cell]
     AFFINE = is_affine(cell)
     DEGREE, BERNSTEIN = space_of(cell)
@@ -216,13 +217,15 @@ def cell_mass(cell: str):
         G = np.empty((NK, D))
         missing = 0
         for p in range(len(cells)):
+            m = mass[p]
+            if m == 0.0:
+                continue
             c = cells[p]
             q = row[c]
             if q < 0:
                 missing += 1
                 continue
             shape(X, p, K, c, SIMPLEX, AFFINE, D, NK, N, G, DEGREE, BERNSTEIN)
-            m = mass[p]
             count[q] += 1
             for a in range(NK):
                 w = m * N[a]

@@ -10,7 +10,8 @@ f^g \mid \nabla m^g]`. :func:`grid_update`, node by node: each group's velocity
 \epsilon_w`), then at a contact node (two or more groups with mass) the correction of
 :mod:`fempm.stepping.contact` against the centre-of-mass velocity (normals from the mass
 gradients, Coulomb friction, and with a gap the position check), then the constrained
-components set to 0. :func:`group_velocity`: the first part alone (MUSL's re-mapped momenta);
+components set to 0; with the groups' velocities and accelerations given (the consistent mass's
+solves) the same update from them. :func:`group_velocity`: the first part alone (MUSL's re-mapped momenta);
 :func:`centre_of_mass`: :math:`\sum_g m^g v^g / \sum_g m^g` over the groups with mass.
 """
 
@@ -71,21 +72,27 @@ if AVAILABLE:
             v_new[i, g * d + j] = vcm[j] + w[j] * keep
 
 
-def grid_update(nodal, stride, free, active_min, weak_max, dt, damping, friction, gap, moments, v_old, v_new):
+def grid_update(nodal, stride, free, active_min, weak_max, dt, damping, friction, gap, moments, v_old, v_new,
+                accelerations=None):
     """See the module: ``v_old`` and ``v_new`` (dofs, G d); ``gap`` > 0 with the groups' first
-    mass moments ``moments`` (dofs, G d), else ``gap`` <= 0. Returns the number of contact
-    nodes."""
-    return _grid_update(free.shape[1], nodal.shape[1] // stride)(nodal, stride, free, active_min, weak_max, dt,
-                                                                   damping, friction, gap, moments, v_old, v_new)
+    mass moments ``moments`` (dofs, G d), else ``gap`` <= 0; ``accelerations`` (dofs, G d): the
+    groups' given accelerations, and ``v_old`` their given velocities (else ``v_old`` is
+    written from the momenta and the accelerations are :math:`f^g / m^g`). Returns the number
+    of contact nodes."""
+    given = accelerations is not None
+    a = accelerations if given else np.zeros((0, 0))
+    return _grid_update(free.shape[1], nodal.shape[1] // stride, given)(
+        nodal, stride, free, active_min, weak_max, dt, damping, friction, gap, moments, v_old, v_new, a)
 
 
 @functools.cache
-def _grid_update(d: int, G: int):
-    """:func:`grid_update` compiled for d components and G groups (its loops unroll)."""
+def _grid_update(d: int, G: int, given: bool = False):
+    """:func:`grid_update` compiled for d components and G groups (its loops unroll); ``given``:
+    the velocities and accelerations given."""
 
     @njit(cache=True, error_model="numpy")
     def kernel(nodal, stride, free, active_min, weak_max, dt, damping, friction, gap, moments, v_old,
-               v_new):  # pragma: no cover - compiled
+               v_new, accelerations):  # pragma: no cover - compiled
         n = free.shape[0]
         vcm = np.empty(d)
         all_grad = np.empty(d)
@@ -108,9 +115,13 @@ def _grid_update(d: int, G: int):
                 inv = 1.0 / m if has else 0.0
                 weak = m <= weak_max
                 for j in range(d):
-                    vo = nodal[i, o + 1 + j] * inv if free[i, j] else 0.0
-                    a = 0.0 if weak else nodal[i, o + 1 + d + j] * inv - damping * vo
-                    v_old[i, g * d + j] = vo
+                    if given:
+                        vo = v_old[i, g * d + j]
+                        a = 0.0 if weak else accelerations[i, g * d + j] - damping * vo
+                    else:
+                        vo = nodal[i, o + 1 + j] * inv if free[i, j] else 0.0
+                        a = 0.0 if weak else nodal[i, o + 1 + d + j] * inv - damping * vo
+                        v_old[i, g * d + j] = vo
                     v_new[i, g * d + j] = vo + dt * a
                     all_grad[j] += nodal[i, o + 1 + 2 * d + j]
                     if gap > 0.0:

@@ -1,18 +1,20 @@
 r"""The compiled passes of F-bar on point particles (:class:`fempm.stepping.fbar_grid.FBarPointGrid`).
 
-The nodal-patch average of :mod:`fempm.stepping.fbar` in four passes over the particles, each
+The nodal-patch average of :mod:`fempm.stepping.fbar` in passes over the particles, each
 evaluating the basis on the fly (:func:`fempm.kernels.shape.shape`), with the nodal sums kept in a
-(dofs, 2 B) array of B bodies, :math:`[\sum_q V_q N_{iq} \mid \sum_q V_q N_{iq} f_q]` per body:
+(dofs, 2 B) array of B bodies, :math:`[\sum_q V_q N_{iq} \mid \sum_q V_q N_{iq} f_q]` per body,
+turned into nodal averages once summed over ranks (:func:`fempm.kernels.patch.averages`):
 
 * :func:`measure_kernel`: :math:`L_p = \sum_a v_a \otimes \nabla N_{ap}` and the measure the law
   averages, :math:`\Delta J_p = \det(I + \Delta t L_p)` or :math:`\Delta\theta_p = \Delta t\,
   \mathrm{tr}(L_p F_p)` (a law with ``volumetric_measure = "trace"``), added to the nodal sums;
-* :func:`deform_kernel` (after the ghosts are summed): the patch average
+* :func:`deform_kernel` (on the averages): the patch average
   :math:`\bar f_p = \sum_a N_{ap} (\sum V N f)_a / (\sum V N)_a`, the averaged deformation
   :math:`\bar F_p = (\overline{\Delta J}_p / \Delta J_p)^{1/d} (I + \Delta t L_p) F_p` or
   :math:`(I + \Delta t L_p) F_p + \frac1d(\overline{\Delta\theta}_p - \Delta\theta_p) I`, the
   volume, the checks of J and the compiled laws' stress (:func:`fempm.kernels.lumped.law_at`);
-  :math:`\bar L_p` in the place of :math:`L_p` for the laws that keep their own ``stress``;
+  :math:`\bar L_p` in the place of :math:`L_p` for the laws that keep their own ``stress`` (on
+  triangles and quadrilaterals the G2P pass of :func:`fempm.kernels.planar.g2p_kernel` does it);
 * :func:`pressure_kernel`: the pressures :math:`p_q = \mathrm{tr}\,\sigma_q / d` added to the nodal
   sums, which the P2G pass then takes (``Forces.patch``, :mod:`fempm.kernels.bundles`) to map the
   force of :math:`\sigma_p + (\bar p_p - p_p) I`, the stress whose divergence is the internal

@@ -63,7 +63,11 @@ from fempm.kernels.particle_checks import (
 )
 from fempm.kernels.shape import AVAILABLE, CELLS, MULTILINEAR, is_affine, space_of
 
-__all__ = ["NO_GROUPS", "NO_STABLE", "kernels_for"]
+__all__ = ["NO_GROUPS", "NO_STABLE", "PLANAR", "kernels_for"]
+
+#: the cells whose passes are the scalar ones of :mod:`fempm.kernels.planar` (their G2P pass also
+#: takes F-bar's averaged kinematics)
+PLANAR = ("triangle", "quadrilateral", "quadrilateral" + MULTILINEAR)
 
 #: the cells whose affine transfers run the scalar passes (:mod:`fempm.kernels.planar` with
 #: :mod:`fempm.kernels.planar_affine`, :mod:`fempm.kernels.solid`), not the generic ones
@@ -132,7 +136,7 @@ def kernels_for(cell: str) -> SimpleNamespace:
     and affine hexahedra those of :mod:`fempm.kernels.solid`)."""
 
     scatter_kernel, g2p_kernel = _scatter_kernel, _g2p_kernel
-    if cell in ("triangle", "quadrilateral", "quadrilateral" + MULTILINEAR):
+    if cell in PLANAR:
         simplex, affine = cell == "triangle", is_affine(cell)
         scatter_kernel = functools.partial(_planar, planar.scatter_kernel, simplex, affine)
         g2p_kernel = functools.partial(_planar, planar.g2p_kernel, simplex, affine)
@@ -159,7 +163,7 @@ def kernels_for(cell: str) -> SimpleNamespace:
 
     def g2p_update(where: Basis, grid: GridStep, state: State, laws: Laws, moves: Moves, outputs: Outputs,
                    groups: Groups = NO_GROUPS, *, blend: bool, kinematics: bool, move: bool,
-                   affine: Affine = NO_AFFINE, kind: int = 0, remap_affine: bool = True) -> tuple:
+                   affine: Affine = NO_AFFINE, kind: int = 0, remap_affine: bool = True, average=None) -> tuple:
         """See :func:`_g2p_kernel` (the bundles: :mod:`fempm.kernels.bundles`); the flags choose
         the compiled variant (``outputs.mom`` with a row per dof: the blend pass also re-maps the
         momenta, MUSL; ``outputs.sums`` of 3 + d entries: the moving pass also sums the state's
@@ -168,10 +172,17 @@ def kernels_for(cell: str) -> SimpleNamespace:
         F (L = 0) and move with their velocity); ``kind`` (1 APIC, 2 TPIC): the blend stores the
         particles' affine matrices (and APIC's spins) into ``affine`` and, with ``remap_affine``,
         re-maps with them (the lumped mass; the consistent mass re-maps the velocities alone: the
-        generic kernel)."""
+        generic kernel); ``average`` (an :class:`~fempm.kernels.bundles.Averaged`, the :data:`PLANAR`
+        cells, a kinematics pass): F-bar's averaged deformation (:func:`fempm.kernels.planar.g2p_kernel`)."""
         remap = blend and outputs.mom.shape[0] > 0
         totals = move and outputs.sums.shape[0] > 0
         flags = (bool(blend), bool(kinematics), bool(move), remap, totals, groups.group.shape[0] > 0)
+        if average is not None:
+            if cell not in PLANAR or not kinematics:
+                raise ValueError(f"F-bar's averaged kinematics in the G2P pass take a kinematics pass on {PLANAR}")
+            on = bool(kind and blend)
+            return g2p_kernel(cell, *flags, kind if on else 0, remap and remap_affine and on, averaged=True)(
+                where, grid, state, laws, moves, outputs, groups, affine, average)
         if kind and blend:
             make = g2p_kernel if cell in AFFINE_SCALAR else _g2p_kernel
             return make(cell, *flags, kind, remap and remap_affine)(where, grid, state, laws, moves, outputs, groups,

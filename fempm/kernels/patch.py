@@ -3,8 +3,9 @@ and into the P2G passes that take the averaged pressure: :mod:`fempm.kernels.lum
 :mod:`fempm.kernels.planar`, :mod:`fempm.kernels.solid`).
 
 The sums of B bodies are kept in a (dofs, 2 B) array, :math:`[\sum_q V_q N_{iq} \mid \sum_q V_q
-N_{iq} f_q]` per body (:mod:`fempm.stepping.fbar`), and a particle p of body b reads the average
-:math:`\bar f_p = \sum_a N_{ap} (\sum V N f)_a / (\sum V N)_a` over the dofs of positive weight.
+N_{iq} f_q]` per body (:mod:`fempm.stepping.fbar`); once summed over ranks, :func:`averages` turns
+the second half into the nodal averages :math:`(\sum V N f)_a / (\sum V N)_a` (0 where the weight
+is not positive), and a particle p of body b reads :math:`\bar f_p = \sum_a N_{ap} \bar f_a`.
 (The loop over a cell's dofs is written out in each pass: through a helper taking the arrays it
 took 5x as long.)
 """
@@ -13,7 +14,7 @@ from __future__ import annotations
 
 from fempm.kernels.shape import AVAILABLE
 
-__all__ = ["AVAILABLE"]
+__all__ = ["AVAILABLE", "averages", "nodal_ratio"]
 
 if AVAILABLE:
     from numba import njit
@@ -21,6 +22,16 @@ if AVAILABLE:
     @njit(inline="always")
     def nodal_ratio(patch, i, b, bodies):  # pragma: no cover - compiled
         r""":math:`(\sum V N f)_i / (\sum V N)_i` of body ``b`` of ``bodies`` at dof ``i`` (0 where
-        the weight is not positive)."""
-        m = patch[i, b]
-        return patch[i, bodies + b] / m if m > 0.0 else 0.0
+        the weight is not positive), of sums turned into averages by :func:`averages`."""
+        return patch[i, bodies + b]
+
+    @njit(cache=True)
+    def averages(patch):  # pragma: no cover - compiled
+        r"""The sums' second half, in place, divided by their weights: :math:`(\sum V N f)_i /
+        (\sum V N)_i`, 0 where the weight is not positive (once per dof, before the passes read
+        them with :func:`nodal_ratio`)."""
+        bodies = patch.shape[1] // 2
+        for i in range(patch.shape[0]):
+            for b in range(bodies):
+                m = patch[i, b]
+                patch[i, bodies + b] = patch[i, bodies + b] / m if m > 0.0 else 0.0

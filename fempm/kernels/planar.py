@@ -94,6 +94,34 @@ if AVAILABLE:
         return n00, n01, n10, n11, n00 * n11 - n01 * n10
 
     @njit(inline="always")
+    def deform_averaged(F, p, dt, Lp, f, averaged, by_trace):  # pragma: no cover - compiled
+        r""":math:`F_p \leftarrow s (I + \Delta t L) F_p + t I` of F-bar (see :func:`g2p_kernel`) for the
+        measure ``f`` and its average; returns the new entries and :math:`J = \det F_p`."""
+        L00, L01, L10, L11 = Lp
+        s, t = (1.0, 0.5 * (averaged - f)) if by_trace else (np.sqrt(averaged / f), 0.0)
+        d00, d01, d10, d11 = 1.0 + dt * L00, dt * L01, dt * L10, 1.0 + dt * L11
+        f00, f01, f10, f11 = F[p, 0, 0], F[p, 0, 1], F[p, 1, 0], F[p, 1, 1]
+        n00 = s * (d00 * f00 + d01 * f10) + t
+        n01 = s * (d00 * f01 + d01 * f11)
+        n10 = s * (d10 * f00 + d11 * f10)
+        n11 = s * (d10 * f01 + d11 * f11) + t
+        F[p, 0, 0], F[p, 0, 1], F[p, 1, 0], F[p, 1, 1] = n00, n01, n10, n11
+        return n00, n01, n10, n11, n00 * n11 - n01 * n10
+
+    @njit(inline="always")
+    def averaged_rate(F, p, dt, Lp, f, averaged, by_trace):  # pragma: no cover - compiled
+        r""":math:`\bar L` with :math:`(I + \Delta t \bar L) F^n_p = \bar F_p` (``F[p]`` still :math:`F^n_p`):
+        :math:`(s (I + \Delta t L) - I) / \Delta t`, or :math:`L + t (F^n_p)^{-1} / \Delta t` for a body
+        averaging :math:`\mathrm{tr}\,F`."""
+        L00, L01, L10, L11 = Lp
+        if not by_trace:
+            s = np.sqrt(averaged / f)
+            return ((s * (1.0 + dt * L00) - 1.0) / dt, s * L01, s * L10, (s * (1.0 + dt * L11) - 1.0) / dt)
+        f00, f01, f10, f11 = F[p, 0, 0], F[p, 0, 1], F[p, 1, 0], F[p, 1, 1]
+        q = 0.5 * (averaged - f) / dt / (f00 * f11 - f01 * f10)
+        return L00 + q * f11, L01 - q * f01, L10 - q * f10, L11 + q * f00
+
+    @njit(inline="always")
     def law_stress(sigma, p, code, lam, mu, n00, n01, n10, n11, J):  # pragma: no cover - compiled
         r"""``sigma[p]`` of the compiled law ``code`` (else left as it is) for
         :math:`F = [[n_{00}, n_{01}], [n_{10}, n_{11}]]`, :math:`J = \det F > 0`."""
@@ -202,15 +230,24 @@ def scatter_kernel(simplex: bool, affine: bool, with_mass: bool, with_momentum: 
 
 @functools.cache
 def g2p_kernel(simplex: bool, affine: bool, blend: bool, kinematics: bool, move: bool, remap: bool,
-               totals: bool = False, grouped: bool = False, kind: int = 0, remap_affine: bool = False):
-    """:func:`fempm.kernels.lumped._g2p_kernel` for ``triangle`` (``simplex``) or
+               totals: bool = False, grouped: bool = False, kind: int = 0, remap_affine: bool = False,
+               averaged: bool = False):
+    r""":func:`fempm.kernels.lumped._g2p_kernel` for ``triangle`` (``simplex``) or
     ``quadrilateral`` cells, ``affine`` or multilinear (``kind``, APIC or TPIC, in a blend pass:
-    affine cells; :mod:`fempm.kernels.planar_affine`)."""
+    affine cells; :mod:`fempm.kernels.planar_affine`). ``averaged`` (F-bar's kinematics,
+    :mod:`fempm.kernels.fbar`; the ``average`` bundle :class:`~fempm.kernels.bundles.Averaged`):
+    :math:`\bar F_p = s\,(I + \Delta t L_p) F_p + t I` with :math:`s = (\bar f_p / f_p)^{1/2}, t = 0`
+    (a body averaging :math:`\det F`) or :math:`s = 1, t = (\bar f_p - f_p) / 2` (averaging
+    :math:`\mathrm{tr}\,F`), :math:`f_p` the measure of the first pass and :math:`\bar f_p` its
+    patch average, and :math:`\bar L_p` into ``L`` where it has a row per particle."""
     QUAD, KIND = not simplex, kind
 
     @njit(cache=True, error_model="numpy")
-    def g2p_update(where, grid, state, laws, moves, outputs, groups, carried=None):  # pragma: no cover
+    def g2p_update(where, grid, state, laws, moves, outputs, groups, carried=None, average=None):  # pragma: no cover
         cells, X, K, cell_dofs = where
+        patch, value, by_trace = (average.patch, average.value, average.by_trace) if averaged else (
+            np.empty((0, 2)), np.empty(0), np.empty(0, np.bool_))
+        bodies = patch.shape[1] // 2
         C, spin, va, weak = ((carried.C, carried.spin, carried.v, carried.weak) if KIND else
                              (np.empty((0, 2, 2)), np.empty((0, 1)), np.empty((0, 2)), np.empty(0, np.uint8)))
         v_new, v_old, flip, dt, by_particle = grid
@@ -253,11 +290,19 @@ def g2p_kernel(simplex: bool, affine: bool, blend: bool, kinematics: bool, move:
                 if QUAD:
                     L00, L01, L10, L11 = L00 + a3 * g3x, L01 + a3 * g3y, L10 + b3 * g3x, L11 + b3 * g3y
                 L00, L01, L10, L11 = (0.0, 0.0, 0.0, 0.0) if still else (L00, L01, L10, L11)
-                n00, n01, n10, n11, J = deform(F, p, dt, L00, L01, L10, L11)
+                b = body[p]
+                if averaged:  # F-bar: the measure's patch average
+                    fa = (N0 * nodal_ratio(patch, i0, b, bodies) + N1 * nodal_ratio(patch, i1, b, bodies)
+                          + N2 * nodal_ratio(patch, i2, b, bodies) + (N3 * nodal_ratio(patch, i3, b, bodies) if QUAD else 0.0))
+                    Lp = (L00, L01, L10, L11)
+                    if keep_L:  # (I + dt L-bar) F = F-bar
+                        L00, L01, L10, L11 = averaged_rate(F, p, dt, Lp, value[p], fa, by_trace[b])
+                    n00, n01, n10, n11, J = deform_averaged(F, p, dt, Lp, value[p], fa, by_trace[b])
+                else:
+                    n00, n01, n10, n11, J = deform(F, p, dt, L00, L01, L10, L11)
                 if keep_L:
                     L[p, 0, 0], L[p, 0, 1], L[p, 1, 0], L[p, 1, 1] = L00, L01, L10, L11
                 volume[p] = J * volume0[p]
-                b = body[p]
                 ok, nonfinite_j, inverted, jmin, jmax = count_j(J, nonfinite_j, inverted, jmin, jmax)
                 if ok:
                     law_stress(sigma, p, law[b], lam[b], mu[b], n00, n01, n10, n11, J)

@@ -61,20 +61,29 @@ class ConsistentNodalMass(NodalMass):
         self._spare: npt.NDArray | None = None  # the array of the acceleration before it
         self.ratio_age = RATIO_EVERY  # steps since the stable-step estimate
         self._ratio_key = -1
+        #: the last estimate of :math:`\lambda_{min}(M_L^{-1} M_C)`
+        self.ratio = 1.0
+        self._always_lumped = self.systems.always_lumped  # the dofs lumped in any case
 
-    def stable_factor(self, nodal, need: bool, top: float) -> float:
+    def stable_factor(self, nodal, need: bool, top: float, masses: npt.NDArray | None = None,
+                      lumped: npt.NDArray | None = None) -> float:
         """The mass pass and the matrices' values; :math:`\\sqrt{0.8\\,\\lambda_{min}}` (1 with
-        lumped forces)."""
+        lumped forces). ``masses``: the particle masses of the matrix in place of the particles'
+        (one body's, zero for the others: multi-field contact, with ``nodal`` that body's P2G
+        columns); ``lumped``: more dofs (owned + ghost) whose rows are lumped this step."""
         g = self.layout
         s = g.state
         p = s.particles
         sy = self.systems
+        if lumped is not None:
+            sy.always_lumped = lumped if self._always_lumped is None else self._always_lumped | lumped
         while True:
             blocks, diagonal, count, dvec = sy.work_arrays()
-            missing = self.cell_mass(p.cells, p.X, g.K, g.cell_dofs, p.mass, sy.pattern, blocks, diagonal, count)
+            missing = self.cell_mass(p.cells, p.X, g.K, g.cell_dofs, p.mass if masses is None else masses, sy.pattern,
+                                     blocks, diagonal, count)
             if not p.comm.allreduce(missing):
                 break
-            sy.rebuild(p.cells)
+            sy.rebuild(p.cells if masses is None else p.cells[masses != 0.0])
         sum_ghosts(dvec[0])
         sy.update(diagonal, nodal[:, 0], p.num_global)
         if g.options.lumped_forces:
@@ -82,9 +91,9 @@ class ConsistentNodalMass(NodalMass):
         key = sy.rebuilds
         self.ratio_age += 1
         if need or key != self._ratio_key or self.ratio_age >= RATIO_EVERY:
-            s.record.mass_ratio = sy.mass_ratio_min(s.V, MASS_RATIO_ITERATIONS)
+            self.ratio = s.record.mass_ratio = sy.mass_ratio_min(s.V, MASS_RATIO_ITERATIONS)
             self._ratio_key, self.ratio_age = key, 0
-        return g.options.mass_model.stable_factor(lambda: s.record.mass_ratio)
+        return g.options.mass_model.stable_factor(lambda: self.ratio)
 
     def checkpoint_state(self) -> tuple[dict, dict[str, npt.NDArray]]:
         """This rank's state that a resumed run needs to repeat the next steps bit for bit: the
@@ -92,6 +101,7 @@ class ConsistentNodalMass(NodalMass):
         and the stable-step estimate's age and key."""
         arrays = {f"mass:{k}": v for k, v in self.systems.state().items()}
         arrays["ratio_key"] = np.array([self._ratio_key])
+        arrays["ratio"] = np.array([self.ratio])
         if self._accel is not None:
             arrays["accel"] = self._accel
         return {"ratio_age": self.ratio_age}, arrays
@@ -104,6 +114,8 @@ class ConsistentNodalMass(NodalMass):
         self._accel = arrays.get("accel")
         if "ratio_key" in arrays:
             self._ratio_key = int(arrays["ratio_key"][0])
+        if "ratio" in arrays:
+            self.ratio = float(arrays["ratio"][0])
         self.systems.restore({k[5:]: v for k, v in arrays.items() if k.startswith("mass:")})
 
     def lumped(self, nodal: npt.NDArray) -> npt.NDArray:
@@ -136,19 +148,27 @@ class ConsistentNodalMass(NodalMass):
         g.conditions.apply(v, centroids)
         return self._ghosts(v)
 
-    def advance(self, mass, force, cf: int, active_min: float, weak_max: float, dt: float, v_old: npt.NDArray,
-                centroids=None) -> npt.NDArray:
+    def acceleration(self, mass, force, cf: int) -> npt.NDArray:
+        """The accelerations of the nodal forces ``force[:, cf:cf+d]`` (owned + ghost dofs, d):
+        the consistent solve from the last ones, or with ``lumped_forces`` the division by the
+        lumped masses ``mass[:, 0]`` on the supported dofs."""
         g = self.layout
-        opts = g.options
         sy = self.systems
         a = self._spare if self._spare is not None else np.zeros((g.num_dofs, g.d))
-        if opts.lumped_forces:
+        if g.options.lumped_forces:
             m = mass[:, 0]
             a[sy.active] = force[sy.active, cf:cf + g.d] / m[sy.active, None]
         else:
             sy.solve(force, cf, a, self._accel)  # every owned entry of a written
             self._ghosts(a)
             self._accel, self._spare = a, self._accel  # the next warm start; the next output
+        return a
+
+    def advance(self, mass, force, cf: int, active_min: float, weak_max: float, dt: float, v_old: npt.NDArray,
+                centroids=None) -> npt.NDArray:
+        g = self.layout
+        opts = g.options
+        a = self.acceleration(mass, force, cf)
         v_new = np.empty_like(a)
         kc.advance(a, v_old, mass[:, 0], weak_max, float(dt), float(opts.damping), v_new)
         g.conditions.apply(v_new, centroids, dt)

@@ -7,15 +7,16 @@ round-off). Two stages of :class:`~fempm.stepping.lumped.PointGrid` change:
 
 * the kinematics: the G2P pass is split at the law. A first pass (:func:`fempm.kernels.fbar.measure_kernel`)
   computes :math:`L_p` and the measure the law averages and adds both to nodal patch sums; once
-  the ghosts are summed a second pass (:func:`fempm.kernels.fbar.deform_kernel`) interpolates the
-  average back and sets :math:`\bar F_p`, :math:`V_p` and the stress; the blend and the motion
-  then run as the point grid's pass without kinematics;
+  the ghosts are summed the point grid's pass interpolates the average back and sets
+  :math:`\bar F_p`, :math:`V_p` and the stress with the blend and the motion (on triangles and
+  quadrilaterals, :func:`fempm.kernels.planar.g2p_kernel`), or a second pass does
+  (:func:`fempm.kernels.fbar.deform_kernel`) before the point grid's pass without kinematics;
 * the internal force: each P2G pass that maps forces takes :math:`\sigma_p + (\bar p_p - p_p) I`,
   the pressures first summed on the nodes (:func:`fempm.kernels.fbar.pressure_kernel`) and
   averaged inside the P2G pass (``Forces.patch``).
 
-So a step costs three more particle passes than the point step and two ghost exchanges of a
-(dofs, 2 B) array of B bodies. Every option of the point grid is taken (lumped, consistent and
+So a step costs two (triangles, quadrilaterals) or three more particle passes than the point
+step and two ghost exchanges of a (dofs, 2 B) array of B bodies. Every option of the point grid is taken (lumped, consistent and
 FMPM mass, every scheme and transfer, every cell and degree of the compiled passes).
 """
 
@@ -25,7 +26,9 @@ import numpy as np
 import numpy.typing as npt
 
 from fempm.kernels import fbar as kb
-from fempm.kernels.bundles import NO_AFFINE, NO_GROUPS, Affine, Basis, Forces, Groups, Stable, State
+from fempm.kernels.bundles import NO_AFFINE, NO_GROUPS, Affine, Averaged, Basis, Forces, Groups, Stable, State
+from fempm.kernels.lumped import PLANAR
+from fempm.kernels.patch import averages
 from fempm.stepping.fbar import trace_measure
 from fempm.stepping.lumped import PointGrid
 from fempm.stepping.nodal import sum_ghosts
@@ -60,14 +63,20 @@ class FBarPointGrid(PointGrid):
         out.fill(0.0)
         return out
 
+    def averaged(self) -> npt.NDArray:
+        """The kept patch sums summed over ranks and turned into nodal averages
+        (:func:`fempm.kernels.patch.averages`). Collective."""
+        sum_ghosts(self._patch[0])
+        averages(self._patch[1])
+        return self._patch[1]
+
     def pressure_sums(self) -> npt.NDArray:
         """The nodal sums of the particles' volumes and pressures where they are (one pass, one
         ghost exchange), for the P2G pass to average. Collective."""
         p = self.state.particles
         f = p.fields
         self._pressures(self.where(), p.volume, f["sigma"], f["body"], self.patch_sums())
-        sum_ghosts(self._patch[0])
-        return self._patch[1]
+        return self.averaged()
 
     def scatter_pass(self, state: State, forces: Forces, out, cm: int, cv: int, cf: int, stable: Stable, *,
                      bound: bool = False, groups: Groups = NO_GROUPS, cg: int = -1, affine: Affine = NO_AFFINE,
@@ -92,8 +101,11 @@ class FBarPointGrid(PointGrid):
         L, value = self._L, self._value
         self._measure(where, v_new, f["F"], p.volume, f["body"], self.by_trace, float(dt), L, value,
                       self.patch_sums())
-        sum_ghosts(self._patch[0])
-        counts = self._deform(where, self._patch[1], self.by_trace, float(dt), L, value, self.particle_state(),
+        patch = self.averaged()
+        if self.cell in PLANAR:  # the averaged kinematics inside the point grid's pass
+            return super()._g2p(v_new, v_old, dt, blend=blend, kinematics=True, move=move, remap=remap,
+                                average=Averaged(patch, value, self.by_trace))
+        counts = self._deform(where, patch, self.by_trace, float(dt), L, value, self.particle_state(),
                               self.laws)
         nonfinite = self.kinematics_checks(counts, L if self.any_external else None, dt)
         left = np.empty(0, dtype=np.bool_)

@@ -88,7 +88,9 @@ class PointGrid(PointPasses):
         self.since_sort = SORT_EVERY  # steps since the particles were sorted by cell (sort on the first step)
         if space_of(self.cell) == (2, False) and type(self.options.mass_model) is not Consistent:
             raise ValueError(negative_basis_message(self.options.mass_model.label, 2))  # as the numpy step
-        layout = NodalLayout(state, self.cell, self.K, self.cell_dofs, self.index_map, self.free, self.mass_apply)
+        #: what a grid mass reads of this grid
+        self.layout = layout = NodalLayout(state, self.cell, self.K, self.cell_dofs, self.index_map, self.free,
+                                           self.mass_apply)
         self.mass = NODAL_MASSES[type(self.options.mass_model)](layout)
         transfer = self.options.velocity_transfer
         #: XPIC(m)'s series (none for the consistent mass, whose projection is exact: XPIC(inf))

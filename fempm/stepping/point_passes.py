@@ -208,15 +208,15 @@ class PointPasses(Grid):
                                     groups=groups, cg=cg, affine=affine, kind=kind)
 
     def gather_pass(self, grid: GridStep, state: State, moves: Moves, outputs: Outputs, *, blend: bool,
-                    kinematics: bool, move: bool) -> tuple:
+                    kinematics: bool, move: bool, average=None) -> tuple:
         """The G2P pass (:func:`fempm.kernels.lumped.kernels_for`) with the particles' basis; a
         blend pass of APIC or TPIC also stores the affine matrices (and re-maps with them with
-        the lumped mass)."""
+        the lumped mass); ``average``: F-bar's averaged kinematics (:mod:`fempm.stepping.fbar_grid`)."""
         p = self.state.particles
         carried, kind = self.affine_state(self.affine_velocity(grid.v_new, grid.v_old)) if blend else (NO_AFFINE, 0)
         return self.kernels.g2p_update(Basis(p.cells, p.X, self.K, self.cell_dofs), grid, state, self.laws, moves,
                                        outputs, blend=blend, kinematics=kinematics, move=move, affine=carried,
-                                       kind=kind, remap_affine=self.affine_with_momenta)
+                                       kind=kind, remap_affine=self.affine_with_momenta, average=average)
 
     def _centroids(self, nodal) -> NodalCentres | None:
         r"""The nodal centres of mass :math:`\sum_p M_p N_{ip} x_p / m_i` (one more particle
@@ -239,9 +239,9 @@ class PointPasses(Grid):
                                   Stable(s.h_cell, self._wave_speeds()))
         return -p.comm.allreduce(-local, op=MPI.MAX)
 
-    def _g2p(self, v_new, v_old, dt, *, blend: bool, kinematics: bool, move: bool, remap=None):
-        """One particle pass (:func:`fempm.kernels.lumped.kernels_for`); checks J (collective)
-        after a kinematics pass; returns (#non-finite particles, which left their cells and
+    def _g2p(self, v_new, v_old, dt, *, blend: bool, kinematics: bool, move: bool, remap=None, average=None):
+        """One particle pass (:func:`fempm.kernels.lumped.kernels_for`; ``average``: with F-bar's
+        averaged kinematics); checks J (collective) after a kinematics pass; returns (#non-finite particles, which left their cells and
         are not in an owned neighbour (a moving pass; else an empty mask))."""
 
         s = self.state
@@ -255,7 +255,7 @@ class PointPasses(Grid):
         outputs = Outputs(L, remap if remap is not None else np.zeros((0, self.d)),
                           self._sums if move and self.totals else np.zeros(0))
         counts = self.gather_pass(grid, self.particle_state(), moves, outputs, blend=blend, kinematics=kinematics,
-                                  move=move)
+                                  move=move, **({} if average is None else {"average": average}))
         nonfinite_j, inverted, jmin, jmax, nonfinite = counts
         if kinematics:
             nonfinite += self.kinematics_checks((nonfinite_j, inverted, jmin, jmax), L if external else None, dt)

@@ -1,0 +1,82 @@
+"""The compiled F-bar passes (fempm.kernels.fbar) against their numpy reference, FBar.rate and
+patch_average of fempm.stepping.fbar on the particle basis: the averaged deformation, volume and
+stress of both measures (det F and tr F bodies) and the nodal pressure averages, on every cell
+type of the separate pass (the planar cells' G2P pass: tests/stepping/test_fbar_compiled.py)."""
+
+import dolfinx.fem
+import dolfinx.mesh as dm
+import numpy as np
+import pytest
+from mpi4py import MPI
+
+import fempm
+from fempm.kernels import fbar as kb
+from fempm.kernels.bundles import Basis, Laws, State
+from fempm.kernels.patch import averages
+from fempm.kernels.particle_checks import LINEAR_ELASTIC, NEO_HOOKEAN
+from fempm.materials import LinearElastic, NeoHookean
+from fempm.stepping.fbar import FBar, patch_average, trace_measure
+from fempm.transfer.basis import ParticleBasis
+
+comm = MPI.COMM_SELF
+
+MESHES = {
+    "triangle": lambda: dm.create_unit_square(comm, 5, 4),
+    "quadrilateral": lambda: dm.create_unit_square(comm, 5, 4, dm.CellType.quadrilateral),
+    "tetrahedron": lambda: dm.create_unit_cube(comm, 3, 3, 2),
+    "hexahedron": lambda: dm.create_unit_cube(comm, 3, 2, 3, dm.CellType.hexahedron),
+}
+
+
+@pytest.mark.parametrize("keep_L", [True, False])
+@pytest.mark.parametrize("cell", list(MESHES))
+def test_compiled_fbar_passes_equal_the_numpy_average(cell, keep_L):
+    mesh = MESHES[cell]()
+    d = mesh.geometry.dim
+    V = dolfinx.fem.functionspace(mesh, ("Lagrange", 1, (d,)))
+    p = fempm.create_particles(mesh, 2**d, jitter=0.3, seed=4)
+    n = len(p)
+    rng = np.random.default_rng(1)
+    body = (p.x[:, 0] > 0.5).astype(np.int32)
+    materials = [NeoHookean(10.0, 0.3), LinearElastic(8.0, 0.25)]
+    F0 = np.eye(d) + 0.05 * rng.standard_normal((n, d, d))
+    v_nodal = 0.3 * rng.standard_normal((V.dofmap.index_map.size_local, d))
+    dt = 0.05
+    basis = ParticleBasis(V, p, gradients=True)
+    L = np.einsum("paj,pae->pje", v_nodal[basis.dofs], basis.gradients)
+    # numpy reference: F-bar = (I + dt L-bar) F, the laws' stresses
+    L_bar = FBar().rate(basis, p.volume, body, materials, F0, L, dt)
+    F_ref = (np.eye(d) + dt * L_bar) @ F0
+    by_trace = trace_measure(materials)
+    # the compiled passes (the kernels' cell names are the meshes' here: affine cells, degree 1)
+    name = cell
+    _, K = p.locator.geometry.kernel_geometry
+    where = Basis(p.cells, p.X, K, np.ascontiguousarray(V.dofmap.list, dtype=np.int32))
+    patch = np.zeros((len(v_nodal), 4))
+    Lc, value = np.empty((n, d, d)), np.empty(n)
+    F = F0.copy()
+    kb.measure_kernel(name)(where, v_nodal, F, p.volume, body, by_trace, dt, Lc, value, patch)
+    np.testing.assert_allclose(Lc, L, rtol=0, atol=1e-13)
+    averages(patch)
+    volume0 = p.volume.copy()
+    volume, sigma = np.empty(n), np.zeros((n, d, d))
+    laws = Laws(np.array([NEO_HOOKEAN, LINEAR_ELASTIC]), np.array([m.lame[0] for m in materials]),
+                np.array([m.lame[1] for m in materials]), np.zeros(2))
+    state = State(p.x, np.zeros((n, d)), F, volume0, volume, sigma, body, p.mass)
+    counts = kb.deform_kernel(name, keep_L)(where, patch, by_trace, dt, Lc, value, state, laws)
+    assert counts[:2] == (0, 0)
+    np.testing.assert_allclose(F, F_ref, rtol=0, atol=1e-13)
+    np.testing.assert_allclose(Lc, L_bar if keep_L else L, rtol=0, atol=1e-11)  # L-bar for the laws of their own
+    np.testing.assert_allclose(volume, np.linalg.det(F_ref) * volume0, rtol=1e-13)
+    for b, mat in enumerate(materials):
+        idx = body == b
+        np.testing.assert_allclose(sigma[idx], mat.stress(F_ref[idx], L_bar[idx], np.zeros((idx.sum(), d, d)), dt,
+                                                          np.ones(idx.sum())), rtol=0, atol=1e-12)
+    # the pressures' nodal averages, read at the particles
+    sigma = rng.standard_normal((n, d, d))
+    patch.fill(0.0)
+    kb.pressure_kernel(name)(where, p.volume, sigma, body, patch)
+    averages(patch)
+    reference = patch_average(basis, p.volume, body, 2, np.trace(sigma, axis1=1, axis2=2) / d)
+    got = np.einsum("pa,pa->p", basis.values, patch[basis.dofs, 2 + body[:, None]])
+    np.testing.assert_allclose(got, reference, rtol=0, atol=1e-13)
