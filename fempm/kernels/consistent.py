@@ -56,6 +56,27 @@ if AVAILABLE:
                 out[diagonal_slot[r]] += 1.0
 
     @njit(cache=True)
+    def coo_entry_values(entries, rows, cols, row_diagonal, keep, lump, identity_dofs, diagonal_slot,
+                         out):  # pragma: no cover
+        """:func:`coo_values` from the summed entries of the sparsity (``entries[e]`` of row dof
+        ``rows[e]``, column dof ``cols[e]``, its row's diagonal entry ``row_diagonal[e]``) instead
+        of the cells' blocks."""
+        out[:] = 0.0
+        for e in range(len(entries)):
+            i = rows[e]
+            if not keep[i]:
+                continue
+            j = cols[e]
+            v = entries[e]
+            if i == j or lump[i] or lump[j]:
+                out[row_diagonal[e]] += v
+            elif keep[j]:
+                out[e] += v
+        for r in range(len(identity_dofs)):
+            if not keep[identity_dofs[r]]:
+                out[diagonal_slot[r]] += 1.0
+
+    @njit(cache=True)
     def eigenvalue_bounds(B, out):  # pragma: no cover
         r"""Bounds of the smallest eigenvalue of each symmetric positive semi-definite ``B[n]``
         (k, k) from its :math:`LDL^T` pivots :math:`d_i`: ``out[n] = (min d_i, \prod d_i /

@@ -102,7 +102,7 @@ def _planar(make, cell: str, *flags):
 
 if AVAILABLE:
     @njit(inline="always")
-    def _particle_basis(p, samples, simplex, affine, D, NK, grad_from_values, corners, scratch):  # pragma: no cover
+    def particle_basis(p, samples, simplex, affine, D, NK, grad_from_values, corners, scratch):  # pragma: no cover
         r"""The averaged basis of particle ``p`` by cell: the distinct cells its samples lie in
         (``cells``, returned their number) and in row ``k`` the weighted values ``W[k]`` (NK,)
         and gradients ``GW[k]`` (NK, D) of the samples in ``cells[k]`` summed (samples sharing a
@@ -179,7 +179,7 @@ def _scatter_kernel(cell: str, grad_from_values: bool, corners: bool, with_mass:
                         sg[j, e] = sigma[p, j, e]
             if with_dt:
                 best = stable_time(best, bound, m, V, speed, modulus[body[p]], c, p, h[cells[p]])
-            ncell = _particle_basis(p, samples, SIMPLEX, AFFINE, D, NK, grad_from_values, corners,
+            ncell = particle_basis(p, samples, SIMPLEX, AFFINE, D, NK, grad_from_values, corners,
                                     (N, G, cs, W, GW, R, Ri))
             for k in range(ncell):
                 cq = cs[k]
@@ -227,7 +227,7 @@ def _g2p_kernel(cell: str, grad_from_values: bool, corners: bool, blend: bool, k
             vg[:] = 0.0
             dv[:] = 0.0
             Lp[:] = 0.0
-            ncell = _particle_basis(p, samples, SIMPLEX, AFFINE, D, NK, grad_from_values, corners,
+            ncell = particle_basis(p, samples, SIMPLEX, AFFINE, D, NK, grad_from_values, corners,
                                     (N, G, cs, W, GW, R, Ri))
             for k in range(ncell):
                 cq = cs[k]
@@ -303,7 +303,7 @@ def _mass_apply_kernel(cell: str, grad_from_values: bool, corners: bool):
         u = np.empty(k)
         lumping = lump.shape[0] > 0
         for p in range(len(cells)):
-            ncell = _particle_basis(p, samples, SIMPLEX, AFFINE, D, NK, grad_from_values, corners,
+            ncell = particle_basis(p, samples, SIMPLEX, AFFINE, D, NK, grad_from_values, corners,
                                     (N, G, cs, W, GW, R, Ri))
             for j in range(k):
                 u[j] = 0.0

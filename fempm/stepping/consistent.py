@@ -27,12 +27,14 @@ import numpy as np
 import numpy.typing as npt
 
 from fempm.kernels import consistent as kc
+from fempm.kernels import consistent_domains as kcd
 from fempm.kernels.shape import space_of
 from fempm.stepping.mass_systems import ConsistentSystems
 from fempm.stepping.nodal import NodalLayout, NodalMass, sum_ghosts
+from fempm.transfer.domains import GIMP
 from fempm.transfer.mass_models import MASS_RATIO_ITERATIONS
 
-__all__ = ["RATIO_EVERY", "ConsistentNodalMass"]
+__all__ = ["RATIO_EVERY", "ConsistentNodalMass", "DomainConsistentMass"]
 
 #: steps between two refreshes of the stable-step estimate when ``dt`` is given
 RATIO_EVERY = 20
@@ -49,12 +51,14 @@ class ConsistentNodalMass(NodalMass):
         # no row lumped on a basis with negative values (P2 Lagrange): it could make the matrix
         # indefinite (as fempm.transfer.Projector)
         nonnegative = space_of(layout.cell) != (2, False)
-        self.systems = ConsistentSystems(state.V, layout.cell_dofs, layout.free, layout.conditions.fixed_mask(),
+        element_dofs, layer_dofs = self.element_dofs()
+        self.systems = ConsistentSystems(state.V, element_dofs, layout.free, layout.conditions.fixed_mask(),
                                          prefix=opts.petsc_options_prefix,
                                          lump_below=opts.lump_below if nonnegative else 0.0,
                                          always_lumped=layout.conditions.friction_dofs if nonnegative else None,
-                                         nonnegative=nonnegative)
+                                         nonnegative=nonnegative, layer_dofs=layer_dofs)
         self.cell_mass = kc.cell_mass(layout.cell)
+        self.assembled = False  # this step's blocks summed already (assemble)
         self._ghosted = layout.nodal_array(layout.d)
         self._signed: tuple | None = None  # a kept nodal array: degree-2 Lagrange's signed lumped masses
         self._accel: npt.NDArray | None = None  # the last acceleration, the warm start of its solve
@@ -77,15 +81,10 @@ class ConsistentNodalMass(NodalMass):
         sy = self.systems
         if lumped is not None:
             sy.always_lumped = lumped if self._always_lumped is None else self._always_lumped | lumped
-        while True:
-            blocks, diagonal, count, dvec = sy.work_arrays()
-            missing = self.cell_mass(p.cells, p.X, g.K, g.cell_dofs, p.mass if masses is None else masses, sy.pattern,
-                                     blocks, diagonal, count)
-            if not p.comm.allreduce(missing):
-                break
-            sy.rebuild(p.cells if masses is None else p.cells[masses != 0.0])
-        sum_ghosts(dvec[0])
-        sy.update(diagonal, nodal[:, 0], p.num_global)
+        if not self.assembled:
+            self.assemble(masses)
+        self.assembled = False
+        sy.update(sy.work_arrays(fill=False)[1], nodal[:, 0], p.num_global)
         if g.options.lumped_forces:
             return 1.0
         key = sy.rebuilds
@@ -94,6 +93,39 @@ class ConsistentNodalMass(NodalMass):
             self.ratio = s.record.mass_ratio = sy.mass_ratio_min(s.V, MASS_RATIO_ITERATIONS)
             self._ratio_key, self.ratio_age = key, 0
         return g.options.mass_model.stable_factor(lambda: self.ratio)
+
+    def element_dofs(self) -> tuple[npt.NDArray, npt.NDArray | None]:
+        """The dofs of the matrix's blocks per cell and the dofmap of the layer around the
+        occupied cells (None: the same): the cells' own dofs."""
+        return self.layout.cell_dofs, None
+
+    def mass_pass(self, masses: npt.NDArray, blocks, diagonal, count) -> tuple[int, int]:
+        """The particle pass summing the blocks, the diagonal and the particles per cell
+        (:func:`fempm.kernels.consistent.cell_mass`); returns (particles in cells without a
+        block, particles the blocks cannot hold: none here)."""
+        g = self.layout
+        p = g.state.particles
+        return self.cell_mass(p.cells, p.X, g.K, g.cell_dofs, masses, self.systems.pattern, blocks, diagonal,
+                              count), 0
+
+    def assemble(self, masses: npt.NDArray | None = None) -> int:
+        """This step's blocks, diagonal (summed over ranks) and counts from the particles
+        (``masses``: in place of theirs, one body's), the sparsity rebuilt where a particle is in
+        a cell outside it; returns the number of particles, over all ranks, whose blocks the
+        sparsity cannot hold (:meth:`mass_pass`; the step then goes elsewhere). Collective."""
+        p = self.layout.state.particles
+        sy = self.systems
+        masses = p.mass if masses is None else masses
+        while True:
+            blocks, diagonal, count, dvec = sy.work_arrays()
+            missing, outside = self.mass_pass(masses, blocks, diagonal, count)
+            missing, outside = p.comm.allreduce(np.array([missing, outside]))
+            if not missing:
+                break
+            sy.rebuild(p.cells[masses != 0.0])
+        sum_ghosts(dvec[0])
+        self.assembled = not outside
+        return int(outside)
 
     def checkpoint_state(self) -> tuple[dict, dict[str, npt.NDArray]]:
         """This rank's state that a resumed run needs to repeat the next steps bit for bit: the
@@ -173,3 +205,39 @@ class ConsistentNodalMass(NodalMass):
         kc.advance(a, v_old, mass[:, 0], weak_max, float(dt), float(opts.damping), v_new)
         g.conditions.apply(v_new, centroids, dt)
         return self._ghosts(v_new)
+
+
+class DomainConsistentMass(ConsistentNodalMass):
+    r"""The consistent grid mass of particle domains (:class:`fempm.stepping.domain_grid.DomainGrid`):
+    :math:`m_{ij} = \sum_p M_p \langle N_i \rangle_p \langle N_j \rangle_p`, the reference
+    :func:`fempm.transfer.mapping.consistent_mass_matrix` on the averaged basis. The blocks are
+    summed per cell over the dofs of its vertex star (:mod:`fempm.kernels.consistent_domains`),
+    which hold every dof the samples of its particles reach; the kept systems, solves and
+    stable-step estimate are those of :class:`ConsistentNodalMass`. A step with a sample beyond
+    its particle's vertex star goes to the numpy grid (:meth:`prepare`)."""
+
+    def __init__(self, layout: NodalLayout):
+        self._star = None
+        super().__init__(layout)
+        #: Gauss or exact GIMP (the samples' kind, :func:`fempm.kernels.samples.kernels_for`)
+        self.gimp = isinstance(layout.options.particle_domain, GIMP)
+
+    def element_dofs(self) -> tuple[npt.NDArray, npt.NDArray | None]:
+        """The dofs of each cell's vertex star and, for the layer, the dofmap."""
+        g = self.layout
+        if self._star is None:
+            self._star = kcd.star_dofs(g.state.particles.sample_locator.vertex_star(), g.cell_dofs)
+        return self._star, g.cell_dofs
+
+    def mass_pass(self, masses: npt.NDArray, blocks, diagonal, count) -> tuple[int, int]:
+        """The domains' pass (:func:`fempm.kernels.consistent_domains.domain_cell_mass`)."""
+        p = self.layout.state.particles
+        samples = self.layout.samples()
+        kernel = kcd.domain_cell_mass(self.layout.cell, self.gimp, samples.Fw.shape[0] > 0)
+        sy = self.systems
+        return kernel(p.cells, samples, masses, self._star, sy.pattern, sy.slot, blocks, diagonal, count)
+
+    def prepare(self) -> bool:
+        """This step's blocks, before the grid takes the step: whether every particle's samples
+        lie in its vertex star (else the numpy grid takes it). Collective."""
+        return self.assemble() == 0

@@ -50,7 +50,9 @@ from fempm.stepping.lumped import PointGrid
 from fempm.stepping.spaces import compiled_space, space_refusal
 from fempm.stepping.state import StepState
 from fempm.transfer.domains import CPDI1, CPDI2, GIMP, half_widths
-from fempm.transfer.mass_models import FMPM, Lumped
+from fempm.stepping.consistent import DomainConsistentMass
+from fempm.stepping.lumped_mass import NODAL_MASSES
+from fempm.transfer.mass_models import FMPM, Consistent, Lumped
 
 __all__ = ["DomainGrid", "frontier_cells"]
 
@@ -76,11 +78,13 @@ class DomainGrid(PointGrid):
     """:class:`~fempm.stepping.lumped.PointGrid` with particle domains of sample points (see the
     module)."""
 
-    takes = ("CPDI1, CPDI2 or GIMP domains (exact GIMP on simplices and axis-aligned boxes) with lumped or FMPM mass "
+    takes = ("CPDI1, CPDI2 or GIMP domains (exact GIMP on simplices and axis-aligned boxes) with lumped, consistent or FMPM mass "
              "on degree 1 of the compiled passes, no wall that checks contact by position")
 
     #: the velocity transfers its passes take
     transfers = ("flip", "pic", "xpic")
+    #: the grid mass of each mass model: the consistent one over the averaged basis
+    nodal_masses = {**NODAL_MASSES, Consistent: DomainConsistentMass}
 
     @classmethod
     def refusal(cls, state: StepState) -> str | None:
@@ -92,8 +96,8 @@ class DomainGrid(PointGrid):
             return space_refusal(state)
         if space_of(cell) != (1, False):
             return "the particle domains' compiled passes take degree 1 (P1 on affine or multilinear cells)"
-        if type(state.options.mass_model) not in (Lumped, FMPM):
-            return f"mass {state.options.mass_model.label} with particle domains: lumped or FMPM"
+        if type(state.options.mass_model) not in (Lumped, FMPM, Consistent):
+            return f"mass {state.options.mass_model.label} with particle domains: lumped, consistent or FMPM"
         if state.conditions.needs_positions:
             return "a wall or collider that checks contact by position takes point particles"
         if state.options.velocity_transfer.name not in cls.transfers:
@@ -136,11 +140,17 @@ class DomainGrid(PointGrid):
         super().for_step()
         missing = self._samples()
         p = self.state.particles
-        if p.comm.allreduce(missing) if p.comm.size > 1 else missing:
+        if (p.comm.allreduce(missing) if p.comm.size > 1 else missing) or not self._mass_ready():
             if self.generic is None:
                 self.generic = SingleFieldGrid(self.state)
             return self.generic
         return self
+
+    def _mass_ready(self) -> bool:
+        """The consistent mass's blocks of this step, whether they hold every particle's samples
+        (:meth:`fempm.stepping.consistent.DomainConsistentMass.prepare`); True for the other masses.
+        Collective."""
+        return self.mass.prepare() if isinstance(self.mass, DomainConsistentMass) else True
 
     def _samples(self) -> int:
         """Make this step's samples (cells, reference coordinates, weights); returns the number

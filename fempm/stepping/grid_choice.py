@@ -11,7 +11,7 @@ grid                                          compiled  contact  takes
 :class:`~fempm.stepping.contact.ContactGrid`  no        yes      any
 :class:`~fempm.stepping.fbar_grid.FBarPointGrid`  yes  no   as PointGrid, F-bar only
 :class:`~fempm.stepping.lumped.PointGrid`     yes       no       point particles, lumped/consistent/FMPM
-:class:`~fempm.stepping.domain_grid.DomainGrid`  yes    no       CPDI1/CPDI2/GIMP, lumped/FMPM, degree 1
+:class:`~fempm.stepping.domain_grid.DomainGrid`  yes    no       CPDI1/CPDI2/GIMP, lumped/consistent/FMPM, degree 1
 :class:`~fempm.stepping.grid.SingleFieldGrid`  no       no       any
 ============================================  ========  =======  ==========================
 

@@ -66,6 +66,10 @@ class PointGrid(PointPasses):
     takes = "point particles with lumped, consistent or FMPM mass on a space of the compiled passes"
     #: the velocity transfers its passes take
     transfers = ("flip", "pic", "apic", "tpic", "xpic")
+    #: the grid mass of each mass model
+    nodal_masses = NODAL_MASSES
+    #: the step's averaged basis of particle domains (:class:`~fempm.stepping.domain_grid.DomainGrid`); none here
+    samples = None
 
     @classmethod
     def refusal(cls, state: StepState) -> str | None:
@@ -90,8 +94,8 @@ class PointGrid(PointPasses):
             raise ValueError(negative_basis_message(self.options.mass_model.label, 2))  # as the numpy step
         #: what a grid mass reads of this grid
         self.layout = layout = NodalLayout(state, self.cell, self.K, self.cell_dofs, self.index_map, self.free,
-                                           self.mass_apply)
-        self.mass = NODAL_MASSES[type(self.options.mass_model)](layout)
+                                           self.mass_apply, self.samples)
+        self.mass = self.nodal_masses[type(self.options.mass_model)](layout)
         transfer = self.options.velocity_transfer
         #: XPIC(m)'s series (none for the consistent mass, whose projection is exact: XPIC(inf))
         self.xpic = (FMPMNodalMass(layout, transfer.order)

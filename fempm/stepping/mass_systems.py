@@ -104,11 +104,23 @@ class ConsistentSystems:
     dofs whose rows are lumped whatever their mass (the walls' of node-local conditions,
     :attr:`fempm.stepping.ExplicitSolver.node_local_dofs`); ``nonnegative``: whether the basis
     is (else, P2 Lagrange, the stable-step estimate is preconditioned by the diagonal, as
-    :meth:`fempm.transfer.Projector.mass_ratio_min`)."""
+    :meth:`fempm.transfer.Projector.mass_ratio_min`); ``layer_dofs`` (cells, k): the dofmap when
+    ``cell_dofs`` are not the cells' own dofs but a superset per cell (particle domains: the
+    dofs of each cell's vertex star, :mod:`fempm.kernels.consistent_domains`), whose blocks
+    carry no null-direction test."""
 
     def __init__(self, V, cell_dofs: npt.NDArray[np.int32], free: npt.NDArray[np.bool_],
                  fixed: npt.NDArray[np.bool_], *, prefix: str, lump_below: float,
-                 always_lumped: npt.NDArray[np.bool_] | None = None, nonnegative: bool = True):
+                 always_lumped: npt.NDArray[np.bool_] | None = None, nonnegative: bool = True,
+                 layer_dofs: npt.NDArray[np.int32] | None = None):
+        #: the cells' dofs of the layer around the occupied cells (the dofmap), if not ``cell_dofs``
+        self.layer_dofs = cell_dofs if layer_dofs is None else layer_dofs
+        #: whether the particle pass sums blocks per cell (point particles, whose singularity
+        #: tests look for null directions of the blocks) or, with ``layer_dofs`` (particle domains,
+        #: the count test alone, as :func:`fempm.transfer.mapping.consistent_mass_matrix` of an
+        #: averaged basis), the matrix's entries through :attr:`slot` (the blocks of supersets of a
+        #: cell's dofs are mostly zeros)
+        self.by_entries = layer_dofs is not None
         self.index_map = V.dofmap.index_map
         self.nonnegative = nonnegative
         self.comm = self.index_map.comm
@@ -122,8 +134,8 @@ class ConsistentSystems:
         self.ksp_options = dict(KSP_OPTIONS if self.comm.size == 1 else KSP_OPTIONS_PARALLEL)
         if not nonnegative:
             self.ksp_options = dict(SIGNED_OPTIONS)
-        elif V.mesh.topology.cell_type in (CellType.triangle, CellType.tetrahedron):
-            self.ksp_options.update(SIMPLEX_OPTIONS)
+        elif V.mesh.topology.cell_type in (CellType.triangle, CellType.tetrahedron) and layer_dofs is None:
+            self.ksp_options.update(SIMPLEX_OPTIONS)  # (the wider sparsity of particle domains: no fill)
         base = ~fixed
         self.systems: list[_System] = []
         for c in range(free.shape[1]):  # components with the same constrained dofs share a matrix
@@ -141,7 +153,10 @@ class ConsistentSystems:
         self.pattern = np.full(len(cell_dofs), -1, dtype=np.int32)  # cell -> its row in the blocks (-1: outside)
         self.pattern_cells = np.zeros(0, dtype=np.int32)
         self._nnz = 0  # entries of the sparsity
-        self._pattern_dofs = np.zeros((0, cell_dofs.shape[1]), dtype=np.int32)
+        k = cell_dofs.shape[1]
+        #: each pattern cell's entries: entry (a, b) of its block is the sparsity's ``slot[q, a, b]``
+        self.slot = np.zeros((0, k, k), dtype=np.int32)
+        self._pattern_dofs = np.zeros((0, k), dtype=np.int32)
         self._cells_of: tuple | None = None  # the cells of each dof in the pattern (made with it)
         self._base_values_stale = True
         self._blocks: npt.NDArray | None = None
@@ -164,23 +179,28 @@ class ConsistentSystems:
         return ksp
 
     # -- sparsity -----------------------------------------------------------------------------
-    def work_arrays(self) -> tuple[npt.NDArray, npt.NDArray, npt.NDArray, tuple]:
-        """Zeroed (blocks (pattern cells, k, k), diagonal (dofs,), count (pattern cells,)) for
-        :func:`fempm.kernels.consistent.cell_mass`, and the diagonal's vector (ghost sums)."""
+    def work_arrays(self, fill: bool = True) -> tuple[npt.NDArray, npt.NDArray, npt.NDArray, tuple]:
+        """Zeroed (blocks (pattern cells, k, k), or with :attr:`by_entries` the entries (nnz,),
+        diagonal (dofs,), count (pattern cells,)) for :func:`fempm.kernels.consistent.cell_mass`
+        (:func:`fempm.kernels.consistent_domains.domain_cell_mass`), and the diagonal's vector
+        (ghost sums); ``fill=False``: as the pass left them."""
         k = self.cell_dofs.shape[1]
         nq = len(self.pattern_cells)
-        if self._blocks is None or len(self._blocks) != nq:
-            self._blocks = np.empty((nq, k, k))
+        shape = (self._nnz,) if self.by_entries else (nq, k, k)
+        if self._blocks is None or self._blocks.shape != shape or len(self._count) != nq:
+            self._blocks = np.empty(shape)
             self._count = np.empty(nq, dtype=np.int64)
-        self._blocks.fill(0.0)
-        self._count.fill(0)
-        self._diagonal[1].fill(0.0)
+            fill = True
+        if fill:
+            self._blocks.fill(0.0)
+            self._count.fill(0)
+            self._diagonal[1].fill(0.0)
         return self._blocks, self._diagonal[1], self._count, self._diagonal
 
     def rebuild(self, particle_cells: npt.NDArray[np.int32]) -> None:
         """Sparsity of the cells holding particles and one layer around them (cells sharing a
         dof with them), on a sub index map of their dofs. Collective."""
-        cd = self.cell_dofs[: self.num_cells]
+        cd = self.layer_dofs[: self.num_cells]
         touched = np.zeros(self.num_dofs, dtype=np.bool_)
         touched[cd[np.unique(particle_cells)].ravel()] = True
         touched = share_flags(self.index_map, touched)
@@ -206,6 +226,9 @@ class ConsistentSystems:
         unique, slot = np.unique(key, return_inverse=True)  # the entries summed per (row, column), row-major
         rows, cols = unique // width, unique % width
         self.slot = slot[: len(cells) * k * k].reshape(len(cells), k, k).astype(np.int32)
+        # each entry's row and column dofs and the slot of its row's diagonal (the values of entries)
+        self._entry_dofs = (self.sub_to_parent[rows].astype(np.int32), self.sub_to_parent[cols].astype(np.int32),
+                            np.searchsorted(unique, rows * (width + 1)).astype(np.int32))
         self.diagonal_slot = np.searchsorted(unique, np.arange(n_sub) * (width + 1)).astype(np.int32)
         self.pattern_cells = cells
         self._pattern_dofs = pattern_dofs
@@ -253,7 +276,8 @@ class ConsistentSystems:
         if self.comm.allreduce(changed, op=MPI.LOR):
             # the empty cells' blocks are 0: they determine nothing, and no copy of the others
             check_nonsingular(self.index_map, num_particles, self.active, self.lump,
-                              (self.pattern_cells, self._pattern_dofs, self._blocks), self._cells_of)
+                              None if self.by_entries else (self.pattern_cells, self._pattern_dofs, self._blocks),
+                              self._cells_of)
             self._structure = (occupied, self.active, self.lump)
             self.tests += 1
             for s in self.systems:  # a few changed rows cost more iterations than a new set-up
@@ -275,8 +299,12 @@ class ConsistentSystems:
     def _set_values(self, s: _System) -> None:
         if s.values is None:
             s.values = np.empty(self._nnz)
-        kc.coo_values(self._blocks, self.pattern_cells, self.cell_dofs, s.keep, self.lump, self.slot,
-                      self.owned_parent, self.diagonal_slot, s.values)
+        if self.by_entries:
+            kc.coo_entry_values(self._blocks, *self._entry_dofs, s.keep, self.lump, self.owned_parent,
+                                self.diagonal_slot, s.values)
+        else:
+            kc.coo_values(self._blocks, self.pattern_cells, self.cell_dofs, s.keep, self.lump, self.slot,
+                          self.owned_parent, self.diagonal_slot, s.values)
         s.matrix.setValuesCOO(s.values, addv=PETSc.InsertMode.INSERT_VALUES)
         s.current = True
 

@@ -47,6 +47,8 @@ class NodalLayout:
         free: The (dof, component) entries solved for, (dofs, d) bool.
         mass_apply: ``mass_apply(y, lump, out)``: :math:`M_C y` without the ``lump`` rows into
             ``out`` on this rank's dofs, ghosts not summed (one particle pass).
+        samples: ``samples()``: the step's averaged basis
+            (:class:`fempm.kernels.bundles.Samples`) of a grid of particle domains, else None.
     """
 
     state: StepState
@@ -56,6 +58,7 @@ class NodalLayout:
     index_map: object
     free: npt.NDArray
     mass_apply: Callable[[npt.NDArray, npt.NDArray, npt.NDArray], None]
+    samples: Callable[[], object] | None = None
 
     @property
     def d(self) -> int:

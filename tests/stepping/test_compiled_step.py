@@ -200,12 +200,13 @@ def test_compiled_step_is_taken_only_where_it_applies():
     assert type(make_solver("triangle", StepOptions(mass="consistent")).grid.mass).__name__ == "ConsistentNodalMass"
     assert type(make_solver("triangle", StepOptions(domain="gimp")).grid) is DomainGrid  # exact GIMP
     assert isinstance(make_solver("distorted quadrilateral", StepOptions(domain="gimp")).grid, SingleFieldGrid)
-    assert isinstance(make_solver("triangle", StepOptions(domain="cpdi1", mass="consistent")).grid, SingleFieldGrid)
+    assert type(make_solver("triangle", StepOptions(domain="cpdi1", mass="consistent")).grid) is DomainGrid
+    assert isinstance(make_solver("triangle", StepOptions(domain="cpdi1", transfer="apic")).grid, SingleFieldGrid)
     with pytest.raises(ValueError, match=r"no compiled grid takes these options: PointGrid \(.*\): particle domain ugimp: "
                        r"point particles; DomainGrid \(.*\): exact GIMP takes simplices and axis-aligned boxes"):
         make_solver("distorted quadrilateral", StepOptions(domain="ugimp"), compiled=True).step()
-    with pytest.raises(ValueError, match=r"DomainGrid \(.*\): mass consistent with particle domains: lumped or FMPM"):
-        make_solver("triangle", StepOptions(domain="cpdi1", mass="consistent"), compiled=True).step()
+    with pytest.raises(ValueError, match=r"DomainGrid \(.*\): transfer apic: flip, pic, xpic"):
+        make_solver("triangle", StepOptions(domain="cpdi1", transfer="apic"), compiled=True).step()
 
 
 @pytest.mark.filterwarnings("ignore:invalid value:RuntimeWarning")  # inf - inf on the oblique wall

@@ -82,6 +82,40 @@ def test_domain_passes_with_fmpm_equal_the_numpy_step(domain, cell):
     assert_close(ref, got)
 
 
+#: the consistent mass's domains, each with its scheme
+CONSISTENT_DOMAINS = {"cpdi1": "USL", "cpdi2": "MUSL", "gimp2": "USF", "ugimp": "MUSL", "cpgimp": "USL"}
+
+
+@pytest.mark.parametrize(("domain", "cell"), covering(list(CONSISTENT_DOMAINS), EXACT_CELLS))
+@pytest.mark.parallel(only=("cpdi1-interval", "cpdi2-triangle", "ugimp-tetrahedron", "cpgimp-quadrilateral"))
+def test_domain_passes_with_consistent_mass_equal_the_numpy_step(domain, cell):
+    """The consistent mass of the averaged basis, m = S^T diag(M) S (its entries summed over
+    each cell's vertex star, fempm.kernels.consistent_domains), in the kept systems."""
+    opts = StepOptions(scheme=CONSISTENT_DOMAINS[domain], flip=0.9, mass="consistent", **DOMAINS[domain])
+    ref, got = run_both(lambda compiled: make_solver(cell, opts, compiled=compiled), steps=10)
+    assert np.concatenate(comm.allgather(ref[0][1])).std() > 0.005
+    assert_close(ref, got)
+
+
+@pytest.mark.parallel
+def test_consistent_mass_with_samples_beyond_the_vertex_star_takes_the_numpy_step():
+    """CPDI1 domains four cells wide: their corners lie beyond their cell's vertex star, whose
+    dofs hold the compiled consistent mass's entries; those steps are the numpy step's, equal to
+    the reference."""
+    opts = StepOptions(scheme="USL", mass="consistent", domain="cpdi1")
+
+    def build(compiled):
+        solver = make_solver("quadrilateral", opts, compiled=compiled)
+        p = solver.particles
+        p.fields["lp"] = np.full((len(p), 2), 0.2)
+        return solver
+
+    ref, got = run_both(build, steps=3)
+    assert_close(ref, got)
+    solver = build(None)
+    assert type(solver.grid.for_step()) is SingleFieldGrid
+
+
 def filled(cell: str, options: StepOptions, compiled: bool) -> ExplicitSolver:
     """Particles in every cell, domains larger than their sub-cells: the boundary ones reach
     beyond the mesh; a law without a kernel on half of them."""
@@ -158,14 +192,15 @@ def test_exact_gimp_on_a_mesh_distributed_by_particles(ghosts, monkeypatch):
 
 
 @pytest.mark.parallel
-def test_domain_grid_needs_lumped_mass_and_sample_points():
+def test_domain_grid_needs_sample_points():
     mesh = dm.create_unit_square(comm, 4, 4)
     p = fempm.create_particles(mesh, 4)
     V = dolfinx.fem.functionspace(mesh, ("Lagrange", 1, (2,)))
     for opts, expected in [(StepOptions(domain="cpdi1"), DomainGrid),
-                           (StepOptions(domain="cpdi1", mass="consistent"), SingleFieldGrid),
+                           (StepOptions(domain="cpdi1", mass="consistent"), DomainGrid),
                            (StepOptions(domain="ugimp"), DomainGrid),
-                           (StepOptions(domain="cpgimp", mass="consistent"), SingleFieldGrid),
+                           (StepOptions(domain="cpgimp", mass="consistent"), DomainGrid),
+                           (StepOptions(domain="cpdi1", transfer="apic"), SingleFieldGrid),
                            (StepOptions(domain="cpdi1", mass="fmpm", fmpm_order=2), DomainGrid),
                            (StepOptions(domain="gimp", gimp_order=2), DomainGrid)]:
         assert type(ExplicitSolver(V, p, [LinearElastic(1.0, 0.3)], options=opts).grid) is expected
