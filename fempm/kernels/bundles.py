@@ -35,7 +35,8 @@ bundle         members
 ``Groups``     multi-field contact: ``group`` per particle (or empty), column ``stride``,
                ``rigid`` per group
 ``Averaged``   F-bar's kinematics in the planar G2P pass (:mod:`fempm.kernels.fbar`): the nodal
-               sums ``patch`` (dofs, 2 B), each particle's measure ``value`` (n,), ``by_trace`` (B,)
+               averages ``patch`` (dofs, 2 B), each particle's measure ``value`` (n,), ``by_trace`` (B,),
+               the number of bodies B
 ``Affine``     APIC/TPIC (:mod:`fempm.kernels.affine`): the particles' affine matrices ``C``
                (n, d, d), APIC's spins ``spin`` (n, 1 or 3), the dofs' coordinates ``xi``, the
                grid velocity ``v`` G2P takes the affine matrices from where a particle's
@@ -49,7 +50,7 @@ from collections import namedtuple
 
 import numpy as np
 
-__all__ = ["NO_AFFINE", "NO_GROUPS", "Affine", "Averaged", "Basis", "Corners", "Forces", "GridStep", "Groups", "Laws", "Moves", "Outputs", "Samples", "Stable",
+__all__ = ["NO_AFFINE", "NO_AVERAGE", "NO_GROUPS", "Affine", "Averaged", "Basis", "Corners", "Forces", "GridStep", "Groups", "Laws", "Moves", "Outputs", "Samples", "Stable",
            "Star", "State"]
 
 Basis = namedtuple("Basis", "cells X K cell_dofs")
@@ -65,9 +66,11 @@ Stable = namedtuple("Stable", "h c")
 Groups = namedtuple("Groups", "group stride rigid")
 Corners = namedtuple("Corners", "yc moved bad sample_cells")
 Affine = namedtuple("Affine", "C spin xi v weak")
-Averaged = namedtuple("Averaged", "patch value by_trace")
+Averaged = namedtuple("Averaged", "patch value by_trace bodies")
 
 #: one velocity field: no group per particle, no rigid group
 NO_GROUPS = Groups(np.zeros(0, dtype=np.int64), 0, np.zeros(1, dtype=np.bool_))
+#: no F-bar average
+NO_AVERAGE = Averaged(np.zeros((0, 2)), np.zeros(0), np.zeros(0, np.bool_), 1)
 #: no affine transfer
 NO_AFFINE = Affine(np.zeros((0, 1, 1)), np.zeros((0, 1)), np.zeros((0, 1)), np.zeros((0, 1)), np.zeros(0, np.uint8))

@@ -72,7 +72,7 @@ if AVAILABLE:
             v_new[i, g * d + j] = vcm[j] + w[j] * keep
 
 
-def grid_update(nodal, stride, free, active_min, weak_max, dt, damping, friction, gap, moments, v_old, v_new,
+def grid_update(nodal, stride, free, active_min, weak_max, dt, damping, friction, gap, moments, v_old, v_new, *,
                 accelerations=None):
     """See the module: ``v_old`` and ``v_new`` (dofs, G d); ``gap`` > 0 with the groups' first
     mass moments ``moments`` (dofs, G d), else ``gap`` <= 0; ``accelerations`` (dofs, G d): the
@@ -82,7 +82,7 @@ def grid_update(nodal, stride, free, active_min, weak_max, dt, damping, friction
     given = accelerations is not None
     a = accelerations if given else np.zeros((0, 0))
     return _grid_update(free.shape[1], nodal.shape[1] // stride, given)(
-        nodal, stride, free, active_min, weak_max, dt, damping, friction, gap, moments, v_old, v_new, a)
+        nodal, stride, free, active_min, weak_max, dt, damping, friction, gap, moments, (v_old, v_new, a))
 
 
 @functools.cache
@@ -91,8 +91,9 @@ def _grid_update(d: int, G: int, given: bool = False):
     the velocities and accelerations given."""
 
     @njit(cache=True, error_model="numpy")
-    def kernel(nodal, stride, free, active_min, weak_max, dt, damping, friction, gap, moments, v_old,
-               v_new, accelerations):  # pragma: no cover - compiled
+    def kernel(nodal, stride, free, active_min, weak_max, dt, damping, friction, gap, moments,
+               velocities):  # pragma: no cover - compiled
+        v_old, v_new, accelerations = velocities
         n = free.shape[0]
         vcm = np.empty(d)
         all_grad = np.empty(d)

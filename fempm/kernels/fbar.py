@@ -39,7 +39,7 @@ if AVAILABLE:
 
     from fempm.kernels.affine import inverse
     from fempm.kernels.kinematics import _det
-    from fempm.kernels.lumped import law_at
+    from fempm.kernels.kinematics import law_at
     from fempm.kernels.particle_checks import count_j
     from fempm.kernels.patch import nodal_ratio
     from fempm.kernels.planar import basis, inverse_jacobian, law_stress

@@ -111,6 +111,28 @@ try:
                     sigma[p, i, j] = 2.0 * mu * e
 
     @njit(inline="always")
+    def deform_at(F, p, dt, Lp, D, Fn):  # pragma: no cover - compiled
+        r""":math:`F_p \leftarrow (I + \Delta t L_p) F_p` (``Fn`` scratch); returns :math:`\det F_p`."""
+        for i in range(D):
+            for j in range(D):
+                t = F[p, i, j]
+                for q in range(D):
+                    t += dt * Lp[i, q] * F[p, q, j]
+                Fn[i, j] = t
+        for i in range(D):
+            for j in range(D):
+                F[p, i, j] = Fn[i, j]
+        return _det(F, p)
+
+    @njit(inline="always")
+    def law_at(code, F, p, D, J, lam, mu, sigma):  # pragma: no cover - compiled
+        """``sigma[p]`` of the compiled law ``code`` (else left as it is) from ``F[p]``, J > 0."""
+        if code == NEO_HOOKEAN:
+            neo_hookean_at(F, p, D, J, lam, mu, sigma)
+        elif code == LINEAR_ELASTIC:
+            linear_elastic_at(F, p, D, lam, mu, sigma)
+
+    @njit(inline="always")
     def energy_at(code, F, p, d, lam, mu):  # pragma: no cover - compiled
         r"""The stored energy per reference volume :math:`W(F_p)` of the compiled law ``code``
         (``NEO_HOOKEAN``: :math:`\frac{\mu}{2}(F:F - d) - \mu

@@ -56,8 +56,6 @@ from fempm.kernels.bundles import (
     State,
 )
 from fempm.kernels.particle_checks import (
-    LINEAR_ELASTIC,
-    NEO_HOOKEAN,
     count_j,
     stable_time,
 )
@@ -79,8 +77,8 @@ if AVAILABLE:
     from numba import njit
 
     from fempm.kernels.affine import add_momentum, affine_work, carried_at, flagged, g2p_affine, offsets
-    from fempm.kernels.kinematics import _det, add_totals, linear_elastic_at, neo_hookean_at
-    from fempm.kernels.patch import nodal_ratio
+    from fempm.kernels.kinematics import add_totals, deform_at, law_at
+    from fempm.kernels.patch import average_pressure
     from fempm.kernels.shape import inside_after_pull_back, shape, star_search
 
     @njit(inline="always")
@@ -105,28 +103,6 @@ if AVAILABLE:
                 if kinematics:
                     for e in range(D):
                         Lp[j, e] += vij * G[a, e]
-
-    @njit(inline="always")
-    def deform_at(F, p, dt, Lp, D, Fn):  # pragma: no cover - compiled
-        r""":math:`F_p \leftarrow (I + \Delta t L_p) F_p` (``Fn`` scratch); returns :math:`\det F_p`."""
-        for i in range(D):
-            for j in range(D):
-                t = F[p, i, j]
-                for q in range(D):
-                    t += dt * Lp[i, q] * F[p, q, j]
-                Fn[i, j] = t
-        for i in range(D):
-            for j in range(D):
-                F[p, i, j] = Fn[i, j]
-        return _det(F, p)
-
-    @njit(inline="always")
-    def law_at(code, F, p, D, J, lam, mu, sigma):  # pragma: no cover - compiled
-        """``sigma[p]`` of the compiled law ``code`` (else left as it is) from ``F[p]``, J > 0."""
-        if code == NEO_HOOKEAN:
-            neo_hookean_at(F, p, D, J, lam, mu, sigma)
-        elif code == LINEAR_ELASTIC:
-            linear_elastic_at(F, p, D, lam, mu, sigma)
 
 
 @functools.cache
@@ -242,8 +218,7 @@ def _scatter_kernel(cell: str, with_mass: bool, with_momentum: bool, with_force:
         cells, X, K, cell_dofs = where
         x, mass, v, volume, sigma, body = state.x, state.mass, state.v, state.volume, state.sigma, state.body
         modulus, g, fext, h, c = laws.modulus, forces.g, forces.fext, stable.h, stable.c
-        group, stride, patch = groups.group, groups.stride, forces.patch
-        bodies = patch.shape[1] // 2
+        group, stride, patch, bodies = groups.group, groups.stride, forces.patch, forces.patch.shape[1] // 2
         N = np.empty(NK)
         G = np.empty((NK, D))
         mv = np.empty(D)
@@ -272,14 +247,7 @@ def _scatter_kernel(cell: str, with_mass: bool, with_momentum: bool, with_force:
                     for e in range(D):
                         sg[j, e] = sigma[p, j, e]
             if with_force and averaged:  # F-bar: the patch-averaged pressure
-                t = 0.0
-                for j in range(D):
-                    t += sg[j, j]
-                t = -t / D
-                for a in range(NK):
-                    t += N[a] * nodal_ratio(patch, cell_dofs[cp, a], body[p], bodies)
-                for j in range(D):
-                    sg[j, j] += t
+                average_pressure(sg, D, (N, NK, cell_dofs, cp), patch, body[p], bodies)
             if KIND:
                 offsets((X, K, cp, cell_dofs, xi, x), p, (D, NK, SIMPLEX, FROM_K), R, Jw)
                 carried_at(N, R, (C, spin), p, (D, NK, KIND), Dm, work)

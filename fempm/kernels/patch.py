@@ -14,7 +14,7 @@ from __future__ import annotations
 
 from fempm.kernels.shape import AVAILABLE
 
-__all__ = ["AVAILABLE", "averages", "nodal_ratio"]
+__all__ = ["AVAILABLE", "average_pressure", "averages", "nodal_ratio"]
 
 if AVAILABLE:
     from numba import njit
@@ -24,6 +24,21 @@ if AVAILABLE:
         r""":math:`(\sum V N f)_i / (\sum V N)_i` of body ``b`` of ``bodies`` at dof ``i`` (0 where
         the weight is not positive), of sums turned into averages by :func:`averages`."""
         return patch[i, bodies + b]
+
+    @njit(inline="always")
+    def average_pressure(sigma, D, at, patch, b, bodies):  # pragma: no cover - compiled
+        r"""``sigma`` (D, D) <- :math:`\sigma + (\bar p - p) I`, :math:`p = \mathrm{tr}\,\sigma / D` and
+        :math:`\bar p` the pressures' patch average at the particle ``at`` = (basis values N, NK,
+        cell_dofs, its cell) of body ``b``."""
+        N, NK, cell_dofs, c = at
+        t = 0.0
+        for j in range(D):
+            t += sigma[j, j]
+        t = -t / D
+        for a in range(NK):
+            t += N[a] * nodal_ratio(patch, cell_dofs[c, a], b, bodies)
+        for j in range(D):
+            sigma[j, j] += t
 
     @njit(cache=True)
     def averages(patch):  # pragma: no cover - compiled

@@ -21,6 +21,7 @@ import functools
 
 import numpy as np
 
+from fempm.kernels.bundles import NO_AVERAGE
 from fempm.kernels.particle_checks import LINEAR_ELASTIC, NEO_HOOKEAN
 from fempm.kernels.shape import AVAILABLE
 
@@ -92,6 +93,29 @@ if AVAILABLE:
         n11 = f11 + dt * L10 * f01 + dt * L11 * f11
         F[p, 0, 0], F[p, 0, 1], F[p, 1, 0], F[p, 1, 1] = n00, n01, n10, n11
         return n00, n01, n10, n11, n00 * n11 - n01 * n10
+
+    @njit(inline="always")
+    def patch_at(patch, dofs, values, b, bodies, quad):  # pragma: no cover - compiled
+        """F-bar's patch average at a particle of body ``b`` with basis ``values`` (N0..N3) at
+        the cell's ``dofs`` (i0..i3; the fourth on a quadrilateral only)."""
+        i0, i1, i2, i3 = dofs
+        N0, N1, N2, N3 = values
+        f = N0 * nodal_ratio(patch, i0, b, bodies) + N1 * nodal_ratio(patch, i1, b, bodies)
+        f += N2 * nodal_ratio(patch, i2, b, bodies)
+        return f + N3 * nodal_ratio(patch, i3, b, bodies) if quad else f
+
+    @njit(inline="always")
+    def fbar_deform(F, p, dt, Lp, f, patch):  # pragma: no cover - compiled
+        r"""F-bar's kinematics (:mod:`fempm.kernels.fbar`): :math:`F_p \leftarrow \bar F_p = s\,(I +
+        \Delta t L_p) F_p + t I` with :math:`s = (\bar f_p / f_p)^{1/2}, t = 0` (a body averaging
+        :math:`\det F`) or :math:`s = 1, t = (\bar f_p - f_p) / 2` (averaging :math:`\mathrm{tr}\,F`),
+        ``f`` the first pass's measure and ``patch`` = (its patch average, whether the body averages
+        :math:`\mathrm{tr}\,F`, ``keep_L``); returns the entries of :math:`\bar F_p`, its
+        determinant and (with ``keep_L``, else ``Lp``) :math:`\bar L_p`."""
+        averaged, by_trace, keep_L = patch
+        Lb = averaged_rate(F, p, dt, Lp, f, averaged, by_trace) if keep_L else Lp  # (from F^n)
+        n00, n01, n10, n11, J = deform_averaged(F, p, dt, Lp, f, averaged, by_trace)
+        return n00, n01, n10, n11, J, Lb[0], Lb[1], Lb[2], Lb[3]
 
     @njit(inline="always")
     def deform_averaged(F, p, dt, Lp, f, averaged, by_trace):  # pragma: no cover - compiled
@@ -232,22 +256,16 @@ def scatter_kernel(simplex: bool, affine: bool, with_mass: bool, with_momentum: 
 def g2p_kernel(simplex: bool, affine: bool, blend: bool, kinematics: bool, move: bool, remap: bool,
                totals: bool = False, grouped: bool = False, kind: int = 0, remap_affine: bool = False,
                averaged: bool = False):
-    r""":func:`fempm.kernels.lumped._g2p_kernel` for ``triangle`` (``simplex``) or
+    """:func:`fempm.kernels.lumped._g2p_kernel` for ``triangle`` (``simplex``) or
     ``quadrilateral`` cells, ``affine`` or multilinear (``kind``, APIC or TPIC, in a blend pass:
-    affine cells; :mod:`fempm.kernels.planar_affine`). ``averaged`` (F-bar's kinematics,
-    :mod:`fempm.kernels.fbar`; the ``average`` bundle :class:`~fempm.kernels.bundles.Averaged`):
-    :math:`\bar F_p = s\,(I + \Delta t L_p) F_p + t I` with :math:`s = (\bar f_p / f_p)^{1/2}, t = 0`
-    (a body averaging :math:`\det F`) or :math:`s = 1, t = (\bar f_p - f_p) / 2` (averaging
-    :math:`\mathrm{tr}\,F`), :math:`f_p` the measure of the first pass and :math:`\bar f_p` its
-    patch average, and :math:`\bar L_p` into ``L`` where it has a row per particle."""
+    affine cells; :mod:`fempm.kernels.planar_affine`); ``averaged``: F-bar's kinematics
+    (:func:`fbar_deform`, the ``average`` bundle :class:`~fempm.kernels.bundles.Averaged`)."""
     QUAD, KIND = not simplex, kind
 
     @njit(cache=True, error_model="numpy")
     def g2p_update(where, grid, state, laws, moves, outputs, groups, carried=None, average=None):  # pragma: no cover
         cells, X, K, cell_dofs = where
-        patch, value, by_trace = (average.patch, average.value, average.by_trace) if averaged else (
-            np.empty((0, 2)), np.empty(0), np.empty(0, np.bool_))
-        bodies = patch.shape[1] // 2
+        patch, value, by_trace, bodies = average if averaged else NO_AVERAGE
         C, spin, va, weak = ((carried.C, carried.spin, carried.v, carried.weak) if KIND else
                              (np.empty((0, 2, 2)), np.empty((0, 1)), np.empty((0, 2)), np.empty(0, np.uint8)))
         v_new, v_old, flip, dt, by_particle = grid
@@ -262,11 +280,9 @@ def g2p_kernel(simplex: bool, affine: bool, blend: bool, kinematics: bool, move:
             k00, k01, k10, k11 = inverse_jacobian(X0, X1, K, c, affine)
             N0, N1, N2, N3, g0x, g0y, g1x, g1y, g2x, g2y, g3x, g3y = basis(X0, X1, k00, k01, k10, k11, simplex)
             i0, i1, i2, i3 = cell_dofs[c, 0], cell_dofs[c, 1], cell_dofs[c, 2], cell_dofs[c, 3 if QUAD else 0]
-            o, o1 = (group[p] * 2, group[p] * 2 + 1) if grouped else (0, 1)
-            still = grouped and rigid[group[p]]  # a rigid body's particle: its own velocity, L = 0
+            o, o1, still = (group[p] * 2, group[p] * 2 + 1, rigid[group[p]]) if grouped else (0, 1, False)  # still: rigid
             a0, b0, a1, b1, a2, b2 = v_new[i0, o], v_new[i0, o1], v_new[i1, o], v_new[i1, o1], v_new[i2, o], v_new[i2, o1]
-            vg0 = N0 * a0 + N1 * a1 + N2 * a2
-            vg1 = N0 * b0 + N1 * b1 + N2 * b2
+            vg0, vg1 = N0 * a0 + N1 * a1 + N2 * a2, N0 * b0 + N1 * b1 + N2 * b2
             if QUAD:
                 a3, b3 = v_new[i3, o], v_new[i3, o1]
                 vg0, vg1 = vg0 + N3 * a3, vg1 + N3 * b3
@@ -283,21 +299,15 @@ def g2p_kernel(simplex: bool, affine: bool, blend: bool, kinematics: bool, move:
             if remap and not (KIND and remap_affine):  # MUSL: the blended momenta back to the grid, in the same pass
                 add_pair(mom, o, (i0, i1, i2, i3), (N0, N1, N2, N3), mass[p] * v[p, 0], mass[p] * v[p, 1], QUAD)
             if kinematics:
-                L00 = a0 * g0x + a1 * g1x + a2 * g2x
-                L01 = a0 * g0y + a1 * g1y + a2 * g2y
-                L10 = b0 * g0x + b1 * g1x + b2 * g2x
-                L11 = b0 * g0y + b1 * g1y + b2 * g2y
+                L00, L01 = a0 * g0x + a1 * g1x + a2 * g2x, a0 * g0y + a1 * g1y + a2 * g2y
+                L10, L11 = b0 * g0x + b1 * g1x + b2 * g2x, b0 * g0y + b1 * g1y + b2 * g2y
                 if QUAD:
                     L00, L01, L10, L11 = L00 + a3 * g3x, L01 + a3 * g3y, L10 + b3 * g3x, L11 + b3 * g3y
                 L00, L01, L10, L11 = (0.0, 0.0, 0.0, 0.0) if still else (L00, L01, L10, L11)
                 b = body[p]
                 if averaged:  # F-bar: the measure's patch average
-                    fa = (N0 * nodal_ratio(patch, i0, b, bodies) + N1 * nodal_ratio(patch, i1, b, bodies)
-                          + N2 * nodal_ratio(patch, i2, b, bodies) + (N3 * nodal_ratio(patch, i3, b, bodies) if QUAD else 0.0))
-                    Lp = (L00, L01, L10, L11)
-                    if keep_L:  # (I + dt L-bar) F = F-bar
-                        L00, L01, L10, L11 = averaged_rate(F, p, dt, Lp, value[p], fa, by_trace[b])
-                    n00, n01, n10, n11, J = deform_averaged(F, p, dt, Lp, value[p], fa, by_trace[b])
+                    n00, n01, n10, n11, J, L00, L01, L10, L11 = fbar_deform(F, p, dt, (L00, L01, L10, L11), value[p], (
+                        patch_at(patch, (i0, i1, i2, i3), (N0, N1, N2, N3), b, bodies, QUAD), by_trace[b], keep_L))
                 else:
                     n00, n01, n10, n11, J = deform(F, p, dt, L00, L01, L10, L11)
                 if keep_L:
@@ -307,8 +317,7 @@ def g2p_kernel(simplex: bool, affine: bool, blend: bool, kinematics: bool, move:
                 if ok:
                     law_stress(sigma, p, law[b], lam[b], mu[b], n00, n01, n10, n11, J)
             if move:
-                own = by_particle or still
-                u0, u1 = dt * (v[p, 0] if own else vg0), dt * (v[p, 1] if own else vg1)
+                u0, u1 = (dt * v[p, 0], dt * v[p, 1]) if by_particle or still else (dt * vg0, dt * vg1)
                 y0, y1 = x[p, 0] + u0, x[p, 1] + u1
                 x[p, 0], x[p, 1] = y0, y1
                 if not (np.isfinite(y0) and np.isfinite(y1) and np.isfinite(v[p, 0] * v[p, 0] + v[p, 1] * v[p, 1])):
@@ -319,9 +328,7 @@ def g2p_kernel(simplex: bool, affine: bool, blend: bool, kinematics: bool, move:
                            quad_pull_back(x, p, K, c, tol, X, max(abs(X[p, 0] - X0), abs(X[p, 1] - X1))))
                 # the neighbours, while in cache (written out: through a helper the pass took 1.8x as long)
                 e = star_search(x, p, x0, K, c, star, simplex, 2, tol, X, affine) if out else c
-                out = e < 0
-                cells[p] = c if out else e
-                left[p] = out
+                cells[p], left[p] = (c, True) if e < 0 else (e, False)
             if totals:
                 add_totals(acc, p, mass, v, F, volume0, law[body[p]], lam[body[p]], mu[body[p]], 2)
         if totals:

@@ -43,7 +43,7 @@ if AVAILABLE:
 
     from fempm.kernels.cpdi1 import corner_frame, corner_gradient
     from fempm.kernels.kinematics import add_totals
-    from fempm.kernels.lumped import deform_at, law_at
+    from fempm.kernels.kinematics import deform_at, law_at
     from fempm.kernels.particle_checks import count_j, stable_time
     from fempm.kernels.shape import inside_after_pull_back, shape, shape_values, star_search
 

@@ -235,7 +235,7 @@ class ContactPointGrid(PointGrid):
                     nodal[:, g * self.stride:(g + 1) * self.stride], nodal, g * self.stride + 1 + d)
         self.contacts = kc.grid_update(nodal, self.stride, self.free, self.active_min, self.weak_max, float(dt),
                                        float(self.options.damping), float(contact.friction), gap, moments, v_old,
-                                       v_new, accelerations)
+                                       v_new, accelerations=accelerations)
         return v_old, v_new
 
     def forces(self) -> None:  # pragma: no cover - the schemes with contact map the forces with the mass

@@ -83,15 +83,15 @@ class FBarPointGrid(PointGrid):
                      kind: int = 0) -> float:
         """The point grid's P2G pass; where it maps forces, with the patch-averaged pressure."""
         if cf >= 0:
-            forces = forces._replace(patch=self.pressure_sums())
+            forces = Forces(forces.g, forces.fext, self.pressure_sums())
         return super().scatter_pass(state, forces, out, cm, cv, cf, stable, bound=bound, groups=groups, cg=cg,
                                     affine=affine, kind=kind)
 
-    def _g2p(self, v_new, v_old, dt, *, blend: bool, kinematics: bool, move: bool, remap=None):
+    def particle_pass(self, v_new, v_old, dt, *, blend: bool, kinematics: bool, move: bool, remap=None):
         """The averaged kinematics (two passes, one ghost exchange, the checks of J), then the
         point grid's pass for the blend, the re-map and the motion."""
         if not kinematics:
-            return super()._g2p(v_new, v_old, dt, blend=blend, kinematics=False, move=move, remap=remap)
+            return super().particle_pass(v_new, v_old, dt, blend=blend, kinematics=False, move=move, remap=remap)
         p = self.state.particles
         f = p.fields
         where = self.where()
@@ -103,13 +103,13 @@ class FBarPointGrid(PointGrid):
                       self.patch_sums())
         patch = self.averaged()
         if self.cell in PLANAR:  # the averaged kinematics inside the point grid's pass
-            return super()._g2p(v_new, v_old, dt, blend=blend, kinematics=True, move=move, remap=remap,
-                                average=Averaged(patch, value, self.by_trace))
+            return super().particle_pass(v_new, v_old, dt, blend=blend, kinematics=True, move=move, remap=remap,
+                                average=Averaged(patch, value, self.by_trace, len(self.by_trace)))
         counts = self._deform(where, patch, self.by_trace, float(dt), L, value, self.particle_state(),
                               self.laws)
         nonfinite = self.kinematics_checks(counts, L if self.any_external else None, dt)
         left = np.empty(0, dtype=np.bool_)
         if blend or move or remap is not None:
-            more, left = super()._g2p(v_new, v_old, dt, blend=blend, kinematics=False, move=move, remap=remap)
+            more, left = super().particle_pass(v_new, v_old, dt, blend=blend, kinematics=False, move=move, remap=remap)
             nonfinite += more
         return nonfinite, left

@@ -190,7 +190,7 @@ class PointGrid(PointPasses):
         if remap:  # the blended particle momenta into the kept nodal array, for velocity(remapped=True)
             self._blend(v_new, v_old, dt, remap)
             return
-        nonfinite, left = self._g2p(v_new, v_old, dt, blend=blend, kinematics=kinematics, move=move)
+        nonfinite, left = self.particle_pass(v_new, v_old, dt, blend=blend, kinematics=kinematics, move=move)
         self.nonfinite += nonfinite
         if move:
             self.left = left
@@ -200,11 +200,11 @@ class PointGrid(PointPasses):
         """A blend pass alone (with ``remap``: the blended momenta into the kept nodal array, for
         :meth:`velocity` with ``remapped``)."""
         if not remap:
-            self.nonfinite += self._g2p(v_new, v_old, dt, blend=True, kinematics=False, move=False)[0]
+            self.nonfinite += self.particle_pass(v_new, v_old, dt, blend=True, kinematics=False, move=False)[0]
             return
         vec, mom = self._nodal_d
         mom.fill(0.0)
-        self._g2p(v_new, v_old, dt, blend=True, kinematics=False, move=False, remap=mom)
+        self.particle_pass(v_new, v_old, dt, blend=True, kinematics=False, move=False, remap=mom)
         sum_ghosts(vec)
 
     def reaction_fields(self, v_new: npt.NDArray, v_old: npt.NDArray) -> list[tuple]:

@@ -32,43 +32,20 @@ from dataclasses import dataclass
 import numpy as np
 import numpy.typing as npt
 from dolfinx.cpp.common import create_sub_index_map
-from dolfinx.mesh import CellType
 from mpi4py import MPI
 from petsc4py import PETSc
 
 from fempm import petsc as fpetsc
 from fempm.kernels import consistent as kc
+from fempm.stepping.mass_options import ksp_options
 from fempm.stepping.nodal import kept_nodal_array
 from fempm.stepping.options import SimulationError
 from fempm.transfer.mapping import SUPPORT_TOL
 from fempm.transfer.mass_span import (check_nonsingular, mass_ratio_estimate, mass_ratio_ksp, mass_ratio_rhs,
                                       share_flags)
 
-__all__ = ["KSP_OPTIONS", "KSP_OPTIONS_PARALLEL", "REFRESH_GROWTH", "SIGNED_OPTIONS", "SIMPLEX_OPTIONS", "ConsistentSystems"]
+__all__ = ["REFRESH_GROWTH", "ConsistentSystems"]
 
-#: KSP defaults of the kept systems on one rank (the options prefix overrides them): CG with
-#: incomplete Cholesky, 5-10 iterations where Jacobi takes 50-60 (P1/Q1, 4 particles per cell).
-#: CG stops on the true residual, :math:`\|b - m u\|_2 \le` rtol :math:`\|b\|_2` (unless
-#: the options prefix sets ``ksp_norm_type``): with a warm start, the preconditioned norm needs
-#: the preconditioner applied to ``b`` once more per solve (about 2.5 ms at 1e6 particles), the
-#: true one half an iteration more on average; a step is 5 % faster (median of 3-step batches
-#: alternating in one process)
-KSP_OPTIONS = {"ksp_type": "cg", "pc_type": "bjacobi", "sub_pc_type": "icc"}
-#: on several ranks: incomplete Cholesky on each rank's rows and one layer of their neighbours
-#: (restricted additive Schwarz, overlap 1). Block Jacobi drops the couplings across the
-#: partition and takes 2-3x the iterations at the 1e-13 tolerance (20 instead of 7-11 on two
-#: ranks, 1e6 particles on triangles); the restricted Schwarz preconditioner is not symmetric,
-#: so GCR (minimal residual, any preconditioner) replaces CG. A step is 17 % faster.
-KSP_OPTIONS_PARALLEL = {"ksp_type": "gcr", "pc_type": "asm", "sub_pc_type": "icc"}
-#: added on simplices: incomplete Cholesky with one level of fill. At 1e6 particles on gmsh
-#: triangles the solves take 7-8 iterations instead of 11-12 and a step is 15-25 % faster on 1
-#: and 2 ranks (the set-up, once a step, costs more); on quadrilaterals the iterations do not
-#: drop (8-9) and the step is 4 % slower, so they keep ICC(0)
-SIMPLEX_OPTIONS = {"sub_pc_factor_levels": 1}
-#: a basis with negative values (P2 Lagrange), on any number of ranks: CG with the diagonal.
-#: Incomplete Cholesky of its mass breaks down (an indefinite factor: CG stops at once; on two
-#: ranks GCR with restricted Schwarz ran 20000 iterations without reaching the tolerance)
-SIGNED_OPTIONS = {"ksp_type": "cg", "pc_type": "jacobi"}
 #: the preconditioner is set up again when a solve takes more than this factor times the
 #: iterations it took fresh (plus 2), and whenever the sparsity, the occupied cells, the
 #: supported or the lumped dofs change
@@ -131,11 +108,7 @@ class ConsistentSystems:
         self.lump_below = lump_below
         self.always_lumped = always_lumped  # dofs whose rows are lumped in any case (node-local conditions)
         self.prefix = prefix
-        self.ksp_options = dict(KSP_OPTIONS if self.comm.size == 1 else KSP_OPTIONS_PARALLEL)
-        if not nonnegative:
-            self.ksp_options = dict(SIGNED_OPTIONS)
-        elif V.mesh.topology.cell_type in (CellType.triangle, CellType.tetrahedron) and layer_dofs is None:
-            self.ksp_options.update(SIMPLEX_OPTIONS)  # (the wider sparsity of particle domains: no fill)
+        self.ksp_options = ksp_options(self.comm.size, V.mesh.topology.cell_type, nonnegative, layer_dofs is not None)
         base = ~fixed
         self.systems: list[_System] = []
         for c in range(free.shape[1]):  # components with the same constrained dofs share a matrix

@@ -29,6 +29,7 @@ from fempm.kernels.bundles import (
 )
 from fempm.kernels.grid_update import affine_cutoff_velocity
 from fempm.kernels.lumped import NO_STABLE
+from fempm.kernels.particle_checks import LINEAR_ELASTIC, NEO_HOOKEAN
 from fempm.materials.base import IsotropicElastic
 from fempm.materials.linear_elastic import LinearElastic
 from fempm.materials.neo_hookean import NeoHookean
@@ -48,7 +49,7 @@ __all__ = ["PointPasses"]
 def _law(mat) -> tuple[int, float, float, float]:
     """(compiled law code, lambda, mu, P-wave modulus or 0) of a material."""
 
-    code = {NeoHookean: kl.NEO_HOOKEAN, LinearElastic: kl.LINEAR_ELASTIC}.get(type(mat), 0)
+    code = {NeoHookean: NEO_HOOKEAN, LinearElastic: LINEAR_ELASTIC}.get(type(mat), 0)
     lam, mu = mat.lame if code else (0.0, 0.0)
     wave = isinstance(mat, IsotropicElastic) and type(mat).wave_speed is IsotropicElastic.wave_speed
     modulus = sum(mat.lame) + mat.lame[1] if wave else 0.0
@@ -239,7 +240,7 @@ class PointPasses(Grid):
                                   Stable(s.h_cell, self._wave_speeds()))
         return -p.comm.allreduce(-local, op=MPI.MAX)
 
-    def _g2p(self, v_new, v_old, dt, *, blend: bool, kinematics: bool, move: bool, remap=None, average=None):
+    def particle_pass(self, v_new, v_old, dt, *, blend: bool, kinematics: bool, move: bool, remap=None, average=None):
         """One particle pass (:func:`fempm.kernels.lumped.kernels_for`; ``average``: with F-bar's
         averaged kinematics); checks J (collective) after a kinematics pass; returns (#non-finite particles, which left their cells and
         are not in an owned neighbour (a moving pass; else an empty mask))."""
