@@ -2,6 +2,7 @@
 writes bit for bit what the uninterrupted run writes, on 1 and on 2 ranks; a checkpoint of
 one number of ranks resumes on another to round-off."""
 
+import dataclasses
 import json
 import os
 import signal
@@ -30,7 +31,13 @@ def _folder(tmp_path, name: str) -> Path:
 
 
 def _disks(c=comm, t_end=T_END, mass="lumped"):
-    return two_disks(cells=10, ppc=4, t_end=t_end, frames=8, comm=c, mass=mass)
+    """The two disks; ``mass`` "consistent+contact": a consistent matrix per disk (contact),
+    "consistent+cpdi1": consistent mass of CPDI1 domains."""
+    mass, _, more = mass.partition("+")
+    scene = two_disks(cells=10, ppc=4, t_end=t_end, frames=8, comm=c, mass=mass, contact=more == "contact")
+    if more == "cpdi1":
+        scene = dataclasses.replace(scene, options=dataclasses.replace(scene.options, domain="cpdi1"))
+    return scene
 
 
 def _interrupt_at(t_stop: float):
@@ -76,12 +83,13 @@ def assert_same_outputs(parts: Path, whole: Path) -> None:
     assert [k for k in a if a[k] != b[k]] == []
 
 
-@pytest.mark.parametrize("mass", ["lumped", "consistent"])
+@pytest.mark.parametrize("mass", ["lumped", "consistent", "consistent+contact", "consistent+cpdi1"])
 def test_resumed_run_is_bit_identical_to_the_uninterrupted_one(tmp_path, mass):
     """Every output: energies.csv, the particle frames and the grid series (pieces, indexes,
     collections, times) and the summary's totals. Consistent mass: the checkpoint holds the
-    kept systems (sparsity, the values each preconditioner was set up from, the warm starts),
-    so the resumed solves repeat the uninterrupted ones."""
+    kept systems (sparsity, the values each preconditioner was set up from, the warm starts;
+    with contact each body's, with particle domains those over the cells' vertex stars), so
+    the resumed solves repeat the uninterrupted ones."""
     whole, parts = _folder(tmp_path, "whole"), _folder(tmp_path, "parts")
     reference = run(_disks(mass=mass), whole, progress=False)
     stop = _interrupted_then_resumed(parts, mass=mass)
