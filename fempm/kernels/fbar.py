@@ -41,8 +41,8 @@ if AVAILABLE:
     from fempm.kernels.kinematics import _det
     from fempm.kernels.kinematics import law_at
     from fempm.kernels.particle_checks import count_j
-    from fempm.kernels.patch import nodal_ratio
-    from fempm.kernels.planar import basis, inverse_jacobian, law_stress
+    from fempm.kernels.patch import add_patch, nodal_ratio
+    from fempm.kernels.planar import basis, inverse_jacobian
     from fempm.kernels.shape import shape, shape_values
 
     @njit(inline="always")
@@ -158,12 +158,7 @@ def measure_kernel(cell: str):
             else:
                 f = increment_det(L, p, dt, D)
             value[p] = f
-            V = volume[p]
-            for a in range(NK):
-                i = cell_dofs[c, a]
-                w = N[a] * V
-                out[i, b] += w
-                out[i, bodies + b] += w * f
+            add_patch(out, (N, NK, cell_dofs, c), b, bodies, volume[p], f)
 
     return measure
 
@@ -175,7 +170,6 @@ def deform_kernel(cell: str, keep_L: bool):
     (:mod:`fempm.kernels.bundles`) from the averaged deformation and, with ``keep_L``,
     :math:`\bar L_p` into ``L``; returns (#non-finite J, #J <= 0, min J, max J) as the G2P pass."""
     D, NK, SIMPLEX, AFFINE, DEGREE, BERNSTEIN = _sizes(cell)
-    PLANAR = D == 2 and DEGREE == 1
 
     @njit(cache=True, error_model="numpy")
     def deform(where, nodal, by_trace, dt, L, value, state, laws):  # pragma: no cover - compiled
@@ -202,20 +196,6 @@ def deform_kernel(cell: str, keep_L: bool):
                 shift = (averaged - value[p]) / D
             else:
                 scale = root(averaged / value[p], D)
-            if PLANAR and not keep_L:  # scalar code (as fempm.kernels.planar)
-                d00, d01, d10, d11 = 1.0 + dt * L[p, 0, 0], dt * L[p, 0, 1], dt * L[p, 1, 0], 1.0 + dt * L[p, 1, 1]
-                f00, f01, f10, f11 = F[p, 0, 0], F[p, 0, 1], F[p, 1, 0], F[p, 1, 1]
-                n00 = scale * (d00 * f00 + d01 * f10) + shift
-                n01 = scale * (d00 * f01 + d01 * f11)
-                n10 = scale * (d10 * f00 + d11 * f10)
-                n11 = scale * (d10 * f01 + d11 * f11) + shift
-                F[p, 0, 0], F[p, 0, 1], F[p, 1, 0], F[p, 1, 1] = n00, n01, n10, n11
-                J = n00 * n11 - n01 * n10
-                volume[p] = J * volume0[p]
-                ok, nonfinite_j, inverted, jmin, jmax = count_j(J, nonfinite_j, inverted, jmin, jmax)
-                if ok:
-                    law_stress(sigma, p, law[b], lam[b], mu[b], n00, n01, n10, n11, J)
-                continue
             for j in range(D):
                 for e in range(D):
                     t = 0.0
@@ -261,11 +241,6 @@ def pressure_kernel(cell: str):
             t = 0.0
             for j in range(D):
                 t += sigma[p, j, j]
-            b, V, t = body[p], volume[p], t / D
-            for a in range(NK):
-                i = cell_dofs[c, a]
-                w = N[a] * V
-                out[i, b] += w
-                out[i, bodies + b] += w * t
+            add_patch(out, (N, NK, cell_dofs, c), body[p], bodies, volume[p], t / D)
 
     return pressures

@@ -14,7 +14,7 @@ from __future__ import annotations
 
 from fempm.kernels.shape import AVAILABLE
 
-__all__ = ["AVAILABLE", "average_pressure", "averages", "nodal_ratio"]
+__all__ = ["AVAILABLE", "add_patch", "average_pressure", "averages", "nodal_ratio"]
 
 if AVAILABLE:
     from numba import njit
@@ -24,6 +24,18 @@ if AVAILABLE:
         r""":math:`(\sum V N f)_i / (\sum V N)_i` of body ``b`` of ``bodies`` at dof ``i`` (0 where
         the weight is not positive), of sums turned into averages by :func:`averages`."""
         return patch[i, bodies + b]
+
+    @njit(inline="always")
+    def add_patch(out, at, b, bodies, weight, value):  # pragma: no cover - compiled
+        r"""A particle of body ``b`` with ``weight`` and ``value`` into the sums ``out`` (dofs, 2 B)
+        at its cell's dofs, ``at`` = (basis values N, NK, cell_dofs, its cell): :math:`N_a w` and
+        :math:`N_a w f`."""
+        N, NK, cell_dofs, c = at
+        for a in range(NK):
+            i = cell_dofs[c, a]
+            w = N[a] * weight
+            out[i, b] += w
+            out[i, bodies + b] += w * value
 
     @njit(inline="always")
     def average_pressure(sigma, D, at, patch, b, bodies):  # pragma: no cover - compiled
