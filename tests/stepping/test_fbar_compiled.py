@@ -30,7 +30,7 @@ class OwnLinearElastic(LinearElastic):
 #: (scheme, mass) pairs, one per cell of DEFAULT in the default run, rotating (each combination
 #: a numba compilation of its own on a clean clone; every pair on every cell in make test-all)
 PAIRS = [("USL", "lumped"), ("MUSL", "consistent"), ("USF", "fmpm2")]
-DEFAULT = ("triangle", "quadrilateral", "tetrahedron", "hexahedron")
+DEFAULT = ("triangle", "tetrahedron")  # the planar G2P pass and the separate deform pass
 
 
 @pytest.mark.parametrize(("cell", "scheme", "mass"),
