@@ -83,8 +83,8 @@ def assert_same_outputs(parts: Path, whole: Path) -> None:
     assert [k for k in a if a[k] != b[k]] == []
 
 
-@pytest.mark.parametrize("mass", ["lumped", "consistent", "consistent+contact",
-                                  pytest.param("consistent+cpdi1", marks=pytest.mark.slow)])
+@pytest.mark.parametrize("mass", ["lumped", "consistent", *(pytest.param(m, marks=pytest.mark.slow)
+                                                           for m in ("consistent+contact", "consistent+cpdi1"))])
 def test_resumed_run_is_bit_identical_to_the_uninterrupted_one(tmp_path, mass):
     """Every output: energies.csv, the particle frames and the grid series (pieces, indexes,
     collections, times) and the summary's totals. Consistent mass: the checkpoint holds the
