@@ -104,7 +104,7 @@ def test_the_body_takes_minus_the_colliders_impulse(variant):
     assert solver.collisions.displacement[0] == pytest.approx([0.5 * solver.t, 0.0], rel=1e-12)
 
 
-@pytest.mark.parametrize("cell", ["triangle", "tetrahedron", "hexahedron"])
+@pytest.mark.parametrize("cell", ["triangle", "tetrahedron", pytest.param("hexahedron", marks=pytest.mark.slow)])
 @pytest.mark.parallel(only=("tetrahedron",))
 def test_the_impulse_balance_on_every_cell_type(cell):
     """A disk (a sphere in 3D) collider moving at 0.5 m/s into a free block on simplices and
@@ -201,7 +201,7 @@ def test_a_resumed_run_continues_the_colliders(tmp_path):
 
 
 # -- the rolling disk -------------------------------------------------------------------------
-@pytest.mark.parametrize("mu", [0.2, 1.0])
+@pytest.mark.parametrize("mu", [0.2, pytest.param(1.0, marks=pytest.mark.slow)])
 def test_a_disk_rolls_down_a_tilted_plane_collider(mu):
     """A disk (8 cells per radius) on a plane collider at 30 degrees, gravity vertical: it rolls
     at (2/3) g sin(theta) within 2 % from mu = 0.2 (just above tan(theta)/3 = 0.19) on."""

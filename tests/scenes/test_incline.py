@@ -71,7 +71,8 @@ def test_a_block_on_a_frictional_plane_with_consistent_mass(mu, plane):
         assert abs(summary["acceleration"]) < 0.01 * G_SIN
 
 
-@pytest.mark.parametrize("mu", [0.0, 0.2, 0.5, 0.6, 0.7])
+@pytest.mark.parametrize("mu", [pytest.param(0.0, marks=pytest.mark.slow), 0.2, 0.5, 0.6,
+                                pytest.param(0.7, marks=pytest.mark.slow)])
 @pytest.mark.parallel(only=("0.2",))
 def test_a_block_on_a_tagged_inclined_wall(mu):
     """The slope as the tagged floor of a gmsh triangle mesh turned by 30 degrees (gravity

@@ -88,7 +88,8 @@ BLOCK_MESHES = {
 }
 
 
-@pytest.mark.parametrize("name", sorted(BLOCK_MESHES))
+@pytest.mark.parametrize("name", [pytest.param(n, marks=pytest.mark.slow) if n == "quadrilateral" else n
+                                  for n in sorted(BLOCK_MESHES)])  # (quadrilaterals: make test-all)
 def test_cpdi2_domains_stay_conforming(name):
     world = BLOCK_MESHES[name](comm)
     p, solver, e0 = deform(world)
