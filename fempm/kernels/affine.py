@@ -17,6 +17,8 @@ Codes of the affine transfers (:attr:`fempm.transfer.transfers.Transfer.kind`): 
 
 from __future__ import annotations
 
+from fempm.kernels.choice import INLINE
+
 from fempm.kernels.shape import AVAILABLE
 
 __all__ = ["APIC", "NONE", "THICK", "THIN", "TPIC"]
@@ -35,7 +37,7 @@ if AVAILABLE:
     import numpy as np
     from numba import njit
 
-    @njit(inline="always")
+    @njit(inline=INLINE)
     def det(A, D):  # pragma: no cover - compiled
         """The determinant of the (D, D) matrix ``A``, D <= 3."""
         if D == 1:
@@ -45,7 +47,7 @@ if AVAILABLE:
         return (A[0, 0] * (A[1, 1] * A[2, 2] - A[1, 2] * A[2, 1]) - A[0, 1] * (A[1, 0] * A[2, 2] - A[1, 2] * A[2, 0])
                 + A[0, 2] * (A[1, 0] * A[2, 1] - A[1, 1] * A[2, 0]))
 
-    @njit(inline="always")
+    @njit(inline=INLINE)
     def inverse(A, D, out):  # pragma: no cover - compiled
         """``out`` = the inverse of the (D, D) matrix ``A`` (D <= 3) by cofactors."""
         a = det(A, D)
@@ -61,7 +63,7 @@ if AVAILABLE:
                     j1, j2 = (i + 1) % 3, (i + 2) % 3
                     out[i, j] = (A[i1, j1] * A[i2, j2] - A[i1, j2] * A[i2, j1]) / a
 
-    @njit(inline="always")
+    @njit(inline=INLINE)
     def offsets(geo, p, sizes, R, J):  # pragma: no cover - compiled
         r"""``R[a]`` = :math:`x_a - x_p` of particle p's dofs (``geo`` = (X, K, c, cell_dofs, xi,
         x), ``sizes`` = (D, NK, SIMPLEX, FROM_K)): with ``FROM_K`` (degree 1 on affine cells)
@@ -84,7 +86,7 @@ if AVAILABLE:
                     t += J[j, i] * (ref - X[p, i])
                 R[a, j] = t
 
-    @njit(inline="always")
+    @njit(inline=INLINE)
     def second_moment(N, R, D, NK, Dm):  # pragma: no cover - compiled
         r""":math:`D_p = \sum_a N_a r_a r_a^T` into ``Dm`` of the offsets ``R``; returns (its trace,
         the largest :math:`|r_a|^2`)."""
@@ -106,7 +108,7 @@ if AVAILABLE:
             tr += Dm[j, j]
         return tr, top
 
-    @njit(inline="always")
+    @njit(inline=INLINE)
     def spin_of(B, D, s):  # pragma: no cover - compiled
         r"""``s`` = :math:`\epsilon : B^T` (1 entry in 2D, 3 in 3D)."""
         if D == 2:
@@ -116,7 +118,7 @@ if AVAILABLE:
             s[1] = B[0, 2] - B[2, 0]
             s[2] = B[1, 0] - B[0, 1]
 
-    @njit(inline="always")
+    @njit(inline=INLINE)
     def carried(C, spin, p, Dm, tr, scale, D, KIND, work):  # pragma: no cover - compiled
         r"""The matrix P2G maps into ``work[0]``: ``C[p]`` (TPIC), plus for APIC the rotation
         :math:`W(\omega)` with :math:`\epsilon : ((C + W) D_p)^T` = ``spin[p]`` (none where
@@ -156,7 +158,7 @@ if AVAILABLE:
         Cu[1, 2] -= om[0]
         Cu[2, 1] += om[0]
 
-    @njit(inline="always")
+    @njit(inline=INLINE)
     def affine_work(D, NK):  # pragma: no cover - compiled
         """Scratch arrays of a pass: :math:`D_p`, :func:`g2p_affine`'s, :func:`carried`'s and
         :func:`offsets`' (R, J)."""
@@ -164,7 +166,7 @@ if AVAILABLE:
                 (np.empty((D, D)), np.empty((D, D)), np.empty((3, 3)), np.empty((3, 3)), np.empty(3), np.empty(3)),
                 (np.empty((NK, D)), np.empty((D, D))))
 
-    @njit(inline="always")
+    @njit(inline=INLINE)
     def carried_at(N, R, state, p, sizes, Dm, work):  # pragma: no cover - compiled
         """:func:`carried` of particle p at its present :math:`D_p` (of the offsets ``R``;
         ``state`` = (C, spin), ``sizes`` = (D, NK, KIND)) into ``work[0]``."""
@@ -173,7 +175,7 @@ if AVAILABLE:
         tr, top = second_moment(N, R, D, NK, Dm) if KIND == APIC else (0.0, 0.0)
         carried(C, spin, p, Dm, tr, top, D, KIND, work)
 
-    @njit(inline="always")
+    @njit(inline=INLINE)
     def add_momentum(at, mom, particle, sizes, affine):  # pragma: no cover - compiled
         r"""``mom[i, o + j]`` += :math:`N_a M_p (v_p + C r_a)_j` over the particle's dofs (``at`` =
         (N, cell_dofs, c, o), ``particle`` = (v, p, M_p), ``sizes`` = (D, NK), ``affine`` = (C,
@@ -191,7 +193,7 @@ if AVAILABLE:
                         t += Cu[j, k] * R[a, k]
                 mom[i, o + j] += N[a] * (m * t)
 
-    @njit(inline="always")
+    @njit(inline=INLINE)
     def flagged(flags, cell_dofs, c, NK):  # pragma: no cover - compiled
         """Whether a dof of cell ``c`` is flagged (``affine_cutoff``'s weak nodes)."""
         for a in range(NK):
@@ -199,7 +201,7 @@ if AVAILABLE:
                 return True
         return False
 
-    @njit(inline="always")
+    @njit(inline=INLINE)
     def velocity_moment(at, v, R, D, NK, B):  # pragma: no cover - compiled
         r""":math:`B = \sum_a N_a v_a r_a^T` of the nodal velocity ``v`` (``at`` as
         :func:`g2p_affine`'s)."""
@@ -215,7 +217,7 @@ if AVAILABLE:
                 for k in range(D):
                     B[j, k] += vj * R[a, k]
 
-    @njit(inline="always")
+    @njit(inline=INLINE)
     def g2p_affine(at, velocities, R, p, Lp, sizes, outputs, work):  # pragma: no cover - compiled
         r"""What G2P stores at particle p (``at`` = (N, cell_dofs, c, o): its basis, its cell and
         the nodal columns from ``o``; ``R`` its dofs' offsets; ``sizes`` = (D, NK, KIND, CLOSED))

@@ -15,6 +15,8 @@ of its centroid (:func:`fempm.kernels.boxes.box_samples` sums them into exact GI
 
 from __future__ import annotations
 
+from fempm.kernels.choice import INLINE
+
 from fempm.kernels.shape import AVAILABLE
 
 __all__ = ["tetrahedron_piece", "triangle_piece"]
@@ -22,7 +24,7 @@ __all__ = ["tetrahedron_piece", "triangle_piece"]
 if AVAILABLE:
     from numba import njit
 
-    @njit(inline="always")
+    @njit(inline=INLINE)
     def _clip_polygon(P, src, n, f0, f1, f2, dst):  # pragma: no cover - compiled
         """The part of the polygon in rows ``src`` to ``src + n`` of ``P`` where
         ``f0 + f1 X_0 + f2 X_1 >= 0``, into the rows from ``dst``; returns its vertex count
@@ -44,7 +46,7 @@ if AVAILABLE:
             j, fj = i, fi
         return m
 
-    @njit(inline="always")
+    @njit(inline=INLINE)
     def triangle_piece(x, p, ell, x0, K, c, P, cen):  # pragma: no cover - compiled
         r"""The area of the part of particle ``p``'s box in triangle ``c`` and its centroid's
         reference coordinates ``cen``: the box mapped to the reference triangle (a
@@ -94,7 +96,7 @@ if AVAILABLE:
         cen[1] = P[at, 1] + c1 / (3.0 * area)
         return 0.5 * abs(area) / detK
 
-    @njit(inline="always")
+    @njit(inline=INLINE)
     def _clip3(P, src, n, f0, f1, f2, f3, strict, dst):  # pragma: no cover - compiled
         """:func:`_clip_polygon` in 3D: the part where ``f0 + f1 x + f2 y + f3 z`` is >= 0 (> 0
         with ``strict``)."""
@@ -117,7 +119,7 @@ if AVAILABLE:
             j, fj = i, fi
         return m
 
-    @njit(inline="always")
+    @njit(inline=INLINE)
     def _fan(P, at, n, acc):  # pragma: no cover - compiled
         r"""Add the cones from the origin over the fan of the polygon in rows ``at`` to
         ``at + n`` of ``P``: 6 times their volumes to ``acc[0]``, 24 times their first moments to
@@ -132,7 +134,7 @@ if AVAILABLE:
             acc[2] += det * (a1 + b1 + c1)
             acc[3] += det * (a2 + b2 + c2)
 
-    @njit(inline="always")
+    @njit(inline=INLINE)
     def tetrahedron_piece(T, x0, K, c, lo, hi, P, acc, cen):  # pragma: no cover - compiled
         r"""The volume of the part of the box ``[lo, hi]`` in tetrahedron ``c`` (vertices ``T``)
         and its centroid's reference coordinates ``cen``, by the divergence theorem over the

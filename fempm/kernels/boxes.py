@@ -31,6 +31,8 @@ cell's piece is the intersection of the two boxes.
 
 from __future__ import annotations
 
+from fempm.kernels.choice import INLINE
+
 import functools
 
 import numpy as np
@@ -52,7 +54,7 @@ if AVAILABLE:
 
     from fempm.kernels.box_pieces import tetrahedron_piece, triangle_piece
 
-    @njit(inline="always")
+    @njit(inline=INLINE)
     def box_piece(c, d, blo, bhi, x0, K, lo, hi, acc, cen):  # pragma: no cover - compiled
         """The volume of the part of box [lo, hi] in the axis-aligned box cell ``c``, its
         centroid's reference coordinates into ``cen`` (``acc``: a work array)."""
@@ -71,7 +73,7 @@ if AVAILABLE:
 
 
 if AVAILABLE:
-    @njit(inline="always")
+    @njit(inline=INLINE)
     def _record(npiece, c, vol, cen, piece_cell, piece_vol, piece_cen):  # pragma: no cover - compiled
         """Keep piece ``npiece`` (cell, volume, centroid); returns the count."""
         piece_cell[npiece], piece_vol[npiece] = c, vol
@@ -79,7 +81,7 @@ if AVAILABLE:
             piece_cen[npiece, e] = cen[e]
         return npiece + 1
 
-    @njit(inline="always")
+    @njit(inline=INLINE)
     def _enqueue(c, c2v, v_offsets, v_cells, num_cells, blo, bhi, lo, hi, visited, nvis):  # pragma: no cover
         """Append to ``visited`` the cells sharing a vertex with ``c`` whose bounding boxes
         overlap ``[lo, hi]`` and that it does not hold; returns (its length, whether it was
@@ -110,7 +112,7 @@ if AVAILABLE:
                         nvis += 1
         return nvis, crowded
 
-    @njit(inline="always")
+    @njit(inline=INLINE)
     def _guesses(p, sc, w, num_cells, guess):  # pragma: no cover - compiled
         """The cells of particle ``p``'s samples of weight into ``guess``; returns their count."""
         ng = 0
@@ -121,7 +123,7 @@ if AVAILABLE:
                 ng += 1
         return ng
 
-    @njit(inline="always")
+    @njit(inline=INLINE)
     def _store(p, npiece, piece_cell, piece_vol, piece_cen, sc, Y, w):  # pragma: no cover - compiled
         """Particle ``p``'s samples: its pieces by ascending cell (the same order and sums
         whether found from the last step's cells or by the flood: a resumed run repeats the

@@ -1,12 +1,28 @@
 """Which implementation the kernels use: numba when installed (unless ``FEMPM_KERNELS=numpy``),
-else the numpy references."""
+else the numpy references; and how numba compiles them.
+
+:data:`INLINE` is the ``inline`` option of the kernels' small helpers (``njit(inline=INLINE)``):
+``"always"`` (the default) inlines them into each pass at numba's IR level, which the passes'
+speed depends on (APIC's triangle pass takes 1.7 times as long with the helpers called);
+``FEMPM_NUMBA_INLINE=never`` leaves them as calls, the same arithmetic in about a third of the
+compile time (numba copies a helper's IR at every site it inlines it). The test run takes
+``never`` (``scripts/run-tests``); its kernels then go to a cache folder of their own
+(``inline-never`` in numba's cache folder, or in ``fempm/kernels/__pycache__``), so that a
+later run of the shipped kernels never loads them.
+"""
 
 from __future__ import annotations
 
 import os
 from collections.abc import Callable
 
-__all__ = ["pick"]
+__all__ = ["COMPILED", "INLINE", "pick"]
+
+#: ``FEMPM_NUMBA_INLINE``'s values
+INLINE_OPTIONS = ("always", "never")
+INLINE = os.environ.get("FEMPM_NUMBA_INLINE", "always")
+if INLINE not in INLINE_OPTIONS:
+    raise ValueError(f"FEMPM_NUMBA_INLINE={INLINE!r}: expected one of {', '.join(INLINE_OPTIONS)}")
 
 try:
     import numba  # noqa: F401
@@ -14,6 +30,12 @@ try:
     COMPILED = os.environ.get("FEMPM_KERNELS", "numba") != "numpy"
 except ImportError:
     COMPILED = False
+
+if COMPILED and INLINE != "always":
+    import numba.core.config
+
+    _base = numba.core.config.CACHE_DIR or os.path.join(os.path.dirname(os.path.abspath(__file__)), "__pycache__")
+    numba.core.config.CACHE_DIR = os.path.join(_base, f"inline-{INLINE}")
 
 
 def pick(compiled: Callable, reference: Callable) -> Callable:

@@ -17,6 +17,8 @@ solves) the same update from them. :func:`group_velocity`: the first part alone 
 
 from __future__ import annotations
 
+from fempm.kernels.choice import INLINE
+
 import functools
 
 import numpy as np
@@ -28,7 +30,7 @@ __all__ = ["centre_of_mass", "grid_update", "group_velocity", "largest_total"]
 if AVAILABLE:
     from numba import njit
 
-    @njit(inline="always")
+    @njit(inline=INLINE)
     def _correct_group(nodal, stride, i, g, d, active_min, node, scratch, law, moments, tiny,
                        v_new):  # pragma: no cover - compiled
         """Group g's correction at contact node i (:func:`fempm.stepping.contact.correct`):

@@ -10,6 +10,8 @@ and :func:`corner_geometry`, one 2D domain's in closed form, for CPDI2's moving 
 
 from __future__ import annotations
 
+from fempm.kernels.choice import INLINE
+
 import numpy as np
 
 from fempm.kernels.shape import AVAILABLE
@@ -19,7 +21,7 @@ __all__ = ["AVAILABLE", "corner_geometry", "inverse", "planar_geometry", "simple
 if AVAILABLE:
     from numba import njit
 
-    @njit(inline="always")
+    @njit(inline=INLINE)
     def inverse(A, d, B):  # pragma: no cover - compiled
         """B <- A^-1 for d <= 3 in closed form (inf/NaN where A is singular); returns det A."""
         if d == 1:
@@ -45,7 +47,7 @@ if AVAILABLE:
             B[2, 2] = (A[0, 0] * A[1, 1] - A[0, 1] * A[1, 0]) / det
         return det
 
-    @njit(inline="always")
+    @njit(inline=INLINE)
     def _centroid(corners, w, p, centroid):  # pragma: no cover - compiled
         r"""``centroid[p]`` <- :math:`\sum_c w_c y_c` of domain ``p``."""
         for i in range(corners.shape[2]):
@@ -129,7 +131,7 @@ if AVAILABLE:
             _centroid(corners, w, p, centroid)
         return bad
 
-    @njit(inline="always")
+    @njit(inline=INLINE)
     def corner_geometry(yc, p, w, gw):  # pragma: no cover - compiled
         r"""CPDI2: the weights ``w[p]``, ``gw[p]`` of domain ``p`` of corners ``yc[p]`` (a triangle,
         or a quadrilateral in :func:`fempm.particles.corners.corner_signs` order) in closed form;

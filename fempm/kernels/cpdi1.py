@@ -19,6 +19,8 @@ does not hold).
 
 from __future__ import annotations
 
+from fempm.kernels.choice import INLINE
+
 import functools
 
 import numpy as np
@@ -34,7 +36,7 @@ if AVAILABLE:
     from fempm.kernels.corners import inverse
     from fempm.kernels.shape import inside_after_pull_back, star_search
 
-    @njit(inline="always")
+    @njit(inline=INLINE)
     def pull(y0, y1, x0, K, e, tol, simplex):  # pragma: no cover - compiled
         """(inside, X0, X1): :func:`fempm.kernels.shape.inside_after_pull_back` in the affine
         triangle (``simplex``) or parallelogram ``e``."""
@@ -45,7 +47,7 @@ if AVAILABLE:
             return X0 >= -tol and X1 >= -tol and X0 + X1 <= 1.0 + tol, X0, X1
         return X0 >= -tol and X1 >= -tol and X0 <= 1.0 + tol and X1 <= 1.0 + tol, X0, X1
 
-    @njit(inline="always")
+    @njit(inline=INLINE)
     def corner_frame(F, lp, p, d, R, Ri):  # pragma: no cover - compiled
         r"""``R`` <- :math:`F_p \operatorname{diag}(\ell_p)`, ``Ri`` <- :math:`R^{-1}` (the
         gradient weight of corner :math:`s` is :math:`Q^{-1} \sum_j R^{-1}_{ji} s_j`)."""
@@ -54,7 +56,7 @@ if AVAILABLE:
                 R[i, j] = F[p, i, j] * lp[p, j]
         inverse(R, d, Ri)
 
-    @njit(inline="always")
+    @njit(inline=INLINE)
     def corner_gradient(Ri, signs, q, i, d):  # pragma: no cover - compiled
         r""":math:`(R^{-T} s_q)_i = \sum_j R^{-1}_{ji} s_{qj}` (times :math:`Q^{-1}`, corner
         ``q``'s gradient weight)."""

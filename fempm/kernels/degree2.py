@@ -6,6 +6,8 @@ equispaced/GLL nodes (equal at degree 2) are the reference.
 
 from __future__ import annotations
 
+from fempm.kernels.choice import INLINE
+
 __all__: list[str] = []
 
 try:
@@ -14,7 +16,7 @@ except ImportError:  # pragma: no cover - numba is a dependency
     njit = None
 
 if njit is not None:
-    @njit(inline="always")
+    @njit(inline=INLINE)
     def edge_vertices(q, t):  # pragma: no cover - compiled
         """The vertices (a, b), a < b, of edge ``q`` of the reference simplex of dimension ``t``
         in basix's numbering (triangle: (1, 2), (0, 2), (0, 1); tetrahedron: (2, 3), (1, 3),

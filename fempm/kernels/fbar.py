@@ -26,6 +26,8 @@ particle basis (``tests/kernels/test_fbar_kernels.py``).
 
 from __future__ import annotations
 
+from fempm.kernels.choice import INLINE
+
 import functools
 
 import numpy as np
@@ -45,7 +47,7 @@ if AVAILABLE:
     from fempm.kernels.planar import basis, inverse_jacobian
     from fempm.kernels.shape import shape, shape_values
 
-    @njit(inline="always")
+    @njit(inline=INLINE)
     def values_at(X, p, K, c, D, NK, SIMPLEX, AFFINE, DEGREE, BERNSTEIN, N, G):  # pragma: no cover - compiled
         """The basis values ``N`` of particle ``p`` alone where they do not need the cell's map
         (degree 1: the reference coordinates), else with the gradients into ``G`` (the sizes and
@@ -55,7 +57,7 @@ if AVAILABLE:
         else:
             shape(X, p, K, c, SIMPLEX, AFFINE, D, NK, N, G, DEGREE, BERNSTEIN)
 
-    @njit(inline="always")
+    @njit(inline=INLINE)
     def increment_det(L, p, dt, D):  # pragma: no cover - compiled
         r""":math:`\det(I + \Delta t L_p)` in closed form."""
         a = 1.0 + dt * L[p, 0, 0]
@@ -68,7 +70,7 @@ if AVAILABLE:
         m = 1.0 + dt * L[p, 2, 2]
         return a * (e * m - g * k) - b * (c * m - g * h) + f * (c * k - e * h)
 
-    @njit(inline="always")
+    @njit(inline=INLINE)
     def root(x, D):  # pragma: no cover - compiled
         """:math:`x^{1/D}` (NaN for x < 0 and D > 1, as numpy's power)."""
         if D == 1:
@@ -93,7 +95,7 @@ def measure_kernel(cell: str):
     D, NK, SIMPLEX, AFFINE, DEGREE, BERNSTEIN = _sizes(cell)
     PLANAR, QUAD = D == 2 and DEGREE == 1, not SIMPLEX
 
-    @njit(inline="always")
+    @njit(inline=INLINE)
     def measure2(p, c, arrays, by_trace, dt, L, value, out, bodies):  # pragma: no cover - compiled
         X, K, cell_dofs, v_new, F, volume, body = arrays
         X0, X1 = X[p, 0], X[p, 1]

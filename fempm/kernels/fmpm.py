@@ -19,6 +19,8 @@ kept output of the next :func:`mass_apply` in their pass.
 
 from __future__ import annotations
 
+from fempm.kernels.choice import INLINE
+
 import functools
 
 import numpy as np
@@ -34,14 +36,14 @@ if AVAILABLE:
     from fempm.kernels.planar import add_pair, basis
     from fempm.kernels.shape import shape, shape_values
 
-    @njit(inline="always")
+    @njit(inline=INLINE)
     def coupled(lump, i0, i1, i2, i3, e0, e1, e2, e3, quad):  # pragma: no cover - compiled
         """The values ``e`` of a cell's dofs with those of the lumped dofs (``lump``) set to 0
         (the fourth on a quadrilateral only)."""
         return (0.0 if lump[i0] else e0, 0.0 if lump[i1] else e1, 0.0 if lump[i2] else e2,
                 0.0 if (quad and lump[i3]) else e3)
 
-    @njit(inline="always")
+    @njit(inline=INLINE)
     def add_column(out, col, i0, i1, i2, i3, N0, N1, N2, N3, t, quad):  # pragma: no cover - compiled
         """``out[i_a, col] += N_a t`` over the cell's dofs (the fourth on a quadrilateral only)."""
         out[i0, col] += N0 * t

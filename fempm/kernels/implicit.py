@@ -23,7 +23,7 @@ from __future__ import annotations
 import numpy as np
 import numpy.typing as npt
 
-from fempm.kernels.choice import pick
+from fempm.kernels.choice import INLINE, pick
 
 __all__ = ["deformed", "increment_determinants", "increment_gradients", "linear_elastic_tangent", "nominal", "tangent_blocks"]
 
@@ -82,7 +82,7 @@ def linear_elastic_tangent_numpy(F: npt.NDArray, lam: float, mu: float) -> npt.N
 try:
     from numba import njit
 
-    @njit(inline="always")
+    @njit(inline=INLINE)
     def _det_inv(G, p, d, inv):  # pragma: no cover - compiled
         """det(I + G[p]) and its inverse into ``inv`` (d x d; not written where det = 0)."""
         if d == 1:

@@ -16,7 +16,7 @@ from __future__ import annotations
 import numpy as np
 import numpy.typing as npt
 
-from fempm.kernels.choice import pick
+from fempm.kernels.choice import INLINE, pick
 from fempm.kernels.particle_checks import LINEAR_ELASTIC, NEO_HOOKEAN
 
 __all__ = [
@@ -58,7 +58,7 @@ def linear_elastic_stress_numpy(F, lam, mu):
 try:
     from numba import njit
 
-    @njit(inline="always")
+    @njit(inline=INLINE)
     def _det(A, p):  # pragma: no cover - compiled
         d = A.shape[1]
         if d == 1:
@@ -81,7 +81,7 @@ try:
                     Fn[p, i, j] = s
             J[p] = _det(Fn, p)
 
-    @njit(inline="always")
+    @njit(inline=INLINE)
     def neo_hookean_at(F, p, d, J, lam, mu, sigma):  # pragma: no cover - compiled
         """sigma[p] of the neo-Hookean law from F[p] (d x d) with J = det F[p] > 0."""
         inv = 1.0 / J
@@ -96,7 +96,7 @@ try:
                 else:
                     sigma[p, i, j] = mu * b * inv
 
-    @njit(inline="always")
+    @njit(inline=INLINE)
     def linear_elastic_at(F, p, d, lam, mu, sigma):  # pragma: no cover - compiled
         """sigma[p] of the linear elastic law from F[p] (d x d)."""
         tr = 0.0
@@ -110,7 +110,7 @@ try:
                 else:
                     sigma[p, i, j] = 2.0 * mu * e
 
-    @njit(inline="always")
+    @njit(inline=INLINE)
     def deform_at(F, p, dt, Lp, D, Fn):  # pragma: no cover - compiled
         r""":math:`F_p \leftarrow (I + \Delta t L_p) F_p` (``Fn`` scratch); returns :math:`\det F_p`."""
         for i in range(D):
@@ -124,7 +124,7 @@ try:
                 F[p, i, j] = Fn[i, j]
         return _det(F, p)
 
-    @njit(inline="always")
+    @njit(inline=INLINE)
     def law_at(code, F, p, D, J, lam, mu, sigma):  # pragma: no cover - compiled
         """``sigma[p]`` of the compiled law ``code`` (else left as it is) from ``F[p]``, J > 0."""
         if code == NEO_HOOKEAN:
@@ -132,7 +132,7 @@ try:
         elif code == LINEAR_ELASTIC:
             linear_elastic_at(F, p, D, lam, mu, sigma)
 
-    @njit(inline="always")
+    @njit(inline=INLINE)
     def energy_at(code, F, p, d, lam, mu):  # pragma: no cover - compiled
         r"""The stored energy per reference volume :math:`W(F_p)` of the compiled law ``code``
         (``NEO_HOOKEAN``: :math:`\frac{\mu}{2}(F:F - d) - \mu
@@ -157,7 +157,7 @@ try:
             return 0.5 * lam * tr * tr + mu * ee
         return 0.0
 
-    @njit(inline="always")
+    @njit(inline=INLINE)
     def add_totals(acc, p, mass, v, F, volume0, law, lam, mu, d):  # pragma: no cover - compiled
         r"""``acc`` (3 + d) += particle ``p``'s :math:`[\tfrac12 M_p |v_p|^2,\ V^0_p W(F_p),\ M_p |v_p|,
         \ M_p v_p]` (``law``, ``lam``, ``mu``: its body's law code and Lame constants; W of the

@@ -35,6 +35,8 @@ its small loops unroll (a kernel with run-time sizes is 2-4x slower), and numba 
 
 from __future__ import annotations
 
+from fempm.kernels.choice import INLINE
+
 import functools
 from types import SimpleNamespace
 
@@ -81,7 +83,7 @@ if AVAILABLE:
     from fempm.kernels.patch import average_pressure
     from fempm.kernels.shape import inside_after_pull_back, shape, star_search
 
-    @njit(inline="always")
+    @njit(inline=INLINE)
     def gather(N, G, cell_dofs, c, o, v_new, v_old, blend, kinematics, D, NK, sums):  # pragma: no cover
         r"""The sums over the dofs of cell ``c`` (columns from ``o``), each loaded once, into
         ``sums`` = (vg, dv, Lp): :math:`\sum_a N_a v_a^+` into ``vg``, with ``blend`` :math:`\sum_a N_a (v_a^+ - v_a)` into ``dv``, with ``kinematics``

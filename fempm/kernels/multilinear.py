@@ -17,6 +17,8 @@ form on quadrilaterals for a moving particle, which knows the size of its first 
 
 from __future__ import annotations
 
+from fempm.kernels.choice import INLINE
+
 import numpy as np
 
 __all__ = ["NEWTON_FLOOR", "NEWTON_MAX", "NEWTON_TOL", "quad_pull_back"]
@@ -35,7 +37,7 @@ except ImportError:  # pragma: no cover - numba is a dependency
     njit = None
 
 if njit is not None:
-    @njit(inline="always")
+    @njit(inline=INLINE)
     def vertex_basis(a, X0, X1, X2, t):  # pragma: no cover - compiled
         r"""The reference basis function of vertex ``a`` (basix order: bit ``i`` of ``a`` is the
         vertex's coordinate ``i``) at :math:`(X_0, X_1, X_2)` and its reference gradient, as
@@ -54,7 +56,7 @@ if njit is not None:
             f2, d2 = 1.0, 0.0
         return f0 * f1 * f2, d0 * f1 * f2, f0 * d1 * f2, f0 * f1 * d2
 
-    @njit(inline="always")
+    @njit(inline=INLINE)
     def multilinear_map(X0, X1, X2, xc, c, t):  # pragma: no cover - compiled
         r"""The multilinear map of cell ``c`` (vertices ``xc[c]``, basix order) at the
         reference point :math:`(X_0, X_1, X_2)` (``t`` = 2: :math:`X_2` unused): the point
@@ -84,7 +86,7 @@ if njit is not None:
             j22 = 1.0
         return y0, y1, y2, j00, j01, j02, j10, j11, j12, j20, j21, j22
 
-    @njit(inline="always")
+    @njit(inline=INLINE)
     def inverse3(j00, j01, j02, j10, j11, j12, j20, j21, j22):  # pragma: no cover - compiled
         """The inverse of a 3x3 matrix by cofactors, row by row (9 scalars)."""
         c00 = j11 * j22 - j12 * j21

@@ -4,6 +4,8 @@ checks of J."""
 
 from __future__ import annotations
 
+from fempm.kernels.choice import INLINE
+
 import numpy as np
 
 from fempm.kernels.shape import AVAILABLE
@@ -14,7 +16,7 @@ NEO_HOOKEAN, LINEAR_ELASTIC = 1, 2
 if AVAILABLE:
     from numba import njit
 
-    @njit(inline="always")
+    @njit(inline=INLINE)
     def stable_time(best, bound, m, V, speed, mod, c, p, hp):  # pragma: no cover - compiled
         """``best`` updated with particle ``p`` (mass ``m``, volume ``V``, squared speed ``speed``,
         P-wave modulus ``mod`` of its body, else wave speed ``c[p]``, cell size ``hp``): the
@@ -32,7 +34,7 @@ if AVAILABLE:
         t = hp / total if not total <= 0.0 else np.inf
         return t if not t >= best else best
 
-    @njit(inline="always")
+    @njit(inline=INLINE)
     def count_j(J, nonfinite_j, inverted, jmin, jmax):  # pragma: no cover - compiled
         """(J finite and positive, then the counts of non-finite and non-positive J and the range
         of the finite J, updated with ``J``)."""

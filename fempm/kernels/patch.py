@@ -12,6 +12,8 @@ took 5x as long.)
 
 from __future__ import annotations
 
+from fempm.kernels.choice import INLINE
+
 from fempm.kernels.shape import AVAILABLE
 
 __all__ = ["AVAILABLE", "add_patch", "average_pressure", "averages", "nodal_ratio"]
@@ -19,13 +21,13 @@ __all__ = ["AVAILABLE", "add_patch", "average_pressure", "averages", "nodal_rati
 if AVAILABLE:
     from numba import njit
 
-    @njit(inline="always")
+    @njit(inline=INLINE)
     def nodal_ratio(patch, i, b, bodies):  # pragma: no cover - compiled
         r""":math:`(\sum V N f)_i / (\sum V N)_i` of body ``b`` of ``bodies`` at dof ``i`` (0 where
         the weight is not positive), of sums turned into averages by :func:`averages`."""
         return patch[i, bodies + b]
 
-    @njit(inline="always")
+    @njit(inline=INLINE)
     def add_patch(out, at, b, bodies, weight, value):  # pragma: no cover - compiled
         r"""A particle of body ``b`` with ``weight`` and ``value`` into the sums ``out`` (dofs, 2 B)
         at its cell's dofs, ``at`` = (basis values N, NK, cell_dofs, its cell): :math:`N_a w` and
@@ -37,7 +39,7 @@ if AVAILABLE:
             out[i, b] += w
             out[i, bodies + b] += w * value
 
-    @njit(inline="always")
+    @njit(inline=INLINE)
     def average_pressure(sigma, D, at, patch, b, bodies):  # pragma: no cover - compiled
         r"""``sigma`` (D, D) <- :math:`\sigma + (\bar p - p) I`, :math:`p = \mathrm{tr}\,\sigma / D` and
         :math:`\bar p` the pressures' patch average at the particle ``at`` = (basis values N, NK,

@@ -17,6 +17,8 @@ The basis on the reference cell (basix's vertex order), :math:`\nabla N_a = \nab
 
 from __future__ import annotations
 
+from fempm.kernels.choice import INLINE
+
 import functools
 
 import numpy as np
@@ -37,7 +39,7 @@ if AVAILABLE:
     from fempm.kernels.planar_affine import add_affine, affine_g2p2, carried2, jacobian2, offsets2
     from fempm.kernels.shape import inside_after_pull_back, star_search
 
-    @njit(inline="always")
+    @njit(inline=INLINE)
     def inverse_jacobian(X0, X1, K, c, affine):  # pragma: no cover - compiled
         r"""(k00, k01, k10, k11) of cell ``c`` at the reference point (X0, X1): ``K[c]`` on affine
         cells; not ``affine``, ``K`` holds the vertices of quadrilaterals and the inverse of
@@ -52,7 +54,7 @@ if AVAILABLE:
         r = 1.0 / (j00 * j11 - j01 * j10)
         return j11 * r, -j01 * r, -j10 * r, j00 * r
 
-    @njit(inline="always")
+    @njit(inline=INLINE)
     def basis(X0, X1, k00, k01, k10, k11, simplex):  # pragma: no cover - compiled
         """(N0..N3, gradients g0x, g0y .. g3x, g3y) at the reference point (X0, X1) with inverse
         Jacobian ``k`` there; on a triangle the fourth is 0."""
@@ -66,7 +68,7 @@ if AVAILABLE:
                 -X1 * k00 + Y0 * k10, -X1 * k01 + Y0 * k11,
                 X1 * k00 + X0 * k10, X1 * k01 + X0 * k11)
 
-    @njit(inline="always")
+    @njit(inline=INLINE)
     def add_pair(out, col, dofs, values, q0, q1, quad):  # pragma: no cover - compiled
         """``out[i_a, col:col+2] += N_a (q0, q1)`` over the cell's ``dofs`` (i0, i1, i2, i3) with
         the basis ``values`` (N0, N1, N2, N3) (the fourth on a quadrilateral only)."""
@@ -82,7 +84,7 @@ if AVAILABLE:
             out[i3, col] += N3 * q0
             out[i3, col + 1] += N3 * q1
 
-    @njit(inline="always")
+    @njit(inline=INLINE)
     def deform(F, p, dt, L00, L01, L10, L11):  # pragma: no cover - compiled
         r""":math:`F_p \leftarrow (I + \Delta t L) F_p`; returns the new entries and
         :math:`J = \det F_p`."""
@@ -94,7 +96,7 @@ if AVAILABLE:
         F[p, 0, 0], F[p, 0, 1], F[p, 1, 0], F[p, 1, 1] = n00, n01, n10, n11
         return n00, n01, n10, n11, n00 * n11 - n01 * n10
 
-    @njit(inline="always")
+    @njit(inline=INLINE)
     def patch_at(patch, dofs, values, b, bodies, quad):  # pragma: no cover - compiled
         """F-bar's patch average at a particle of body ``b`` with basis ``values`` (N0..N3) at
         the cell's ``dofs`` (i0..i3; the fourth on a quadrilateral only)."""
@@ -104,7 +106,7 @@ if AVAILABLE:
         f += N2 * nodal_ratio(patch, i2, b, bodies)
         return f + N3 * nodal_ratio(patch, i3, b, bodies) if quad else f
 
-    @njit(inline="always")
+    @njit(inline=INLINE)
     def fbar_deform(F, p, dt, Lp, f, patch):  # pragma: no cover - compiled
         r"""F-bar's kinematics (:mod:`fempm.kernels.fbar`): :math:`F_p \leftarrow \bar F_p = s\,(I +
         \Delta t L_p) F_p + t I` with :math:`s = (\bar f_p / f_p)^{1/2}, t = 0` (a body averaging
@@ -117,7 +119,7 @@ if AVAILABLE:
         n00, n01, n10, n11, J = deform_averaged(F, p, dt, Lp, f, averaged, by_trace)
         return n00, n01, n10, n11, J, Lb[0], Lb[1], Lb[2], Lb[3]
 
-    @njit(inline="always")
+    @njit(inline=INLINE)
     def deform_averaged(F, p, dt, Lp, f, averaged, by_trace):  # pragma: no cover - compiled
         r""":math:`F_p \leftarrow s (I + \Delta t L) F_p + t I` of F-bar (see :func:`g2p_kernel`) for the
         measure ``f`` and its average; returns the new entries and :math:`J = \det F_p`."""
@@ -132,7 +134,7 @@ if AVAILABLE:
         F[p, 0, 0], F[p, 0, 1], F[p, 1, 0], F[p, 1, 1] = n00, n01, n10, n11
         return n00, n01, n10, n11, n00 * n11 - n01 * n10
 
-    @njit(inline="always")
+    @njit(inline=INLINE)
     def averaged_rate(F, p, dt, Lp, f, averaged, by_trace):  # pragma: no cover - compiled
         r""":math:`\bar L` with :math:`(I + \Delta t \bar L) F^n_p = \bar F_p` (``F[p]`` still :math:`F^n_p`):
         :math:`(s (I + \Delta t L) - I) / \Delta t`, or :math:`L + t (F^n_p)^{-1} / \Delta t` for a body
@@ -145,7 +147,7 @@ if AVAILABLE:
         q = 0.5 * (averaged - f) / dt / (f00 * f11 - f01 * f10)
         return L00 + q * f11, L01 - q * f01, L10 - q * f10, L11 + q * f00
 
-    @njit(inline="always")
+    @njit(inline=INLINE)
     def law_stress(sigma, p, code, lam, mu, n00, n01, n10, n11, J):  # pragma: no cover - compiled
         r"""``sigma[p]`` of the compiled law ``code`` (else left as it is) for
         :math:`F = [[n_{00}, n_{01}], [n_{10}, n_{11}]]`, :math:`J = \det F > 0`."""

@@ -9,6 +9,8 @@ On an affine cell the offsets of the particle's dofs are
 
 from __future__ import annotations
 
+from fempm.kernels.choice import INLINE
+
 from fempm.kernels.affine import APIC, THIN
 from fempm.kernels.shape import AVAILABLE
 
@@ -19,7 +21,7 @@ if AVAILABLE:
 
     __all__ += ["add_affine", "affine_g2p2", "carried2", "jacobian2", "offsets2", "spin2"]
 
-    @njit(inline="always")
+    @njit(inline=INLINE)
     def add_affine(out, col, dofs, values, q, mc, r, quad):  # pragma: no cover - compiled
         r"""``out[i_a, col:col+2]`` += :math:`N_a (q + M C r_a)` (``q`` = :math:`M v`, ``mc`` =
         :math:`M C` row by row, ``r`` the offsets)."""
@@ -38,14 +40,14 @@ if AVAILABLE:
             out[i3, col] += N3 * (q0 + m00 * r3x + m01 * r3y)
             out[i3, col + 1] += N3 * (q1 + m10 * r3x + m11 * r3y)
 
-    @njit(inline="always")
+    @njit(inline=INLINE)
     def jacobian2(k):  # pragma: no cover - compiled
         """The Jacobian (j00, j01, j10, j11) of a cell whose inverse Jacobian is ``k``."""
         k00, k01, k10, k11 = k
         det = k00 * k11 - k01 * k10
         return k11 / det, -k01 / det, -k10 / det, k00 / det
 
-    @njit(inline="always")
+    @njit(inline=INLINE)
     def offsets2(X0, X1, j, simplex):  # pragma: no cover - compiled
         """(r0x, r0y, r1x, r1y, r2x, r2y, r3x, r3y): the offsets of the cell's vertices from the
         particle at reference point (X0, X1) of a cell whose Jacobian is ``j`` =
@@ -60,7 +62,7 @@ if AVAILABLE:
             return r0x, r0y, r1x, r1y, r2x, r2y, 0.0, 0.0
         return r0x, r0y, r1x, r1y, r2x, r2y, j00 * e0 + j01 * e1, j10 * e0 + j11 * e1
 
-    @njit(inline="always")
+    @njit(inline=INLINE)
     def carried2(C, spin, p, X, j, simplex, kind):  # pragma: no cover - compiled
         r"""The matrix P2G maps (c00, c01, c10, c11): ``C[p]``, plus for APIC the rotation that
         gives it the stored spin at the present :math:`D_p = \sum_a N_a r_a r_a^T`
@@ -85,7 +87,7 @@ if AVAILABLE:
             c10 += w
         return c00, c01, c10, c11
 
-    @njit(inline="always")
+    @njit(inline=INLINE)
     def spin2(N, X, j, a, b, simplex):  # pragma: no cover - compiled
         r""":math:`\epsilon : B_p^T = \sum_a N_a (r_a \times v_a)` of the nodal velocities
         ``a`` (x components) and ``b`` (y), with :math:`r_a = J (X_a - X)`:
@@ -104,7 +106,7 @@ if AVAILABLE:
         yx, yy = j00 * X0 + j01 * X1, j10 * X0 + j11 * X1
         return (j00 * u0y - j10 * u0x) + (j01 * u1y - j11 * u1x) - (yx * gy - yy * gx)
 
-    @njit(inline="always")
+    @njit(inline=INLINE)
     def affine_g2p2(p, geo, nodal, state, cutoff, remap, kind):  # pragma: no cover - compiled
         r"""G2P's affine state of particle p (``geo`` = (X0, X1, k, simplex, quad); ``nodal`` =
         (N, the updated grid velocity's x and y components, the gradients (g0x, g0y, ...), the

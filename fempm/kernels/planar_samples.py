@@ -18,6 +18,8 @@ and exact GIMP (``grad_from_values``) weight each sample's point-pass terms by :
 
 from __future__ import annotations
 
+from fempm.kernels.choice import INLINE
+
 import functools
 
 import numpy as np
@@ -36,7 +38,7 @@ if AVAILABLE:
     from fempm.kernels.planar import add_pair, basis, deform, inverse_jacobian, law_stress
     from fempm.kernels.shape import inside_after_pull_back, star_search
 
-    @njit(inline="always")
+    @njit(inline=INLINE)
     def corner_inverse(F, lp, p):  # pragma: no cover - compiled
         r""":math:`R^{-1}` of CPDI1's :math:`R = F_p \operatorname{diag}(\ell_p)` (:mod:`fempm.kernels.cpdi1`)."""
         a, b = F[p, 0, 0] * lp[p, 0], F[p, 0, 1] * lp[p, 1]
@@ -44,13 +46,13 @@ if AVAILABLE:
         det = a * d - b * c
         return d / det, -b / det, -c / det, a / det
 
-    @njit(inline="always")
+    @njit(inline=INLINE)
     def corner_weight(r00, r01, r10, r11, signs, q, share):  # pragma: no cover - compiled
         """CPDI1's gradient weight :math:`Q^{-1} R^{-T} s_q` of corner ``q``."""
         s0, s1 = signs[q, 0], signs[q, 1]
         return share * (r00 * s0 + r10 * s1), share * (r01 * s0 + r11 * s1)
 
-    @njit(inline="always")
+    @njit(inline=INLINE)
     def add_momentum(p, sc, Y, w, cell_dofs, m0, m1, mom, simplex, grad_from_values,
                      corners):  # pragma: no cover - compiled
         r"""MUSL's re-map of particle ``p``'s blended momentum ``(m0, m1)`` over its samples,
@@ -68,7 +70,7 @@ if AVAILABLE:
             i3 = cell_dofs[cq, 3] if QUAD else i0
             add_pair(mom, 0, (i0, i1, i2, i3), (N0, N1, N2, N3), wq * m0, wq * m1, QUAD)
 
-    @njit(inline="always")
+    @njit(inline=INLINE)
     def sample(p, q, Q, sc, Y, w, cell_dofs, simplex, corners):  # pragma: no cover - compiled
         """Sample ``q`` of particle ``p``: its weight (0: none), basis values and cell's dofs."""
         wq = 1.0 / Q if corners else w[p, q]
@@ -77,7 +79,7 @@ if AVAILABLE:
         i0, i1, i2 = cell_dofs[cq, 0], cell_dofs[cq, 1], cell_dofs[cq, 2]
         return wq, N0, N1, N2, N3, i0, i1, i2, cell_dofs[cq, 3] if not simplex else i0
 
-    @njit(inline="always")
+    @njit(inline=INLINE)
     def gather(p, samples, v_new, v_old, at, simplex, affine, grad_from_values, corners, blend, kinematics,
                track):  # pragma: no cover - compiled
         """Particle ``p``'s grid velocity, FLIP increment and velocity gradient summed over its

@@ -23,7 +23,7 @@ from __future__ import annotations
 import numpy as np
 import numpy.typing as npt
 
-from fempm.kernels.choice import pick
+from fempm.kernels.choice import INLINE, pick
 from fempm.kernels.kinematics import skew, sym
 
 __all__ = [
@@ -118,7 +118,7 @@ try:
                         v += dt * lam * tr
                     S[p, i, j] = v
 
-    @njit(inline="always")
+    @njit(inline=INLINE)
     def invariants_at(S, p):  # pragma: no cover - compiled
         """(pressure, s : s) of the stress S[p] (3 x 3)."""
         pr = (S[p, 0, 0] + S[p, 1, 1] + S[p, 2, 2]) / 3
@@ -129,7 +129,7 @@ try:
                 ss += dv * dv
         return pr, ss
 
-    @njit(inline="always")
+    @njit(inline=INLINE)
     def _returned(S, p, pr, scale, pr_new, out):  # pragma: no cover - compiled
         """out[p] = scale * dev(S[p]) + pr_new I, with pr the pressure of S[p]."""
         for i in range(3):

@@ -27,6 +27,8 @@ samples reach gets each share (the sums are the same as over distinct nodes).
 
 from __future__ import annotations
 
+from fempm.kernels.choice import INLINE
+
 import functools
 from types import SimpleNamespace
 
@@ -101,7 +103,7 @@ def _planar(make, cell: str, *flags):
 
 
 if AVAILABLE:
-    @njit(inline="always")
+    @njit(inline=INLINE)
     def particle_basis(p, samples, simplex, affine, D, NK, grad_from_values, corners, scratch):  # pragma: no cover
         r"""The averaged basis of particle ``p`` by cell: the distinct cells its samples lie in
         (``cells``, returned their number) and in row ``k`` the weighted values ``W[k]`` (NK,)

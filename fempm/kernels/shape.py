@@ -33,7 +33,7 @@ from types import SimpleNamespace
 import numpy as np
 import numpy.typing as npt
 
-from fempm.kernels.choice import COMPILED
+from fempm.kernels.choice import COMPILED, INLINE
 
 __all__ = ["AVAILABLE", "BERNSTEIN2", "CELLS", "LAGRANGE2", "MULTILINEAR", "cell_basis", "cell_pull_back", "is_affine",
            "near_pull_back", "space_of", "vertex_star_pull_back"]
@@ -47,7 +47,7 @@ if njit is not None:
     from fempm.kernels.degree2 import degree2
     from fempm.kernels.multilinear import multilinear_pull_back, multilinear_shape
 
-    @njit(inline="always")
+    @njit(inline=INLINE)
     def shape(X, p, K, c, simplex, affine, t, k, N, G, degree=1, bernstein=False):  # pragma: no cover - compiled
         """Values ``N`` (k,) and physical gradients ``G`` (k, t) of particle ``p`` at reference
         point ``X[p]`` in cell ``c`` with inverse Jacobian ``K[c]`` (gdim = tdim = ``t``); on
@@ -92,7 +92,7 @@ if njit is not None:
                     for e in range(t):
                         G[a, e] += g * K[c, j, e]
 
-    @njit(inline="always")
+    @njit(inline=INLINE)
     def shape_values(X, p, simplex, t, k, N):  # pragma: no cover - compiled
         """The values ``N`` (k,) of :func:`shape` alone (no gradients, no Jacobian)."""
         if simplex:
@@ -109,7 +109,7 @@ if njit is not None:
                     v *= X[p, i] if (a >> i) & 1 else 1.0 - X[p, i]
                 N[a] = v
 
-    @njit(inline="always")
+    @njit(inline=INLINE)
     def inside_after_pull_back(x, p, x0, K, c, simplex, t, tol, X, affine=True):  # pragma: no cover - compiled
         """X[p] <- K[c] (x[p] - x0[c]); whether it lies in the reference cell within ``tol``
         (:meth:`fempm.meshes.geometry.CellGeometry.contains`; NaN lies outside). Not
@@ -130,7 +130,7 @@ if njit is not None:
             ok = False
         return ok
 
-    @njit(inline="always")
+    @njit(inline=INLINE)
     def star_search(x, p, x0, K, c0, star, simplex, t, tol, X, affine=True):  # pragma: no cover - compiled
         """The lowest-numbered cell below ``num_cells`` other than ``c0`` sharing a vertex with
         it (``star`` = (``c2v``, ``v_offsets``, ``v_cells``, ``num_cells``),

@@ -18,6 +18,8 @@ The basis on the reference cell (basix's vertex order), :math:`\nabla N_a = \nab
 
 from __future__ import annotations
 
+from fempm.kernels.choice import INLINE
+
 import functools
 
 import numpy as np
@@ -36,13 +38,13 @@ if AVAILABLE:
     from fempm.kernels.shape import inside_after_pull_back, star_search
     from fempm.kernels.solid_affine import add_affine3, carried3, jacobian3, offset3, spin3
 
-    @njit(inline="always")
+    @njit(inline=INLINE)
     def inverse_jacobian(K, c):  # pragma: no cover - compiled
         """The 9 entries of ``K[c]``, row by row."""
         return (K[c, 0, 0], K[c, 0, 1], K[c, 0, 2], K[c, 1, 0], K[c, 1, 1], K[c, 1, 2],
                 K[c, 2, 0], K[c, 2, 1], K[c, 2, 2])
 
-    @njit(inline="always")
+    @njit(inline=INLINE)
     def node(a, X0, X1, X2, k, hexa):  # pragma: no cover - compiled
         r"""(:math:`N_a`, :math:`\nabla N_a`) at the reference point (X0, X1, X2), ``k`` the 9
         entries of the inverse Jacobian."""
@@ -62,7 +64,7 @@ if AVAILABLE:
         return (N, d0 * k[0] + d1 * k[3] + d2 * k[6], d0 * k[1] + d1 * k[4] + d2 * k[7],
                 d0 * k[2] + d1 * k[5] + d2 * k[8])
 
-    @njit(inline="always")
+    @njit(inline=INLINE)
     def gradient_of(c, o, X, k, cell_dofs, v, NK, hexa, out):  # pragma: no cover - compiled
         r"""``out`` = :math:`\sum_a v_a \otimes \nabla N_a` of the nodal velocity ``v`` (3, 3)."""
         for j in range(3):
@@ -77,7 +79,7 @@ if AVAILABLE:
                 out[j, 1] += vj * gy
                 out[j, 2] += vj * gz
 
-    @njit(inline="always")
+    @njit(inline=INLINE)
     def gather(c, o, X, k, cell_dofs, v_new, v_old, blend, kinematics, NK, hexa, spin):  # pragma: no cover
         r"""(:math:`\sum_a N_a v_a^+` (3), with ``blend`` :math:`\sum_a N_a (v_a^+ - v_a)` (3),
         with ``kinematics`` :math:`L = \sum_a v_a^+ \otimes \nabla N_a` (9, row by row), with
@@ -114,7 +116,7 @@ if AVAILABLE:
         w = spin3(jac, X, (u00, u01, u02, u10, u11, u12, u20, u21, u22), (vg0, vg1, vg2)) if with_spin else (0.0, 0.0, 0.0)
         return vg0, vg1, vg2, dv0, dv1, dv2, (L00, L01, L02, L10, L11, L12, L20, L21, L22), w
 
-    @njit(inline="always")
+    @njit(inline=INLINE)
     def g2p_affine3(p, at, velocities, particle, state, sizes, La):  # pragma: no cover - compiled
         r"""G2P's affine state of particle p (``at`` = (X, k, the Jacobian, cell_dofs, c, o),
         ``particle`` = (its :math:`L_p` of ``v_new``, 9 entries, given with ``kinematics``; APIC's
@@ -147,7 +149,7 @@ if AVAILABLE:
                 add_affine3(mom, cell_dofs[c, a], o, node(a, X[0], X[1], X[2], k, hexa)[0],
                             (mp * v[p, 0], mp * v[p, 1], mp * v[p, 2]), mc, offset3(a, X[0], X[1], X[2], jac, hexa))
 
-    @njit(inline="always")
+    @njit(inline=INLINE)
     def deform(F, p, dt, L):  # pragma: no cover - compiled
         r""":math:`F_p \leftarrow (I + \Delta t L) F_p` (``L`` 9 entries, row by row); returns
         the new entries (9, row by row) and :math:`\det F_p`, in scalars (not read back)."""
@@ -169,7 +171,7 @@ if AVAILABLE:
         J = n00 * (n11 * n22 - n12 * n21) - n01 * (n10 * n22 - n12 * n20) + n02 * (n10 * n21 - n11 * n20)
         return (n00, n01, n02, n10, n11, n12, n20, n21, n22), J
 
-    @njit(inline="always")
+    @njit(inline=INLINE)
     def law_stress(sigma, p, code, lam, mu, n, J):  # pragma: no cover - compiled
         r"""``sigma[p]`` of the compiled law ``code`` (else left as it is) for :math:`F` of the
         9 entries ``n`` (row by row), :math:`J = \det F > 0`: the laws of
@@ -194,7 +196,7 @@ if AVAILABLE:
                     else:
                         sigma[p, i, j] = sigma[p, j, i] = 2.0 * mu * (0.5 * (n[3 * i + j] + n[3 * j + i]))
 
-    @njit(inline="always")
+    @njit(inline=INLINE)
     def move_to(x, p, v, vg0, vg1, vg2, own, dt):  # pragma: no cover - compiled
         """``x[p]`` += dt times the grid velocity (or, ``own``, the particle's); whether x and v
         are finite."""

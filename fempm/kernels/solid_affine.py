@@ -17,6 +17,8 @@ the dofs; :math:`C_p = L_p` (degree 1).
 
 from __future__ import annotations
 
+from fempm.kernels.choice import INLINE
+
 from fempm.kernels.affine import APIC, THIN
 from fempm.kernels.shape import AVAILABLE
 
@@ -27,7 +29,7 @@ if AVAILABLE:
 
     __all__ += ["add_affine3", "carried3", "jacobian3", "offset3", "spin3"]
 
-    @njit(inline="always")
+    @njit(inline=INLINE)
     def jacobian3(K, c):  # pragma: no cover - compiled
         """The Jacobian of cell ``c`` (9 entries, row by row): the inverse of ``K[c]``."""
         a, b, e = K[c, 0, 0], K[c, 0, 1], K[c, 0, 2]
@@ -38,7 +40,7 @@ if AVAILABLE:
         return (c00 * inv, c01 * inv, c02 * inv, (g * h - d * k) * inv, (a * k - e * h) * inv, (e * d - a * g) * inv,
                 (d * i - f * h) * inv, (b * h - a * i) * inv, (a * f - b * d) * inv)
 
-    @njit(inline="always")
+    @njit(inline=INLINE)
     def offset3(a, X0, X1, X2, j, hexa):  # pragma: no cover - compiled
         r""":math:`r_a = J (X_a - X)` of vertex ``a`` (DOLFINx's order) from the reference point
         (X0, X1, X2), ``j`` the Jacobian's 9 entries."""
@@ -50,7 +52,7 @@ if AVAILABLE:
         return (j[0] * d0 + j[1] * d1 + j[2] * d2, j[3] * d0 + j[4] * d1 + j[5] * d2,
                 j[6] * d0 + j[7] * d1 + j[8] * d2)
 
-    @njit(inline="always")
+    @njit(inline=INLINE)
     def carried3(C, spin, p, X, j, hexa, kind):  # pragma: no cover - compiled
         r"""The matrix P2G maps (9 entries, row by row): ``C[p]``, plus for APIC the rotation
         :math:`W(\omega)` that gives it the stored spin at the present :math:`D_p = J M J^T`,
@@ -102,7 +104,7 @@ if AVAILABLE:
         w2 = (q02 * s0 + q12 * s1 + q22 * s2) * inv
         return c00, c01 - w2, c02 + w1, c10 + w2, c11, c12 - w0, c20 - w1, c21 + w0, c22
 
-    @njit(inline="always")
+    @njit(inline=INLINE)
     def add_affine3(out, i, col, N, q, mc, r):  # pragma: no cover - compiled
         r"""``out[i, col:col+3]`` += :math:`N (q + M C r)` (``q`` = :math:`M v`, ``mc`` =
         :math:`M C`, 9 entries row by row, ``r`` the dof's offset)."""
@@ -111,7 +113,7 @@ if AVAILABLE:
         out[i, col + 1] += N * (q[1] + mc[3] * r0 + mc[4] * r1 + mc[5] * r2)
         out[i, col + 2] += N * (q[2] + mc[6] * r0 + mc[7] * r1 + mc[8] * r2)
 
-    @njit(inline="always")
+    @njit(inline=INLINE)
     def spin3(j, X, u, vg):  # pragma: no cover - compiled
         r"""APIC's spin :math:`\sum_a N_a r_a \times v_a = \sum_q J_q \times u_q - (J X) \times v_g`
         of the nodal velocities :math:`v_a`, with :math:`r_a = J (X_a - X)`, the Jacobian's
