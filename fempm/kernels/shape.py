@@ -109,7 +109,7 @@ if njit is not None:
                     v *= X[p, i] if (a >> i) & 1 else 1.0 - X[p, i]
                 N[a] = v
 
-    @njit(inline=INLINE)
+    @njit(inline="always")  # (always: the multilinear branch types only where affine is the caller's constant)
     def inside_after_pull_back(x, p, x0, K, c, simplex, t, tol, X, affine=True):  # pragma: no cover - compiled
         """X[p] <- K[c] (x[p] - x0[c]); whether it lies in the reference cell within ``tol``
         (:meth:`fempm.meshes.geometry.CellGeometry.contains`; NaN lies outside). Not
@@ -130,7 +130,7 @@ if njit is not None:
             ok = False
         return ok
 
-    @njit(inline=INLINE)
+    @njit(inline="always")  # (always: the multilinear branch types only where affine is the caller's constant)
     def star_search(x, p, x0, K, c0, star, simplex, t, tol, X, affine=True):  # pragma: no cover - compiled
         """The lowest-numbered cell below ``num_cells`` other than ``c0`` sharing a vertex with
         it (``star`` = (``c2v``, ``v_offsets``, ``v_cells``, ``num_cells``),
