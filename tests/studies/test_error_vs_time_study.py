@@ -29,7 +29,7 @@ def test_csv_has_the_fixed_columns_and_every_run(study):
         with open(Path(out) / "error_vs_time.csv", newline="") as f:
             reader = csv.DictReader(f)
             assert reader.fieldnames == ["problem", "mesh", "degree", "mass", "domain", "scheme", "cells", "ppc", "error",
-                                         "wall_s", "repeats", "threads", "pareto", "integration"]
+                                         "wall_s", "repeats", "threads", "pareto", "integration", "transfer"]
             assert len(list(reader)) == expected
         assert (Path(out) / "error_vs_time.md").read_text().count("## ") == len(evt.SWEEPS)
         assert (Path(out) / "error_vs_time.md").read_text().splitlines()[2].startswith("Made by `")
