@@ -163,7 +163,8 @@ class ImplicitStep:
         def residual(x, r) -> None:
             du = increment(x)
             G = op.gradients(du)
-            if inverts(G) or inverts(op.law_gradients(G)):  # outside the residual's domain: an infinite norm,
+            law = op.law_gradients(G)  # (G itself without F-bar: its determinants are checked once)
+            if inverts(G) or (law is not G and inverts(law)):  # outside the residual's domain: an infinite norm,
                 r.set(np.inf)  # which the line search steps back from
                 return
             R = op.internal_force(op.forces(G)) - fext
