@@ -18,7 +18,6 @@ Codes of the affine transfers (:attr:`fempm.transfer.transfers.Transfer.kind`): 
 from __future__ import annotations
 
 from fempm.kernels.choice import INLINE
-
 from fempm.kernels.shape import AVAILABLE
 
 __all__ = ["APIC", "NONE", "THICK", "THIN", "TPIC"]

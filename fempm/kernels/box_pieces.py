@@ -16,7 +16,6 @@ of its centroid (:func:`fempm.kernels.boxes.box_samples` sums them into exact GI
 from __future__ import annotations
 
 from fempm.kernels.choice import INLINE
-
 from fempm.kernels.shape import AVAILABLE
 
 __all__ = ["tetrahedron_piece", "triangle_piece"]

@@ -31,13 +31,12 @@ cell's piece is the intersection of the two boxes.
 
 from __future__ import annotations
 
-from fempm.kernels.choice import INLINE
-
 import functools
 
 import numpy as np
 
 from fempm.kernels.bundles import Star
+from fempm.kernels.choice import INLINE
 from fempm.kernels.shape import AVAILABLE
 
 __all__ = ["box_samples"]

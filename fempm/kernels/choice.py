@@ -50,8 +50,6 @@ def _cache_folder(mode: str) -> str:
 
 
 if COMPILED and INLINE != "always":
-    import numba.core.config
-
     numba.core.config.CACHE_DIR = _cache_folder(INLINE)
 
 

@@ -17,12 +17,11 @@ solves) the same update from them. :func:`group_velocity`: the first part alone 
 
 from __future__ import annotations
 
-from fempm.kernels.choice import INLINE
-
 import functools
 
 import numpy as np
 
+from fempm.kernels.choice import INLINE
 from fempm.kernels.shape import AVAILABLE
 
 __all__ = ["centre_of_mass", "grid_update", "group_velocity", "largest_total"]

@@ -10,10 +10,9 @@ and :func:`corner_geometry`, one 2D domain's in closed form, for CPDI2's moving 
 
 from __future__ import annotations
 
-from fempm.kernels.choice import INLINE
-
 import numpy as np
 
+from fempm.kernels.choice import INLINE
 from fempm.kernels.shape import AVAILABLE
 
 __all__ = ["AVAILABLE", "corner_geometry", "inverse", "planar_geometry", "simplex_geometry", "tensor_geometry"]

@@ -19,13 +19,12 @@ does not hold).
 
 from __future__ import annotations
 
-from fempm.kernels.choice import INLINE
-
 import functools
 
 import numpy as np
 
 from fempm.kernels.bundles import Star
+from fempm.kernels.choice import INLINE
 from fempm.kernels.shape import AVAILABLE, CELLS, is_affine
 
 __all__ = ["corner_frame", "corner_gradient", "cpdi1_samples", "locate_corners"]

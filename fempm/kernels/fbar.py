@@ -26,12 +26,11 @@ particle basis (``tests/kernels/test_fbar_kernels.py``).
 
 from __future__ import annotations
 
-from fempm.kernels.choice import INLINE
-
 import functools
 
 import numpy as np
 
+from fempm.kernels.choice import INLINE
 from fempm.kernels.shape import AVAILABLE, CELLS, is_affine, space_of
 
 __all__ = ["deform_kernel", "measure_kernel", "pressure_kernel"]

@@ -19,12 +19,11 @@ kept output of the next :func:`mass_apply` in their pass.
 
 from __future__ import annotations
 
-from fempm.kernels.choice import INLINE
-
 import functools
 
 import numpy as np
 
+from fempm.kernels.choice import INLINE
 from fempm.kernels.shape import AVAILABLE, CELLS, MULTILINEAR, is_affine, space_of
 
 __all__ = ["add_column", "coupled", "generic_mass_apply", "lumped_solve", "mass_apply", "planar_mass_apply",

@@ -35,8 +35,6 @@ its small loops unroll (a kernel with run-time sizes is 2-4x slower), and numba 
 
 from __future__ import annotations
 
-from fempm.kernels.choice import INLINE
-
 import functools
 from types import SimpleNamespace
 
@@ -57,6 +55,7 @@ from fempm.kernels.bundles import (
     Stable,
     State,
 )
+from fempm.kernels.choice import INLINE
 from fempm.kernels.particle_checks import (
     count_j,
     stable_time,

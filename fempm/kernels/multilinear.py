@@ -17,9 +17,9 @@ form on quadrilaterals for a moving particle, which knows the size of its first 
 
 from __future__ import annotations
 
-from fempm.kernels.choice import INLINE
-
 import numpy as np
+
+from fempm.kernels.choice import INLINE
 
 __all__ = ["NEWTON_FLOOR", "NEWTON_MAX", "NEWTON_TOL", "quad_pull_back"]
 

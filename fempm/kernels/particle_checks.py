@@ -4,10 +4,9 @@ checks of J."""
 
 from __future__ import annotations
 
-from fempm.kernels.choice import INLINE
-
 import numpy as np
 
+from fempm.kernels.choice import INLINE
 from fempm.kernels.shape import AVAILABLE
 
 #: the codes of the laws the passes evaluate themselves (0: the law's own ``stress``)

@@ -13,7 +13,6 @@ took 5x as long.)
 from __future__ import annotations
 
 from fempm.kernels.choice import INLINE
-
 from fempm.kernels.shape import AVAILABLE
 
 __all__ = ["AVAILABLE", "add_patch", "average_pressure", "averages", "nodal_ratio"]

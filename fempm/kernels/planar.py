@@ -17,13 +17,12 @@ The basis on the reference cell (basix's vertex order), :math:`\nabla N_a = \nab
 
 from __future__ import annotations
 
-from fempm.kernels.choice import INLINE
-
 import functools
 
 import numpy as np
 
 from fempm.kernels.bundles import NO_AVERAGE
+from fempm.kernels.choice import INLINE
 from fempm.kernels.particle_checks import LINEAR_ELASTIC, NEO_HOOKEAN
 from fempm.kernels.shape import AVAILABLE
 

@@ -9,9 +9,8 @@ On an affine cell the offsets of the particle's dofs are
 
 from __future__ import annotations
 
-from fempm.kernels.choice import INLINE
-
 from fempm.kernels.affine import APIC, THIN
+from fempm.kernels.choice import INLINE
 from fempm.kernels.shape import AVAILABLE
 
 __all__: list[str] = []

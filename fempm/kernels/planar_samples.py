@@ -18,12 +18,11 @@ and exact GIMP (``grad_from_values``) weight each sample's point-pass terms by :
 
 from __future__ import annotations
 
-from fempm.kernels.choice import INLINE
-
 import functools
 
 import numpy as np
 
+from fempm.kernels.choice import INLINE
 from fempm.kernels.shape import AVAILABLE
 
 __all__ = ["g2p_kernel", "mass_apply_kernel", "scatter_kernel"]

@@ -27,8 +27,6 @@ samples reach gets each share (the sums are the same as over distinct nodes).
 
 from __future__ import annotations
 
-from fempm.kernels.choice import INLINE
-
 import functools
 from types import SimpleNamespace
 
@@ -36,6 +34,7 @@ import numpy as np
 
 from fempm.kernels import planar_samples
 from fempm.kernels.bundles import Basis, Corners, Forces, GridStep, Laws, Moves, Outputs, Samples, Stable, State
+from fempm.kernels.choice import INLINE
 from fempm.kernels.shape import AVAILABLE, CELLS, MULTILINEAR, is_affine
 
 __all__ = ["kernels_for"]

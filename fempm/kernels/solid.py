@@ -18,12 +18,11 @@ The basis on the reference cell (basix's vertex order), :math:`\nabla N_a = \nab
 
 from __future__ import annotations
 
-from fempm.kernels.choice import INLINE
-
 import functools
 
 import numpy as np
 
+from fempm.kernels.choice import INLINE
 from fempm.kernels.shape import AVAILABLE
 
 __all__ = ["g2p_kernel", "scatter_kernel"]

@@ -17,9 +17,8 @@ the dofs; :math:`C_p = L_p` (degree 1).
 
 from __future__ import annotations
 
-from fempm.kernels.choice import INLINE
-
 from fempm.kernels.affine import APIC, THIN
+from fempm.kernels.choice import INLINE
 from fempm.kernels.shape import AVAILABLE
 
 __all__: list[str] = []

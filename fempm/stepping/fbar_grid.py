@@ -104,7 +104,7 @@ class FBarPointGrid(PointGrid):
         patch = self.averaged()
         if self.cell in PLANAR:  # the averaged kinematics inside the point grid's pass
             return super().particle_pass(v_new, v_old, dt, blend=blend, kinematics=True, move=move, remap=remap,
-                                average=Averaged(patch, value, self.by_trace, len(self.by_trace)))
+                                         average=Averaged(patch, value, self.by_trace, len(self.by_trace)))
         counts = self._deform(where, patch, self.by_trace, float(dt), L, value, self.particle_state(),
                               self.laws)
         nonfinite = self.kinematics_checks(counts, L if self.any_external else None, dt)
