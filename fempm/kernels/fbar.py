@@ -42,7 +42,7 @@ if AVAILABLE:
     from fempm.kernels.kinematics import _det
     from fempm.kernels.kinematics import law_at
     from fempm.kernels.particle_checks import count_j
-    from fempm.kernels.patch import add_patch, nodal_ratio
+    from fempm.kernels.patch import BLOCK_SHIFT, add_patch, nodal_ratio
     from fempm.kernels.planar import basis, inverse_jacobian
     from fempm.kernels.shape import shape, shape_values
 
@@ -88,15 +88,18 @@ def _sizes(cell: str) -> tuple:
 @functools.cache
 def measure_kernel(cell: str):
     r"""The first pass (see the module): ``measure(where, v_new, F, volume, body, by_trace, dt,
-    L, value, out)`` writes :math:`L_p` into ``L`` (n, d, d) and the measure into ``value``
-    (n,), and adds the particles' volumes and measures to ``out`` (dofs, 2 B); ``by_trace``
-    (B,) says which bodies' laws average :math:`\mathrm{tr}\,F`."""
+    L, value, out, dirty)`` writes the measure into ``value`` (n,) and :math:`L_p` into ``L`` (n,
+    d, d; not on :data:`fempm.kernels.lumped.PLANAR` cells, whose G2P pass computes it again),
+    and adds the particles' volumes and measures to ``out`` (dofs, 2 B), marking the blocks it
+    writes in ``dirty`` (:mod:`fempm.kernels.patch`); ``by_trace`` (B,) says which bodies' laws
+    average :math:`\mathrm{tr}\,F`."""
     D, NK, SIMPLEX, AFFINE, DEGREE, BERNSTEIN = _sizes(cell)
     PLANAR, QUAD = D == 2 and DEGREE == 1, not SIMPLEX
 
     @njit(inline=INLINE)
-    def measure2(p, c, arrays, by_trace, dt, L, value, out, bodies):  # pragma: no cover - compiled
+    def measure2(p, c, arrays, by_trace, dt, value, out, dirty):  # pragma: no cover - compiled
         X, K, cell_dofs, v_new, F, volume, body = arrays
+        bodies = out.shape[1] // 2
         X0, X1 = X[p, 0], X[p, 1]
         k00, k01, k10, k11 = inverse_jacobian(X0, X1, K, c, AFFINE)
         N0, N1, N2, N3, g0x, g0y, g1x, g1y, g2x, g2y, g3x, g3y = basis(X0, X1, k00, k01, k10, k11, SIMPLEX)
@@ -110,7 +113,6 @@ def measure_kernel(cell: str):
         if QUAD:
             a3, b3 = v_new[i3, 0], v_new[i3, 1]
             L00, L01, L10, L11 = L00 + a3 * g3x, L01 + a3 * g3y, L10 + b3 * g3x, L11 + b3 * g3y
-        L[p, 0, 0], L[p, 0, 1], L[p, 1, 0], L[p, 1, 1] = L00, L01, L10, L11
         b = body[p]
         if by_trace[b]:
             f = dt * (L00 * F[p, 0, 0] + L01 * F[p, 1, 0] + L10 * F[p, 0, 1] + L11 * F[p, 1, 1])
@@ -125,19 +127,21 @@ def measure_kernel(cell: str):
         out[i1, bodies + b] += w1 * f
         out[i2, b] += w2
         out[i2, bodies + b] += w2 * f
+        dirty[i0 >> BLOCK_SHIFT], dirty[i1 >> BLOCK_SHIFT], dirty[i2 >> BLOCK_SHIFT] = 1, 1, 1
         if QUAD:
             out[i3, b] += w3
             out[i3, bodies + b] += w3 * f
+            dirty[i3 >> BLOCK_SHIFT] = 1
 
     @njit(cache=True, error_model="numpy")
-    def measure(where, v_new, F, volume, body, by_trace, dt, L, value, out):  # pragma: no cover - compiled
+    def measure(where, v_new, F, volume, body, by_trace, dt, L, value, out, dirty):  # pragma: no cover - compiled
         cells, X, K, cell_dofs = where
         bodies = out.shape[1] // 2
         N, G = np.empty(NK), np.empty((NK, D))
         for p in range(len(cells)):
             c = cells[p]
             if PLANAR:  # scalar code (as fempm.kernels.planar)
-                measure2(p, c, (X, K, cell_dofs, v_new, F, volume, body), by_trace, dt, L, value, out, bodies)
+                measure2(p, c, (X, K, cell_dofs, v_new, F, volume, body), by_trace, dt, value, out, dirty)
                 continue
             shape(X, p, K, c, SIMPLEX, AFFINE, D, NK, N, G, DEGREE, BERNSTEIN)
             for j in range(D):
@@ -159,7 +163,7 @@ def measure_kernel(cell: str):
             else:
                 f = increment_det(L, p, dt, D)
             value[p] = f
-            add_patch(out, (N, NK, cell_dofs, c), b, bodies, volume[p], f)
+            add_patch(out, dirty, (N, NK, cell_dofs, c), b, bodies, volume[p], f)
 
     return measure
 
@@ -227,12 +231,13 @@ def deform_kernel(cell: str, keep_L: bool):
 
 @functools.cache
 def pressure_kernel(cell: str):
-    r"""The third pass (see the module): ``pressures(where, volume, sigma, body, out)`` adds the
-    particles' volumes and pressures :math:`\mathrm{tr}\,\sigma / d` to ``out`` (dofs, 2 B)."""
+    r"""The third pass (see the module): ``pressures(where, volume, sigma, body, out, dirty)`` adds
+    the particles' volumes and pressures :math:`\mathrm{tr}\,\sigma / d` to ``out`` (dofs, 2 B),
+    marking the blocks it writes in ``dirty``."""
     D, NK, SIMPLEX, AFFINE, DEGREE, BERNSTEIN = _sizes(cell)
 
     @njit(cache=True, error_model="numpy")
-    def pressures(where, volume, sigma, body, out):  # pragma: no cover - compiled
+    def pressures(where, volume, sigma, body, out, dirty):  # pragma: no cover - compiled
         cells, X, K, cell_dofs = where
         bodies = out.shape[1] // 2
         N, G = np.empty(NK), np.empty((NK, D))
@@ -242,6 +247,6 @@ def pressure_kernel(cell: str):
             t = 0.0
             for j in range(D):
                 t += sigma[p, j, j]
-            add_patch(out, (N, NK, cell_dofs, c), body[p], bodies, volume[p], t / D)
+            add_patch(out, dirty, (N, NK, cell_dofs, c), body[p], bodies, volume[p], t / D)
 
     return pressures

@@ -28,10 +28,10 @@ import numpy.typing as npt
 from fempm.kernels import fbar as kb
 from fempm.kernels.bundles import NO_AFFINE, NO_GROUPS, Affine, Averaged, Basis, Forces, Groups, Stable, State
 from fempm.kernels.lumped import PLANAR
-from fempm.kernels.patch import averages
+from fempm.kernels.patch import BLOCK_SHIFT, averages, blocks, clear_blocks
 from fempm.stepping.fbar import trace_measure
 from fempm.stepping.lumped import PointGrid
-from fempm.stepping.nodal import sum_ghosts
+from fempm.stepping.nodal import exchanged_rows, sum_ghosts
 from fempm.stepping.state import StepState
 
 __all__ = ["FBarPointGrid"]
@@ -47,6 +47,10 @@ class FBarPointGrid(PointGrid):
         bodies = len(state.materials)
         self.by_trace = trace_measure(state.materials)
         self._patch = self.nodal_array(2 * bodies)  # [sum V N | sum V N f] per body
+        rows = len(self._patch[1])
+        self._always = np.zeros(blocks(rows), dtype=np.uint8)  # the blocks a ghost exchange writes
+        self._always[np.flatnonzero(exchanged_rows(self.index_map)) >> BLOCK_SHIFT] = 1
+        self._dirty = np.ones_like(self._always)  # the blocks written since the last clear: all at first
         self._measure = kb.measure_kernel(self.cell)
         self._deform = kb.deform_kernel(self.cell, self.any_external)
         self._pressures = kb.pressure_kernel(self.cell)
@@ -57,17 +61,18 @@ class FBarPointGrid(PointGrid):
         p = self.state.particles
         return Basis(p.cells, p.X, self.K, self.cell_dofs)
 
-    def patch_sums(self) -> npt.NDArray:
-        """The kept nodal patch sums, zeroed."""
+    def patch_sums(self) -> tuple[npt.NDArray, npt.NDArray]:
+        """The kept nodal patch sums, zeroed, and their blocks' dirty marks
+        (:mod:`fempm.kernels.patch`: the blocks written since are cleared, not every dof)."""
         out = self._patch[1]
-        out.fill(0.0)
-        return out
+        clear_blocks(out, self._dirty, self._always)
+        return out, self._dirty
 
     def averaged(self) -> npt.NDArray:
         """The kept patch sums summed over ranks and turned into nodal averages
         (:func:`fempm.kernels.patch.averages`). Collective."""
         sum_ghosts(self._patch[0])
-        averages(self._patch[1])
+        averages(self._patch[1], self._dirty)
         return self._patch[1]
 
     def pressure_sums(self) -> npt.NDArray:
@@ -75,7 +80,7 @@ class FBarPointGrid(PointGrid):
         ghost exchange), for the P2G pass to average. Collective."""
         p = self.state.particles
         f = p.fields
-        self._pressures(self.where(), p.volume, f["sigma"], f["body"], self.patch_sums())
+        self._pressures(self.where(), p.volume, f["sigma"], f["body"], *self.patch_sums())
         return self.averaged()
 
     def scatter_pass(self, state: State, forces: Forces, out, cm: int, cv: int, cf: int, stable: Stable, *,
@@ -100,7 +105,7 @@ class FBarPointGrid(PointGrid):
             self._L, self._value = np.empty((n, self.d, self.d)), np.empty(n)
         L, value = self._L, self._value
         self._measure(where, v_new, f["F"], p.volume, f["body"], self.by_trace, float(dt), L, value,
-                      self.patch_sums())
+                      *self.patch_sums())
         patch = self.averaged()
         if self.cell in PLANAR:  # the averaged kinematics inside the point grid's pass
             return super().particle_pass(v_new, v_old, dt, blend=blend, kinematics=True, move=move, remap=remap,

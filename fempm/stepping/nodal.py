@@ -12,7 +12,7 @@ import numpy.typing as npt
 
 from fempm.stepping.state import StepState
 
-__all__ = ["NodalLayout", "NodalMass", "kept_nodal_array", "sum_ghosts"]
+__all__ = ["NodalLayout", "NodalMass", "exchanged_rows", "kept_nodal_array", "sum_ghosts"]
 
 
 def sum_ghosts(vec) -> None:
@@ -21,6 +21,21 @@ def sum_ghosts(vec) -> None:
     if vec is not None:
         vec.scatter_reverse(dolfinx.la.InsertMode.add)
         vec.scatter_forward()
+
+
+def exchanged_rows(index_map) -> npt.NDArray[np.bool_]:
+    """(owned + ghost dofs,) bool: the rows :func:`sum_ghosts` may write, the ghosts and the owned
+    dofs that other ranks hold as ghosts (none on one rank). Collective."""
+    n = index_map.size_local + index_map.num_ghosts
+    if index_map.comm.size == 1 and index_map.num_ghosts == 0:
+        return np.zeros(n, dtype=np.bool_)
+    vec = dolfinx.la.vector(index_map, bs=1)
+    vec.array[:] = 0.0
+    vec.array[index_map.size_local:] = 1.0
+    vec.scatter_reverse(dolfinx.la.InsertMode.add)  # > 0 on the owned dofs ghosted elsewhere
+    out = vec.array > 0.0
+    out[index_map.size_local:] = True
+    return out
 
 
 def kept_nodal_array(index_map, k: int) -> tuple:

@@ -1,7 +1,8 @@
 """The compiled F-bar passes (fempm.kernels.fbar) against their numpy reference, FBar.rate and
 patch_average of fempm.stepping.fbar on the particle basis: the averaged deformation, volume and
 stress of both measures (det F and tr F bodies) and the nodal pressure averages, on every cell
-type of the separate pass (the planar cells' G2P pass: tests/stepping/test_fbar_compiled.py)."""
+type (the G2P pass that takes the average on fempm.kernels.lumped.PLANAR's cells:
+tests/stepping/test_fbar_compiled.py)."""
 
 import dolfinx.fem
 import dolfinx.mesh as dm
@@ -12,7 +13,8 @@ from mpi4py import MPI
 import fempm
 from fempm.kernels import fbar as kb
 from fempm.kernels.bundles import Basis, Laws, State
-from fempm.kernels.patch import averages
+from fempm.kernels.lumped import PLANAR
+from fempm.kernels.patch import BLOCK_ROWS, BLOCK_SHIFT, averages, blocks, clear_blocks
 from fempm.kernels.particle_checks import LINEAR_ELASTIC, NEO_HOOKEAN
 from fempm.materials import LinearElastic, NeoHookean
 from fempm.stepping.fbar import FBar, patch_average, trace_measure
@@ -21,6 +23,7 @@ from fempm.transfer.basis import ParticleBasis
 comm = MPI.COMM_SELF
 
 MESHES = {
+    "interval": lambda: dm.create_unit_interval(comm, 9),
     "triangle": lambda: dm.create_unit_square(comm, 5, 4),
     "quadrilateral": lambda: dm.create_unit_square(comm, 5, 4, dm.CellType.quadrilateral),
     "tetrahedron": lambda: dm.create_unit_cube(comm, 3, 3, 2),
@@ -29,7 +32,7 @@ MESHES = {
 
 
 @pytest.mark.parametrize(("cell", "keep_L"), [pytest.param(cell, keep_L, marks=() if (cell, keep_L) in (
-    ("triangle", True), ("hexahedron", False)) else pytest.mark.slow) for cell in MESHES for keep_L in (True, False)])
+    ("triangle", True), ("hexahedron", False), ("interval", True)) else pytest.mark.slow) for cell in MESHES for keep_L in (True, False)])
 def test_compiled_fbar_passes_equal_the_numpy_average(cell, keep_L):
     mesh = MESHES[cell]()
     d = mesh.geometry.dim
@@ -52,12 +55,16 @@ def test_compiled_fbar_passes_equal_the_numpy_average(cell, keep_L):
     name = cell
     _, K = p.locator.geometry.kernel_geometry
     where = Basis(p.cells, p.X, K, np.ascontiguousarray(V.dofmap.list, dtype=np.int32))
-    patch = np.zeros((len(v_nodal), 4))
-    Lc, value = np.empty((n, d, d)), np.empty(n)
+    patch, dirty = np.zeros((len(v_nodal), 4)), np.zeros(blocks(len(v_nodal)), dtype=np.uint8)
+    Lc, value = np.full((n, d, d), np.nan), np.empty(n)
     F = F0.copy()
-    kb.measure_kernel(name)(where, v_nodal, F, p.volume, body, by_trace, dt, Lc, value, patch)
+    kb.measure_kernel(name)(where, v_nodal, F, p.volume, body, by_trace, dt, Lc, value, patch, dirty)
+    if cell in PLANAR:  # the G2P pass computes L_p again: the measure pass keeps none
+        assert np.isnan(Lc).all()
+        Lc = L.copy()  # (the deform pass, as on the other cells)
     np.testing.assert_allclose(Lc, L, rtol=0, atol=1e-13)
-    averages(patch)
+    assert dirty[np.flatnonzero(patch.any(axis=1)) >> BLOCK_SHIFT].all()  # every row written is in a marked block
+    averages(patch, dirty)
     volume0 = p.volume.copy()
     volume, sigma = np.empty(n), np.zeros((n, d, d))
     laws = Laws(np.array([NEO_HOOKEAN, LINEAR_ELASTIC]), np.array([m.lame[0] for m in materials]),
@@ -75,8 +82,30 @@ def test_compiled_fbar_passes_equal_the_numpy_average(cell, keep_L):
     # the pressures' nodal averages, read at the particles
     sigma = rng.standard_normal((n, d, d))
     patch.fill(0.0)
-    kb.pressure_kernel(name)(where, p.volume, sigma, body, patch)
-    averages(patch)
+    kb.pressure_kernel(name)(where, p.volume, sigma, body, patch, dirty)
+    averages(patch, dirty)
     reference = patch_average(basis, p.volume, body, 2, np.trace(sigma, axis1=1, axis2=2) / d)
     got = np.einsum("pa,pa->p", basis.values, patch[basis.dofs, 2 + body[:, None]])
     np.testing.assert_allclose(got, reference, rtol=0, atol=1e-13)
+
+
+def test_the_dirty_blocks_clear_and_average_every_row_written():
+    """averages and clear_blocks visit the marked blocks only: the same averages as over every
+    row, every written row zeroed, the marks reset to the blocks a ghost exchange writes."""
+    rng = np.random.default_rng(3)
+    rows = 5 * BLOCK_ROWS + 3  # a last block cut short
+    patch, dirty = np.zeros((rows, 4)), np.zeros(blocks(rows), dtype=np.uint8)
+    written = rng.choice(rows, 20, replace=False)
+    written[0] = rows - 1
+    patch[written] = rng.uniform(0.5, 1.0, (20, 4))
+    patch[written[1], 0] = 0.0  # a row of no weight for body 0: its average is 0
+    dirty[written >> BLOCK_SHIFT] = 1
+    full = patch.copy()
+    full[:, 2:] = np.where(full[:, :2] > 0, full[:, 2:] / np.where(full[:, :2] > 0, full[:, :2], 1.0), 0.0)
+    averages(patch, dirty)
+    np.testing.assert_array_equal(patch, full)
+    always = np.zeros_like(dirty)
+    always[-1] = 1
+    clear_blocks(patch, dirty, always)
+    assert not patch.any()
+    np.testing.assert_array_equal(dirty, always)
