@@ -35,8 +35,9 @@ bundle         members
 ``Groups``     multi-field contact: ``group`` per particle (or empty), column ``stride``,
                ``rigid`` per group
 ``Averaged``   F-bar's kinematics in the planar G2P pass (:mod:`fempm.kernels.fbar`): the nodal
-               averages ``patch`` (dofs, 2 B), each particle's measure ``value`` (n,), ``by_trace`` (B,),
-               the number of bodies B
+               averages ``patch`` (dofs, 2 B) of the measures (which the pass computes again for
+               each particle), ``by_trace`` (B,), the number of bodies B; the next force pass's pressure sums ``sums`` (dofs, 2 B;
+               (0, 2): none) the pass adds to and their blocks' ``dirty`` marks
 ``Affine``     APIC/TPIC (:mod:`fempm.kernels.affine`): the particles' affine matrices ``C``
                (n, d, d), APIC's spins ``spin`` (n, 1 or 3), the dofs' coordinates ``xi``, the
                grid velocity ``v`` G2P takes the affine matrices from where a particle's
@@ -66,11 +67,12 @@ Stable = namedtuple("Stable", "h c")
 Groups = namedtuple("Groups", "group stride rigid")
 Corners = namedtuple("Corners", "yc moved bad sample_cells")
 Affine = namedtuple("Affine", "C spin xi v weak")
-Averaged = namedtuple("Averaged", "patch value by_trace bodies")
+Averaged = namedtuple("Averaged", "patch by_trace bodies sums dirty",
+                      defaults=(np.zeros((0, 2)), np.zeros(0, np.uint8)))
 
 #: one velocity field: no group per particle, no rigid group
 NO_GROUPS = Groups(np.zeros(0, dtype=np.int64), 0, np.zeros(1, dtype=np.bool_))
 #: no F-bar average
-NO_AVERAGE = Averaged(np.zeros((0, 2)), np.zeros(0), np.zeros(0, np.bool_), 1)
+NO_AVERAGE = Averaged(np.zeros((0, 2)), np.zeros(0, np.bool_), 1, np.zeros((0, 2)), np.zeros(0, np.uint8))
 #: no affine transfer
 NO_AFFINE = Affine(np.zeros((0, 1, 1)), np.zeros((0, 1)), np.zeros((0, 1)), np.zeros((0, 1)), np.zeros(0, np.uint8))

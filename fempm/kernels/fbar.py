@@ -43,7 +43,7 @@ if AVAILABLE:
     from fempm.kernels.kinematics import law_at
     from fempm.kernels.particle_checks import count_j
     from fempm.kernels.patch import BLOCK_SHIFT, add_patch, nodal_ratio
-    from fempm.kernels.planar import basis, inverse_jacobian
+    from fempm.kernels.planar import basis, increment_measure, inverse_jacobian
     from fempm.kernels.shape import shape, shape_values
 
     @njit(inline=INLINE)
@@ -88,16 +88,16 @@ def _sizes(cell: str) -> tuple:
 @functools.cache
 def measure_kernel(cell: str):
     r"""The first pass (see the module): ``measure(where, v_new, F, volume, body, by_trace, dt,
-    L, value, out, dirty)`` writes the measure into ``value`` (n,) and :math:`L_p` into ``L`` (n,
-    d, d; not on :data:`fempm.kernels.lumped.PLANAR` cells, whose G2P pass computes it again),
-    and adds the particles' volumes and measures to ``out`` (dofs, 2 B), marking the blocks it
+    L, value, out, dirty)`` writes :math:`L_p` into ``L`` (n, d, d) and the measure into ``value``
+    (n,) (neither on :data:`fempm.kernels.lumped.PLANAR` cells, whose G2P pass computes both
+    again: :func:`fempm.kernels.planar.increment_measure`), and adds the particles' volumes and measures to ``out`` (dofs, 2 B), marking the blocks it
     writes in ``dirty`` (:mod:`fempm.kernels.patch`); ``by_trace`` (B,) says which bodies' laws
     average :math:`\mathrm{tr}\,F`."""
     D, NK, SIMPLEX, AFFINE, DEGREE, BERNSTEIN = _sizes(cell)
     PLANAR, QUAD = D == 2 and DEGREE == 1, not SIMPLEX
 
     @njit(inline=INLINE)
-    def measure2(p, c, arrays, by_trace, dt, value, out, dirty):  # pragma: no cover - compiled
+    def measure2(p, c, arrays, by_trace, dt, out, dirty):  # pragma: no cover - compiled
         X, K, cell_dofs, v_new, F, volume, body = arrays
         bodies = out.shape[1] // 2
         X0, X1 = X[p, 0], X[p, 1]
@@ -114,11 +114,7 @@ def measure_kernel(cell: str):
             a3, b3 = v_new[i3, 0], v_new[i3, 1]
             L00, L01, L10, L11 = L00 + a3 * g3x, L01 + a3 * g3y, L10 + b3 * g3x, L11 + b3 * g3y
         b = body[p]
-        if by_trace[b]:
-            f = dt * (L00 * F[p, 0, 0] + L01 * F[p, 1, 0] + L10 * F[p, 0, 1] + L11 * F[p, 1, 1])
-        else:
-            f = (1.0 + dt * L00) * (1.0 + dt * L11) - (dt * L01) * (dt * L10)
-        value[p] = f
+        f = increment_measure(F, p, dt, (L00, L01, L10, L11), by_trace[b])  # (the G2P pass computes it again)
         V = volume[p]
         w0, w1, w2, w3 = N0 * V, N1 * V, N2 * V, N3 * V
         out[i0, b] += w0
@@ -141,7 +137,7 @@ def measure_kernel(cell: str):
         for p in range(len(cells)):
             c = cells[p]
             if PLANAR:  # scalar code (as fempm.kernels.planar)
-                measure2(p, c, (X, K, cell_dofs, v_new, F, volume, body), by_trace, dt, value, out, dirty)
+                measure2(p, c, (X, K, cell_dofs, v_new, F, volume, body), by_trace, dt, out, dirty)
                 continue
             shape(X, p, K, c, SIMPLEX, AFFINE, D, NK, N, G, DEGREE, BERNSTEIN)
             for j in range(D):

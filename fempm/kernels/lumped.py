@@ -158,7 +158,8 @@ def kernels_for(cell: str) -> SimpleNamespace:
             if cell not in PLANAR or not kinematics:
                 raise ValueError(f"F-bar's averaged kinematics in the G2P pass take a kinematics pass on {PLANAR}")
             on = bool(kind and blend)
-            return g2p_kernel(cell, *flags, kind if on else 0, remap and remap_affine and on, averaged=True)(
+            return g2p_kernel(cell, *flags, kind if on else 0, remap and remap_affine and on, averaged=True,
+                              pressures=average.sums.shape[0] > 0)(
                 where, grid, state, laws, moves, outputs, groups, affine, average)
         if kind and blend:
             make = g2p_kernel if cell in AFFINE_SCALAR else _g2p_kernel

@@ -70,27 +70,50 @@ if AVAILABLE:
         for j in range(D):
             sigma[j, j] += t
 
-    @njit(cache=True)
+    @njit(inline=INLINE)
+    def run_end(dirty, k):  # pragma: no cover - compiled
+        """The first block from ``k`` on that is not marked in ``dirty`` (or their number)."""
+        while k < len(dirty) and dirty[k]:
+            k += 1
+        return k
+
+    @njit(cache=True, error_model="numpy")
     def averages(patch, dirty):  # pragma: no cover - compiled
         r"""The sums' second half, in place, divided by their weights: :math:`(\sum V N f)_i /
         (\sum V N)_i`, 0 where the weight is not positive, in the blocks marked in ``dirty`` (once
-        per dof, before the passes read them with :func:`nodal_ratio`)."""
+        per dof, before the passes read them with :func:`nodal_ratio`); over each run of marked
+        blocks, a strided loop per body (which vectorizes, where a loop over rows and bodies does
+        not: 4x as long)."""
         rows, bodies = patch.shape[0], patch.shape[1] // 2
-        for k in range(len(dirty)):
-            if dirty[k]:
-                for i in range(k << BLOCK_SHIFT, min((k + 1) << BLOCK_SHIFT, rows)):
-                    for b in range(bodies):
-                        m = patch[i, b]
-                        patch[i, bodies + b] = patch[i, bodies + b] / m if m > 0.0 else 0.0
+        flat, width = patch.reshape(-1), 2 * bodies
+        k = 0
+        while k < len(dirty):
+            if not dirty[k]:
+                k += 1
+                continue
+            e = run_end(dirty, k)
+            lo, hi = width * (k << BLOCK_SHIFT), width * min(e << BLOCK_SHIFT, rows)
+            for b in range(bodies):
+                w, f = flat[lo + b:hi:width], flat[lo + bodies + b:hi:width]
+                for i in range(len(w)):
+                    m = w[i]
+                    r = f[i] / m
+                    f[i] = r if m > 0.0 else 0.0
+            k = e
 
     @njit(cache=True)
     def clear_blocks(patch, dirty, always):  # pragma: no cover - compiled
         """Zero the rows of ``patch`` in the blocks marked in ``dirty``, then reset the marks to
-        ``always`` (the blocks a ghost exchange writes)."""
-        rows, k2 = patch.shape
-        for k in range(len(dirty)):
-            if dirty[k]:
-                for i in range(k << BLOCK_SHIFT, min((k + 1) << BLOCK_SHIFT, rows)):
-                    for j in range(k2):
-                        patch[i, j] = 0.0
-            dirty[k] = always[k]
+        ``always`` (the blocks a ghost exchange writes); a slice per run of marked blocks (a
+        memset: a loop over the rows takes 5x as long)."""
+        flat, width = patch.reshape(-1), patch.shape[1] << BLOCK_SHIFT
+        k = 0
+        while k < len(dirty):
+            if not dirty[k]:
+                dirty[k] = always[k]
+                k += 1
+                continue
+            e = run_end(dirty, k)
+            flat[k * width:min(e * width, len(flat))] = 0.0
+            dirty[k:e] = always[k:e]
+            k = e

@@ -34,7 +34,7 @@ if AVAILABLE:
     from fempm.kernels.kinematics import add_totals
     from fempm.kernels.multilinear import quad_pull_back
     from fempm.kernels.particle_checks import count_j, stable_time
-    from fempm.kernels.patch import nodal_ratio
+    from fempm.kernels.patch import BLOCK_SHIFT, nodal_ratio
     from fempm.kernels.planar_affine import add_affine, affine_g2p2, carried2, jacobian2, offsets2
     from fempm.kernels.shape import inside_after_pull_back, star_search
 
@@ -84,6 +84,35 @@ if AVAILABLE:
             out[i3, col + 1] += N3 * q1
 
     @njit(inline=INLINE)
+    def add_pressure(sums, p, at, state, bodies, quad):  # pragma: no cover - compiled
+        r"""F-bar's pressure sums of the next force pass (:func:`fempm.kernels.fbar.pressure_kernel`)
+        for particle p where it ends the G2P pass (none for one that left its cell's neighbours):
+        :math:`N_a V_p` and :math:`N_a V_p\,\mathrm{tr}\,\sigma_p / 2` into ``sums`` = (the (dofs, 2 B) sums, their blocks' dirty marks), ``at`` = (cell_dofs, cells,
+        X, whether p moved, the dofs i0..i3 and basis values N0..N3 where the pass found it),
+        ``state`` = (volume, sigma, body)."""
+        out, dirty = sums
+        cell_dofs, cells, X, moved, (i0, i1, i2, i3), (N0, N1, N2, N3) = at
+        if moved:  # its new cell and reference coordinates
+            c = cells[p]
+            i0, i1, i2, i3 = cell_dofs[c, 0], cell_dofs[c, 1], cell_dofs[c, 2], cell_dofs[c, 3 if quad else 0]
+            N0, N1, N2, N3 = basis(X[p, 0], X[p, 1], 0.0, 0.0, 0.0, 0.0, not quad)[:4]
+        volume, sigma, body = state
+        b, V = body[p], volume[p]
+        f = 0.5 * (sigma[p, 0, 0] + sigma[p, 1, 1])
+        w0, w1, w2, w3 = N0 * V, N1 * V, N2 * V, N3 * V
+        out[i0, b] += w0
+        out[i0, bodies + b] += w0 * f
+        out[i1, b] += w1
+        out[i1, bodies + b] += w1 * f
+        out[i2, b] += w2
+        out[i2, bodies + b] += w2 * f
+        dirty[i0 >> BLOCK_SHIFT], dirty[i1 >> BLOCK_SHIFT], dirty[i2 >> BLOCK_SHIFT] = 1, 1, 1
+        if quad:
+            out[i3, b] += w3
+            out[i3, bodies + b] += w3 * f
+            dirty[i3 >> BLOCK_SHIFT] = 1
+
+    @njit(inline=INLINE)
     def deform(F, p, dt, L00, L01, L10, L11):  # pragma: no cover - compiled
         r""":math:`F_p \leftarrow (I + \Delta t L) F_p`; returns the new entries and
         :math:`J = \det F_p`."""
@@ -106,14 +135,27 @@ if AVAILABLE:
         return f + N3 * nodal_ratio(patch, i3, b, bodies) if quad else f
 
     @njit(inline=INLINE)
-    def fbar_deform(F, p, dt, Lp, f, patch):  # pragma: no cover - compiled
+    def increment_measure(F, p, dt, Lp, by_trace):  # pragma: no cover - compiled
+        r"""F-bar's measure of the increment (:mod:`fempm.kernels.fbar`): :math:`\Delta\theta_p = \Delta
+        t\,\mathrm{tr}(L F_p)` (``by_trace``) or :math:`\Delta J_p = \det(I + \Delta t L)`, ``Lp`` =
+        (L00, L01, L10, L11), ``F[p]`` still :math:`F^n_p`."""
+        L00, L01, L10, L11 = Lp
+        if by_trace:
+            return dt * (L00 * F[p, 0, 0] + L01 * F[p, 1, 0] + L10 * F[p, 0, 1] + L11 * F[p, 1, 1])
+        return (1.0 + dt * L00) * (1.0 + dt * L11) - (dt * L01) * (dt * L10)
+
+    @njit(inline=INLINE)
+    def fbar_deform(F, p, dt, Lp, still, patch):  # pragma: no cover - compiled
         r"""F-bar's kinematics (:mod:`fempm.kernels.fbar`): :math:`F_p \leftarrow \bar F_p = s\,(I +
         \Delta t L_p) F_p + t I` with :math:`s = (\bar f_p / f_p)^{1/2}, t = 0` (a body averaging
         :math:`\det F`) or :math:`s = 1, t = (\bar f_p - f_p) / 2` (averaging :math:`\mathrm{tr}\,F`),
-        ``f`` the first pass's measure and ``patch`` = (its patch average, whether the body averages
-        :math:`\mathrm{tr}\,F`, ``keep_L``); returns the entries of :math:`\bar F_p`, its
-        determinant and (with ``keep_L``, else ``Lp``) :math:`\bar L_p`."""
+        :math:`f_p` the measure of ``Lp`` (:func:`increment_measure`, as F-bar's first pass; then
+        :math:`L_p = 0` for a ``still`` particle of a rigid group) and ``patch`` = (its patch
+        average, whether the body averages :math:`\mathrm{tr}\,F`, ``keep_L``); returns the entries
+        of :math:`\bar F_p`, its determinant and (with ``keep_L``, else ``Lp``) :math:`\bar L_p`."""
         averaged, by_trace, keep_L = patch
+        f = increment_measure(F, p, dt, Lp, by_trace)
+        Lp = (0.0, 0.0, 0.0, 0.0) if still else Lp
         Lb = averaged_rate(F, p, dt, Lp, f, averaged, by_trace) if keep_L else Lp  # (from F^n)
         n00, n01, n10, n11, J = deform_averaged(F, p, dt, Lp, f, averaged, by_trace)
         return n00, n01, n10, n11, J, Lb[0], Lb[1], Lb[2], Lb[3]
@@ -256,21 +298,20 @@ def scatter_kernel(simplex: bool, affine: bool, with_mass: bool, with_momentum: 
 @functools.cache
 def g2p_kernel(simplex: bool, affine: bool, blend: bool, kinematics: bool, move: bool, remap: bool,
                totals: bool = False, grouped: bool = False, kind: int = 0, remap_affine: bool = False,
-               averaged: bool = False):
+               averaged: bool = False, pressures: bool = False):
     """:func:`fempm.kernels.lumped._g2p_kernel` for ``triangle`` (``simplex``) or
     ``quadrilateral`` cells, ``affine`` or multilinear (``kind``, APIC or TPIC, in a blend pass:
     affine cells; :mod:`fempm.kernels.planar_affine`); ``averaged``: F-bar's kinematics
-    (:func:`fbar_deform`, the ``average`` bundle :class:`~fempm.kernels.bundles.Averaged`)."""
+    (:func:`fbar_deform`, the ``average`` bundle), with ``pressures`` the next force pass's sums (:func:`add_pressure`)."""
     QUAD, KIND = not simplex, kind
 
     @njit(cache=True, error_model="numpy")
     def g2p_update(where, grid, state, laws, moves, outputs, groups, carried=None, average=None):  # pragma: no cover
         cells, X, K, cell_dofs = where
-        patch, value, by_trace, bodies = average if averaged else NO_AVERAGE
+        patch, by_trace, bodies, pressure_sums, dirty = average if averaged else NO_AVERAGE
         C, spin, va, weak = ((carried.C, carried.spin, carried.v, carried.weak) if KIND else
                              (np.empty((0, 2, 2)), np.empty((0, 1)), np.empty((0, 2)), np.empty(0, np.uint8)))
-        v_new, v_old, flip, dt, by_particle = grid
-        x, v, F, volume0, volume, sigma, body, mass = state
+        (v_new, v_old, flip, dt, by_particle), (x, v, F, volume0, volume, sigma, body, mass) = grid, state
         law, lam, mu, x0, tol, left, star = laws.law, laws.lam, laws.mu, moves.x0, moves.tol, moves.left, moves.star
         L, mom, sums, group, rigid = outputs.L, outputs.mom, outputs.sums, groups.group, groups.rigid
         n, keep_L = len(cells), L.shape[0] == len(cells)
@@ -304,12 +345,12 @@ def g2p_kernel(simplex: bool, affine: bool, blend: bool, kinematics: bool, move:
                 L10, L11 = b0 * g0x + b1 * g1x + b2 * g2x, b0 * g0y + b1 * g1y + b2 * g2y
                 if QUAD:
                     L00, L01, L10, L11 = L00 + a3 * g3x, L01 + a3 * g3y, L10 + b3 * g3x, L11 + b3 * g3y
-                L00, L01, L10, L11 = (0.0, 0.0, 0.0, 0.0) if still else (L00, L01, L10, L11)
                 b = body[p]
                 if averaged:  # F-bar: the measure's patch average
-                    n00, n01, n10, n11, J, L00, L01, L10, L11 = fbar_deform(F, p, dt, (L00, L01, L10, L11), value[p], (
+                    n00, n01, n10, n11, J, L00, L01, L10, L11 = fbar_deform(F, p, dt, (L00, L01, L10, L11), still, (
                         patch_at(patch, (i0, i1, i2, i3), (N0, N1, N2, N3), b, bodies, QUAD), by_trace[b], keep_L))
                 else:
+                    L00, L01, L10, L11 = (0.0, 0.0, 0.0, 0.0) if still else (L00, L01, L10, L11)
                     n00, n01, n10, n11, J = deform(F, p, dt, L00, L01, L10, L11)
                 if keep_L:
                     L[p, 0, 0], L[p, 0, 1], L[p, 1, 0], L[p, 1, 1] = L00, L01, L10, L11
@@ -319,8 +360,7 @@ def g2p_kernel(simplex: bool, affine: bool, blend: bool, kinematics: bool, move:
                     law_stress(sigma, p, law[b], lam[b], mu[b], n00, n01, n10, n11, J)
             if move:
                 u0, u1 = (dt * v[p, 0], dt * v[p, 1]) if by_particle or still else (dt * vg0, dt * vg1)
-                y0, y1 = x[p, 0] + u0, x[p, 1] + u1
-                x[p, 0], x[p, 1] = y0, y1
+                x[p, 0], x[p, 1] = y0, y1 = x[p, 0] + u0, x[p, 1] + u1
                 if not (np.isfinite(y0) and np.isfinite(y1) and np.isfinite(v[p, 0] * v[p, 0] + v[p, 1] * v[p, 1])):
                     nonfinite += 1  # x or v (v.v: the kinetic energy); the compiled laws' stress is finite where J is
                 if not affine:  # Newton from the first step X + K(X) u (K of the basis above), its size the seed's
@@ -330,6 +370,9 @@ def g2p_kernel(simplex: bool, affine: bool, blend: bool, kinematics: bool, move:
                 # the neighbours, while in cache (written out: through a helper the pass took 1.8x as long)
                 e = star_search(x, p, x0, K, c, star, simplex, 2, tol, X, affine) if out else c
                 cells[p], left[p] = (c, True) if e < 0 else (e, False)
+            if pressures and not (move and left[p]):  # F-bar (a kinematics pass): the next force pass's sums
+                add_pressure((pressure_sums, dirty), p, (cell_dofs, cells, X, move, (i0, i1, i2, i3), (N0, N1, N2, N3)),
+                             (volume, sigma, body), bodies, QUAD)
             if totals:
                 add_totals(acc, p, mass, v, F, volume0, law[body[p]], lam[body[p]], mu[body[p]], 2)
         if totals:

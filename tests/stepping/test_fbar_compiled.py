@@ -9,15 +9,20 @@ with laws that keep their own numpy stress (the averaged L-bar handed to them), 
 on degree 2.
 """
 
+import numpy as np
 import pytest
+from mpi4py import MPI
 
 from fempm.materials import LinearElastic
 from fempm.materials.newtonian_eos import NewtonianTait
 from fempm.stepping import StepOptions
+from fempm.stepping import fbar_grid
 from fempm.stepping.fbar_grid import FBarPointGrid
 from fempm.stepping.grid import SingleFieldGrid
 
-from tests.stepping.test_compiled_step import MESHES, assert_close, make_solver, run_both
+from tests.stepping.test_compiled_step import MESHES, assert_close, make_solver, run_both, state
+
+comm = MPI.COMM_WORLD
 
 pytestmark = pytest.mark.parallel  # also under mpiexec -n 2 (scripts/run-tests)
 
@@ -74,3 +79,42 @@ def test_fbar_takes_the_numpy_step_where_no_compiled_grid_takes_it():
                        r"domain cpdi1: point particles$"):
         make_solver("triangle", opts, compiled=True).step()
     assert not isinstance(make_solver("triangle", StepOptions()).grid, FBarPointGrid)
+
+
+def test_the_pressures_summed_in_the_g2p_pass_follow_the_particles_across_cells_and_ranks(monkeypatch):
+    """On triangles the kinematics pass also sums the next force pass's pressures where each
+    particle ends it; a drift carries the particles across cells (and on 2 ranks across ranks,
+    whose departures and arrivals make the force pass sum them again): the numpy step to round-off,
+    and the separate pressure pass runs only where the particles changed."""
+    passes = []
+    compiled = fbar_grid.kb.pressure_kernel
+
+    def counted(cell):
+        kernel = compiled(cell)
+
+        def run(*args):
+            passes.append(len(args[1]))
+            return kernel(*args)
+        return run
+
+    monkeypatch.setattr(fbar_grid.kb, "pressure_kernel", counted)
+    opts = StepOptions(scheme="USL", flip=0.9, damping=0.5, volumetric="fbar")
+    out, sizes = [], []
+    for compiled_step in (False, True):
+        solver = make_solver("triangle", opts, compiled=compiled_step)
+        solver.particles.fields["v"] = solver.particles.fields["v"] + np.array([1.5, 0.0])
+        start = comm.allreduce(float(solver.particles.x[:, 0].sum()))
+        sizes.append([len(solver.particles)])
+        for _ in range(15):
+            solver.step()
+            sizes[-1].append(len(solver.particles))
+        out.append((state(solver), np.zeros(1), solver.j_range, solver.t))
+    assert_close(*out)
+    drift = (comm.allreduce(float(solver.particles.x[:, 0].sum())) - start) / comm.allreduce(len(solver.particles))
+    assert drift > 0.08  # most of a cell (0.1) on average
+    exchanged = comm.allreduce(int(len(set(sizes[1])) > 1), op=MPI.MAX)  # particles changed ranks
+    assert comm.size == 1 or exchanged
+    if comm.size == 1:
+        assert passes == [len(solver.particles)]  # the first step's force pass alone
+    else:
+        assert 1 < len(passes) < 16
