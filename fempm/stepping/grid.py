@@ -28,9 +28,10 @@ import numpy.typing as npt
 from mpi4py import MPI
 
 from fempm import kernels
+from fempm.kernels.reactions import reaction_sum
 from fempm.stepping.loads import external_forces
 from fempm.stepping.particle_stages import ParticleStages
-from fempm.stepping.reactions import damping_impulse, nodal_reaction
+from fempm.stepping.reactions import damping_impulse
 from fempm.stepping.state import StepState
 from fempm.transfer import affine, g2p
 from fempm.transfer.basis import ParticleBasis
@@ -135,9 +136,11 @@ class Grid:
             coupled = opts.mass_model.couples_dofs  # the free rows balance only together
             self._reaction_rows = np.arange(num_owned) if coupled else held[held < num_owned]
         rows = self._reaction_rows
-        total = np.zeros(s.particles.gdim)
+        total, one = np.zeros(s.particles.gdim), np.zeros(s.particles.gdim)
+        flip = float(opts.velocity_transfer.blend)
         for field in fields:
-            total += nodal_reaction(*field, dt, float(opts.velocity_transfer.blend), damping, rows)
+            reaction_sum(field, float(dt), flip, damping, rows, one)  # (numpy reference: nodal_reaction)
+            total += one
         if len(s.collisions):  # theirs, counted as the colliders' impulses
             total -= s.collisions.nodal_impulse[rows].sum(axis=0)
         s.record.reaction = total
