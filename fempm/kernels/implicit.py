@@ -20,6 +20,8 @@ Each ``*_numpy`` is the reference its compiled form is tested against
 
 from __future__ import annotations
 
+import functools
+
 import numpy as np
 import numpy.typing as npt
 
@@ -151,82 +153,97 @@ try:
             J[p] = _det_inv(G, p, d, inv)
         return J
 
-    @njit(cache=True)
-    def _nominal(sigma, D, G, tangent):  # pragma: no cover - compiled
-        n, d = G.shape[0], G.shape[1]
-        P = np.empty((n, d, d))
-        A = np.zeros((n, d, d, d, d)) if tangent else np.zeros((0, d, d, d, d))
-        J = np.empty(n)
-        inv = np.full((d, d), np.nan)
-        Pt = np.empty((d, d))
-        for p in range(n):
-            Jp = _det_inv(G, p, d, inv)
-            J[p] = Jp
-            if Jp == 0.0:
-                inv[:, :] = np.nan
-            for i in range(d):
-                for m in range(d):
-                    s = 0.0
-                    for j in range(d):
-                        s += sigma[p, i, j] * inv[m, j]
-                    Pt[i, m] = s
-                    P[p, i, m] = Jp * s
-            if tangent:
+    @functools.cache
+    def _nominal_kernel(d: int, tangent: bool):
+        r""":math:`P_p` (and with ``tangent`` :math:`\mathbb{A}_p`) of dimension ``d``, the loops'
+        sizes compile-time constants (unrolled: 2-3x as fast as with the sizes read at run time)."""
+
+        @njit(cache=True)
+        def nominal(sigma, D, G):  # pragma: no cover - compiled
+            n = G.shape[0]
+            P = np.empty((n, d, d))
+            A = np.zeros((n, d, d, d, d)) if tangent else np.zeros((0, d, d, d, d))
+            J = np.empty(n)
+            inv = np.full((d, d), np.nan)
+            Pt = np.empty((d, d))
+            for p in range(n):
+                Jp = _det_inv(G, p, d, inv)
+                J[p] = Jp
+                if Jp == 0.0:
+                    inv[:, :] = np.nan
                 for i in range(d):
                     for m in range(d):
-                        for k in range(d):
-                            for l in range(d):
-                                s = Pt[i, m] * inv[l, k] - Pt[i, l] * inv[m, k]
-                                for j in range(d):
-                                    s += D[p, i, j, k, l] * inv[m, j]
-                                A[p, i, m, k, l] = Jp * s
-        return P, A, J
+                        s = 0.0
+                        for j in range(d):
+                            s += sigma[p, i, j] * inv[m, j]
+                        Pt[i, m] = s
+                        P[p, i, m] = Jp * s
+                if tangent:
+                    for i in range(d):
+                        for m in range(d):
+                            for k in range(d):
+                                for l in range(d):
+                                    s = Pt[i, m] * inv[l, k] - Pt[i, l] * inv[m, k]
+                                    for j in range(d):
+                                        s += D[p, i, j, k, l] * inv[m, j]
+                                    A[p, i, m, k, l] = Jp * s
+            return P, A, J
+
+        return nominal
 
     def nominal_numba(sigma, D, G):
-        P, A, J = _nominal(np.ascontiguousarray(sigma), np.zeros((0,) + (G.shape[1],) * 4) if D is None
-                           else np.ascontiguousarray(D), np.ascontiguousarray(G), D is not None)
+        d = G.shape[1]
+        P, A, J = _nominal_kernel(d, D is not None)(np.ascontiguousarray(sigma), np.zeros((0,) + (d,) * 4) if D is None
+                                                    else np.ascontiguousarray(D), np.ascontiguousarray(G))
         return P, (A if D is not None else None), J
 
-    @njit(cache=True)
-    def _tangent_blocks(gradients, values, A, volume, mass, factor, consistent, diagonal):  # pragma: no cover
-        n, k, d = gradients.shape
-        m = k * d
-        out = np.zeros(n * m * m + diagonal)
-        B = np.empty((k, d, d, d))  # B[a, i, kk, l] = sum_m g[a, m] A[i, m, kk, l]
-        for p in range(n):
-            V = volume[p]
-            for a in range(k):
-                for i in range(d):
-                    for kk in range(d):
-                        for l in range(d):
-                            s = 0.0
-                            for mm in range(d):
-                                s += gradients[p, a, mm] * A[p, i, mm, kk, l]
-                            B[a, i, kk, l] = V * s
-            base = p * m * m
-            for a in range(k):
-                for i in range(d):
-                    row = base + (a * d + i) * m
-                    for b in range(k):
+    @functools.cache
+    def _tangent_blocks_kernel(k: int, d: int):
+        """The particles' tangent blocks for ``k`` dofs per cell in dimension ``d``, the loops'
+        sizes compile-time constants."""
+
+        @njit(cache=True)
+        def blocks(gradients, values, A, volume, mass, factor, consistent, diagonal):  # pragma: no cover
+            n = gradients.shape[0]
+            m = k * d
+            out = np.zeros(n * m * m + diagonal)
+            B = np.empty((k, d, d, d))  # B[a, i, kk, l] = sum_m g[a, m] A[i, m, kk, l]
+            for p in range(n):
+                V = volume[p]
+                for a in range(k):
+                    for i in range(d):
                         for kk in range(d):
-                            s = 0.0
                             for l in range(d):
-                                s += B[a, i, kk, l] * gradients[p, b, l]
-                            out[row + b * d + kk] = s
-            if factor != 0.0:
-                cm = factor * mass[p]
+                                s = 0.0
+                                for mm in range(d):
+                                    s += gradients[p, a, mm] * A[p, i, mm, kk, l]
+                                B[a, i, kk, l] = V * s
+                base = p * m * m
                 for a in range(k):
                     for i in range(d):
                         row = base + (a * d + i) * m
-                        if consistent:
-                            for b in range(k):
-                                out[row + b * d + i] += cm * values[p, a] * values[p, b]
-                        else:
-                            out[row + a * d + i] += cm * values[p, a]
-        return out
+                        for b in range(k):
+                            for kk in range(d):
+                                s = 0.0
+                                for l in range(d):
+                                    s += B[a, i, kk, l] * gradients[p, b, l]
+                                out[row + b * d + kk] = s
+                if factor != 0.0:
+                    cm = factor * mass[p]
+                    for a in range(k):
+                        for i in range(d):
+                            row = base + (a * d + i) * m
+                            if consistent:
+                                for b in range(k):
+                                    out[row + b * d + i] += cm * values[p, a] * values[p, b]
+                            else:
+                                out[row + a * d + i] += cm * values[p, a]
+            return out
+
+        return blocks
 
     def tangent_blocks_numba(gradients, values, A, volume, mass, factor, consistent, diagonal):
-        return _tangent_blocks(np.ascontiguousarray(gradients), np.ascontiguousarray(values), np.ascontiguousarray(A),
+        return _tangent_blocks_kernel(*gradients.shape[1:])(np.ascontiguousarray(gradients), np.ascontiguousarray(values), np.ascontiguousarray(A),
                                np.ascontiguousarray(volume, dtype=np.float64), np.ascontiguousarray(mass),
                                float(factor), bool(consistent), int(diagonal))
 
