@@ -56,10 +56,13 @@ class IncrementOperator:
         self.mass = particles.mass
         self.rho = particles.mass / particles.volume
         self.F, self.sigma = f["F"], f["sigma"]
-        self.groups = [(mat, idx, law_state(mat, f, idx)) for mat, idx in material_groups(f, materials)]
+        n = len(self.volume)  # a law of every particle reads them through a slice, not copies
+        self.groups = [(mat, slice(None) if len(idx) == n else idx, law_state(mat, f, idx))
+                       for mat, idx in material_groups(f, materials)]
         self.finite_difference = finite_difference
         self.dt = dt
         self._last: tuple[npt.NDArray, npt.NDArray] | None = None  # (G, sigma) of the last call
+        self._groups: tuple[npt.NDArray, npt.NDArray] | None = None  # (dof_groups)
 
     def gradients(self, du: npt.NDArray) -> npt.NDArray:
         r""":math:`G_p = \sum_a \Delta u_a \otimes \nabla N_a(x_p)` (n, d, d) of an increment ``du``
@@ -121,12 +124,25 @@ class IncrementOperator:
             return self.nodal(self.mass[:, None] * self.basis.gather(a))
         return lumped[:, None] * a
 
+    def dof_groups(self) -> tuple[npt.NDArray, npt.NDArray]:
+        """(the dofs of each group (groups, k), each particle's group (n,)): point particles in a
+        cell share its block of the tangent, so that its COO entries are a block per occupied
+        cell, not per particle (a quarter of the entries with 4 particles a cell; particle domains,
+        whose dofs are their own: a group per particle)."""
+        if self._groups is None:
+            b = self.basis
+            self._groups = (b.dofs, np.arange(len(b.dofs)))  # particle domains: a block per particle
+            if b.cells is not None:  # point particles: a cell's particles have its dofs
+                cells, first, slot = np.unique(b.cells, return_index=True, return_inverse=True)
+                self._groups = (b.dofs[first], slot.ravel())
+        return self._groups
+
     def pattern(self) -> tuple[npt.NDArray, npt.NDArray]:
         """(rows, columns) of the tangent's entries in local scalar indices (dof d + component):
-        each particle's block over its dofs (:meth:`tangent_values`' order), then the
-        diagonal of every local dof (zeros where no particle reaches: their rows are held)."""
+        each block over a group's dofs (:meth:`dof_groups`, :meth:`tangent_values`' order), then
+        the diagonal of every local dof (zeros where no particle reaches: their rows are held)."""
         d = self.d
-        dofs = self.basis.dofs
+        dofs = self.dof_groups()[0]
         idx = (dofs[:, :, None] * d + np.arange(d)).reshape(len(dofs), -1)  # (n, k d)
         m = idx.shape[1]
         diagonal = np.arange(self.basis.num_dofs_local * d)
@@ -137,8 +153,9 @@ class IncrementOperator:
     def tangent_values(self, A: npt.NDArray, mass_factor: float, consistent: bool) -> npt.NDArray:
         r"""The entries of :meth:`pattern`: each particle's
         :math:`V_p^n \nabla N_a \cdot \mathbb{A}_p \cdot \nabla N_b` plus ``mass_factor`` times
-        its mass block (consistent, or lumped on the block's diagonal), then zeros (one compiled
-        pass, :func:`fempm.kernels.implicit.tangent_blocks`)."""
+        its mass block (consistent, or lumped on the block's diagonal), summed over its group of
+        :meth:`dof_groups`, then zeros (one compiled pass, :func:`fempm.kernels.implicit.tangent_blocks`)."""
         b = self.basis
+        dofs, slot = self.dof_groups()
         return tangent_blocks(b.gradients, b.values, A, self.volume, self.mass, mass_factor, consistent,
-                              b.num_dofs_local * self.d)
+                              b.num_dofs_local * self.d, slot, len(dofs))

@@ -9,8 +9,10 @@ r"""The implicit step's per-particle passes (:mod:`fempm.implicit`), compiled.
   \Delta F^{-1}_{mj} - \tilde P_{il} \Delta F^{-1}_{mk})` (:mod:`fempm.implicit.nominal`).
 * :func:`tangent_blocks`: each particle's block
   :math:`V_p \partial_m N_a \mathbb{A}_{imkl} \partial_l N_b` plus ``c`` times its mass block
-  (consistent :math:`M_p N_a N_b \delta_{ik}`, or lumped on the diagonal), in the order of
-  :meth:`fempm.implicit.operator.IncrementOperator.pattern`, then zeros for the diagonal entries.
+  (consistent :math:`M_p N_a N_b \delta_{ik}`, or lumped on the diagonal), summed over the
+  particles of a group (``slot`` (n,) of ``groups``: those of the same dofs; by default one per
+  particle), in the order of :meth:`fempm.implicit.operator.IncrementOperator.pattern`, then
+  zeros for the diagonal entries.
 * :func:`linear_elastic_tangent`: :math:`\lambda \delta_{ij} F_{lk} + \mu (\delta_{ik} F_{lj}
   + \delta_{jk} F_{li})` (:class:`fempm.materials.LinearElastic`).
 
@@ -59,7 +61,8 @@ def nominal_numpy(sigma: npt.NDArray, D: npt.NDArray | None, G: npt.NDArray):
     return J[:, None, None] * Pt, J[:, None, None, None, None] * A, J
 
 
-def tangent_blocks_numpy(gradients, values, A, volume, mass, factor: float, consistent: bool, diagonal: int):
+def tangent_blocks_numpy(gradients, values, A, volume, mass, factor: float, consistent: bool, diagonal: int,
+                         slot: npt.NDArray | None = None, groups: int | None = None):
     p, k, d = gradients.shape
     VA = volume[:, None, None, None, None] * A
     K = np.einsum("paikl,pbl->paibk", np.einsum("pam,pimkl->paikl", gradients, VA, optimize=True), gradients,
@@ -72,6 +75,10 @@ def tangent_blocks_numpy(gradients, values, A, volume, mass, factor: float, cons
         else:
             a = np.arange(k)
             K[:, a, :, a, :] += ((factor * mass)[:, None] * values).T[:, :, None, None] * eye
+    if slot is not None:  # the blocks of the particles of a group summed
+        summed = np.zeros((groups, (k * d) ** 2))
+        np.add.at(summed, slot, K.reshape(p, -1))
+        K = summed
     return np.concatenate([K.ravel(), np.zeros(diagonal)])
 
 
@@ -203,10 +210,10 @@ try:
         sizes compile-time constants."""
 
         @njit(cache=True)
-        def blocks(gradients, values, A, volume, mass, factor, consistent, diagonal):  # pragma: no cover
+        def blocks(gradients, values, A, volume, mass, factor, consistent, diagonal, slot, groups):  # pragma: no cover
             n = gradients.shape[0]
             m = k * d
-            out = np.zeros(n * m * m + diagonal)
+            out = np.zeros(groups * m * m + diagonal)
             B = np.empty((k, d, d, d))  # B[a, i, kk, l] = sum_m g[a, m] A[i, m, kk, l]
             for p in range(n):
                 V = volume[p]
@@ -218,7 +225,7 @@ try:
                                 for mm in range(d):
                                     s += gradients[p, a, mm] * A[p, i, mm, kk, l]
                                 B[a, i, kk, l] = V * s
-                base = p * m * m
+                base = slot[p] * m * m
                 for a in range(k):
                     for i in range(d):
                         row = base + (a * d + i) * m
@@ -227,7 +234,7 @@ try:
                                 s = 0.0
                                 for l in range(d):
                                     s += B[a, i, kk, l] * gradients[p, b, l]
-                                out[row + b * d + kk] = s
+                                out[row + b * d + kk] += s
                 if factor != 0.0:
                     cm = factor * mass[p]
                     for a in range(k):
@@ -242,29 +249,38 @@ try:
 
         return blocks
 
-    def tangent_blocks_numba(gradients, values, A, volume, mass, factor, consistent, diagonal):
-        return _tangent_blocks_kernel(*gradients.shape[1:])(np.ascontiguousarray(gradients), np.ascontiguousarray(values), np.ascontiguousarray(A),
-                               np.ascontiguousarray(volume, dtype=np.float64), np.ascontiguousarray(mass),
-                               float(factor), bool(consistent), int(diagonal))
+    def tangent_blocks_numba(gradients, values, A, volume, mass, factor, consistent, diagonal, slot=None, groups=None):
+        if slot is None:  # a block per particle
+            slot, groups = np.arange(len(gradients)), len(gradients)
+        blocks = _tangent_blocks_kernel(*gradients.shape[1:])
+        return blocks(np.ascontiguousarray(gradients), np.ascontiguousarray(values), np.ascontiguousarray(A),
+                      np.ascontiguousarray(volume, dtype=np.float64), np.ascontiguousarray(mass), float(factor),
+                      bool(consistent), int(diagonal), np.ascontiguousarray(slot, dtype=np.int64), int(groups))
 
-    @njit(cache=True)
-    def _linear_elastic_tangent(F, lam, mu):  # pragma: no cover - compiled
-        n, d = F.shape[0], F.shape[1]
-        D = np.zeros((n, d, d, d, d))
-        for p in range(n):
-            for i in range(d):
-                for k in range(d):
-                    for l in range(d):
-                        D[p, i, i, k, l] += lam * F[p, l, k]
-                        for j in range(d):
-                            if i == k:
-                                D[p, i, j, k, l] += mu * F[p, l, j]
-                            if j == k:
-                                D[p, i, j, k, l] += mu * F[p, l, i]
-        return D
+    @functools.cache
+    def _linear_elastic_tangent_kernel(d: int):
+        """:func:`linear_elastic_tangent` in dimension ``d`` (the loops' sizes compile-time constants)."""
+
+        @njit(cache=True)
+        def tangent(F, lam, mu):  # pragma: no cover - compiled
+            n = F.shape[0]
+            D = np.zeros((n, d, d, d, d))
+            for p in range(n):
+                for i in range(d):
+                    for k in range(d):
+                        for l in range(d):
+                            D[p, i, i, k, l] += lam * F[p, l, k]
+                            for j in range(d):
+                                if i == k:
+                                    D[p, i, j, k, l] += mu * F[p, l, j]
+                                if j == k:
+                                    D[p, i, j, k, l] += mu * F[p, l, i]
+            return D
+
+        return tangent
 
     def linear_elastic_tangent_numba(F, lam, mu):
-        return _linear_elastic_tangent(np.ascontiguousarray(F), float(lam), float(mu))
+        return _linear_elastic_tangent_kernel(F.shape[1])(np.ascontiguousarray(F), float(lam), float(mu))
 
 except ImportError:  # pragma: no cover - numba is a dependency
     increment_gradients_numba = increment_gradients_numpy

@@ -67,6 +67,11 @@ def test_tangent_blocks(data, factor, consistent):
     got, ref = ki.tangent_blocks_numba(*args), ki.tangent_blocks_numpy(*args)
     close(got, ref)
     assert len(got) == len(data["dofs"]) * (data["k"] * data["d"]) ** 2 + 11 and not got[-11:].any()
+    slot = np.random.default_rng(5).integers(0, 40, len(data["dofs"]))  # blocks summed by group
+    got, ref = ki.tangent_blocks_numba(*args, slot, 40), ki.tangent_blocks_numpy(*args, slot, 40)
+    close(got, ref)
+    m2 = (data["k"] * data["d"]) ** 2
+    close(got[:40 * m2].reshape(40, m2).sum(axis=0), ki.tangent_blocks_numpy(*args)[:-11].reshape(-1, m2).sum(axis=0))
 
 
 def test_linear_elastic_tangent(data):
