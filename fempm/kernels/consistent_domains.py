@@ -89,7 +89,7 @@ def domain_cell_mass(cell: str, grad_from_values: bool, corners: bool):
     D, NK, SIMPLEX = CELLS[cell]
     AFFINE = is_affine(cell)
 
-    @njit(cache=True)
+    @njit(cache=True, error_model="numpy")  # (python's: a zero test at each division, 1.6x the pass)
     def kernel(cells, samples, mass, star, row, slot, entries, diagonal, count):  # pragma: no cover - compiled
         sc, cell_dofs = samples.sc, samples.cell_dofs
         Q = sc.shape[1]
