@@ -16,7 +16,9 @@ r"""The implicit step's per-particle passes (:mod:`fempm.implicit`), compiled.
 * :func:`linear_elastic_tangent`: :math:`\lambda \delta_{ij} F_{lk} + \mu (\delta_{ik} F_{lj}
   + \delta_{jk} F_{li})` (:class:`fempm.materials.LinearElastic`).
 
-Each ``*_numpy`` is the reference its compiled form is tested against
+The compiled forms take numpy's error model (their divisions are guarded: a zero determinant
+leaves the inverse NaN; python's model tests every division again). Each ``*_numpy`` is the
+reference its compiled form is tested against
 (``tests/kernels/test_implicit_kernels.py``); :func:`fempm.kernels.choice.pick` chooses.
 """
 
@@ -121,7 +123,7 @@ try:
             inv[2, 2] = (m00 * m11 - m01 * m10) * r
         return J
 
-    @njit(cache=True)
+    @njit(cache=True, error_model="numpy")
     def increment_gradients_numba(du, dofs, gradients):  # pragma: no cover - compiled
         n, k = dofs.shape
         d = du.shape[1]
@@ -135,7 +137,7 @@ try:
                         G[p, i, m] += u * gradients[p, a, m]
         return G
 
-    @njit(cache=True)
+    @njit(cache=True, error_model="numpy")
     def _deformed(F, G):  # pragma: no cover - compiled
         n, d = F.shape[0], F.shape[1]
         out = np.empty((n, d, d))
@@ -151,7 +153,7 @@ try:
     def deformed_numba(F, G):
         return _deformed(np.ascontiguousarray(F), np.ascontiguousarray(G))
 
-    @njit(cache=True)
+    @njit(cache=True, error_model="numpy")
     def increment_determinants_numba(G):  # pragma: no cover - compiled
         n, d = G.shape[0], G.shape[1]
         J = np.empty(n)
@@ -165,7 +167,7 @@ try:
         r""":math:`P_p` (and with ``tangent`` :math:`\mathbb{A}_p`) of dimension ``d``, the loops'
         sizes compile-time constants (unrolled: 2-3x as fast as with the sizes read at run time)."""
 
-        @njit(cache=True)
+        @njit(cache=True, error_model="numpy")
         def nominal(sigma, D, G):  # pragma: no cover - compiled
             n = G.shape[0]
             P = np.empty((n, d, d))
@@ -209,7 +211,7 @@ try:
         """The particles' tangent blocks for ``k`` dofs per cell in dimension ``d``, the loops'
         sizes compile-time constants."""
 
-        @njit(cache=True)
+        @njit(cache=True, error_model="numpy")
         def blocks(gradients, values, A, volume, mass, factor, consistent, diagonal, slot, groups):  # pragma: no cover
             n = gradients.shape[0]
             m = k * d
@@ -261,7 +263,7 @@ try:
     def _linear_elastic_tangent_kernel(d: int):
         """:func:`linear_elastic_tangent` in dimension ``d`` (the loops' sizes compile-time constants)."""
 
-        @njit(cache=True)
+        @njit(cache=True, error_model="numpy")
         def tangent(F, lam, mu):  # pragma: no cover - compiled
             n = F.shape[0]
             D = np.zeros((n, d, d, d, d))
