@@ -42,7 +42,7 @@ if AVAILABLE:
     from fempm.kernels.kinematics import _det
     from fempm.kernels.kinematics import law_at
     from fempm.kernels.particle_checks import count_j
-    from fempm.kernels.patch import BLOCK_SHIFT, add_patch, nodal_ratio
+    from fempm.kernels.patch import add_corners, add_patch, nodal_ratio
     from fempm.kernels.planar import basis, increment_measure, inverse_jacobian
     from fempm.kernels.shape import shape, shape_values
 
@@ -99,7 +99,6 @@ def measure_kernel(cell: str):
     @njit(inline=INLINE)
     def measure2(p, c, arrays, by_trace, dt, out, dirty):  # pragma: no cover - compiled
         X, K, cell_dofs, v_new, F, volume, body = arrays
-        bodies = out.shape[1] // 2
         X0, X1 = X[p, 0], X[p, 1]
         k00, k01, k10, k11 = inverse_jacobian(X0, X1, K, c, AFFINE)
         N0, N1, N2, N3, g0x, g0y, g1x, g1y, g2x, g2y, g3x, g3y = basis(X0, X1, k00, k01, k10, k11, SIMPLEX)
@@ -115,19 +114,7 @@ def measure_kernel(cell: str):
             L00, L01, L10, L11 = L00 + a3 * g3x, L01 + a3 * g3y, L10 + b3 * g3x, L11 + b3 * g3y
         b = body[p]
         f = increment_measure(F, p, dt, (L00, L01, L10, L11), by_trace[b])  # (the G2P pass computes it again)
-        V = volume[p]
-        w0, w1, w2, w3 = N0 * V, N1 * V, N2 * V, N3 * V
-        out[i0, b] += w0
-        out[i0, bodies + b] += w0 * f
-        out[i1, b] += w1
-        out[i1, bodies + b] += w1 * f
-        out[i2, b] += w2
-        out[i2, bodies + b] += w2 * f
-        dirty[i0 >> BLOCK_SHIFT], dirty[i1 >> BLOCK_SHIFT], dirty[i2 >> BLOCK_SHIFT] = 1, 1, 1
-        if QUAD:
-            out[i3, b] += w3
-            out[i3, bodies + b] += w3 * f
-            dirty[i3 >> BLOCK_SHIFT] = 1
+        add_corners(out, dirty, ((i0, i1, i2, i3), (N0, N1, N2, N3)), b, volume[p], f, QUAD)
 
     @njit(cache=True, error_model="numpy")
     def measure(where, v_new, F, volume, body, by_trace, dt, L, value, out, dirty):  # pragma: no cover - compiled

@@ -20,7 +20,7 @@ from __future__ import annotations
 from fempm.kernels.choice import INLINE
 from fempm.kernels.shape import AVAILABLE
 
-__all__ = ["AVAILABLE", "BLOCK_ROWS", "BLOCK_SHIFT", "add_patch", "average_pressure", "averages", "blocks",
+__all__ = ["AVAILABLE", "BLOCK_ROWS", "BLOCK_SHIFT", "add_corners", "add_patch", "average_pressure", "averages", "blocks",
            "clear_blocks", "nodal_ratio"]
 
 #: log2 of :data:`BLOCK_ROWS`
@@ -54,6 +54,25 @@ if AVAILABLE:
             out[i, b] += w
             out[i, bodies + b] += w * value
             dirty[i >> BLOCK_SHIFT] = 1
+
+    @njit(inline=INLINE)
+    def add_corners(out, dirty, at, b, weight, value, quad):  # pragma: no cover - compiled
+        r""":func:`add_patch` in scalar code for a triangle or (``quad``) quadrilateral of degree 1,
+        ``at`` = (its dofs i0..i3, the basis values N0..N3; the fourth on a quadrilateral only)."""
+        (i0, i1, i2, i3), (N0, N1, N2, N3) = at
+        bodies = out.shape[1] // 2
+        w0, w1, w2, w3 = N0 * weight, N1 * weight, N2 * weight, N3 * weight
+        out[i0, b] += w0
+        out[i0, bodies + b] += w0 * value
+        out[i1, b] += w1
+        out[i1, bodies + b] += w1 * value
+        out[i2, b] += w2
+        out[i2, bodies + b] += w2 * value
+        dirty[i0 >> BLOCK_SHIFT], dirty[i1 >> BLOCK_SHIFT], dirty[i2 >> BLOCK_SHIFT] = 1, 1, 1
+        if quad:
+            out[i3, b] += w3
+            out[i3, bodies + b] += w3 * value
+            dirty[i3 >> BLOCK_SHIFT] = 1
 
     @njit(inline=INLINE)
     def average_pressure(sigma, D, at, patch, b, bodies):  # pragma: no cover - compiled

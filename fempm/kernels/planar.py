@@ -34,7 +34,7 @@ if AVAILABLE:
     from fempm.kernels.kinematics import add_totals
     from fempm.kernels.multilinear import quad_pull_back
     from fempm.kernels.particle_checks import count_j, stable_time
-    from fempm.kernels.patch import BLOCK_SHIFT, nodal_ratio
+    from fempm.kernels.patch import add_corners, nodal_ratio
     from fempm.kernels.planar_affine import add_affine, affine_g2p2, carried2, jacobian2, offsets2
     from fempm.kernels.shape import inside_after_pull_back, star_search
 
@@ -84,12 +84,13 @@ if AVAILABLE:
             out[i3, col + 1] += N3 * q1
 
     @njit(inline=INLINE)
-    def add_pressure(sums, p, at, state, bodies, quad):  # pragma: no cover - compiled
+    def add_pressure(sums, p, at, state, quad):  # pragma: no cover - compiled
         r"""F-bar's pressure sums of the next force pass (:func:`fempm.kernels.fbar.pressure_kernel`)
         for particle p where it ends the G2P pass (none for one that left its cell's neighbours):
-        :math:`N_a V_p` and :math:`N_a V_p\,\mathrm{tr}\,\sigma_p / 2` into ``sums`` = (the (dofs, 2 B) sums, their blocks' dirty marks), ``at`` = (cell_dofs, cells,
-        X, whether p moved, the dofs i0..i3 and basis values N0..N3 where the pass found it),
-        ``state`` = (volume, sigma, body)."""
+        :math:`N_a V_p` and :math:`N_a V_p\,\mathrm{tr}\,\sigma_p / 2` into ``sums`` = (the (dofs,
+        2 B) sums, their blocks' dirty marks), ``at`` = (cell_dofs, cells, X, whether p moved, the
+        dofs i0..i3 and basis values N0..N3 where the pass found it), ``state`` = (volume, sigma,
+        body)."""
         out, dirty = sums
         cell_dofs, cells, X, moved, (i0, i1, i2, i3), (N0, N1, N2, N3) = at
         if moved:  # its new cell and reference coordinates
@@ -97,20 +98,8 @@ if AVAILABLE:
             i0, i1, i2, i3 = cell_dofs[c, 0], cell_dofs[c, 1], cell_dofs[c, 2], cell_dofs[c, 3 if quad else 0]
             N0, N1, N2, N3 = basis(X[p, 0], X[p, 1], 0.0, 0.0, 0.0, 0.0, not quad)[:4]
         volume, sigma, body = state
-        b, V = body[p], volume[p]
-        f = 0.5 * (sigma[p, 0, 0] + sigma[p, 1, 1])
-        w0, w1, w2, w3 = N0 * V, N1 * V, N2 * V, N3 * V
-        out[i0, b] += w0
-        out[i0, bodies + b] += w0 * f
-        out[i1, b] += w1
-        out[i1, bodies + b] += w1 * f
-        out[i2, b] += w2
-        out[i2, bodies + b] += w2 * f
-        dirty[i0 >> BLOCK_SHIFT], dirty[i1 >> BLOCK_SHIFT], dirty[i2 >> BLOCK_SHIFT] = 1, 1, 1
-        if quad:
-            out[i3, b] += w3
-            out[i3, bodies + b] += w3 * f
-            dirty[i3 >> BLOCK_SHIFT] = 1
+        add_corners(out, dirty, ((i0, i1, i2, i3), (N0, N1, N2, N3)), body[p], volume[p],
+                    0.5 * (sigma[p, 0, 0] + sigma[p, 1, 1]), quad)
 
     @njit(inline=INLINE)
     def deform(F, p, dt, L00, L01, L10, L11):  # pragma: no cover - compiled
@@ -372,7 +361,7 @@ def g2p_kernel(simplex: bool, affine: bool, blend: bool, kinematics: bool, move:
                 cells[p], left[p] = (c, True) if e < 0 else (e, False)
             if pressures and not (move and left[p]):  # F-bar (a kinematics pass): the next force pass's sums
                 add_pressure((pressure_sums, dirty), p, (cell_dofs, cells, X, move, (i0, i1, i2, i3), (N0, N1, N2, N3)),
-                             (volume, sigma, body), bodies, QUAD)
+                             (volume, sigma, body), QUAD)
             if totals:
                 add_totals(acc, p, mass, v, F, volume0, law[body[p]], lam[body[p]], mu[body[p]], 2)
         if totals:
