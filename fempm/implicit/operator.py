@@ -129,12 +129,12 @@ class IncrementOperator:
         cell share its block of the tangent, so that its COO entries are a block per occupied
         cell, not per particle (a quarter of the entries with 4 particles a cell; particle domains,
         whose dofs are their own: a group per particle)."""
-        if self._groups is None:
-            b = self.basis
-            self._groups = (b.dofs, np.arange(len(b.dofs)))  # particle domains: a block per particle
-            if b.cells is not None:  # point particles: a cell's particles have its dofs
-                cells, first, slot = np.unique(b.cells, return_index=True, return_inverse=True)
-                self._groups = (b.dofs[first], slot.ravel())
+        b = self.basis
+        if self._groups is None and b.cells is None:  # particle domains: a block per particle
+            self._groups = (b.dofs, np.arange(len(b.dofs)))
+        elif self._groups is None:  # point particles: a cell's particles have its dofs
+            _, first, slot = np.unique(b.cells, return_index=True, return_inverse=True)
+            self._groups = (b.dofs[first], slot.ravel())
         return self._groups
 
     def pattern(self) -> tuple[npt.NDArray, npt.NDArray]:

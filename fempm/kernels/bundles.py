@@ -36,8 +36,9 @@ bundle         members
                ``rigid`` per group
 ``Averaged``   F-bar's kinematics in the planar G2P pass (:mod:`fempm.kernels.fbar`): the nodal
                averages ``patch`` (dofs, 2 B) of the measures (which the pass computes again for
-               each particle), ``by_trace`` (B,), the number of bodies B; the next force pass's pressure sums ``sums`` (dofs, 2 B;
-               (0, 2): none) the pass adds to and their blocks' ``dirty`` marks
+               each particle), ``by_trace`` (B,), the number of bodies B; the next force pass's
+               pressure sums ``sums`` (dofs, 2 B; (0, 2): none) the pass adds to and their blocks'
+               ``dirty`` marks
 ``Affine``     APIC/TPIC (:mod:`fempm.kernels.affine`): the particles' affine matrices ``C``
                (n, d, d), APIC's spins ``spin`` (n, 1 or 3), the dofs' coordinates ``xi``, the
                grid velocity ``v`` G2P takes the affine matrices from where a particle's

@@ -90,9 +90,10 @@ def measure_kernel(cell: str):
     r"""The first pass (see the module): ``measure(where, v_new, F, volume, body, by_trace, dt,
     L, value, out, dirty)`` writes :math:`L_p` into ``L`` (n, d, d) and the measure into ``value``
     (n,) (neither on :data:`fempm.kernels.lumped.PLANAR` cells, whose G2P pass computes both
-    again: :func:`fempm.kernels.planar.increment_measure`), and adds the particles' volumes and measures to ``out`` (dofs, 2 B), marking the blocks it
-    writes in ``dirty`` (:mod:`fempm.kernels.patch`); ``by_trace`` (B,) says which bodies' laws
-    average :math:`\mathrm{tr}\,F`."""
+    again: :func:`fempm.kernels.planar.increment_measure`), and adds the particles' volumes and
+    measures to ``out`` (dofs, 2 B), marking the blocks it writes in ``dirty``
+    (:mod:`fempm.kernels.patch`); ``by_trace`` (B,) says which bodies' laws average
+    :math:`\mathrm{tr}\,F`."""
     D, NK, SIMPLEX, AFFINE, DEGREE, BERNSTEIN = _sizes(cell)
     PLANAR, QUAD = D == 2 and DEGREE == 1, not SIMPLEX
 

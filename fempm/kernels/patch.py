@@ -20,8 +20,8 @@ from __future__ import annotations
 from fempm.kernels.choice import INLINE
 from fempm.kernels.shape import AVAILABLE
 
-__all__ = ["AVAILABLE", "BLOCK_ROWS", "BLOCK_SHIFT", "add_corners", "add_patch", "average_pressure", "averages", "blocks",
-           "clear_blocks", "nodal_ratio"]
+__all__ = ["AVAILABLE", "BLOCK_ROWS", "BLOCK_SHIFT", "add_corners", "add_patch", "average_pressure", "averages",
+           "blocks", "clear_blocks", "nodal_ratio"]
 
 #: log2 of :data:`BLOCK_ROWS`
 BLOCK_SHIFT = 4

@@ -291,7 +291,8 @@ def g2p_kernel(simplex: bool, affine: bool, blend: bool, kinematics: bool, move:
     """:func:`fempm.kernels.lumped._g2p_kernel` for ``triangle`` (``simplex``) or
     ``quadrilateral`` cells, ``affine`` or multilinear (``kind``, APIC or TPIC, in a blend pass:
     affine cells; :mod:`fempm.kernels.planar_affine`); ``averaged``: F-bar's kinematics
-    (:func:`fbar_deform`, the ``average`` bundle), with ``pressures`` the next force pass's sums (:func:`add_pressure`)."""
+    (:func:`fbar_deform`, the ``average`` bundle), with ``pressures`` the next force pass's sums
+    (:func:`add_pressure`)."""
     QUAD, KIND = not simplex, kind
 
     @njit(cache=True, error_model="numpy")

@@ -76,7 +76,8 @@ class FBarPointGrid(PointGrid):
         super().__init__(state)
         bodies = len(state.materials)
         self.by_trace = trace_measure(state.materials)
-        self._patch, self._at_pressures = PatchSums(self, bodies), PatchSums(self, bodies)  # the measures, the pressures
+        self._patch = PatchSums(self, bodies)  # the measures'
+        self._at_pressures = PatchSums(self, bodies)  # the pressures'
         #: the particle arrays (``_state``) the planar kinematics pass left the pressure sums of, else None
         self._carried = None
         self._measure = kb.measure_kernel(self.cell)
@@ -132,9 +133,9 @@ class FBarPointGrid(PointGrid):
         if self.cell in PLANAR:  # the averaged kinematics inside the point grid's pass
             carry = not self.any_external  # (the laws without a compiled kernel set their stress after it)
             sums = self._at_pressures.zeroed() if carry else ()
+            average = Averaged(patch, self.by_trace, len(self.by_trace), *sums)
             nonfinite, left = super().particle_pass(v_new, v_old, dt, blend=blend, kinematics=True, move=move,
-                                                    remap=remap, average=Averaged(patch, self.by_trace, len(self.by_trace),
-                                                                                  *sums))
+                                                    remap=remap, average=average)
             if carry and not (move and left.any()):
                 self._carried = self._state()
             return nonfinite, left

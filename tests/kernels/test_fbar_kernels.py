@@ -31,8 +31,12 @@ MESHES = {
 }
 
 
-@pytest.mark.parametrize(("cell", "keep_L"), [pytest.param(cell, keep_L, marks=() if (cell, keep_L) in (
-    ("triangle", True), ("hexahedron", False), ("interval", True)) else pytest.mark.slow) for cell in MESHES for keep_L in (True, False)])
+DEFAULT = (("triangle", True), ("hexahedron", False), ("interval", True))  # the rest: make test-all
+
+
+@pytest.mark.parametrize(("cell", "keep_L"), [pytest.param(cell, keep_L, marks=() if (cell, keep_L) in DEFAULT
+                                                           else pytest.mark.slow)
+                                              for cell in MESHES for keep_L in (True, False)])
 def test_compiled_fbar_passes_equal_the_numpy_average(cell, keep_L):
     mesh = MESHES[cell]()
     d = mesh.geometry.dim
