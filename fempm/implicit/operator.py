@@ -27,7 +27,7 @@ from fempm.implicit.nominal import nominal_stress
 from fempm.kernels.implicit import increment_gradients, tangent_blocks
 from fempm.materials.tangent import stress_after, tangent_of
 from fempm.particles.particle_set import Particles
-from fempm.stepping.laws import law_state, material_groups
+from fempm.stepping.laws import every, law_state, material_groups
 from fempm.transfer.basis import ParticleBasis
 from fempm.transfer.mapping import p2g, p2g_gradients
 
@@ -57,7 +57,7 @@ class IncrementOperator:
         self.rho = particles.mass / particles.volume
         self.F, self.sigma = f["F"], f["sigma"]
         n = len(self.volume)  # a law of every particle reads them through a slice, not copies
-        self.groups = [(mat, slice(None) if len(idx) == n else idx, law_state(mat, f, idx))
+        self.groups = [(mat, every(idx, n), law_state(mat, f, idx))
                        for mat, idx in material_groups(f, materials)]
         self.finite_difference = finite_difference
         self.dt = dt
@@ -75,19 +75,28 @@ class IncrementOperator:
         and with ``tangent`` their tangents :math:`\mathbb{A}_p` (n, d, d, d, d) (else None). The
         Cauchy stresses of the last call are kept: Newton asks for the tangent where it has just
         evaluated the residual, and the laws' stress update is not repeated there."""
-        n, d = len(G), self.d
         known = self._last is not None and np.array_equal(self._last[0], G)
-        sigma = self._last[1] if known else np.empty((n, d, d))
-        D = np.empty((n, d, d, d, d)) if tangent else None
-        for mat, idx, state in self.groups:
-            if not known:
-                sigma[idx] = stress_after(mat, self.F[idx], G[idx], self.sigma[idx], self.rho[idx], state,
-                                          self.dt)[0]
-            if D is not None:
-                D[idx] = tangent_of(mat, self.F[idx], G[idx], self.sigma[idx], self.rho[idx], state,
-                                    finite_difference=self.finite_difference, dt=self.dt)
+        sigma = self._last[1] if known else self._per_law(
+            lambda mat, idx, state: stress_after(mat, self.F[idx], G[idx], self.sigma[idx], self.rho[idx], state,
+                                                 self.dt)[0])
+        D = self._per_law(lambda mat, idx, state: tangent_of(
+            mat, self.F[idx], G[idx], self.sigma[idx], self.rho[idx], state, finite_difference=self.finite_difference,
+            dt=self.dt)) if tangent else None
         self._last = (G, sigma)
         return nominal_stress(sigma, D, G)
+
+    def _per_law(self, value) -> npt.NDArray:
+        """``value(law, idx, state)`` of every law's particles, in one array (n, ...): a law of
+        every particle gives it whole (no copy)."""
+        if len(self.groups) == 1 and isinstance(self.groups[0][1], slice):
+            return value(*self.groups[0])
+        out = None
+        for mat, idx, state in self.groups:
+            part = value(mat, idx, state)
+            if out is None:
+                out = np.empty((len(self.volume),) + part.shape[1:])
+            out[idx] = part
+        return out
 
     def law_gradients(self, G: npt.NDArray) -> npt.NDArray:
         """The increments the laws see for the increments ``G``: ``G`` itself (F-bar averages

@@ -9,18 +9,22 @@ With the particle's dofs :math:`i_a`, values :math:`N_a = S[p, a]` and gradients
     \qquad L_p = \sum_a v^+_{i_a} \otimes \nabla N_a .
 
 :func:`g2p_point` returns all three in one pass over the particles (USL, USF);
+:func:`interpolate` the values :math:`\sum_a N_a f_{i_a}` of any nodal field (the basis's ``gather``);
 :func:`velocity_and_gradient` returns :math:`\bar v_p` and :math:`L_p` of one grid velocity
 (MUSL's re-mapped one).
 """
 
 from __future__ import annotations
 
+import functools
+
 import numpy as np
 import numpy.typing as npt
 
 from fempm.kernels.choice import pick
 
-__all__ = ["g2p_point", "g2p_point_numpy", "velocity_and_gradient", "velocity_and_gradient_numpy"]
+__all__ = ["g2p_point", "g2p_point_numpy", "interpolate", "interpolate_numpy", "velocity_and_gradient",
+           "velocity_and_gradient_numpy"]
 
 
 def g2p_point_numpy(dofs, S, G, v_new, v_old, vp, flip):
@@ -36,6 +40,10 @@ def velocity_and_gradient_numpy(dofs, S, G, v):
     """Reference: (grid velocity at the particles, L_p)."""
     vn = v[dofs]
     return np.einsum("na,nad->nd", S, vn), np.einsum("nai,naj->nij", vn, G)
+
+
+def interpolate_numpy(dofs, S, nodal):
+    return np.einsum("na,nak->nk", S, nodal[dofs])
 
 
 try:
@@ -79,6 +87,30 @@ try:
              float(flip), blended, vgrid, L)
         return blended, vgrid, L
 
+    @functools.cache
+    def _interpolate(k: int, c: int):
+        """:func:`interpolate` of ``k`` dofs a particle and ``c`` components (compile-time loops)."""
+
+        @njit(cache=True)
+        def interpolate(dofs, S, nodal):  # pragma: no cover - compiled
+            n = S.shape[0]
+            out = np.empty((n, c))
+            for p in range(n):
+                for r in range(c):
+                    s = 0.0
+                    for a in range(k):
+                        s += S[p, a] * nodal[dofs[p, a], r]
+                    out[p, r] = s
+            return out
+
+        return interpolate
+
+    def interpolate_numba(dofs, S, nodal):
+        if nodal.dtype != np.float64 or nodal.ndim != 2:  # (what the kernel is compiled for)
+            return interpolate_numpy(dofs, S, nodal)
+        return _interpolate(S.shape[1], nodal.shape[1])(np.ascontiguousarray(dofs), np.ascontiguousarray(S),
+                                                        np.ascontiguousarray(nodal))
+
     def velocity_and_gradient_numba(dofs, S, G, v):
         n, d = len(S), v.shape[1]
         vgrid, L = np.empty((n, d)), np.zeros((n, d, G.shape[2]))
@@ -86,6 +118,7 @@ try:
         return vgrid, L
 except ImportError:  # pragma: no cover - numba is a dependency; the references stand in
     g2p_point_numba = g2p_point_numpy
+    interpolate_numba = interpolate_numpy
     velocity_and_gradient_numba = velocity_and_gradient_numpy
 
 
@@ -100,3 +133,8 @@ def velocity_and_gradient(dofs: npt.NDArray, S: npt.NDArray, G: npt.NDArray,
                           v: npt.NDArray) -> tuple[npt.NDArray, npt.NDArray]:
     """(the grid velocity at the particles, L_p) of nodal (ndofs, d) ``v``, ghosts up to date."""
     return pick(velocity_and_gradient_numba, velocity_and_gradient_numpy)(dofs, S, G, v)
+
+
+def interpolate(dofs: npt.NDArray, S: npt.NDArray, nodal: npt.NDArray) -> npt.NDArray:
+    r""":math:`f_p = \sum_a S[p, a]\, F_{d(p,a)}` (n, c) of nodal (ndofs, c) data (ghosts up to date)."""
+    return pick(interpolate_numba, interpolate_numpy)(dofs, S, nodal)

@@ -14,6 +14,8 @@ per particle), local sums (the caller adds the ghost contributions to their owne
 
 from __future__ import annotations
 
+import functools
+
 import numpy as np
 import numpy.typing as npt
 
@@ -47,35 +49,49 @@ def scatter_gradients_numpy(dofs, G, W, ndofs):
 try:
     from numba import njit
 
-    @njit(cache=True)
-    def _weighted(dofs, S, w, out):  # pragma: no cover - compiled
-        n, k = S.shape
-        for p in range(n):
-            for a in range(k):
-                i = dofs[p, a]
-                for c in range(w.shape[1]):
-                    out[i, c] += S[p, a] * w[p, c]
+    @functools.cache
+    def _weighted(k: int, c: int):
+        """:func:`scatter_weighted` of ``k`` dofs a particle and ``c`` weights, the loops' sizes
+        compile-time constants (2-3x as fast as read at run time)."""
 
-    @njit(cache=True)
-    def _gradients(dofs, G, W, out):  # pragma: no cover - compiled
-        n, k, d = G.shape
-        for p in range(n):
-            for a in range(k):
-                i = dofs[p, a]
-                for r in range(W.shape[1]):
-                    s = 0.0
-                    for b in range(d):
-                        s += G[p, a, b] * W[p, r, b]
-                    out[i, r] += s
+        @njit(cache=True)
+        def weighted(dofs, S, w, out):  # pragma: no cover - compiled
+            for p in range(S.shape[0]):
+                for a in range(k):
+                    i = dofs[p, a]
+                    for r in range(c):
+                        out[i, r] += S[p, a] * w[p, r]
+
+        return weighted
+
+    @functools.cache
+    def _gradients(k: int, c: int, d: int):
+        """:func:`scatter_gradients` of ``k`` dofs a particle, ``c`` rows of ``W``, dimension ``d``
+        (compile-time loops)."""
+
+        @njit(cache=True)
+        def gradients(dofs, G, W, out):  # pragma: no cover - compiled
+            for p in range(G.shape[0]):
+                for a in range(k):
+                    i = dofs[p, a]
+                    for r in range(c):
+                        s = 0.0
+                        for b in range(d):
+                            s += G[p, a, b] * W[p, r, b]
+                        out[i, r] += s
+
+        return gradients
 
     def scatter_weighted_numba(dofs, S, w, ndofs):
         out = np.zeros((ndofs, w.shape[1]))
-        _weighted(np.ascontiguousarray(dofs), np.ascontiguousarray(S), np.ascontiguousarray(w), out)
+        _weighted(S.shape[1], w.shape[1])(np.ascontiguousarray(dofs), np.ascontiguousarray(S), np.ascontiguousarray(w),
+                                          out)
         return out
 
     def scatter_gradients_numba(dofs, G, W, ndofs):
         out = np.zeros((ndofs, W.shape[1]))
-        _gradients(np.ascontiguousarray(dofs), np.ascontiguousarray(G), np.ascontiguousarray(W), out)
+        _gradients(G.shape[1], W.shape[1], G.shape[2])(np.ascontiguousarray(dofs), np.ascontiguousarray(G),
+                                                       np.ascontiguousarray(W), out)
         return out
 
     @njit(cache=True)

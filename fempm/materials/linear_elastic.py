@@ -14,7 +14,8 @@ import numpy as np
 import numpy.typing as npt
 
 from fempm.kernels.implicit import linear_elastic_tangent
-from fempm.kernels.kinematics import linear_elastic_stress, sym
+from fempm.kernels.kinematics import elastic_energy, linear_elastic_stress, sym
+from fempm.kernels.particle_checks import LINEAR_ELASTIC
 from fempm.materials.base import IsotropicElastic, identity, trace
 
 __all__ = ["LinearElastic"]
@@ -57,6 +58,6 @@ class LinearElastic(IsotropicElastic):
         return linear_elastic_tangent(F, *self.lame)
 
     def energy_density(self, F) -> npt.NDArray:
-        lam, mu = self.lame
-        eps = self.strain(F)
-        return 0.5 * lam * trace(eps) ** 2 + mu * np.einsum("nij,nij->n", eps, eps)
+        """The stored energy per reference volume (n,), compiled
+        (:func:`fempm.kernels.kinematics.elastic_energy`, its numpy reference ``elastic_energy_numpy``)."""
+        return elastic_energy(LINEAR_ELASTIC, F, *self.lame)

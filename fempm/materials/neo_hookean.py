@@ -10,7 +10,8 @@ from dataclasses import dataclass
 import numpy as np
 import numpy.typing as npt
 
-from fempm.kernels.kinematics import neo_hookean_stress
+from fempm.kernels.kinematics import elastic_energy, neo_hookean_stress
+from fempm.kernels.particle_checks import NEO_HOOKEAN
 from fempm.materials.base import IsotropicElastic, identity
 
 __all__ = ["NeoHookean"]
@@ -63,6 +64,6 @@ class NeoHookean(IsotropicElastic):
                                                            + np.einsum("jk,nil->nijkl", eye, FFn)))
 
     def energy_density(self, F) -> npt.NDArray:
-        lam, mu = self.lame
-        lnJ = np.log(np.linalg.det(F))
-        return 0.5 * mu * (np.einsum("nij,nij->n", F, F) - F.shape[1]) - mu * lnJ + 0.5 * lam * lnJ**2
+        """The stored energy per reference volume (n,), compiled
+        (:func:`fempm.kernels.kinematics.elastic_energy`, its numpy reference ``elastic_energy_numpy``)."""
+        return elastic_energy(NEO_HOOKEAN, F, *self.lame)

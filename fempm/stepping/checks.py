@@ -8,6 +8,7 @@ from collections.abc import Callable, Sequence
 import numpy as np
 import numpy.typing as npt
 
+from fempm.kernels.finite import nonfinite
 from fempm.particles.particle_set import Particles
 
 __all__ = ["check_bodies", "check_fields", "check_step_arguments", "nonfinite_particles"]
@@ -36,8 +37,7 @@ def nonfinite_particles(particles: Particles) -> npt.NDArray[np.bool_]:
     r"""The particles whose position, stress or kinetic energy density :math:`v_p \cdot v_p`
     (hence velocity) is not finite (this rank's)."""
     f = particles.fields
-    speed2 = np.einsum("nd,nd->n", f["v"], f["v"]) if len(particles) else np.zeros(0)
-    return ~(np.isfinite(particles.x).all(1) & np.isfinite(speed2) & np.isfinite(f["sigma"]).all((1, 2)))
+    return nonfinite(particles.x, f["v"], f["sigma"])  # (compiled, fempm.kernels.finite)
 
 
 def check_step_arguments(particles: Particles, dt: float | None, dt_max: float) -> None:

@@ -14,7 +14,7 @@ from mpi4py import MPI
 
 from fempm.materials.linear_elastic import LinearElastic
 from fempm.particles.particle_set import Particles
-from fempm.stepping.laws import law_state, material_groups
+from fempm.stepping.laws import every, law_state, material_groups
 from fempm.stepping.options import StepOptions
 from fempm.transfer import affine
 from fempm.transfer.basis import is_nonnegative
@@ -67,11 +67,12 @@ def strain_energy(particles: Particles, materials: Sequence, which: Sequence[boo
     for b, (mat, idx) in enumerate(material_groups(f, materials)):
         if which is not None and not which[b]:
             continue
+        at = every(idx, len(particles))
         if getattr(mat, "energy_from_stress", False):  # hypoelastic: the elastic energy of the stress
-            w = mat.energy_density(f["F"][idx], f["sigma"][idx], law_state(mat, f, idx))
+            w = mat.energy_density(f["F"][at], f["sigma"][at], law_state(mat, f, idx))
         else:
-            w = mat.energy_density(f["F"][idx])
-        strain += np.sum(f["volume0"][idx] * w)
+            w = mat.energy_density(f["F"][at])
+        strain += np.sum(f["volume0"][at] * w)
     return float(strain)
 
 

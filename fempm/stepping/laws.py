@@ -10,7 +10,7 @@ import numpy.typing as npt
 
 from fempm.abort import raise_together
 
-__all__ = ["law_state", "law_stress", "material_groups", "stresses_of"]
+__all__ = ["every", "law_state", "law_stress", "material_groups", "stresses_of"]
 
 
 def law_state(mat, fields: dict, idx: npt.NDArray) -> dict:
@@ -46,10 +46,17 @@ def stresses_of(comm, groups, F: npt.NDArray, L: npt.NDArray, sigma: npt.NDArray
     error = None
     try:
         for mat, idx in groups:
-            sigma[idx] = law_stress(mat, F[idx], L[idx], sigma[idx], dt, rho[idx], fields, idx)
+            at = every(idx, len(sigma))
+            sigma[idx] = law_stress(mat, F[at], L[at], sigma[at], dt, rho[at], fields, idx)
     except Exception as e:  # noqa: BLE001 - whatever the law raised, on every rank
         error = e
     raise_together(comm, error)
+
+
+def every(idx: npt.NDArray, n: int) -> npt.NDArray | slice:
+    """``idx``, or ``slice(None)`` where it holds all ``n`` particles (a law of every particle
+    reads their arrays as they are: views, not copies)."""
+    return slice(None) if len(idx) == n else idx
 
 
 def material_groups(fields: dict, materials: Sequence):

@@ -21,6 +21,7 @@ import numpy as np
 import numpy.typing as npt
 
 from fempm.kernels import shape as shape_kernels
+from fempm.kernels.g2p import interpolate
 from fempm.kernels.p2g import scatter_weighted
 from fempm.particles.halo import extend_index_map, remote_box_rows, remote_rows
 from fempm.particles.particle_set import Particles
@@ -257,7 +258,7 @@ class ParticleBasis:
         r"""G2P: :math:`f_p = \sum_a S[p, a]\, F_{d(p,a)}` for nodal (ndofs, k) data -> (n, k)."""
         if len(nodal) < self.num_dofs_local:  # the space's dofs: fetch the extra ghosts
             nodal = self.update_ghosts(nodal)
-        return np.einsum("na,nak->nk", self.values, nodal[self.dofs])
+        return interpolate(self.dofs, self.values, nodal)  # (compiled, fempm.kernels.g2p)
 
 
 def _dense_rows(p: npt.NDArray, dofs: npt.NDArray, vals: npt.NDArray, grads: npt.NDArray | None, n: int, d: int):

@@ -32,6 +32,11 @@ def test_interpolation_kernel_equals_reference(data):
     dofs, S, G, v_new, _, _ = data
     for a, b in zip(g2p.velocity_and_gradient_numpy(dofs, S, G, v_new), g2p.velocity_and_gradient_numba(dofs, S, G, v_new)):
         assert np.abs(a - b).max() < 1e-13 * max(1.0, np.abs(a).max())
+    for nodal in (v_new, v_new[:, :1], np.hstack([v_new, v_new[:, ::-1]])):  # any number of components
+        a, b = g2p.interpolate_numpy(dofs, S, nodal), g2p.interpolate_numba(dofs, S[:, ::-1][:, ::-1], nodal)
+        assert a.shape == b.shape == (len(S), nodal.shape[1]) and np.abs(a - b).max() < 1e-13 * np.abs(a).max()
+    ints = g2p.interpolate_numba(dofs, S, np.arange(len(v_new))[:, None])  # an integer field: numpy's reference
+    assert np.array_equal(ints, g2p.interpolate_numpy(dofs, S, np.arange(len(v_new))[:, None]))
 
 
 def test_kernels_are_compiled():
@@ -54,6 +59,9 @@ def test_kinematics_and_elastic_laws_equal_their_references(d):
     for law in (NeoHookean(7.0, 0.3), LinearElastic(7.0, 0.3)):
         ref, got = law.stress_numpy(F, L, None, 0.01, None), law.stress(F, L, None, 0.01, None)
         assert np.abs(ref - got).max() < 1e-13 * np.abs(ref).max(), type(law).__name__
+    for code in (k.NEO_HOOKEAN, k.LINEAR_ELASTIC):  # the stored energies
+        ref, got = k.elastic_energy_numpy(code, F, 7.0, 0.3), k.elastic_energy_numba(code, F, 7.0, 0.3)
+        assert ref.shape == (n,) and np.abs(ref - got).max() < 1e-13 * np.abs(ref).max(), code
 
 
 def test_scatter_kernels_equal_their_references(data):
