@@ -20,6 +20,8 @@ turned into nodal averages once summed over ranks (:func:`fempm.kernels.patch.av
   force of :math:`\sigma_p + (\bar p_p - p_p) I`, the stress whose divergence is the internal
   force of the averaged kinematics.
 
+On tetrahedra and affine hexahedra the first two passes are those of :mod:`fempm.kernels.fbar_solid`
+(the same equations in local scalars; the second where it keeps no :math:`\bar L_p`).
 The numpy reference is :class:`fempm.stepping.fbar.FBar` (``rate``, ``force_stress``) on the
 particle basis (``tests/kernels/test_fbar_kernels.py``).
 """
@@ -30,6 +32,7 @@ import functools
 
 import numpy as np
 
+from fempm.kernels import fbar_solid
 from fempm.kernels.choice import INLINE
 from fempm.kernels.shape import AVAILABLE, CELLS, is_affine, space_of
 
@@ -39,6 +42,7 @@ if AVAILABLE:
     from numba import njit
 
     from fempm.kernels.affine import inverse
+    from fempm.kernels.fbar_solid import root
     from fempm.kernels.kinematics import _det
     from fempm.kernels.kinematics import law_at
     from fempm.kernels.particle_checks import count_j
@@ -69,14 +73,6 @@ if AVAILABLE:
         m = 1.0 + dt * L[p, 2, 2]
         return a * (e * m - g * k) - b * (c * m - g * h) + f * (c * k - e * h)
 
-    @njit(inline=INLINE)
-    def root(x, D):  # pragma: no cover - compiled
-        """:math:`x^{1/D}` (NaN for x < 0 and D > 1, as numpy's power)."""
-        if D == 1:
-            return x
-        if D == 2:
-            return np.sqrt(x)
-        return np.cbrt(x) if x >= 0.0 else np.nan
 
 
 def _sizes(cell: str) -> tuple:
@@ -96,6 +92,7 @@ def measure_kernel(cell: str):
     :math:`\mathrm{tr}\,F`."""
     D, NK, SIMPLEX, AFFINE, DEGREE, BERNSTEIN = _sizes(cell)
     PLANAR, QUAD = D == 2 and DEGREE == 1, not SIMPLEX
+    SOLID = D == 3 and DEGREE == 1 and AFFINE  # tetrahedra, affine hexahedra: scalar code (fempm.kernels.solid)
 
     @njit(inline=INLINE)
     def measure2(p, c, arrays, by_trace, dt, out, dirty):  # pragma: no cover - compiled
@@ -116,6 +113,9 @@ def measure_kernel(cell: str):
         b = body[p]
         f = increment_measure(F, p, dt, (L00, L01, L10, L11), by_trace[b])  # (the G2P pass computes it again)
         add_corners(out, dirty, ((i0, i1, i2, i3), (N0, N1, N2, N3)), b, volume[p], f, QUAD)
+
+    if SOLID:
+        return fbar_solid.measure_kernel(QUAD)
 
     @njit(cache=True, error_model="numpy")
     def measure(where, v_new, F, volume, body, by_trace, dt, L, value, out, dirty):  # pragma: no cover - compiled
@@ -159,6 +159,10 @@ def deform_kernel(cell: str, keep_L: bool):
     (:mod:`fempm.kernels.bundles`) from the averaged deformation and, with ``keep_L``,
     :math:`\bar L_p` into ``L``; returns (#non-finite J, #J <= 0, min J, max J) as the G2P pass."""
     D, NK, SIMPLEX, AFFINE, DEGREE, BERNSTEIN = _sizes(cell)
+    SOLID = D == 3 and DEGREE == 1 and AFFINE  # tetrahedra, affine hexahedra: scalar code
+
+    if SOLID and not keep_L:
+        return fbar_solid.deform_kernel(not SIMPLEX)
 
     @njit(cache=True, error_model="numpy")
     def deform(where, nodal, by_trace, dt, L, value, state, laws):  # pragma: no cover - compiled

@@ -62,7 +62,7 @@ from fempm.kernels.particle_checks import (
 )
 from fempm.kernels.shape import AVAILABLE, CELLS, MULTILINEAR, is_affine, space_of
 
-__all__ = ["NO_GROUPS", "NO_STABLE", "PLANAR", "kernels_for"]
+__all__ = ["NO_GROUPS", "NO_STABLE", "PLANAR", "SOLID", "kernels_for"]
 
 #: the cells whose passes are the scalar ones of :mod:`fempm.kernels.planar` (their G2P pass also
 #: takes F-bar's averaged kinematics)
@@ -71,6 +71,8 @@ PLANAR = ("triangle", "quadrilateral", "quadrilateral" + MULTILINEAR)
 #: the cells whose affine transfers run the scalar passes (:mod:`fempm.kernels.planar` with
 #: :mod:`fempm.kernels.planar_affine`, :mod:`fempm.kernels.solid`), not the generic ones
 AFFINE_SCALAR = ("triangle", "quadrilateral", "tetrahedron", "hexahedron")
+#: the cells of the scalar 3D passes (:mod:`fempm.kernels.solid`; hexahedra affine)
+SOLID = ("tetrahedron", "hexahedron")
 #: no stable time asked of a P2G pass
 NO_STABLE = Stable(np.zeros(0), np.zeros(0))
 
@@ -117,7 +119,7 @@ def kernels_for(cell: str) -> SimpleNamespace:
         simplex, affine = cell == "triangle", is_affine(cell)
         scatter_kernel = functools.partial(_planar, planar.scatter_kernel, simplex, affine)
         g2p_kernel = functools.partial(_planar, planar.g2p_kernel, simplex, affine)
-    elif cell in ("tetrahedron", "hexahedron"):
+    elif cell in SOLID:
         scatter_kernel = functools.partial(_solid, solid.scatter_kernel, cell == "hexahedron")
         g2p_kernel = functools.partial(_solid, solid.g2p_kernel, cell == "hexahedron")
 
@@ -149,15 +151,21 @@ def kernels_for(cell: str) -> SimpleNamespace:
         F (L = 0) and move with their velocity); ``kind`` (1 APIC, 2 TPIC): the blend stores the
         particles' affine matrices (and APIC's spins) into ``affine`` and, with ``remap_affine``,
         re-maps with them (the lumped mass; the consistent mass re-maps the velocities alone: the
-        generic kernel); ``average`` (an :class:`~fempm.kernels.bundles.Averaged`, the :data:`PLANAR`
-        cells, a kinematics pass): F-bar's averaged deformation (:func:`fempm.kernels.planar.g2p_kernel`)."""
+        generic kernel); ``average`` (an :class:`~fempm.kernels.bundles.Averaged`): on the :data:`PLANAR`
+        cells, a kinematics pass, F-bar's averaged deformation (:func:`fempm.kernels.planar.g2p_kernel`);
+        on the :data:`SOLID` cells, a moving pass without kinematics, the pressure sums of the next
+        force pass (:func:`fempm.kernels.solid.g2p_kernel`)."""
         remap = blend and outputs.mom.shape[0] > 0
         totals = move and outputs.sums.shape[0] > 0
         flags = (bool(blend), bool(kinematics), bool(move), remap, totals, groups.group.shape[0] > 0)
         if average is not None:
-            if cell not in PLANAR or not kinematics:
-                raise ValueError(f"F-bar's averaged kinematics in the G2P pass take a kinematics pass on {PLANAR}")
             on = bool(kind and blend)
+            if cell in SOLID and move and not kinematics:  # the pressure sums alone
+                return g2p_kernel(cell, *flags, kind if on else 0, remap and remap_affine and on, pressures=True)(
+                    where, grid, state, laws, moves, outputs, groups, affine, average)
+            if cell not in PLANAR or not kinematics:
+                raise ValueError(f"F-bar's averaged kinematics in the G2P pass take a kinematics pass on {PLANAR}, "
+                                 f"its pressure sums a moving pass without kinematics on {SOLID}")
             return g2p_kernel(cell, *flags, kind if on else 0, remap and remap_affine and on, averaged=True,
                               pressures=average.sums.shape[0] > 0)(
                 where, grid, state, laws, moves, outputs, groups, affine, average)

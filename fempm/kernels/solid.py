@@ -33,7 +33,7 @@ if AVAILABLE:
     from fempm.kernels.affine import APIC, flagged
     from fempm.kernels.kinematics import add_totals
     from fempm.kernels.particle_checks import LINEAR_ELASTIC, NEO_HOOKEAN, count_j, stable_time
-    from fempm.kernels.patch import nodal_ratio
+    from fempm.kernels.patch import BLOCK_SHIFT, nodal_ratio
     from fempm.kernels.shape import inside_after_pull_back, star_search
     from fempm.kernels.solid_affine import add_affine3, carried3, jacobian3, offset3, spin3
 
@@ -62,6 +62,13 @@ if AVAILABLE:
             d0, d1, d2 = 1.0 if a == 1 else 0.0, 1.0 if a == 2 else 0.0, 1.0 if a == 3 else 0.0
         return (N, d0 * k[0] + d1 * k[3] + d2 * k[6], d0 * k[1] + d1 * k[4] + d2 * k[7],
                 d0 * k[2] + d1 * k[5] + d2 * k[8])
+
+    @njit(inline=INLINE)
+    def value(a, X0, X1, X2, hexa):  # pragma: no cover - compiled
+        r""":math:`N_a` alone at the reference point (X0, X1, X2)."""
+        if hexa:
+            return (X0 if a & 1 else 1.0 - X0) * (X1 if a & 2 else 1.0 - X1) * (X2 if a & 4 else 1.0 - X2)
+        return 1.0 - X0 - X1 - X2 if a == 0 else (X0 if a == 1 else (X1 if a == 2 else X2))
 
     @njit(inline=INLINE)
     def gradient_of(c, o, X, k, cell_dofs, v, NK, hexa, out):  # pragma: no cover - compiled
@@ -196,6 +203,26 @@ if AVAILABLE:
                         sigma[p, i, j] = sigma[p, j, i] = 2.0 * mu * (0.5 * (n[3 * i + j] + n[3 * j + i]))
 
     @njit(inline=INLINE)
+    def add_pressure(average, p, at, state, NK, hexa):  # pragma: no cover - compiled
+        r"""F-bar's pressure sums of the next force pass (:func:`fempm.kernels.fbar.pressure_kernel`)
+        for particle p where it ends the pass: :math:`N_a V_p` and :math:`N_a V_p\,\mathrm{tr}\,
+        \sigma_p / 3` into ``average.sums`` (dofs, 2 B), their blocks marked in ``average.dirty``;
+        ``at`` = (its cell, the reference coordinates X, cell_dofs), ``state`` = (volume, sigma, body)."""
+        c, X, cell_dofs = at
+        volume, sigma, body = state
+        out, dirty, bodies = average.sums, average.dirty, average.bodies
+        b = body[p]
+        w = volume[p]
+        wf = w * (sigma[p, 0, 0] + sigma[p, 1, 1] + sigma[p, 2, 2]) * (1.0 / 3.0)
+        X0, X1, X2 = X[p, 0], X[p, 1], X[p, 2]
+        for a in range(NK):
+            N = value(a, X0, X1, X2, hexa)
+            i = cell_dofs[c, a]
+            out[i, b] += N * w
+            out[i, bodies + b] += N * wf
+            dirty[i >> BLOCK_SHIFT] = 1
+
+    @njit(inline=INLINE)
     def move_to(x, p, v, vg0, vg1, vg2, own, dt):  # pragma: no cover - compiled
         """``x[p]`` += dt times the grid velocity (or, ``own``, the particle's); whether x and v
         are finite."""
@@ -283,15 +310,17 @@ def scatter_kernel(hexa: bool, with_mass: bool, with_momentum: bool, with_force:
 
 @functools.cache
 def g2p_kernel(hexa: bool, blend: bool, kinematics: bool, move: bool, remap: bool, totals: bool = False,
-               grouped: bool = False, kind: int = 0, remap_affine: bool = False):
+               grouped: bool = False, kind: int = 0, remap_affine: bool = False, pressures: bool = False):
     """:func:`fempm.kernels.lumped._g2p_kernel` for ``tetrahedron`` or (``hexa``) affine
     ``hexahedron`` cells (``kind``, APIC or TPIC, in a blend pass: the affine state and with
-    ``remap_affine`` the re-map with it, :mod:`fempm.kernels.solid_affine`)."""
+    ``remap_affine`` the re-map with it, :mod:`fempm.kernels.solid_affine`); with ``pressures``
+    (a moving pass, the argument ``average``: an :class:`~fempm.kernels.bundles.Averaged`)
+    F-bar's pressure sums of the next force pass where each particle ends (:func:`add_pressure`)."""
     NK = 8 if hexa else 4
     KIND = kind
 
     @njit(cache=True, error_model="numpy")
-    def g2p_update(where, grid, state, laws, moves, outputs, groups, carried=None):  # pragma: no cover
+    def g2p_update(where, grid, state, laws, moves, outputs, groups, carried=None, average=None):  # pragma: no cover
         cells, X, K, cell_dofs = where
         v_new, v_old, flip, dt, by_particle = grid
         x, v, F, volume0, volume, sigma, body, mass = state
@@ -349,6 +378,8 @@ def g2p_kernel(hexa: bool, blend: bool, kinematics: bool, move: bool, remap: boo
                     out = e < 0
                     cells[p] = c if out else e
                 left[p] = out
+                if pressures and not out:
+                    add_pressure(average, p, (cells[p], X, cell_dofs), (volume, sigma, body), NK, hexa)
             if totals:
                 add_totals(acc, p, mass, v, F, volume0, law[body[p]], lam[body[p]], mu[body[p]], 3)
         if totals:

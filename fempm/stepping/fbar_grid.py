@@ -15,12 +15,15 @@ round-off). Two stages of :class:`~fempm.stepping.lumped.PointGrid` change:
 * the internal force: each P2G pass that maps forces takes :math:`\sigma_p + (\bar p_p - p_p) I`,
   the pressures first summed on the nodes and averaged inside the P2G pass (``Forces.patch``).
   On triangles and quadrilaterals the kinematics pass sums them where each particle ends it, for
-  the next force pass; a pass of their own (:func:`fempm.kernels.fbar.pressure_kernel`) sums them
-  where the particles changed since (left their cells' neighbours, changed ranks, were set from
-  outside: new arrays), after a moving pass without kinematics (USF) and for the laws without a
-  compiled kernel (which set their stress after the pass).
+  the next force pass, on tetrahedra and affine hexahedra the moving pass after the second
+  (:func:`fempm.kernels.solid.g2p_kernel`, ``pressures``); a pass of their own
+  (:func:`fempm.kernels.fbar.pressure_kernel`) sums them where the particles changed since (left
+  their cells' neighbours, changed ranks, were set from outside: new arrays), after a moving pass
+  without kinematics (USF), for the planar passes' laws without a compiled kernel (which set
+  their stress after the pass) and on the other cells.
 
-So a step costs one (triangles, quadrilaterals) or three more particle passes than the point step
+So a step costs one (triangles, quadrilaterals) or two (tetrahedra, affine hexahedra) more
+particle passes than the point step (three on the other cells)
 and two ghost exchanges of a (dofs, 2 B) array of B bodies; the sums are cleared and averaged in
 the blocks of dofs the passes wrote (:mod:`fempm.kernels.patch`). Every option of the point grid
 is taken (lumped, consistent and FMPM mass, every scheme and transfer, every cell and degree of
@@ -34,7 +37,7 @@ import numpy.typing as npt
 
 from fempm.kernels import fbar as kb
 from fempm.kernels.bundles import NO_AFFINE, NO_GROUPS, Affine, Averaged, Basis, Forces, Groups, Stable, State
-from fempm.kernels.lumped import PLANAR
+from fempm.kernels.lumped import PLANAR, SOLID
 from fempm.kernels.patch import BLOCK_SHIFT, averages, blocks, clear_blocks
 from fempm.stepping.fbar import trace_measure
 from fempm.stepping.lumped import PointGrid
@@ -143,7 +146,13 @@ class FBarPointGrid(PointGrid):
                               self.laws)
         nonfinite = self.kinematics_checks(counts, L if self.any_external else None, dt)
         left = np.empty(0, dtype=np.bool_)
-        if blend or move or remap is not None:
-            more, left = super().particle_pass(v_new, v_old, dt, blend=blend, kinematics=False, move=move, remap=remap)
+        if blend or move or remap is not None:  # (tetrahedra, hexahedra: the moving pass sums the pressures)
+            carry = move and self.cell in SOLID
+            sums = self._at_pressures.zeroed() if carry else None
+            average = Averaged(patch, self.by_trace, len(self.by_trace), *sums) if carry else None
+            more, left = super().particle_pass(v_new, v_old, dt, blend=blend, kinematics=False, move=move, remap=remap,
+                                               average=average)
             nonfinite += more
+            if carry and not left.any():
+                self._carried = self._state()
         return nonfinite, left

@@ -81,11 +81,16 @@ def test_fbar_takes_the_numpy_step_where_no_compiled_grid_takes_it():
     assert not isinstance(make_solver("triangle", StepOptions()).grid, FBarPointGrid)
 
 
-def test_the_pressures_summed_in_the_g2p_pass_follow_the_particles_across_cells_and_ranks(monkeypatch):
-    """On triangles the kinematics pass also sums the next force pass's pressures where each
-    particle ends it; a drift carries the particles across cells (and on 2 ranks across ranks,
-    whose departures and arrivals make the force pass sum them again): the numpy step to round-off,
-    and the separate pressure pass runs only where the particles changed."""
+@pytest.mark.parametrize(("cell", "drift_velocity", "width"),
+                         [("triangle", (1.5, 0.0), 0.1), ("tetrahedron", (0.0, 0.0, -1.0), 1 / 3),
+                          pytest.param("hexahedron", (0.0, 0.0, -1.0), 0.25, marks=pytest.mark.slow)])
+def test_the_pressures_summed_in_the_g2p_pass_follow_the_particles_across_cells_and_ranks(monkeypatch, cell,
+                                                                                          drift_velocity, width):
+    """On triangles the kinematics pass, on tetrahedra and hexahedra the moving pass, also sums the
+    next force pass's pressures where each particle ends it; a drift carries the particles across
+    cells (and on 2 ranks across ranks, whose departures and arrivals make the force pass sum them
+    again): the numpy step to round-off, and the separate pressure pass runs only where the
+    particles changed."""
     passes = []
     compiled = fbar_grid.kb.pressure_kernel
 
@@ -101,17 +106,19 @@ def test_the_pressures_summed_in_the_g2p_pass_follow_the_particles_across_cells_
     opts = StepOptions(scheme="USL", flip=0.9, damping=0.5, volumetric="fbar")
     out, sizes = [], []
     for compiled_step in (False, True):
-        solver = make_solver("triangle", opts, compiled=compiled_step)
-        solver.particles.fields["v"] = solver.particles.fields["v"] + np.array([1.5, 0.0])
-        start = comm.allreduce(float(solver.particles.x[:, 0].sum()))
+        solver = make_solver(cell, opts, compiled=compiled_step)
+        solver.particles.fields["v"] = solver.particles.fields["v"] + np.array(drift_velocity)
+        axis = int(np.flatnonzero(drift_velocity)[0])
+        start = comm.allreduce(float(solver.particles.x[:, axis].sum()))
         sizes.append([len(solver.particles)])
         for _ in range(15):
             solver.step()
             sizes[-1].append(len(solver.particles))
         out.append((state(solver), np.zeros(1), solver.j_range, solver.t))
     assert_close(*out)
-    drift = (comm.allreduce(float(solver.particles.x[:, 0].sum())) - start) / comm.allreduce(len(solver.particles))
-    assert drift > 0.08  # most of a cell (0.1) on average
+    total = comm.allreduce(float(solver.particles.x[:, axis].sum()))
+    drift = abs(total - start) / comm.allreduce(len(solver.particles))
+    assert drift > 0.3 * width  # a good part of a cell on average
     exchanged = comm.allreduce(int(len(set(sizes[1])) > 1), op=MPI.MAX)  # particles changed ranks
     assert comm.size == 1 or exchanged
     if comm.size == 1:
