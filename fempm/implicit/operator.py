@@ -24,7 +24,8 @@ import numpy as np
 import numpy.typing as npt
 
 from fempm.implicit.nominal import nominal_stress
-from fempm.kernels.implicit import increment_gradients, tangent_blocks
+from fempm.kernels.implicit import increment_gradients
+from fempm.kernels.implicit_blocks import cell_tangent_blocks, tangent_blocks
 from fempm.materials.tangent import stress_after, tangent_of
 from fempm.particles.particle_set import Particles
 from fempm.stepping.laws import every, law_state, material_groups
@@ -63,6 +64,7 @@ class IncrementOperator:
         self.dt = dt
         self._last: tuple[npt.NDArray, npt.NDArray] | None = None  # (G, sigma) of the last call
         self._groups: tuple[npt.NDArray, npt.NDArray] | None = None  # (dof_groups)
+        self._first: npt.NDArray | None = None  # a particle of each group (point particles)
 
     def gradients(self, du: npt.NDArray) -> npt.NDArray:
         r""":math:`G_p = \sum_a \Delta u_a \otimes \nabla N_a(x_p)` (n, d, d) of an increment ``du``
@@ -144,6 +146,7 @@ class IncrementOperator:
         elif self._groups is None:  # point particles: a cell's particles have its dofs
             _, first, slot = np.unique(b.cells, return_index=True, return_inverse=True)
             self._groups = (b.dofs[first], slot.ravel())
+            self._first = first
         return self._groups
 
     def pattern(self) -> tuple[npt.NDArray, npt.NDArray]:
@@ -163,8 +166,13 @@ class IncrementOperator:
         r"""The entries of :meth:`pattern`: each particle's
         :math:`V_p^n \nabla N_a \cdot \mathbb{A}_p \cdot \nabla N_b` plus ``mass_factor`` times
         its mass block (consistent, or lumped on the block's diagonal), summed over its group of
-        :meth:`dof_groups`, then zeros (one compiled pass, :func:`fempm.kernels.implicit.tangent_blocks`)."""
+        :meth:`dof_groups`, then zeros (one compiled pass, :func:`fempm.kernels.implicit.tangent_blocks`;
+        where a cell's particles share its gradients, degree 1 on affine simplices, their
+        :math:`V_p \mathbb{A}_p` and mass factors summed first, :func:`~fempm.kernels.implicit.cell_tangent_blocks`)."""
         b = self.basis
         dofs, slot = self.dof_groups()
+        if b.constant_gradients:  # a cell's particles share its gradients: its sums, then one block
+            return cell_tangent_blocks(b.gradients, b.values, A, self.volume, self.mass, mass_factor, consistent,
+                                       b.num_dofs_local * self.d, slot, self._first)
         return tangent_blocks(b.gradients, b.values, A, self.volume, self.mass, mass_factor, consistent,
                               b.num_dofs_local * self.d, slot, len(dofs))

@@ -21,7 +21,17 @@ its closure, in a folder per user in the temporary directory), then looks in the
 second process that needs the same variant meanwhile (the other test worker, the other MPI
 rank) waits for the first and loads its result instead of compiling it again; different
 variants still compile side by side. A call graph has no cycles, so nested compilations (a
-kernel's callees) cannot deadlock. Without ``fcntl`` (Windows) nothing is installed.
+kernel's callees) cannot deadlock. Without ``fcntl`` (Windows) the locks are not installed.
+
+And it names every closure's compiled code apart (:func:`distinct_variant_ids`): numba names a
+compiled function (its symbol and its environment of constant objects) by its qualified name,
+its argument types and a counter of the process that compiled it. Two variants of one factory's
+kernel compiled in two processes can take the same count; a third process that loads both from
+the cache then finds one environment under both names (numba's ``_rebuild_env`` returns the one
+it knows) and one symbol for both functions: in a test run of 2026-12-07 a kernel read another
+variant's constants ("In 'NRT_adapt_ndarray_to_python', 'descr' is NULL"), and a variant can as
+well call the other's helper without an error. The closure's contents now enter the count, and
+a closure's code saved before (its id below :data:`TAGGED`) is compiled anew rather than loaded.
 """
 
 from __future__ import annotations
@@ -32,7 +42,7 @@ import hashlib
 import os
 import tempfile
 
-__all__ = ["install", "lock_path", "variant_lock_path"]
+__all__ = ["distinct_variant_ids", "install", "lock_path", "variant_lock_path", "variant_tag"]
 
 try:
     import fcntl
@@ -123,10 +133,78 @@ def _compile_once(compile_):
     return compile_locked
 
 
+def variant_tag(func) -> int | None:
+    """A number telling apart the functions defined in another function (a factory's kernels,
+    ``<locals>`` in their qualified name): a digest of the qualified name and the pickled
+    contents of the closure (none, or one that cannot be pickled: numba keeps no cache of it
+    then); None for a function of a module."""
+    if "<locals>" not in func.__qualname__:
+        return None
+    from numba.core.serialize import dumps
+
+    try:
+        data = dumps(tuple(c.cell_contents for c in func.__closure__)) if func.__closure__ else b""
+    except Exception:  # noqa: BLE001 - any pickling failure
+        data = b"?"
+    return int.from_bytes(hashlib.sha256(func.__qualname__.encode() + data).digest()[:6], "big")
+
+
+def distinct_variant_ids() -> bool:
+    """Make the id numba gives each compilation of a factory's function (``FunctionIdentity.unique_id``,
+    part of its symbol's and its environment's names) the process's count times 2^48 plus
+    :func:`variant_tag`, so that variants compiled in different processes never share a name
+    (see the module); returns whether it is in place. Idempotent."""
+    try:
+        from numba.core.bytecode import FunctionIdentity
+    except ImportError:  # pragma: no cover - without numba there is nothing to name
+        return False
+    made = FunctionIdentity.from_function.__func__
+    if getattr(made, "fempm_distinct", False):
+        return True
+
+    def from_function(cls, pyfunc):
+        self = made(cls, pyfunc)
+        tag = variant_tag(self.func)
+        if tag is not None:
+            self.unique_id = self.unique_id * TAGGED + tag
+            self.unique_name = f"{self.func_qualname}${self.unique_id}"
+        return self
+
+    from_function.fempm_distinct = True
+    FunctionIdentity.from_function = classmethod(from_function)
+    _reload_tagged()
+    return True
+
+
+#: the ids :func:`distinct_variant_ids` gives closures are at least this (numba's own count less)
+TAGGED = 2**48
+
+
+def _reload_tagged() -> None:
+    """Make numba's cache refuse a closure's code saved before :func:`distinct_variant_ids` (its
+    id below :data:`TAGGED`: its names may be another variant's), so that it is compiled anew."""
+    from numba.core.caching import Cache
+
+    load = Cache.load_overload
+    if getattr(load, "fempm_tagged", False):
+        return
+
+    def load_overload(self, sig, target_context):
+        data = load(self, sig, target_context)
+        fndesc = getattr(data, "fndesc", None)
+        if fndesc is not None and "<locals>" in fndesc.qualname and (fndesc.uid or 0) < TAGGED:
+            return None
+        return data
+
+    load_overload.fempm_tagged = True
+    Cache.load_overload = load_overload
+
+
 def install() -> bool:
     """Lock numba's cache saves (exclusive) and loads (shared) against other processes, and each
     variant's compilation (:func:`variant_lock_path`); returns whether the locks are in place
     (numba and ``fcntl`` present). Idempotent."""
+    distinct_variant_ids()
     if fcntl is None:  # pragma: no cover - Windows
         return False
     try:

@@ -7,12 +7,6 @@ r"""The implicit step's per-particle passes (:mod:`fempm.implicit`), compiled.
   :math:`\mathbb{D} = \partial \sigma / \partial G`, its tangent
   :math:`\mathbb{A}_{imkl} = J_\Delta (\tilde P_{im} \Delta F^{-1}_{lk} + \mathbb{D}_{ijkl}
   \Delta F^{-1}_{mj} - \tilde P_{il} \Delta F^{-1}_{mk})` (:mod:`fempm.implicit.nominal`).
-* :func:`tangent_blocks`: each particle's block
-  :math:`V_p \partial_m N_a \mathbb{A}_{imkl} \partial_l N_b` plus ``c`` times its mass block
-  (consistent :math:`M_p N_a N_b \delta_{ik}`, or lumped on the diagonal), summed over the
-  particles of a group (``slot`` (n,) of ``groups``: those of the same dofs; by default one per
-  particle), in the order of :meth:`fempm.implicit.operator.IncrementOperator.pattern`, then
-  zeros for the diagonal entries.
 * :func:`linear_elastic_tangent`: :math:`\lambda \delta_{ij} F_{lk} + \mu (\delta_{ik} F_{lj}
   + \delta_{jk} F_{li})` (:class:`fempm.materials.LinearElastic`).
 
@@ -22,7 +16,8 @@ loops whose sizes are compile-time constants, one kernel per (d, dofs a particle
 carry no branch (a conditional store serialises the loop: the determinants of a 2D increment
 took 17x as long with one). Each ``*_numpy`` is the
 reference its compiled form is tested against
-(``tests/kernels/test_implicit_kernels.py``); :func:`fempm.kernels.choice.pick` chooses.
+(``tests/kernels/test_implicit_kernels.py``); :func:`fempm.kernels.choice.pick` chooses. The
+particles' tangent blocks are :mod:`fempm.kernels.implicit_blocks`.
 """
 
 from __future__ import annotations
@@ -34,7 +29,7 @@ import numpy.typing as npt
 
 from fempm.kernels.choice import INLINE, pick
 
-__all__ = ["deformed", "increment_determinants", "increment_gradients", "linear_elastic_tangent", "nominal", "tangent_blocks"]
+__all__ = ["deformed", "increment_determinants", "increment_gradients", "linear_elastic_tangent", "nominal"]
 
 
 # -- the numpy references -------------------------------------------------------------------------
@@ -64,27 +59,6 @@ def nominal_numpy(sigma: npt.NDArray, D: npt.NDArray | None, G: npt.NDArray):
     A += Pt[:, :, :, None, None] * np.swapaxes(inv, 1, 2)[:, None, None, :, :]  # P~_im inv_lk
     A -= Pt[:, :, None, None, :] * inv[:, None, :, :, None]  # P~_il inv_mk
     return J[:, None, None] * Pt, J[:, None, None, None, None] * A, J
-
-
-def tangent_blocks_numpy(gradients, values, A, volume, mass, factor: float, consistent: bool, diagonal: int,
-                         slot: npt.NDArray | None = None, groups: int | None = None):
-    p, k, d = gradients.shape
-    VA = volume[:, None, None, None, None] * A
-    K = np.einsum("paikl,pbl->paibk", np.einsum("pam,pimkl->paikl", gradients, VA, optimize=True), gradients,
-                  optimize=True)
-    if factor:
-        eye = np.eye(d)
-        if consistent:
-            block = (factor * mass)[:, None, None] * values[:, :, None] * values[:, None, :]
-            K += block[:, :, None, :, None] * eye[None, None, :, None, :]
-        else:
-            a = np.arange(k)
-            K[:, a, :, a, :] += ((factor * mass)[:, None] * values).T[:, :, None, None] * eye
-    if slot is not None:  # the blocks of the particles of a group summed
-        summed = np.zeros((groups, (k * d) ** 2))
-        np.add.at(summed, slot, K.reshape(p, -1))
-        K = summed
-    return np.concatenate([K.ravel(), np.zeros(diagonal)])
 
 
 def linear_elastic_tangent_numpy(F: npt.NDArray, lam: float, mu: float) -> npt.NDArray:
@@ -243,59 +217,6 @@ try:
         return P, (A if D is not None else None), J
 
     @functools.cache
-    def _tangent_blocks_kernel(k: int, d: int):
-        """The particles' tangent blocks for ``k`` dofs per cell in dimension ``d``, the loops'
-        sizes compile-time constants."""
-
-        @njit(cache=True, error_model="numpy")
-        def blocks(gradients, values, A, volume, mass, factor, consistent, diagonal, slot, groups):  # pragma: no cover
-            n = gradients.shape[0]
-            m = k * d
-            out = np.zeros(groups * m * m + diagonal)
-            B = np.empty((k, d, d, d))  # B[a, i, kk, l] = sum_m g[a, m] A[i, m, kk, l]
-            for p in range(n):
-                V = volume[p]
-                for a in range(k):
-                    for i in range(d):
-                        for kk in range(d):
-                            for l in range(d):
-                                s = 0.0
-                                for mm in range(d):
-                                    s += gradients[p, a, mm] * A[p, i, mm, kk, l]
-                                B[a, i, kk, l] = V * s
-                base = slot[p] * m * m
-                for a in range(k):
-                    for i in range(d):
-                        row = base + (a * d + i) * m
-                        for b in range(k):
-                            for kk in range(d):
-                                s = 0.0
-                                for l in range(d):
-                                    s += B[a, i, kk, l] * gradients[p, b, l]
-                                out[row + b * d + kk] += s
-                if factor != 0.0:
-                    cm = factor * mass[p]
-                    for a in range(k):
-                        for i in range(d):
-                            row = base + (a * d + i) * m
-                            if consistent:
-                                for b in range(k):
-                                    out[row + b * d + i] += cm * values[p, a] * values[p, b]
-                            else:
-                                out[row + a * d + i] += cm * values[p, a]
-            return out
-
-        return blocks
-
-    def tangent_blocks_numba(gradients, values, A, volume, mass, factor, consistent, diagonal, slot=None, groups=None):
-        if slot is None:  # a block per particle
-            slot, groups = np.arange(len(gradients)), len(gradients)
-        blocks = _tangent_blocks_kernel(*gradients.shape[1:])
-        return blocks(np.ascontiguousarray(gradients), np.ascontiguousarray(values), np.ascontiguousarray(A),
-                      np.ascontiguousarray(volume, dtype=np.float64), np.ascontiguousarray(mass), float(factor),
-                      bool(consistent), int(diagonal), np.ascontiguousarray(slot, dtype=np.int64), int(groups))
-
-    @functools.cache
     def _linear_elastic_tangent_kernel(d: int):
         """:func:`linear_elastic_tangent` in dimension ``d`` (the loops' sizes compile-time constants)."""
 
@@ -325,12 +246,10 @@ except ImportError:  # pragma: no cover - numba is a dependency
     increment_determinants_numba = increment_determinants_numpy
     deformed_numba = deformed_numpy
     nominal_numba = nominal_numpy
-    tangent_blocks_numba = tangent_blocks_numpy
     linear_elastic_tangent_numba = linear_elastic_tangent_numpy
 
 increment_gradients = pick(increment_gradients_numba, increment_gradients_numpy)
 increment_determinants = pick(increment_determinants_numba, increment_determinants_numpy)
 deformed = pick(deformed_numba, deformed_numpy)
 nominal = pick(nominal_numba, nominal_numpy)
-tangent_blocks = pick(tangent_blocks_numba, tangent_blocks_numpy)
 linear_elastic_tangent = pick(linear_elastic_tangent_numba, linear_elastic_tangent_numpy)

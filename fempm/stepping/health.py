@@ -188,18 +188,18 @@ class HealthMonitor:
         (:meth:`ExplicitSolver.step_energies`), else computed."""
         s, h = self.solver, self.health
         mom = np.array([energies[k] for k in energies if k.startswith("momentum_")])
-        power, force = self._external(s.t, mom)  # the loads at the step's end on the particles in the mesh
         if s.options.integration is not None:  # the implicit step's own account of its loads
             self.work += s.record.load_work
             self.work_path += s.record.load_work
             self.impulse = self.impulse + s.record.load_impulse
-        else:  # those removed in this step were in it until its end
+        else:  # the loads at the step's end on the particles in the mesh; those removed in this step were in it
+            power, force = self._external(s.t, mom)  # until its end
             end = self._external(s.t, mom + s.removal.last_momentum, s.removal.last_mass) if s.removal.removed_now \
                 else (power, force)
             self.work += 0.5 * dt * (self._power + end[0])
             self.work_path += dt * end[0]
             self.impulse = self.impulse + 0.5 * dt * (self._force + end[1])
-        self._power, self._force = power, force
+            self._power, self._force = power, force
         gone = s.removed  # what the particles that left the mesh took: it has left, not vanished
         if gone.count:
             mom = mom + np.asarray(gone.momentum)

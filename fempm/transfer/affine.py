@@ -84,10 +84,7 @@ def closed_form(basis: ParticleBasis) -> bool:
     r"""Whether :math:`B_p D_p^{-1} = L_p` (degree-1 point particles on simplices of straight
     edges: :math:`(x_j - x_p) \cdot \nabla N_i = \delta_{ij} - N_{ip}` gives
     :math:`N_{ip} r_{ip} = D_p \nabla N_{ip}`)."""
-    mesh = basis.V.mesh
-    return (basis.cells is not None and basis.element.degree == 1 and basis.gradients is not None
-            and mesh.topology.cell_name() in ("interval", "triangle", "tetrahedron")
-            and mesh.geometry.cmaps[0].degree == 1)
+    return basis.constant_gradients and basis.gradients is not None
 
 
 def spin_of(B: npt.NDArray) -> npt.NDArray:

@@ -206,6 +206,15 @@ class ParticleBasis:
         return lost[~rows.found]
 
     @property
+    def constant_gradients(self) -> bool:
+        """Whether the gradients are the same at every point particle of a cell: degree 1 on affine
+        simplices (interval, triangle, tetrahedron of an affine map)."""
+        mesh = self.V.mesh
+        return (self.cells is not None and self.element.degree == 1
+                and mesh.topology.cell_name() in ("interval", "triangle", "tetrahedron")
+                and mesh.geometry.cmaps[0].degree == 1)
+
+    @property
     def extended(self) -> bool:
         """Whether the dofs include extra ghosts for remote sample points (:mod:`fempm.particles.halo`)."""
         return self.index_map is not self.V.dofmap.index_map

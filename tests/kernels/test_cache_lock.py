@@ -97,3 +97,50 @@ def test_a_second_process_loads_every_kernel_from_the_cache(tmp_path):
     first, second = (json.loads(r.stdout.strip().splitlines()[-1]) for r in runs)
     assert any("planar_samples" in name for name in first) and any("boxes" in name for name in first), first
     assert second == [], second
+
+
+_VARIANTS = """
+import functools, sys
+import numpy as np
+from numba import njit
+if sys.argv[1] == "fempm":
+    from fempm.kernels import cache_lock
+    assert cache_lock.distinct_variant_ids()
+
+@functools.cache
+def make(dtype):
+    @njit(cache=True)
+    def full(n):
+        return np.ones(n, dtype=dtype)  # (boxing the result reads the variant's dtype from its environment)
+    return full
+
+for name in sys.argv[2:]:
+    print(name, make(np.dtype(name))(3).dtype, make(np.dtype(name)).stats.cache_hits.total())
+"""
+
+
+def _variants(tmp_path, mode: str, *names: str, cache: str | None = None) -> list[str]:
+    import os
+    import subprocess
+    import sys
+
+    script = tmp_path / "variants.py"
+    script.write_text(_VARIANTS)
+    env = dict(os.environ, NUMBA_CACHE_DIR=str(tmp_path / f"cache-{cache or mode}"))
+    out = subprocess.run([sys.executable, str(script), mode, *names], env=env, capture_output=True, text=True,
+                         timeout=300)
+    return out.stdout.split("\n") if out.returncode == 0 else ["failed: " + out.stderr.strip().splitlines()[-1]]
+
+
+def test_variants_compiled_in_two_processes_keep_their_own_names(tmp_path):
+    """Two processes each compile one variant of a factory's kernel first (the same count of
+    numba's ids in both); a third loads both from the cache. With fempm's names each keeps its
+    own environment; with numba's alone the second finds the first's (numba's ``_rebuild_env``)."""
+    for mode in ("fempm", "numba"):
+        assert _variants(tmp_path, mode, "int64")[0] == "int64 int64 0"
+        assert _variants(tmp_path, mode, "float32")[0] == "float32 float32 0"
+    assert _variants(tmp_path, "fempm", "int64", "float32")[:2] == ["int64 int64 1", "float32 float32 1"]
+    assert _variants(tmp_path, "numba", "int64", "float32")[:2] != ["int64 int64 1", "float32 float32 1"]
+    # code saved with numba's names is not loaded with fempm's: compiled anew, then loaded
+    assert _variants(tmp_path, "fempm", "int64", "float32", cache="numba")[:2] == ["int64 int64 0", "float32 float32 0"]
+    assert _variants(tmp_path, "fempm", "int64", "float32", cache="numba")[:2] == ["int64 int64 1", "float32 float32 1"]

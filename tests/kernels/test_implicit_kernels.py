@@ -6,6 +6,7 @@ import numpy as np
 import pytest
 
 from fempm.kernels import implicit as ki
+from fempm.kernels import implicit_blocks as kb
 
 
 @pytest.fixture(params=[(1, 2), (2, 3), (2, 6), (3, 4), (3, 8)], ids=["interval", "P1-triangle", "P2-triangle",
@@ -64,14 +65,29 @@ def test_an_inverting_increment_gives_its_determinant(data):
 @pytest.mark.parametrize("factor, consistent", [(0.0, False), (3.5, False), (3.5, True)])
 def test_tangent_blocks(data, factor, consistent):
     args = (data["grads"], data["values"], data["D"][:, :, :, :, :], data["volume"], data["mass"], factor, consistent, 11)
-    got, ref = ki.tangent_blocks_numba(*args), ki.tangent_blocks_numpy(*args)
+    got, ref = kb.tangent_blocks_numba(*args), kb.tangent_blocks_numpy(*args)
     close(got, ref)
     assert len(got) == len(data["dofs"]) * (data["k"] * data["d"]) ** 2 + 11 and not got[-11:].any()
     slot = np.random.default_rng(5).integers(0, 40, len(data["dofs"]))  # blocks summed by group
-    got, ref = ki.tangent_blocks_numba(*args, slot, 40), ki.tangent_blocks_numpy(*args, slot, 40)
+    got, ref = kb.tangent_blocks_numba(*args, slot, 40), kb.tangent_blocks_numpy(*args, slot, 40)
     close(got, ref)
     m2 = (data["k"] * data["d"]) ** 2
-    close(got[:40 * m2].reshape(40, m2).sum(axis=0), ki.tangent_blocks_numpy(*args)[:-11].reshape(-1, m2).sum(axis=0))
+    close(got[:40 * m2].reshape(40, m2).sum(axis=0), kb.tangent_blocks_numpy(*args)[:-11].reshape(-1, m2).sum(axis=0))
+
+
+@pytest.mark.parametrize("factor, consistent", [(0.0, False), (3.5, False), (3.5, True)])
+def test_tangent_blocks_of_groups_sharing_their_gradients(data, factor, consistent):
+    """Particles of a group with the same gradients (a cell of degree 1 on affine simplices):
+    their summed tangents and masses, then one block, equal the blocks summed particle by particle."""
+    rng = np.random.default_rng(9)
+    slot = rng.integers(0, 40, len(data["dofs"]))
+    slot[:40] = np.arange(40)  # every group holds a particle
+    first = np.array([np.flatnonzero(slot == g)[0] for g in range(40)])
+    grads = data["grads"][first][slot]  # a group's particles share its gradients
+    args = (grads, data["values"], data["D"], data["volume"], data["mass"], factor, consistent, 11)
+    got = kb.cell_tangent_blocks_numba(*args, slot, first)
+    close(got, kb.tangent_blocks_numpy(*args, slot, 40))
+    close(kb.cell_tangent_blocks_numpy(*args, slot, first), got)
 
 
 def test_linear_elastic_tangent(data):
