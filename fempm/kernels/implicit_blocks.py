@@ -22,7 +22,7 @@ import functools
 import numpy as np
 import numpy.typing as npt
 
-from fempm.kernels.choice import pick
+from fempm.kernels.choice import INLINE, pick
 
 __all__ = ["cell_tangent_blocks", "tangent_blocks"]
 
@@ -56,6 +56,19 @@ def cell_tangent_blocks_numpy(gradients, values, A, volume, mass, factor: float,
 try:
     from numba import njit
 
+    @njit(inline=INLINE)
+    def contract(gradients, p, T, t, scale, B, k, d):  # pragma: no cover - compiled
+        r"""``B[a, i, kk, l]`` = ``scale`` :math:`\sum_m \partial_m N_a` ``T[t, i, m, kk, l]`` of particle
+        ``p``'s gradients (the left half of a block's product)."""
+        for a in range(k):
+            for i in range(d):
+                for kk in range(d):
+                    for l in range(d):
+                        s = 0.0
+                        for mm in range(d):
+                            s += gradients[p, a, mm] * T[t, i, mm, kk, l]
+                        B[a, i, kk, l] = scale * s
+
     @functools.cache
     def _tangent_blocks_kernel(k: int, d: int):
         """The particles' tangent blocks for ``k`` dofs per cell in dimension ``d``, the loops'
@@ -68,15 +81,7 @@ try:
             out = np.zeros(groups * m * m + diagonal)
             B = np.empty((k, d, d, d))  # B[a, i, kk, l] = sum_m g[a, m] A[i, m, kk, l]
             for p in range(n):
-                V = volume[p]
-                for a in range(k):
-                    for i in range(d):
-                        for kk in range(d):
-                            for l in range(d):
-                                s = 0.0
-                                for mm in range(d):
-                                    s += gradients[p, a, mm] * A[p, i, mm, kk, l]
-                                B[a, i, kk, l] = V * s
+                contract(gradients, p, A, p, volume[p], B, k, d)
                 base = slot[p] * m * m
                 for a in range(k):
                     for i in range(d):
@@ -138,14 +143,7 @@ try:
             B = np.empty((k, d, d, d))
             for g in range(groups):
                 p = first[g]
-                for a in range(k):
-                    for i in range(d):
-                        for kk in range(d):
-                            for l in range(d):
-                                s = 0.0
-                                for mm in range(d):
-                                    s += gradients[p, a, mm] * VA[g, i, mm, kk, l]
-                                B[a, i, kk, l] = s
+                contract(gradients, p, VA, g, 1.0, B, k, d)
                 base = g * m * m
                 for a in range(k):
                     for i in range(d):

@@ -25,6 +25,10 @@ __all__ = ["nodal_forces", "nodal_forces_numpy", "scatter_gradients", "scatter_g
            "scatter_weighted_numpy"]
 
 
+#: the widest array of weights the scatter kernels are compiled for (wider ones: a loop read at run time)
+CONSTANT_COLUMNS = 3
+
+
 def _bincount(dofs, contrib, ndofs):
     """Per-particle, per-local-dof contributions (n, K, k) summed into the dofs (ndofs, k)."""
     out = np.empty((ndofs, contrib.shape[2]))
@@ -51,30 +55,32 @@ try:
 
     @functools.cache
     def _weighted(k: int, c: int):
-        """:func:`scatter_weighted` of ``k`` dofs a particle and ``c`` weights, the loops' sizes
-        compile-time constants (2-3x as fast as read at run time)."""
+        """:func:`scatter_weighted` of ``k`` dofs a particle and ``c`` weights (0: read at run
+        time), the loops' sizes compile-time constants (2x as fast as read at run time)."""
 
         @njit(cache=True)
         def weighted(dofs, S, w, out):  # pragma: no cover - compiled
+            cw = c if c else w.shape[1]
             for p in range(S.shape[0]):
                 for a in range(k):
                     i = dofs[p, a]
-                    for r in range(c):
+                    for r in range(cw):
                         out[i, r] += S[p, a] * w[p, r]
 
         return weighted
 
     @functools.cache
     def _gradients(k: int, c: int, d: int):
-        """:func:`scatter_gradients` of ``k`` dofs a particle, ``c`` rows of ``W``, dimension ``d``
-        (compile-time loops)."""
+        """:func:`scatter_gradients` of ``k`` dofs a particle, ``c`` rows of ``W`` (0: read at run
+        time), dimension ``d`` (compile-time loops)."""
 
         @njit(cache=True)
         def gradients(dofs, G, W, out):  # pragma: no cover - compiled
+            cw = c if c else W.shape[1]
             for p in range(G.shape[0]):
                 for a in range(k):
                     i = dofs[p, a]
-                    for r in range(c):
+                    for r in range(cw):
                         s = 0.0
                         for b in range(d):
                             s += G[p, a, b] * W[p, r, b]
@@ -82,16 +88,21 @@ try:
 
         return gradients
 
+    def _width(c: int) -> int:
+        """The number of columns a kernel is compiled for: up to :data:`CONSTANT_COLUMNS`, else 0
+        (read at run time: fewer variants to compile for the wide arrays of a few callers)."""
+        return c if c <= CONSTANT_COLUMNS else 0
+
     def scatter_weighted_numba(dofs, S, w, ndofs):
         out = np.zeros((ndofs, w.shape[1]))
-        _weighted(S.shape[1], w.shape[1])(np.ascontiguousarray(dofs), np.ascontiguousarray(S), np.ascontiguousarray(w),
-                                          out)
+        _weighted(S.shape[1], _width(w.shape[1]))(np.ascontiguousarray(dofs), np.ascontiguousarray(S),
+                                                  np.ascontiguousarray(w), out)
         return out
 
     def scatter_gradients_numba(dofs, G, W, ndofs):
         out = np.zeros((ndofs, W.shape[1]))
-        _gradients(G.shape[1], W.shape[1], G.shape[2])(np.ascontiguousarray(dofs), np.ascontiguousarray(G),
-                                                       np.ascontiguousarray(W), out)
+        _gradients(G.shape[1], _width(W.shape[1]), G.shape[2])(np.ascontiguousarray(dofs), np.ascontiguousarray(G),
+                                                               np.ascontiguousarray(W), out)
         return out
 
     @njit(cache=True)

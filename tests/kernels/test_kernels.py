@@ -70,8 +70,11 @@ def test_scatter_kernels_equal_their_references(data):
     dofs, S, G, _, _, _ = data
     rng = np.random.default_rng(6)
     n, d = G.shape[0], G.shape[2]
-    w, W = rng.standard_normal((n, 3)), rng.standard_normal((n, 4, d))
+    w, W = rng.standard_normal((n, 3)), rng.standard_normal((n, 4, d))  # widths compiled in, read at run time
+    w5, W2 = rng.standard_normal((n, 5)), rng.standard_normal((n, 2, d))  # and the other way round
     for ref, got in [(p2g.scatter_weighted_numpy(dofs, S, w, 97), p2g.scatter_weighted_numba(dofs, S, w, 97)),
+                     (p2g.scatter_weighted_numpy(dofs, S, w5, 97), p2g.scatter_weighted_numba(dofs, S, w5, 97)),
+                     (p2g.scatter_gradients_numpy(dofs, G, W2, 97), p2g.scatter_gradients_numba(dofs, G, W2, 97)),
                      (p2g.scatter_gradients_numpy(dofs, G, W, 97), p2g.scatter_gradients_numba(dofs, G, W, 97))]:
         assert ref.shape == got.shape and np.abs(ref - got).max() < 1e-13 * np.abs(ref).max()
 
