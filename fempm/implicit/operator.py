@@ -26,7 +26,7 @@ import numpy.typing as npt
 from fempm.implicit.nominal import nominal_stress
 from fempm.kernels.implicit import increment_gradients
 from fempm.kernels.implicit_blocks import cell_tangent_blocks, tangent_blocks
-from fempm.materials.tangent import stress_after, tangent_of
+from fempm.materials.tangent import stress_after, tangent_fixed_in_step, tangent_of
 from fempm.particles.particle_set import Particles
 from fempm.stepping.laws import every, law_state, material_groups
 from fempm.transfer.basis import ParticleBasis
@@ -63,6 +63,7 @@ class IncrementOperator:
         self.finite_difference = finite_difference
         self.dt = dt
         self._last: tuple[npt.NDArray, npt.NDArray] | None = None  # (G, sigma) of the last call
+        self._fixed: npt.NDArray | None = None  # the laws' tangents where they hold for the step
         self._groups: tuple[npt.NDArray, npt.NDArray] | None = None  # (dof_groups)
         self._first: npt.NDArray | None = None  # a particle of each group (point particles)
 
@@ -81,11 +82,21 @@ class IncrementOperator:
         sigma = self._last[1] if known else self._per_law(
             lambda mat, idx, state: stress_after(mat, self.F[idx], G[idx], self.sigma[idx], self.rho[idx], state,
                                                  self.dt)[0])
-        D = self._per_law(lambda mat, idx, state: tangent_of(
-            mat, self.F[idx], G[idx], self.sigma[idx], self.rho[idx], state, finite_difference=self.finite_difference,
-            dt=self.dt)) if tangent else None
+        D = self._tangents(G) if tangent else None
         self._last = (G, sigma)
         return nominal_stress(sigma, D, G)
+
+    def _tangents(self, G: npt.NDArray) -> npt.NDArray:
+        r"""The laws' tangents :math:`\mathbb{D}_p` at the increments ``G``, kept for the step where
+        every law's is the same at every increment (:func:`fempm.materials.tangent.tangent_fixed_in_step`)."""
+        if self._fixed is not None:
+            return self._fixed
+        D = self._per_law(lambda mat, idx, state: tangent_of(
+            mat, self.F[idx], G[idx], self.sigma[idx], self.rho[idx], state, finite_difference=self.finite_difference,
+            dt=self.dt))
+        if not self.finite_difference and all(tangent_fixed_in_step(mat) for mat, _, _ in self.groups):
+            self._fixed = D
+        return D
 
     def _per_law(self, value) -> npt.NDArray:
         """``value(law, idx, state)`` of every law's particles, in one array (n, ...): a law of

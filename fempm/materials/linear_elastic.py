@@ -34,6 +34,8 @@ class LinearElastic(IsotropicElastic):
 
     #: what F-bar averages for this law (fempm.stepping.fbar): tr F - d, its volumetric strain
     volumetric_measure: ClassVar[str] = "trace"
+    #: its tangent depends on F_n alone, not on the increment (fempm.materials.tangent.tangent_fixed_in_step)
+    tangent_fixed_in_step: ClassVar[bool] = True
 
     def strain(self, F: npt.NDArray) -> npt.NDArray:
         return sym(F) - identity(len(F), F.shape[1])

@@ -31,7 +31,8 @@ import numpy.typing as npt
 from fempm.kernels.implicit import deformed as deformed_kernel
 from fempm.kernels.implicit import increment_determinants
 
-__all__ = ["FD_STEP", "deformed", "finite_difference_tangent", "rate_dependent", "stress_after", "tangent_of"]
+__all__ = ["FD_STEP", "deformed", "finite_difference_tangent", "rate_dependent", "stress_after", "tangent_fixed_in_step",
+           "tangent_of"]
 
 #: the step of the finite-difference tangent, relative to 1 (G is dimensionless)
 FD_STEP = 1e-6
@@ -46,6 +47,15 @@ def rate_dependent(law) -> bool:
     """Whether ``law``'s stress depends on the rate, not only on the increment (its class
     attribute ``rate_dependent``; False where it has none)."""
     return bool(getattr(law, "rate_dependent", False))
+
+
+def tangent_fixed_in_step(law) -> bool:
+    """Whether ``law``'s tangent is the same at every increment of a step: the class attribute
+    ``tangent_fixed_in_step`` of the class whose ``tangent`` the law takes (a law linear in F,
+    whose tangent depends on :math:`F_n` alone; a subclass with a ``tangent`` of its own does not
+    inherit it); False where it has none."""
+    owner = next((c for c in type(law).__mro__ if "tangent" in vars(c)), None)
+    return owner is not None and bool(vars(owner).get("tangent_fixed_in_step", False))
 
 
 def stress_after(law, F: npt.NDArray, G: npt.NDArray, sigma: npt.NDArray, rho: npt.NDArray,
