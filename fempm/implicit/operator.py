@@ -64,8 +64,7 @@ class IncrementOperator:
         self.dt = dt
         self._last: tuple[npt.NDArray, npt.NDArray] | None = None  # (G, sigma) of the last call
         self._fixed: npt.NDArray | None = None  # the laws' tangents where they hold for the step
-        self._groups: tuple[npt.NDArray, npt.NDArray] | None = None  # (dof_groups)
-        self._first: npt.NDArray | None = None  # a particle of each group (point particles)
+        self._groups: tuple[npt.NDArray, npt.NDArray, npt.NDArray] | None = None  # (dof_groups)
 
     def gradients(self, du: npt.NDArray) -> npt.NDArray:
         r""":math:`G_p = \sum_a \Delta u_a \otimes \nabla N_a(x_p)` (n, d, d) of an increment ``du``
@@ -146,18 +145,18 @@ class IncrementOperator:
             return self.nodal(self.mass[:, None] * self.basis.gather(a))
         return lumped[:, None] * a
 
-    def dof_groups(self) -> tuple[npt.NDArray, npt.NDArray]:
-        """(the dofs of each group (groups, k), each particle's group (n,)): point particles in a
-        cell share its block of the tangent, so that its COO entries are a block per occupied
-        cell, not per particle (a quarter of the entries with 4 particles a cell; particle domains,
-        whose dofs are their own: a group per particle)."""
+    def dof_groups(self) -> tuple[npt.NDArray, npt.NDArray, npt.NDArray]:
+        """(the dofs of each group (groups, k), each particle's group (n,), a particle of each group
+        (groups,)): point particles in a cell share its block of the tangent, so that its COO
+        entries are a block per occupied cell, not per particle (a quarter of the entries with 4
+        particles a cell; particle domains, whose dofs are their own: a group per particle)."""
         b = self.basis
         if self._groups is None and b.cells is None:  # particle domains: a block per particle
-            self._groups = (b.dofs, np.arange(len(b.dofs)))
+            every_particle = np.arange(len(b.dofs))
+            self._groups = (b.dofs, every_particle, every_particle)
         elif self._groups is None:  # point particles: a cell's particles have its dofs
             _, first, slot = np.unique(b.cells, return_index=True, return_inverse=True)
-            self._groups = (b.dofs[first], slot.ravel())
-            self._first = first
+            self._groups = (b.dofs[first], slot.ravel(), first)
         return self._groups
 
     def pattern(self) -> tuple[npt.NDArray, npt.NDArray]:
@@ -181,9 +180,9 @@ class IncrementOperator:
         where a cell's particles share its gradients, degree 1 on affine simplices, their
         :math:`V_p \mathbb{A}_p` and mass factors summed first, :func:`~fempm.kernels.implicit.cell_tangent_blocks`)."""
         b = self.basis
-        dofs, slot = self.dof_groups()
+        dofs, slot, first = self.dof_groups()
         if b.constant_gradients:  # a cell's particles share its gradients: its sums, then one block
             return cell_tangent_blocks(b.gradients, b.values, A, self.volume, self.mass, mass_factor, consistent,
-                                       b.num_dofs_local * self.d, slot, self._first)
+                                       b.num_dofs_local * self.d, slot, first)
         return tangent_blocks(b.gradients, b.values, A, self.volume, self.mass, mass_factor, consistent,
                               b.num_dofs_local * self.d, slot, len(dofs))

@@ -74,7 +74,6 @@ if AVAILABLE:
         return a * (e * m - g * k) - b * (c * m - g * h) + f * (c * k - e * h)
 
 
-
 def _sizes(cell: str) -> tuple:
     """(D, NK, SIMPLEX, AFFINE, DEGREE, BERNSTEIN) of a kernels' cell type."""
     D, NK, SIMPLEX = CELLS[cell]

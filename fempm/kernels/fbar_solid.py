@@ -24,10 +24,9 @@ if AVAILABLE:
 
     from fempm.kernels.kinematics import law_at
     from fempm.kernels.particle_checks import count_j
-    from fempm.kernels.patch import BLOCK_SHIFT, nodal_ratio
+    from fempm.kernels.patch import add_node, nodal_ratio
     from fempm.kernels.solid import gather as solid_gather
     from fempm.kernels.solid import inverse_jacobian as solid_inverse_jacobian
-    from fempm.kernels.solid import node as solid_node
     from fempm.kernels.solid import value as solid_value
 
     @njit(inline=INLINE)
@@ -83,11 +82,7 @@ def measure_kernel(hexa: bool):
             value[p] = f
             w = volume[p]
             for a in range(NK):
-                N = solid_node(a, X0, X1, X2, k, QUAD)[0]
-                i = cell_dofs[c, a]
-                out[i, b] += N * w
-                out[i, bodies + b] += N * w * f
-                dirty[i >> BLOCK_SHIFT] = 1
+                add_node(out, dirty, cell_dofs[c, a], b, bodies, solid_value(a, X0, X1, X2, QUAD) * w, f)
 
     return measure
 

@@ -2,7 +2,6 @@ r"""The implicit step's per-particle passes (:mod:`fempm.implicit`), compiled.
 
 * :func:`increment_gradients`: :math:`G_p = \sum_a \Delta u_a \otimes \nabla N_a(x_p)` (n, d, d).
 * :func:`increment_determinants`: :math:`\det(I + G_p)` (n,), closed form.
-* :func:`deformed`: :math:`F = (I + G) F_n` (n, d, d).
 * :func:`nominal`: the nominal stress :math:`P = J_\Delta \sigma \Delta F^{-T}` and, from the law's
   :math:`\mathbb{D} = \partial \sigma / \partial G`, its tangent
   :math:`\mathbb{A}_{imkl} = J_\Delta (\tilde P_{im} \Delta F^{-1}_{lk} + \mathbb{D}_{ijkl}
@@ -29,16 +28,12 @@ import numpy.typing as npt
 
 from fempm.kernels.choice import INLINE, pick
 
-__all__ = ["deformed", "increment_determinants", "increment_gradients", "linear_elastic_tangent", "nominal"]
+__all__ = ["increment_determinants", "increment_gradients", "linear_elastic_tangent", "nominal"]
 
 
 # -- the numpy references -------------------------------------------------------------------------
 def increment_gradients_numpy(du: npt.NDArray, dofs: npt.NDArray, gradients: npt.NDArray) -> npt.NDArray:
     return np.einsum("pak,pal->pkl", du[dofs], gradients)
-
-
-def deformed_numpy(F: npt.NDArray, G: npt.NDArray) -> npt.NDArray:
-    return F + G @ F
 
 
 def increment_determinants_numpy(G: npt.NDArray) -> npt.NDArray:
@@ -136,28 +131,6 @@ try:
                                                                  np.ascontiguousarray(gradients))
 
     @functools.cache
-    def _deformed_kernel(d: int):
-        """:func:`deformed` in dimension ``d`` (compile-time loops)."""
-
-        @njit(cache=True, error_model="numpy")
-        def deformed(F, G):  # pragma: no cover - compiled
-            n = F.shape[0]
-            out = np.empty((n, d, d))
-            for p in range(n):
-                for i in range(d):
-                    for j in range(d):
-                        s = F[p, i, j]
-                        for k in range(d):
-                            s += G[p, i, k] * F[p, k, j]
-                        out[p, i, j] = s
-            return out
-
-        return deformed
-
-    def deformed_numba(F, G):
-        return _deformed_kernel(F.shape[1])(np.ascontiguousarray(F), np.ascontiguousarray(G))
-
-    @functools.cache
     def _determinants_kernel(d: int):
         """:func:`increment_determinants` in dimension ``d`` (closed form, vectorised)."""
 
@@ -244,12 +217,10 @@ try:
 except ImportError:  # pragma: no cover - numba is a dependency
     increment_gradients_numba = increment_gradients_numpy
     increment_determinants_numba = increment_determinants_numpy
-    deformed_numba = deformed_numpy
     nominal_numba = nominal_numpy
     linear_elastic_tangent_numba = linear_elastic_tangent_numpy
 
 increment_gradients = pick(increment_gradients_numba, increment_gradients_numpy)
 increment_determinants = pick(increment_determinants_numba, increment_determinants_numpy)
-deformed = pick(deformed_numba, deformed_numpy)
 nominal = pick(nominal_numba, nominal_numpy)
 linear_elastic_tangent = pick(linear_elastic_tangent_numba, linear_elastic_tangent_numpy)

@@ -16,6 +16,7 @@ r"""Kinematics and the elastic laws, per particle.
 from __future__ import annotations
 
 import functools
+from types import SimpleNamespace
 
 import numpy as np
 import numpy.typing as npt
@@ -24,8 +25,8 @@ from fempm.kernels.choice import INLINE, pick
 from fempm.kernels.particle_checks import LINEAR_ELASTIC, NEO_HOOKEAN
 
 __all__ = [
-    "deform", "deform_numpy", "elastic_energy", "elastic_energy_numpy", "linear_elastic_stress", "linear_elastic_stress_numpy", "neo_hookean_stress",
-    "neo_hookean_stress_numpy", "skew", "sym",
+    "deform", "deform_numpy", "elastic_energy", "elastic_energy_numpy", "linear_elastic_stress",
+    "linear_elastic_stress_numpy", "neo_hookean_stress", "neo_hookean_stress_numpy", "skew", "sym",
 ]
 
 
@@ -175,67 +176,58 @@ try:
         acc[2] += m * np.sqrt(w2)
 
     @functools.cache
-    def _pass(name: str, d: int):
-        """The pass ``name`` ("deform", "neo-hookean", "energy", "linear-elastic") over particles of
-        dimension ``d``, the loops' sizes compile-time constants (2-5x as fast as read at run time)."""
-        if name == "deform":
+    def _passes(d: int) -> SimpleNamespace:
+        """The passes of particles of dimension ``d`` (``deform``, ``neo_hookean``,
+        ``linear_elastic``, ``energy``), the loops' sizes compile-time constants (2-5x as fast as
+        read at run time; each compiled at its first call)."""
 
-            @njit(cache=True, error_model="numpy")
-            def deform(F, L, dt, Fn, J):  # pragma: no cover - compiled
-                for p in range(F.shape[0]):
-                    for i in range(d):
-                        for j in range(d):
-                            s = F[p, i, j]
-                            for k in range(d):
-                                s += dt * L[p, i, k] * F[p, k, j]
-                            Fn[p, i, j] = s
-                    J[p] = _det(Fn, p)
+        @njit(cache=True, error_model="numpy")
+        def deform(F, L, dt, Fn, J):  # pragma: no cover - compiled
+            for p in range(F.shape[0]):
+                for i in range(d):
+                    for j in range(d):
+                        s = F[p, i, j]
+                        for k in range(d):
+                            s += dt * L[p, i, k] * F[p, k, j]
+                        Fn[p, i, j] = s
+                J[p] = _det(Fn, p)
 
-            return deform
-        if name == "neo-hookean":
-
-            @njit(cache=True, error_model="numpy")
-            def neo_hookean(F, lam, mu, sigma):  # pragma: no cover - compiled
-                for p in range(F.shape[0]):
-                    neo_hookean_at(F, p, d, _det(F, p), lam, mu, sigma)
-
-            return neo_hookean
-
-        if name == "energy":
-
-            @njit(cache=True, error_model="numpy")
-            def energy(code, F, lam, mu):  # pragma: no cover - compiled
-                W = np.empty(F.shape[0])
-                for p in range(F.shape[0]):
-                    W[p] = energy_at(code, F, p, d, lam, mu)
-                return W
-
-            return energy
+        @njit(cache=True, error_model="numpy")
+        def neo_hookean(F, lam, mu, sigma):  # pragma: no cover - compiled
+            for p in range(F.shape[0]):
+                neo_hookean_at(F, p, d, _det(F, p), lam, mu, sigma)
 
         @njit(cache=True, error_model="numpy")
         def linear_elastic(F, lam, mu, sigma):  # pragma: no cover - compiled
             for p in range(F.shape[0]):
                 linear_elastic_at(F, p, d, lam, mu, sigma)
 
-        return linear_elastic
+        @njit(cache=True, error_model="numpy")
+        def energy(code, F, lam, mu):  # pragma: no cover - compiled
+            W = np.empty(F.shape[0])
+            for p in range(F.shape[0]):
+                W[p] = energy_at(code, F, p, d, lam, mu)
+            return W
+
+        return SimpleNamespace(deform=deform, neo_hookean=neo_hookean, linear_elastic=linear_elastic, energy=energy)
 
     def deform_numba(F, L, dt):
         Fn, J = np.empty_like(F), np.empty(len(F))
-        _pass("deform", F.shape[1])(F, L, float(dt), Fn, J)
+        _passes(F.shape[1]).deform(F, L, float(dt), Fn, J)
         return Fn, J
 
     def neo_hookean_stress_numba(F, lam, mu):
         sigma = np.empty_like(F)
-        _pass("neo-hookean", F.shape[1])(F, float(lam), float(mu), sigma)
+        _passes(F.shape[1]).neo_hookean(F, float(lam), float(mu), sigma)
         return sigma
 
     def linear_elastic_stress_numba(F, lam, mu):
         sigma = np.empty_like(F)
-        _pass("linear-elastic", F.shape[1])(F, float(lam), float(mu), sigma)
+        _passes(F.shape[1]).linear_elastic(F, float(lam), float(mu), sigma)
         return sigma
 
     def elastic_energy_numba(code, F, lam, mu):
-        return _pass("energy", F.shape[1])(int(code), np.ascontiguousarray(F), float(lam), float(mu))
+        return _passes(F.shape[1]).energy(int(code), np.ascontiguousarray(F), float(lam), float(mu))
 except ImportError:  # pragma: no cover
     deform_numba, neo_hookean_stress_numba, linear_elastic_stress_numba, elastic_energy_numba = (
         deform_numpy, neo_hookean_stress_numpy, linear_elastic_stress_numpy, elastic_energy_numpy)

@@ -20,7 +20,7 @@ from __future__ import annotations
 from fempm.kernels.choice import INLINE
 from fempm.kernels.shape import AVAILABLE
 
-__all__ = ["AVAILABLE", "BLOCK_ROWS", "BLOCK_SHIFT", "add_corners", "add_patch", "average_pressure", "averages",
+__all__ = ["AVAILABLE", "BLOCK_ROWS", "BLOCK_SHIFT", "add_corners", "add_node", "add_patch", "average_pressure", "averages",
            "blocks", "clear_blocks", "nodal_ratio"]
 
 #: log2 of :data:`BLOCK_ROWS`
@@ -43,17 +43,22 @@ if AVAILABLE:
         return patch[i, bodies + b]
 
     @njit(inline=INLINE)
+    def add_node(out, dirty, i, b, bodies, w, value):  # pragma: no cover - compiled
+        r""":math:`w` and :math:`w f` (``value``) into body ``b``'s sums of dof ``i`` of ``out``
+        (dofs, 2 B of ``bodies``), its block marked in ``dirty``: one node's share of a particle
+        (:math:`w = N_a V_p`)."""
+        out[i, b] += w
+        out[i, bodies + b] += w * value
+        dirty[i >> BLOCK_SHIFT] = 1
+
+    @njit(inline=INLINE)
     def add_patch(out, dirty, at, b, bodies, weight, value):  # pragma: no cover - compiled
         r"""A particle of body ``b`` with ``weight`` and ``value`` into the sums ``out`` (dofs, 2 B)
         at its cell's dofs, ``at`` = (basis values N, NK, cell_dofs, its cell): :math:`N_a w` and
         :math:`N_a w f`; their blocks marked in ``dirty``."""
         N, NK, cell_dofs, c = at
         for a in range(NK):
-            i = cell_dofs[c, a]
-            w = N[a] * weight
-            out[i, b] += w
-            out[i, bodies + b] += w * value
-            dirty[i >> BLOCK_SHIFT] = 1
+            add_node(out, dirty, cell_dofs[c, a], b, bodies, N[a] * weight, value)
 
     @njit(inline=INLINE)
     def add_corners(out, dirty, at, b, weight, value, quad):  # pragma: no cover - compiled
@@ -61,18 +66,11 @@ if AVAILABLE:
         ``at`` = (its dofs i0..i3, the basis values N0..N3; the fourth on a quadrilateral only)."""
         (i0, i1, i2, i3), (N0, N1, N2, N3) = at
         bodies = out.shape[1] // 2
-        w0, w1, w2, w3 = N0 * weight, N1 * weight, N2 * weight, N3 * weight
-        out[i0, b] += w0
-        out[i0, bodies + b] += w0 * value
-        out[i1, b] += w1
-        out[i1, bodies + b] += w1 * value
-        out[i2, b] += w2
-        out[i2, bodies + b] += w2 * value
-        dirty[i0 >> BLOCK_SHIFT], dirty[i1 >> BLOCK_SHIFT], dirty[i2 >> BLOCK_SHIFT] = 1, 1, 1
+        add_node(out, dirty, i0, b, bodies, N0 * weight, value)
+        add_node(out, dirty, i1, b, bodies, N1 * weight, value)
+        add_node(out, dirty, i2, b, bodies, N2 * weight, value)
         if quad:
-            out[i3, b] += w3
-            out[i3, bodies + b] += w3 * value
-            dirty[i3 >> BLOCK_SHIFT] = 1
+            add_node(out, dirty, i3, b, bodies, N3 * weight, value)
 
     @njit(inline=INLINE)
     def average_pressure(sigma, D, at, patch, b, bodies):  # pragma: no cover - compiled

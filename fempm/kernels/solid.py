@@ -33,7 +33,7 @@ if AVAILABLE:
     from fempm.kernels.affine import APIC, flagged
     from fempm.kernels.kinematics import add_totals
     from fempm.kernels.particle_checks import LINEAR_ELASTIC, NEO_HOOKEAN, count_j, stable_time
-    from fempm.kernels.patch import BLOCK_SHIFT, nodal_ratio
+    from fempm.kernels.patch import add_node, nodal_ratio
     from fempm.kernels.shape import inside_after_pull_back, star_search
     from fempm.kernels.solid_affine import add_affine3, carried3, jacobian3, offset3, spin3
 
@@ -213,14 +213,10 @@ if AVAILABLE:
         out, dirty, bodies = average.sums, average.dirty, average.bodies
         b = body[p]
         w = volume[p]
-        wf = w * (sigma[p, 0, 0] + sigma[p, 1, 1] + sigma[p, 2, 2]) * (1.0 / 3.0)
+        f = (sigma[p, 0, 0] + sigma[p, 1, 1] + sigma[p, 2, 2]) * (1.0 / 3.0)
         X0, X1, X2 = X[p, 0], X[p, 1], X[p, 2]
         for a in range(NK):
-            N = value(a, X0, X1, X2, hexa)
-            i = cell_dofs[c, a]
-            out[i, b] += N * w
-            out[i, bodies + b] += N * wf
-            dirty[i >> BLOCK_SHIFT] = 1
+            add_node(out, dirty, cell_dofs[c, a], b, bodies, value(a, X0, X1, X2, hexa) * w, f)
 
     @njit(inline=INLINE)
     def move_to(x, p, v, vg0, vg1, vg2, own, dt):  # pragma: no cover - compiled

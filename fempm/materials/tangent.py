@@ -28,8 +28,8 @@ from __future__ import annotations
 import numpy as np
 import numpy.typing as npt
 
-from fempm.kernels.implicit import deformed as deformed_kernel
 from fempm.kernels.implicit import increment_determinants
+from fempm.kernels.kinematics import deform
 
 __all__ = ["FD_STEP", "deformed", "finite_difference_tangent", "rate_dependent", "stress_after", "tangent_fixed_in_step",
            "tangent_of"]
@@ -39,8 +39,9 @@ FD_STEP = 1e-6
 
 
 def deformed(F: npt.NDArray, G: npt.NDArray) -> npt.NDArray:
-    r""":math:`F = (I + G) F_n` (n, d, d) (compiled, :func:`fempm.kernels.implicit.deformed`)."""
-    return deformed_kernel(F, G)
+    r""":math:`F = (I + G) F_n` (n, d, d): :func:`fempm.kernels.kinematics.deform` with
+    :math:`\Delta t\, L = G` (compiled)."""
+    return deform(np.ascontiguousarray(F), np.ascontiguousarray(G), 1.0)[0]
 
 
 def rate_dependent(law) -> bool:

@@ -148,8 +148,9 @@ class FBarPointGrid(PointGrid):
         left = np.empty(0, dtype=np.bool_)
         if blend or move or remap is not None:  # (tetrahedra, hexahedra: the moving pass sums the pressures)
             carry = move and self.cell in SOLID
-            sums = self._at_pressures.zeroed() if carry else None
-            average = Averaged(patch, self.by_trace, len(self.by_trace), *sums) if carry else None
+            average = None
+            if carry:
+                average = Averaged(patch, self.by_trace, len(self.by_trace), *self._at_pressures.zeroed())
             more, left = super().particle_pass(v_new, v_old, dt, blend=blend, kinematics=False, move=move, remap=remap,
                                                average=average)
             nonfinite += more
