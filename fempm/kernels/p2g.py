@@ -54,25 +54,9 @@ try:
     from numba import njit
 
     @functools.cache
-    def _weighted(k: int, c: int):
-        """:func:`scatter_weighted` of ``k`` dofs a particle and ``c`` weights (0: read at run
-        time), the loops' sizes compile-time constants (2x as fast as read at run time)."""
-
-        @njit(cache=True)
-        def weighted(dofs, S, w, out):  # pragma: no cover - compiled
-            cw = c if c else w.shape[1]
-            for p in range(S.shape[0]):
-                for a in range(k):
-                    i = dofs[p, a]
-                    for r in range(cw):
-                        out[i, r] += S[p, a] * w[p, r]
-
-        return weighted
-
-    @functools.cache
     def _gradients(k: int, c: int, d: int):
         """:func:`scatter_gradients` of ``k`` dofs a particle, ``c`` rows of ``W`` (0: read at run
-        time), dimension ``d`` (compile-time loops)."""
+        time), dimension ``d`` (compile-time loops; :func:`scatter_weighted` is the case d = 1)."""
 
         @njit(cache=True)
         def gradients(dofs, G, W, out):  # pragma: no cover - compiled
@@ -93,11 +77,9 @@ try:
         (read at run time: fewer variants to compile for the wide arrays of a few callers)."""
         return c if c <= CONSTANT_COLUMNS else 0
 
-    def scatter_weighted_numba(dofs, S, w, ndofs):
-        out = np.zeros((ndofs, w.shape[1]))
-        _weighted(S.shape[1], _width(w.shape[1]))(np.ascontiguousarray(dofs), np.ascontiguousarray(S),
-                                                  np.ascontiguousarray(w), out)
-        return out
+    def scatter_weighted_numba(dofs, S, w, ndofs):  # the gradients' scatter of one dimension (views, no copies)
+        return scatter_gradients_numba(dofs, np.ascontiguousarray(S)[:, :, None], np.ascontiguousarray(w)[:, :, None],
+                                       ndofs)
 
     def scatter_gradients_numba(dofs, G, W, ndofs):
         out = np.zeros((ndofs, W.shape[1]))
