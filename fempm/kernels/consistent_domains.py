@@ -13,9 +13,10 @@ take the matrix, each particle adding to the entries of its pairs of dofs.
 
 * :func:`star_dofs`: the star dofs of every cell, (cells, S);
 * :func:`domain_cell_mass`: the particle pass adding :math:`M_p \bar S_p \bar S_p^T` to the
-  matrix's entries (the slots of the particles' cells over their star dofs), :math:`\sum_p M_p \bar S_{pi}^2` to the
-  diagonal and counting the particles per cell; returns the particles in cells without a block
-  and, separately, those with a sample dof outside their cell's star dofs.
+  matrix's entries (the slots of the particles' cells over their star dofs: the pairs kept,
+  :mod:`fempm.stepping.mass_sparsity`), :math:`\sum_p M_p \bar S_{pi}^2` to the diagonal and
+  counting the particles per cell; returns the particles in cells without a block, those with a
+  sample dof outside their cell's star dofs and those that reached a pair not kept.
 """
 
 from __future__ import annotations
@@ -82,15 +83,18 @@ def star_dofs(star, cell_dofs: npt.NDArray[np.int32]) -> npt.NDArray[np.int32]:
 def domain_cell_mass(cell: str, grad_from_values: bool, corners: bool):
     """The particle pass of the domains' consistent mass for one cell type and kind of samples
     (as :func:`fempm.kernels.samples.kernels_for`): ``kernel(cells, samples, mass, star, row,
-    slot, entries, diagonal, count)`` adds :math:`M_p \bar S_{pa} \bar S_{pb}` to the matrix's
-    ``entries`` (nnz,) at ``slot[row[c], a, b]`` over the star dofs ``star`` (cells, S) of each
-    particle's cell ``c``, to ``diagonal`` (ndofs,) and ``count`` (rows,); returns (particles in cells without a row, particles with a sample dof
-    outside their cell's star dofs), both skipped. Particles of zero mass add nothing."""
+    slot, entries, diagonal, count, wide)`` adds :math:`M_p \bar S_{pa} \bar S_{pb}` to the
+    matrix's ``entries`` (nnz + 1,) at ``slot[row[c], a, b]`` over the star dofs ``star`` (cells,
+    S) of each particle's cell ``c``, to ``diagonal`` (ndofs,) and ``count`` (rows,). A pair not
+    kept has the last slot (:func:`fempm.stepping.mass_sparsity.entries`): its particle's row is
+    marked in ``wide`` (rows,). Returns (particles in cells without a row, particles with a
+    sample dof outside their cell's star dofs, both skipped; particles that reached a pair not
+    kept). Particles of zero mass add nothing."""
     D, NK, SIMPLEX = CELLS[cell]
     AFFINE = is_affine(cell)
 
     @njit(cache=True, error_model="numpy")  # (python's: a zero test at each division, 1.6x the pass)
-    def kernel(cells, samples, mass, star, row, slot, entries, diagonal, count):  # pragma: no cover - compiled
+    def kernel(cells, samples, mass, star, row, slot, entries, diagonal, count, wide):  # pragma: no cover - compiled
         sc, cell_dofs = samples.sc, samples.cell_dofs
         Q = sc.shape[1]
         S = star.shape[1]
@@ -101,7 +105,8 @@ def domain_cell_mass(cell: str, grad_from_values: bool, corners: bool):
         listed = np.zeros(S, dtype=np.bool_)
         local = np.full(len(diagonal), -1, dtype=np.int64)  # dof -> its index in the current cell's star dofs
         current = -1
-        missing, outside = 0, 0
+        missing, outside, widened = 0, 0, 0
+        last = len(entries) - 1  # the slot of the pairs not kept
         for p in range(len(cells)):
             m = mass[p]
             if m == 0.0:
@@ -141,15 +146,21 @@ def domain_cell_mass(cell: str, grad_from_values: bool, corners: bool):
                     Sbar[used[t]], listed[used[t]] = 0.0, False
                 continue
             count[q] += 1
+            reached = False
             for t in range(nused):
                 a = used[t]
                 wa = m * Sbar[a]
                 diagonal[star[c, a]] += wa * Sbar[a]
                 for u in range(nused):
                     b = used[u]
-                    entries[slot[q, a, b]] += wa * Sbar[b]
+                    e = slot[q, a, b]
+                    reached |= e == last
+                    entries[e] += wa * Sbar[b]
+            if reached:
+                wide[q] = True
+                widened += 1
             for t in range(nused):
                 Sbar[used[t]], listed[used[t]] = 0.0, False
-        return missing, outside
+        return missing, outside, widened
 
     return kernel

@@ -230,12 +230,19 @@ class DomainConsistentMass(ConsistentNodalMass):
         return self._star, g.cell_dofs
 
     def mass_pass(self, masses: npt.NDArray, blocks, diagonal, count) -> tuple[int, int]:
-        """The domains' pass (:func:`fempm.kernels.consistent_domains.domain_cell_mass`)."""
+        """The domains' pass (:func:`fempm.kernels.consistent_domains.domain_cell_mass`); the
+        cells whose particles reached pairs of dofs the sparsity does not keep join its wide
+        cells (:mod:`fempm.stepping.mass_sparsity`) and count as missing: the sparsity is rebuilt."""
         p = self.layout.state.particles
         samples = self.layout.samples()
         kernel = kcd.domain_cell_mass(self.layout.cell, self.gimp, samples.Fw.shape[0] > 0)
         sy = self.systems
-        return kernel(p.cells, samples, masses, self._star, sy.pattern, sy.slot, blocks, diagonal, count)
+        wide = np.zeros(len(sy.pattern_cells), dtype=np.bool_)
+        missing, outside, widened = kernel(p.cells, samples, masses, self._star, sy.pattern, sy.slot, blocks, diagonal,
+                                           count, wide)
+        if widened:
+            sy.wide = np.union1d(sy.wide, sy.pattern_cells[wide]).astype(np.int32)
+        return missing + widened, outside
 
     def prepare(self) -> bool:
         """This step's blocks, before the grid takes the step: whether every particle's samples

@@ -8,7 +8,8 @@ builds for one use is kept here:
 - the *sparsity*: the cells holding particles plus one layer of cells around them (those that
   share a dof), numbered on a sub index map of their dofs (:func:`create_sub_index_map`), so
   vectors and matrix rows cover the particles' region, not the whole mesh; it is rebuilt only
-  when a particle enters a cell outside it;
+  when a particle enters a cell outside it (with particle domains, or reaches pairs of dofs
+  beyond its entries: :mod:`fempm.stepping.mass_sparsity`);
 - the *matrices*: one per set of constrained dofs (a velocity component held at 0 on slip walls
   normal to its axis is solved on its own dofs, the constrained fit), their values written with
   ``setValuesCOO`` from the per-cell blocks (:func:`fempm.kernels.consistent.coo_values`): dofs
@@ -39,6 +40,7 @@ from fempm import petsc as fpetsc
 from fempm.kernels import consistent as kc
 from fempm.stepping.mass_options import ksp_options
 from fempm.stepping.nodal import kept_nodal_array
+from fempm.stepping.mass_sparsity import entries
 from fempm.stepping.options import SimulationError
 from fempm.transfer.mapping import SUPPORT_TOL
 from fempm.transfer.mass_span import (check_nonsingular, mass_ratio_estimate, mass_ratio_ksp, mass_ratio_rhs,
@@ -92,11 +94,9 @@ class ConsistentSystems:
                  layer_dofs: npt.NDArray[np.int32] | None = None):
         #: the cells' dofs of the layer around the occupied cells (the dofmap), if not ``cell_dofs``
         self.layer_dofs = cell_dofs if layer_dofs is None else layer_dofs
-        #: whether the particle pass sums blocks per cell (point particles, whose singularity
-        #: tests look for null directions of the blocks) or, with ``layer_dofs`` (particle domains,
-        #: the count test alone, as :func:`fempm.transfer.mapping.consistent_mass_matrix` of an
-        #: averaged basis), the matrix's entries through :attr:`slot` (the blocks of supersets of a
-        #: cell's dofs are mostly zeros)
+        #: whether the particle pass sums blocks per cell (point particles: the singularity tests
+        #: look for their null directions) or, with ``layer_dofs`` (particle domains: the count
+        #: test alone), the matrix's entries through :attr:`slot`
         self.by_entries = layer_dofs is not None
         self.index_map = V.dofmap.index_map
         self.nonnegative = nonnegative
@@ -108,7 +108,7 @@ class ConsistentSystems:
         self.lump_below = lump_below
         self.always_lumped = always_lumped  # dofs whose rows are lumped in any case (node-local conditions)
         self.prefix = prefix
-        self.ksp_options = ksp_options(self.comm.size, V.mesh.topology.cell_type, nonnegative, layer_dofs is not None)
+        self.ksp_options = ksp_options(self.comm.size, V.mesh.topology.cell_type, nonnegative)
         base = ~fixed
         self.systems: list[_System] = []
         for c in range(free.shape[1]):  # components with the same constrained dofs share a matrix
@@ -126,6 +126,9 @@ class ConsistentSystems:
         self.pattern = np.full(len(cell_dofs), -1, dtype=np.int32)  # cell -> its row in the blocks (-1: outside)
         self.pattern_cells = np.zeros(0, dtype=np.int32)
         self._nnz = 0  # entries of the sparsity
+        #: the cells (local) whose particles reached pairs of their star dofs beyond the entries of
+        #: the domains' sparsity (:mod:`fempm.stepping.mass_sparsity`): kept for the run
+        self.wide = np.zeros(0, dtype=np.int32)
         k = cell_dofs.shape[1]
         #: each pattern cell's entries: entry (a, b) of its block is the sparsity's ``slot[q, a, b]``
         self.slot = np.zeros((0, k, k), dtype=np.int32)
@@ -153,13 +156,13 @@ class ConsistentSystems:
 
     # -- sparsity -----------------------------------------------------------------------------
     def work_arrays(self, fill: bool = True) -> tuple[npt.NDArray, npt.NDArray, npt.NDArray, tuple]:
-        """Zeroed (blocks (pattern cells, k, k), or with :attr:`by_entries` the entries (nnz,),
+        """Zeroed (blocks (pattern cells, k, k), or with :attr:`by_entries` the entries (nnz + 1,),
         diagonal (dofs,), count (pattern cells,)) for :func:`fempm.kernels.consistent.cell_mass`
         (:func:`fempm.kernels.consistent_domains.domain_cell_mass`), and the diagonal's vector
         (ghost sums); ``fill=False``: as the pass left them."""
         k = self.cell_dofs.shape[1]
         nq = len(self.pattern_cells)
-        shape = (self._nnz,) if self.by_entries else (nq, k, k)
+        shape = (self._nnz + 1,) if self.by_entries else (nq, k, k)  # (and the pairs not kept)
         if self._blocks is None or self._blocks.shape != shape or len(self._count) != nq:
             self._blocks = np.empty(shape)
             self._count = np.empty(nq, dtype=np.int64)
@@ -191,14 +194,13 @@ class ConsistentSystems:
         self.owned_parent = np.ascontiguousarray(self.sub_to_parent[:n_sub])
         parent_to_sub = np.full(self.num_dofs, -1, dtype=np.int64)
         parent_to_sub[self.sub_to_parent] = np.arange(len(self.sub_to_parent))
-        local = parent_to_sub[pattern_dofs]
-        k = local.shape[1]
         width = len(self.sub_to_parent)
-        key = np.concatenate([(np.repeat(local, k, axis=1) * width + np.tile(local, (1, k))).ravel(),
-                              np.arange(n_sub) * (width + 1)])  # every owned dof's diagonal: identity rows
-        unique, slot = np.unique(key, return_inverse=True)  # the entries summed per (row, column), row-major
+        own = wide = None
+        if self.by_entries:  # a cell's own dofs by its star dofs, and the wide cells' star by star
+            own = parent_to_sub[self.layer_dofs[cells]]
+            wide = np.isin(cells, self.wide)
+        unique, self.slot = entries(parent_to_sub[pattern_dofs], width, n_sub, own, wide)
         rows, cols = unique // width, unique % width
-        self.slot = slot[: len(cells) * k * k].reshape(len(cells), k, k).astype(np.int32)
         # each entry's row and column dofs and the slot of its row's diagonal (the values of entries)
         self._entry_dofs = (self.sub_to_parent[rows].astype(np.int32), self.sub_to_parent[cols].astype(np.int32),
                             np.searchsorted(unique, rows * (width + 1)).astype(np.int32))
@@ -273,7 +275,7 @@ class ConsistentSystems:
         if s.values is None:
             s.values = np.empty(self._nnz)
         if self.by_entries:
-            kc.coo_entry_values(self._blocks, *self._entry_dofs, s.keep, self.lump, self.owned_parent,
+            kc.coo_entry_values(self._blocks[: self._nnz], *self._entry_dofs, s.keep, self.lump, self.owned_parent,
                                 self.diagonal_slot, s.values)
         else:
             kc.coo_values(self._blocks, self.pattern_cells, self.cell_dofs, s.keep, self.lump, self.slot,
@@ -329,9 +331,9 @@ class ConsistentSystems:
     def state(self) -> dict[str, npt.NDArray]:
         """What a resumed run needs to continue bit for bit (this rank's arrays): the sparsity's
         cells, the values each preconditioner was set up from, the last singularity test's
-        structure and the counters. See :meth:`restore`."""
+        structure and the counters (with particle domains, the wide cells). See :meth:`restore`."""
         systems = self._all()
-        out = {"pattern_cells": self.pattern_cells,
+        out = {"pattern_cells": self.pattern_cells, "wide": self.wide,
                "counters": np.array([self.rebuilds] + [s.refresh for s in systems]
                                     + [s.fresh_iterations for s in systems], dtype=np.int64)}
         for i, s in enumerate(systems):
@@ -348,6 +350,7 @@ class ConsistentSystems:
         if "pattern_cells" not in state:
             return
         cells = np.asarray(state["pattern_cells"], dtype=np.int32)
+        self.wide = np.asarray(state.get("wide", self.wide), dtype=np.int32)
         if not self.comm.allreduce(len(cells)):  # written before the first step: built then
             return
         self._build(cells)
