@@ -34,10 +34,13 @@ from fempm.stepping.nodal import NodalLayout, NodalMass, sum_ghosts
 from fempm.transfer.domains import GIMP
 from fempm.transfer.mass_models import MASS_RATIO_ITERATIONS
 
-__all__ = ["RATIO_EVERY", "ConsistentNodalMass", "DomainConsistentMass"]
+__all__ = ["RATIO_EVERY", "WIDE_SHARE", "ConsistentNodalMass", "DomainConsistentMass"]
 
 #: steps between two refreshes of the stable-step estimate when ``dt`` is given
 RATIO_EVERY = 20
+#: the share of the cells holding particles beyond which every cell keeps its star dofs by star
+#: dofs (:meth:`DomainConsistentMass.widen`)
+WIDE_SHARE = 0.25
 
 
 class ConsistentNodalMass(NodalMass):
@@ -241,8 +244,25 @@ class DomainConsistentMass(ConsistentNodalMass):
         missing, outside, widened = kernel(p.cells, samples, masses, self._star, sy.pattern, sy.slot, blocks, diagonal,
                                            count, wide)
         if widened:
-            sy.wide = np.union1d(sy.wide, sy.pattern_cells[wide]).astype(np.int32)
+            self.widen(sy.pattern_cells[wide])
         return missing + widened, outside
+
+    def widen(self, cells: npt.NDArray[np.int32]) -> None:
+        """The cells sharing a vertex with ``cells`` (whose particles reached pairs of dofs the
+        sparsity does not keep) join the wide cells, which keep their star dofs by star dofs
+        (:mod:`fempm.stepping.mass_sparsity`): particles leave a cell for its neighbours, and a
+        domain wider than a cell here is likely so there. When the wide cells are more than
+        :data:`WIDE_SHARE` of the cells with particles, every cell is wide (the pairs of domains
+        larger than the cells, as CPDI on tetrahedra split from cubes: rebuilding the sparsity
+        costs about 20 steps)."""
+        sy = self.systems
+        dofs = self.layout.cell_dofs[: sy.num_cells]
+        near = np.zeros(sy.num_dofs, dtype=np.bool_)
+        near[dofs[cells].ravel()] = True
+        wide = np.union1d(sy.wide, np.flatnonzero(near[dofs].any(axis=1)))
+        if len(wide) > WIDE_SHARE * len(np.unique(self.layout.state.particles.cells)):
+            wide = np.arange(sy.num_cells)
+        sy.wide = wide.astype(np.int32)
 
     def prepare(self) -> bool:
         """This step's blocks, before the grid takes the step: whether every particle's samples

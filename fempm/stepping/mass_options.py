@@ -24,9 +24,11 @@ KSP_OPTIONS_PARALLEL = {"ksp_type": "gcr", "pc_type": "asm", "sub_pc_type": "icc
 #: added on simplices: incomplete Cholesky with one level of fill. At 1e6 particles on gmsh
 #: triangles the solves take 7-8 iterations instead of 11-12 and a step is 15-25 % faster on 1
 #: and 2 ranks (the set-up, once a step, costs more); on quadrilaterals the iterations do not
-#: drop (8-9) and the step is 4 % slower, so they keep ICC(0). With particle domains too, on the
-#: pairs they couple (:mod:`fempm.stepping.mass_sparsity`): CPDI1 at 1e5 on triangles 2.54 ->
-#: 2.28x the consistent point step (``benchmarks/bench_configurations.py --configs cons-cpdi1``)
+#: drop (8-9) and the step is 4 % slower, so they keep ICC(0). With particle domains on
+#: triangles too, on the pairs they couple (:mod:`fempm.stepping.mass_sparsity`): CPDI1 at 1e5
+#: 2.54 -> 2.28x the consistent point step (``benchmarks/bench_configurations.py --configs
+#: cons-cpdi1``); not on tetrahedra, whose domains' rows hold 100-1000 entries (CPDI1 at 1e4:
+#: 65 against 112 ms a step with one level, exact uGIMP 156 against 166 ms)
 SIMPLEX_OPTIONS = {"sub_pc_factor_levels": 1}
 #: a basis with negative values (P2 Lagrange), on any number of ranks: CG with the diagonal.
 #: Incomplete Cholesky of its mass breaks down (an indefinite factor: CG stops at once; on two
@@ -34,12 +36,12 @@ SIMPLEX_OPTIONS = {"sub_pc_factor_levels": 1}
 SIGNED_OPTIONS = {"ksp_type": "cg", "pc_type": "jacobi"}
 
 
-def ksp_options(ranks: int, cell_type: CellType, nonnegative: bool) -> dict:
+def ksp_options(ranks: int, cell_type: CellType, nonnegative: bool, domains: bool) -> dict:
     """The KSP options of the systems on ``ranks`` ranks of cells ``cell_type``, of a basis that
-    is ``nonnegative`` (else :data:`SIGNED_OPTIONS`)."""
+    is ``nonnegative`` (else :data:`SIGNED_OPTIONS`), of point particles or particle ``domains``."""
     if not nonnegative:
         return dict(SIGNED_OPTIONS)
     options = dict(KSP_OPTIONS if ranks == 1 else KSP_OPTIONS_PARALLEL)
-    if cell_type in (CellType.triangle, CellType.tetrahedron):
+    if cell_type == CellType.triangle or (cell_type == CellType.tetrahedron and not domains):
         options.update(SIMPLEX_OPTIONS)
     return options

@@ -108,7 +108,7 @@ class ConsistentSystems:
         self.lump_below = lump_below
         self.always_lumped = always_lumped  # dofs whose rows are lumped in any case (node-local conditions)
         self.prefix = prefix
-        self.ksp_options = ksp_options(self.comm.size, V.mesh.topology.cell_type, nonnegative)
+        self.ksp_options = ksp_options(self.comm.size, V.mesh.topology.cell_type, nonnegative, layer_dofs is not None)
         base = ~fixed
         self.systems: list[_System] = []
         for c in range(free.shape[1]):  # components with the same constrained dofs share a matrix
@@ -125,9 +125,9 @@ class ConsistentSystems:
         self._ratio_rhs: npt.NDArray | None = None  # over all owned dofs, made on first use
         self.pattern = np.full(len(cell_dofs), -1, dtype=np.int32)  # cell -> its row in the blocks (-1: outside)
         self.pattern_cells = np.zeros(0, dtype=np.int32)
-        self._nnz = 0  # entries of the sparsity
-        #: the cells (local) whose particles reached pairs of their star dofs beyond the entries of
-        #: the domains' sparsity (:mod:`fempm.stepping.mass_sparsity`): kept for the run
+        self.nnz = 0  #: the number of entries of the sparsity
+        #: the cells (local) that keep their star dofs by star dofs (particle domains reaching beyond
+        #: the pairs of :mod:`fempm.stepping.mass_sparsity`), for the run
         self.wide = np.zeros(0, dtype=np.int32)
         k = cell_dofs.shape[1]
         #: each pattern cell's entries: entry (a, b) of its block is the sparsity's ``slot[q, a, b]``
@@ -162,7 +162,7 @@ class ConsistentSystems:
         (ghost sums); ``fill=False``: as the pass left them."""
         k = self.cell_dofs.shape[1]
         nq = len(self.pattern_cells)
-        shape = (self._nnz + 1,) if self.by_entries else (nq, k, k)  # (and the pairs not kept)
+        shape = (self.nnz + 1,) if self.by_entries else (nq, k, k)  # (and the pairs not kept)
         if self._blocks is None or self._blocks.shape != shape or len(self._count) != nq:
             self._blocks = np.empty(shape)
             self._count = np.empty(nq, dtype=np.int64)
@@ -210,7 +210,7 @@ class ConsistentSystems:
         self._cells_of = kc.adjacency(pattern_dofs, self.num_dofs)  # of the singularity tests
         self.pattern = np.full(len(self.cell_dofs), -1, dtype=np.int32)  # cell -> its row in the blocks
         self.pattern[cells] = np.arange(len(cells), dtype=np.int32)
-        self._nnz = len(rows)
+        self.nnz = len(rows)
         lgmap = fpetsc.local_to_global_map(self.sub_map)
         for s in self._all():
             if s.matrix is not None:
@@ -273,9 +273,9 @@ class ConsistentSystems:
 
     def _set_values(self, s: _System) -> None:
         if s.values is None:
-            s.values = np.empty(self._nnz)
+            s.values = np.empty(self.nnz)
         if self.by_entries:
-            kc.coo_entry_values(self._blocks[: self._nnz], *self._entry_dofs, s.keep, self.lump, self.owned_parent,
+            kc.coo_entry_values(self._blocks[: self.nnz], *self._entry_dofs, s.keep, self.lump, self.owned_parent,
                                 self.diagonal_slot, s.values)
         else:
             kc.coo_values(self._blocks, self.pattern_cells, self.cell_dofs, s.keep, self.lump, self.slot,
