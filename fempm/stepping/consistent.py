@@ -34,13 +34,15 @@ from fempm.stepping.nodal import NodalLayout, NodalMass, sum_ghosts
 from fempm.transfer.domains import GIMP
 from fempm.transfer.mass_models import MASS_RATIO_ITERATIONS
 
-__all__ = ["RATIO_EVERY", "WIDE_SHARE", "ConsistentNodalMass", "DomainConsistentMass"]
+__all__ = ["RATIO_EVERY", "WIDENINGS", "WIDE_SHARE", "ConsistentNodalMass", "DomainConsistentMass"]
 
 #: steps between two refreshes of the stable-step estimate when ``dt`` is given
 RATIO_EVERY = 20
 #: the share of the cells holding particles beyond which every cell keeps its star dofs by star
 #: dofs (:meth:`DomainConsistentMass.widen`)
 WIDE_SHARE = 0.25
+#: the widening of a run after which every cell keeps its star dofs by star dofs
+WIDENINGS = 2
 
 
 class ConsistentNodalMass(NodalMass):
@@ -224,6 +226,7 @@ class DomainConsistentMass(ConsistentNodalMass):
         super().__init__(layout)
         #: Gauss or exact GIMP (the samples' kind, :func:`fempm.kernels.samples.kernels_for`)
         self.gimp = isinstance(layout.options.particle_domain, GIMP)
+        self.widenings = 0  #: the sparsity's widenings so far (:meth:`widen`)
 
     def element_dofs(self) -> tuple[npt.NDArray, npt.NDArray | None]:
         """The dofs of each cell's vertex star and, for the layer, the dofmap."""
@@ -252,17 +255,29 @@ class DomainConsistentMass(ConsistentNodalMass):
         sparsity does not keep) join the wide cells, which keep their star dofs by star dofs
         (:mod:`fempm.stepping.mass_sparsity`): particles leave a cell for its neighbours, and a
         domain wider than a cell here is likely so there. When the wide cells are more than
-        :data:`WIDE_SHARE` of the cells with particles, every cell is wide (the pairs of domains
-        larger than the cells, as CPDI on tetrahedra split from cubes: rebuilding the sparsity
-        costs about 20 steps)."""
+        :data:`WIDE_SHARE` of the cells with particles, or at the :data:`WIDENINGS` th widening
+        of the run, every cell is wide (domains larger than the cells, as on tetrahedra split from
+        cubes, reach new pairs every step, and a rebuild of the sparsity costs 10-20 steps)."""
         sy = self.systems
+        self.widenings += 1
         dofs = self.layout.cell_dofs[: sy.num_cells]
         near = np.zeros(sy.num_dofs, dtype=np.bool_)
         near[dofs[cells].ravel()] = True
         wide = np.union1d(sy.wide, np.flatnonzero(near[dofs].any(axis=1)))
-        if len(wide) > WIDE_SHARE * len(np.unique(self.layout.state.particles.cells)):
+        if (len(wide) > WIDE_SHARE * len(np.unique(self.layout.state.particles.cells))
+                or self.widenings >= WIDENINGS):
             wide = np.arange(sy.num_cells)
         sy.wide = wide.astype(np.int32)
+
+    def checkpoint_state(self) -> tuple[dict, dict[str, npt.NDArray]]:
+        """:meth:`ConsistentNodalMass.checkpoint_state` and the widenings so far."""
+        counters, arrays = super().checkpoint_state()
+        return counters, {**arrays, "widenings": np.array([self.widenings])}  # (of this rank)
+
+    def restore_state(self, counters: dict, arrays: dict[str, npt.NDArray]) -> None:
+        super().restore_state(counters, arrays)
+        if "widenings" in arrays:
+            self.widenings = int(arrays["widenings"][0])
 
     def prepare(self) -> bool:
         """This step's blocks, before the grid takes the step: whether every particle's samples

@@ -140,6 +140,7 @@ def test_consistent_mass_of_domains_wider_than_a_cell_keeps_the_pairs_they_reach
     estimate, of the stable step, differs by 1e-3 between the two sums' orders.)"""
     if wide == "one":
         monkeypatch.setattr(fempm.stepping.consistent, "WIDE_SHARE", np.inf)  # never every cell
+        monkeypatch.setattr(fempm.stepping.consistent, "WIDENINGS", 100)
     opts = StepOptions(scheme="USL", mass="consistent", domain="cpdi1")
     out = []
     for compiled in (False, True):
