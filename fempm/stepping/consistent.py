@@ -29,6 +29,7 @@ import numpy.typing as npt
 from fempm.kernels import consistent as kc
 from fempm.kernels import consistent_domains as kcd
 from fempm.kernels.shape import space_of
+from fempm.stepping.mass_sparsity import cells_around
 from fempm.stepping.mass_systems import ConsistentSystems
 from fempm.stepping.nodal import NodalLayout, NodalMass, sum_ghosts
 from fempm.transfer.domains import GIMP
@@ -260,10 +261,7 @@ class DomainConsistentMass(ConsistentNodalMass):
         cubes, reach new pairs every step, and a rebuild of the sparsity costs 10-20 steps)."""
         sy = self.systems
         self.widenings += 1
-        dofs = self.layout.cell_dofs[: sy.num_cells]
-        near = np.zeros(sy.num_dofs, dtype=np.bool_)
-        near[dofs[cells].ravel()] = True
-        wide = np.union1d(sy.wide, np.flatnonzero(near[dofs].any(axis=1)))
+        wide = np.union1d(sy.wide, cells_around(sy.layer_dofs[: sy.num_cells], cells, sy.num_dofs))
         if (len(wide) > WIDE_SHARE * len(np.unique(self.layout.state.particles.cells))
                 or self.widenings >= WIDENINGS):
             wide = np.arange(sy.num_cells)

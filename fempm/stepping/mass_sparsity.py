@@ -22,7 +22,9 @@ from __future__ import annotations
 import numpy as np
 import numpy.typing as npt
 
-__all__ = ["entries"]
+from fempm.transfer.mass_span import share_flags
+
+__all__ = ["cells_around", "entries"]
 
 #: cells whose slots are looked up at once (the (cells, S, S) int64 keys of a chunk: 100 MB at S = 32)
 CHUNK = 12_000
@@ -64,3 +66,13 @@ def entries(local: npt.NDArray, width: int, num_owned: int, own: npt.NDArray | N
         at = np.minimum(np.searchsorted(unique, key), len(unique) - 1)
         slot[lo:lo + CHUNK] = np.where(unique[at] == key, at, len(unique))
     return unique, slot
+
+
+def cells_around(cell_dofs: npt.NDArray, cells: npt.NDArray, num_dofs: int, index_map=None) -> npt.NDArray[np.int32]:
+    """The cells (rows of ``cell_dofs``) sharing a dof with ``cells``, these included; with
+    ``index_map``, a dof of ``cells`` on any rank (collective)."""
+    near = np.zeros(num_dofs, dtype=np.bool_)
+    near[cell_dofs[cells].ravel()] = True
+    if index_map is not None:
+        near = share_flags(index_map, near)
+    return np.flatnonzero(near[cell_dofs].any(axis=1)).astype(np.int32)

@@ -39,8 +39,8 @@ from petsc4py import PETSc
 from fempm import petsc as fpetsc
 from fempm.kernels import consistent as kc
 from fempm.stepping.mass_options import ksp_options
+from fempm.stepping.mass_sparsity import cells_around, entries
 from fempm.stepping.nodal import kept_nodal_array
-from fempm.stepping.mass_sparsity import entries
 from fempm.stepping.options import SimulationError
 from fempm.transfer.mapping import SUPPORT_TOL
 from fempm.transfer.mass_span import (check_nonsingular, mass_ratio_estimate, mass_ratio_ksp, mass_ratio_rhs,
@@ -176,11 +176,8 @@ class ConsistentSystems:
     def rebuild(self, particle_cells: npt.NDArray[np.int32]) -> None:
         """Sparsity of the cells holding particles and one layer around them (cells sharing a
         dof with them), on a sub index map of their dofs. Collective."""
-        cd = self.layer_dofs[: self.num_cells]
-        touched = np.zeros(self.num_dofs, dtype=np.bool_)
-        touched[cd[np.unique(particle_cells)].ravel()] = True
-        touched = share_flags(self.index_map, touched)
-        self._build(np.flatnonzero(touched[cd].any(axis=1)).astype(np.int32))
+        self._build(cells_around(self.layer_dofs[: self.num_cells], np.unique(particle_cells), self.num_dofs,
+                                 self.index_map))
 
     def _build(self, cells: npt.NDArray[np.int32]) -> None:
         """The sparsity of the cells ``cells`` (owned), matrices and vectors. Collective."""
